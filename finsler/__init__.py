@@ -1,0 +1,45 @@
+"""finsler: Finsler metrics defined once, symbolically in CasADi, with every numeric
+evaluator (numpy, torch, IPOPT) derived from that single expression."""
+
+from finsler.domains import Box, Disk, Domain, JointBox, Product
+from finsler.errors import DomainError, InputError, UnknownMetricError
+from finsler.metric import Metric, Task
+from finsler.metrics import (
+    MATSUMOTO_CONVEX_RADIUS,
+    CarLike,
+    ClosedFormMetric,
+    Euclidean,
+    Matsumoto,
+    Minkowski,
+    PandaPole,
+    Poincare,
+    Randers,
+    Sphere,
+)
+from finsler.registry import get_metric, list_metrics, register_metric
+
+__all__ = [
+    "MATSUMOTO_CONVEX_RADIUS",
+    "Box",
+    "CarLike",
+    "ClosedFormMetric",
+    "Disk",
+    "Domain",
+    "DomainError",
+    "Euclidean",
+    "InputError",
+    "JointBox",
+    "Matsumoto",
+    "Metric",
+    "Minkowski",
+    "PandaPole",
+    "Poincare",
+    "Product",
+    "Randers",
+    "Sphere",
+    "Task",
+    "UnknownMetricError",
+    "get_metric",
+    "list_metrics",
+    "register_metric",
+]

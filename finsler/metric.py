@@ -1,0 +1,254 @@
+"""The :class:`Metric` base: one symbolic ``F(x, v)``, every numeric method derived from it.
+
+A concrete metric is a small frozen dataclass holding its parameters and
+implementing :meth:`Metric.F_sx`, the CasADi SX expression of ``F(x, v)``.
+From that single expression the class derives
+
+* the CasADi function used by IPOPT (``casadi_F``, exact derivatives),
+* vectorised numpy / torch evaluators obtained by *lowering* the SX
+  instruction list (:mod:`finsler.lowering`), compiled once and cached,
+* the local costs of the paper: ``cost`` (eq. 4), ``cost_symmetric`` (eq. 59)
+  and ``segment_length`` (eq. 58, Gauss-Legendre quadrature),
+* a numerical convexity check of ``F(x, .)`` (the Finsler condition).
+"""
+
+from __future__ import annotations
+
+import functools
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+import casadi as ca
+import numpy as np
+
+from finsler.domains import Domain, _as_batch, is_torch
+from finsler.errors import InputError
+from finsler.lowering import LoweredFunction, lower
+
+__all__ = ["Metric", "Task"]
+
+
+@dataclass(frozen=True)
+class Task:
+    """The midpoint-tree task of section 5.1: ``2**depth`` segments, success iff every
+    ``C(p_i, p_{i+1}) <= eps``."""
+
+    depth: int
+    eps: float
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.depth, (int, np.integer)) or self.depth < 1:
+            raise InputError(f"task depth must be a positive integer, got {self.depth!r}")
+        if not (np.isfinite(self.eps) and self.eps > 0):
+            raise InputError(f"task eps must be positive and finite, got {self.eps!r}")
+
+    @property
+    def segments(self) -> int:
+        return 2**self.depth
+
+
+@functools.lru_cache(maxsize=16)
+def _gauss_legendre01(order: int) -> tuple[np.ndarray, np.ndarray]:
+    t, w = np.polynomial.legendre.leggauss(order)
+    return 0.5 * (t + 1.0), 0.5 * w
+
+
+class Metric(ABC):
+    """A Finsler-type metric ``F(x, v)`` on a coordinate domain.
+
+    Subclasses are frozen dataclasses; their fields are the metric's parameters.
+    Class attributes describe it:
+
+    * ``name``: registry name; ``task``: default :class:`Task`;
+    * ``reversible``: ``F(x, -v) == F(x, v)``;
+    * ``smooth``: ``F`` is smooth on ``TM \\ 0``;
+    * ``convex_everywhere``: ``F(x, .)`` is convex at every point of the domain
+      (for ``smooth`` metrics: strongly convex, i.e. Finsler);
+    * ``convexity_note``: a sentence for docs and the CLI.
+    """
+
+    name: ClassVar[str]
+    task: ClassVar[Task]
+    reversible: ClassVar[bool] = False
+    smooth: ClassVar[bool] = True
+    convex_everywhere: ClassVar[bool] = True
+    convexity_note: ClassVar[str] = "Finsler (strongly convex) on the whole domain"
+
+    # -- to implement -------------------------------------------------------------------
+    @property
+    @abstractmethod
+    def domain(self) -> Domain:
+        """The coordinate domain."""
+
+    @abstractmethod
+    def F_sx(self, x: ca.SX, v: ca.SX) -> ca.SX:
+        """``F(x, v)`` as a scalar CasADi SX expression of ``x``, ``v`` (each ``(dim, 1)``)."""
+
+    # -- derived symbolic objects ---------------------------------------------------------
+    @property
+    def dim(self) -> int:
+        return self.domain.dim
+
+    @functools.cached_property
+    def casadi_F(self) -> ca.Function:
+        """CasADi function ``F(x, v)`` of two ``dim``-vectors."""
+        x = ca.SX.sym("x", self.dim)
+        v = ca.SX.sym("v", self.dim)
+        return ca.Function(f"F_{self.name}", [x, v], [self.F_sx(x, v)], ["x", "v"], ["F"])
+
+    @functools.cached_property
+    def casadi_cost(self) -> ca.Function:
+        """CasADi function ``C(x, y) = F(x, y - x)`` (eq. 4; the chart is the identity)."""
+        x = ca.SX.sym("x", self.dim)
+        y = ca.SX.sym("y", self.dim)
+        return ca.Function(f"C_{self.name}", [x, y], [self.F_sx(x, y - x)], ["x", "y"], ["C"])
+
+    @functools.cached_property
+    def casadi_hessian(self) -> ca.Function:
+        """CasADi function: Hessian in ``v`` of ``F(x, v)**2 / 2`` (the fundamental tensor)."""
+        x = ca.SX.sym("x", self.dim)
+        v = ca.SX.sym("v", self.dim)
+        e = 0.5 * self.F_sx(x, v) ** 2
+        h, _ = ca.hessian(e, v)
+        return ca.Function(f"g_{self.name}", [x, v], [ca.densify(h)], ["x", "v"], ["g"])
+
+    @functools.cached_property
+    def lowered_F(self) -> LoweredFunction:
+        """Vectorised numpy/torch program of ``F``, lowered from :attr:`casadi_F`."""
+        return lower(self.casadi_F)
+
+    @functools.cached_property
+    def lowered_hessian(self) -> LoweredFunction:
+        return lower(self.casadi_hessian)
+
+    # -- numeric batch methods ------------------------------------------------------------
+    def F(self, x: Any, v: Any) -> Any:
+        """``F(x, v)`` for ``x, v`` of shape ``(N, dim)`` (or ``(dim,)``) -> ``(N,)`` (or ``()``).
+
+        numpy in, numpy (float64) out; torch in, torch out (same device, differentiable).
+        """
+        single = _ndim(x) == 1 and _ndim(v) == 1
+        xb = _as_batch(x, self.dim, "x")
+        vb = _as_batch(v, self.dim, "v")
+        _same_kind(xb, vb)
+        (out,) = self.lowered_F(xb, vb)
+        out = out[..., 0]
+        return out[0] if single else out
+
+    def cost(self, x: Any, y: Any) -> Any:
+        """Local cost ``C(x, y) = F(x, y - x)`` of eq. (4), batch ``(N, dim)`` -> ``(N,)``."""
+        xb, yb, single = self._pair(x, y)
+        (out,) = self.lowered_F(xb, yb - xb)
+        out = out[..., 0]
+        return out[0] if single else out
+
+    def cost_symmetric(self, x: Any, y: Any) -> Any:
+        """Symmetrised cost of eq. (59): ``(F(x, y - x) + F(y, y - x)) / 2``."""
+        xb, yb, single = self._pair(x, y)
+        d = yb - xb
+        (a,) = self.lowered_F(xb, d)
+        (b,) = self.lowered_F(yb, d)
+        out = 0.5 * (a[..., 0] + b[..., 0])
+        return out[0] if single else out
+
+    def segment_length(self, x: Any, y: Any, order: int = 8) -> Any:
+        """Length (eq. 58) of the coordinate segment from ``x`` to ``y`` by Gauss-Legendre
+        quadrature of the given order; an upper bound of the distance ``d(x, y)``."""
+        if not isinstance(order, (int, np.integer)) or order < 1:
+            raise InputError(f"quadrature order must be a positive integer, got {order!r}")
+        xb, yb, single = self._pair(x, y)
+        t, w = _gauss_legendre01(int(order))
+        d = yb - xb
+        n = xb.shape[0]
+        if is_torch(xb):
+            import torch
+
+            tt = torch.as_tensor(t, dtype=xb.dtype, device=xb.device)[:, None, None]
+            ww = torch.as_tensor(w, dtype=xb.dtype, device=xb.device)
+            pts = (xb[None] + tt * d[None]).reshape(-1, self.dim)
+            dirs = d[None].expand(len(t), n, self.dim).reshape(-1, self.dim)
+            (f,) = self.lowered_F(pts, dirs)
+            out = (f[..., 0].reshape(len(t), n) * ww[:, None]).sum(0)
+        else:
+            pts = (xb[None] + t[:, None, None] * d[None]).reshape(-1, self.dim)
+            dirs = np.broadcast_to(d[None], (len(t), n, self.dim)).reshape(-1, self.dim)
+            (f,) = self.lowered_F(pts, dirs)
+            out = w @ f[:, 0].reshape(len(t), n)
+        return out[0] if single else out
+
+    def path_costs(self, points: Any) -> Any:
+        """Segment costs ``C(p_i, p_{i+1})`` of paths ``(K, n+1, dim)`` -> ``(K, n)``."""
+        if _ndim(points) != 3 or points.shape[-1] != self.dim or points.shape[1] < 2:
+            raise InputError(
+                f"paths must have shape (K, n+1, {self.dim}) with n >= 1, got "
+                f"{tuple(points.shape)}"
+            )
+        k, m, _ = points.shape
+        a = points[:, :-1].reshape(-1, self.dim)
+        b = points[:, 1:].reshape(-1, self.dim)
+        return self.cost(a, b).reshape(k, m - 1)
+
+    # -- convexity (the Finsler condition) ------------------------------------------------
+    def convexity(self, x: Any, n_directions: int = 64, seed: int = 0) -> np.ndarray:
+        """Smallest eigenvalue of the fundamental tensor ``Hess_v F(x, v)**2 / 2`` over unit
+        directions ``v`` at each point ``x`` ``(N, dim)`` -> ``(N,)``.
+
+        Positive means ``F(x, .)`` is strongly convex along the sampled directions; a
+        negative value certifies non-convexity. Directions: evenly spaced on the circle in
+        2-D, uniformly random (seeded) unit vectors otherwise. For non-smooth metrics the
+        Hessian is taken where ``F`` is smooth (a.e.).
+        """
+        xn = self.domain.check(x, "x")
+        if self.dim == 2:
+            a = np.linspace(0.0, 2 * np.pi, n_directions, endpoint=False)
+            dirs = np.stack([np.cos(a), np.sin(a)], 1)
+        else:
+            g = np.random.default_rng(seed).normal(size=(n_directions, self.dim))
+            dirs = g / np.linalg.norm(g, axis=1, keepdims=True)
+        n = xn.shape[0]
+        xs = np.repeat(xn, len(dirs), axis=0)
+        vs = np.tile(dirs, (n, 1))
+        (h,) = self.lowered_hessian(xs, vs)
+        h = h.reshape(-1, self.dim, self.dim).transpose(0, 2, 1)  # CasADi is column-major
+        lam = np.linalg.eigvalsh(0.5 * (h + h.transpose(0, 2, 1)))[:, 0]
+        return lam.reshape(n, len(dirs)).min(axis=1)
+
+    def midpoint_convexity_gap(self, x: Any, v: Any, w: Any) -> np.ndarray:
+        """``F(x, (v + w) / 2) - (F(x, v) + F(x, w)) / 2``: positive values violate convexity."""
+        return self.F(x, 0.5 * (np.asarray(v) + np.asarray(w))) - 0.5 * (
+            self.F(x, v) + self.F(x, w)
+        )
+
+    # -- helpers --------------------------------------------------------------------------
+    def _pair(self, x: Any, y: Any) -> tuple[Any, Any, bool]:
+        single = _ndim(x) == 1 and _ndim(y) == 1
+        xb = _as_batch(x, self.dim, "x")
+        yb = _as_batch(y, self.dim, "y")
+        _same_kind(xb, yb)
+        if xb.shape[0] != yb.shape[0] and 1 not in (xb.shape[0], yb.shape[0]):
+            raise InputError(
+                f"x and y must have the same number of rows, got {xb.shape[0]} and {yb.shape[0]}"
+            )
+        return xb, yb, single
+
+    def info(self) -> dict[str, Any]:
+        """Summary used by ``geodesics metrics``."""
+        return {
+            "name": self.name,
+            "dim": self.dim,
+            "domain": self.domain.describe(),
+            "depth": self.task.depth,
+            "eps": self.task.eps,
+            "reversible": self.reversible,
+            "convexity": self.convexity_note,
+        }
+
+
+def _ndim(a: Any) -> int:
+    return int(a.ndim) if hasattr(a, "ndim") else int(np.ndim(a))
+
+
+def _same_kind(a: Any, b: Any) -> None:
+    if is_torch(a) != is_torch(b):
+        raise InputError("mix of numpy arrays and torch tensors: pass both as the same kind")

@@ -1,0 +1,411 @@
+"""The registered metrics: the paper's environments and closed-form references.
+
+Each metric is written exactly once, as the CasADi SX expression returned by
+``F_sx``; every numeric evaluator is derived from it (:mod:`finsler.metric`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+import casadi as ca
+import numpy as np
+
+from finsler.domains import Box, Disk, Domain, JointBox, Product, _as_batch
+from finsler.errors import InputError
+from finsler.metric import Metric, Task
+
+__all__ = [
+    "CarLike",
+    "ClosedFormMetric",
+    "Euclidean",
+    "Matsumoto",
+    "Minkowski",
+    "PandaPole",
+    "Poincare",
+    "Randers",
+    "Sphere",
+]
+
+#: Radius below which the paper's Matsumoto metric (h = -|p|^2) is strongly convex:
+#: ||beta||_alpha < 1/2  <=>  |grad h| < 1/sqrt(3)  <=>  |p| < 1/(2 sqrt 3).
+MATSUMOTO_CONVEX_RADIUS = 1.0 / (2.0 * math.sqrt(3.0))
+
+
+def _norm_sx(v: ca.SX) -> ca.SX:
+    return ca.sqrt(ca.dot(v, v))
+
+
+def _positive(name: str, value: float) -> None:
+    if not (math.isfinite(value) and value > 0):
+        raise InputError(f"parameter {name} must be positive and finite, got {value!r}")
+
+
+# ----------------------------------------------------------------------------------------
+# The paper's environments
+# ----------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Matsumoto(Metric):
+    """Matsumoto slope metric, eqs. (20)-(21): ``F = alpha**2 / (alpha - beta)`` with
+    ``beta = <grad h(p), v>``, ``alpha = sqrt(|v|**2 + beta**2)`` and the height
+    ``h(p) = -height * |p|**2`` (a mountain at the centre) on the unit disk.
+
+    Not Finsler everywhere: ``F(p, .)`` is strongly convex only where
+    ``||beta||_alpha < 1/2``, i.e. ``|grad h| < 1/sqrt(3)``; for the default
+    ``height = 1`` that is ``|p| < 1/(2 sqrt 3) ~ 0.2887`` (about 8% of the disk).
+    """
+
+    height: float = 1.0
+    radius: float = 1.0
+
+    name: ClassVar[str] = "matsumoto"
+    task: ClassVar[Task] = Task(depth=6, eps=0.1)
+    reversible: ClassVar[bool] = False
+    convex_everywhere: ClassVar[bool] = False
+    convexity_note: ClassVar[str] = (
+        "NOT Finsler everywhere: F(x,.) convex only for |p| < 1/(2*sqrt(3)*height) "
+        "(~0.2887 at height 1)"
+    )
+
+    def __post_init__(self) -> None:
+        _positive("height", self.height)
+        _positive("radius", self.radius)
+
+    @property
+    def domain(self) -> Domain:
+        return Disk(radius=self.radius)
+
+    @property
+    def convex_radius(self) -> float:
+        """Analytic radius of the region where ``F(p, .)`` is strongly convex."""
+        return MATSUMOTO_CONVEX_RADIUS / self.height
+
+    def F_sx(self, x: ca.SX, v: ca.SX) -> ca.SX:
+        grad_h = -2.0 * self.height * x
+        beta = ca.dot(grad_h, v)
+        alpha = ca.sqrt(ca.dot(v, v) + beta * beta)
+        return alpha * alpha / (alpha - beta)
+
+
+@dataclass(frozen=True)
+class CarLike(Metric):
+    """Unidirectional car-like metric, eqs. (22)-(24), on (unit disk) x [-pi, pi]:
+    ``F = sqrt(vx**2 + vy**2 + c_p (h**2 + xi**2))`` with the sideways motion
+    ``h = -vx sin(th) + vy cos(th)`` and ``xi = max(r_min |v_th| - vx cos(th) - vy sin(th), 0)``.
+
+    A C^0-Finsler structure (appendix D): ``F(x, .)`` is convex but not smooth.
+    theta is a plain coordinate (not identified at +-pi).
+    """
+
+    c_p: float = 100.0
+    r_min: float = 0.5
+    radius: float = 1.0
+
+    name: ClassVar[str] = "carlike"
+    task: ClassVar[Task] = Task(depth=8, eps=0.1)
+    reversible: ClassVar[bool] = False
+    smooth: ClassVar[bool] = False
+    convexity_note: ClassVar[str] = "C^0-Finsler: convex but not smooth (max, abs)"
+
+    def __post_init__(self) -> None:
+        _positive("c_p", self.c_p)
+        _positive("r_min", self.r_min)
+        _positive("radius", self.radius)
+
+    @property
+    def domain(self) -> Domain:
+        return Product(
+            (Disk(radius=self.radius), Box((-math.pi,), (math.pi,), names=("theta",)))
+        )
+
+    def F_sx(self, x: ca.SX, v: ca.SX) -> ca.SX:
+        th = x[2]
+        c, s = ca.cos(th), ca.sin(th)
+        h = -v[0] * s + v[1] * c
+        xi = ca.fmax(self.r_min * ca.fabs(v[2]) - v[0] * c - v[1] * s, 0.0)
+        return ca.sqrt(v[0] * v[0] + v[1] * v[1] + self.c_p * (h * h + xi * xi))
+
+
+@dataclass(frozen=True)
+class PandaPole(Metric):
+    """Franka Panda joint space with a pole obstacle, eq. (60):
+    ``F(q, v) = (1 + sum_i ((p_i(q)_x - o_x)**2 + (p_i(q)_y - o_y)**2)**(-1/2)) |v|`` with
+    ``p_i`` the positions of the frames panda_link0..panda_link8, panda_hand (Pinocchio's
+    Panda model from example-robot-data) and the joint-limit box as domain.
+    """
+
+    pole_x: float = 0.4
+    pole_y: float = 0.0
+
+    name: ClassVar[str] = "panda-pole"
+    task: ClassVar[Task] = Task(depth=5, eps=20.0)
+    reversible: ClassVar[bool] = True
+    convexity_note: ClassVar[str] = "Riemannian (conformal): Finsler everywhere"
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.pole_x) and math.isfinite(self.pole_y)):
+            raise InputError("pole position must be finite")
+
+    @property
+    def domain(self) -> Domain:
+        from finsler import panda
+
+        return JointBox(
+            tuple(panda.JOINT_LIMITS_LOW.tolist()),
+            tuple(panda.JOINT_LIMITS_HIGH.tolist()),
+            names=tuple(f"q{i + 1}" for i in range(7)),
+        )
+
+    def F_sx(self, x: ca.SX, v: ca.SX) -> ca.SX:
+        from finsler import panda
+
+        return panda.pole_metric_sx(x, v, pole=(self.pole_x, self.pole_y))
+
+    def frame_positions(self, q: Any) -> Any:
+        """World positions of the ten frames, ``(N, 7)`` -> ``(N, 10, 3)`` (lowered CasADi
+        forward kinematics; numpy or torch)."""
+        qb = _as_batch(q, 7, "q")
+        (p,) = _lowered_panda_fk()(qb)
+        p = p.reshape(-1, 3, 10)  # CasADi stores the (10, 3) matrix column-major
+        return p.transpose(1, 2) if hasattr(p, "detach") else p.transpose(0, 2, 1)
+
+
+_PANDA_FK = None
+
+
+def _lowered_panda_fk() -> Any:
+    global _PANDA_FK
+    if _PANDA_FK is None:
+        from finsler import panda
+        from finsler.lowering import lower
+
+        _PANDA_FK = lower(panda.frame_positions_function())
+    return _PANDA_FK
+
+
+# ----------------------------------------------------------------------------------------
+# Closed-form references
+# ----------------------------------------------------------------------------------------
+class ClosedFormMetric(Metric):
+    """A metric whose distance and minimising geodesics are known in closed form."""
+
+    def distance(self, x: Any, y: Any) -> np.ndarray:
+        """Exact distance ``d(x, y)`` for ``(N, dim)`` arrays -> ``(N,)``."""
+        xb = self.domain.check(x, "x")
+        yb = self.domain.check(y, "y")
+        return self._distance(xb, yb)
+
+    def geodesic(self, x: Any, y: Any, t: Any) -> np.ndarray:
+        """Points of the minimising geodesic at arc-length fractions ``t`` ``(T,)``:
+        ``(N, dim)`` pairs -> ``(N, T, dim)``."""
+        xb = self.domain.check(x, "x")
+        yb = self.domain.check(y, "y")
+        t = np.asarray(t, float).reshape(-1)
+        return self._geodesic(xb, yb, t)
+
+    def _distance(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:  # pragma: no cover
+        raise NotImplementedError
+
+    def _geodesic(self, x: np.ndarray, y: np.ndarray, t: np.ndarray) -> np.ndarray:
+        # Constant metrics (Minkowski norms): straight lines at constant speed.
+        return x[:, None] + t[None, :, None] * (y - x)[:, None]
+
+
+@dataclass(frozen=True)
+class Euclidean(ClosedFormMetric):
+    """Euclidean metric ``F(x, v) = |v|`` on the box ``[-1, 1]**dim``."""
+
+    n: int = 2
+
+    name: ClassVar[str] = "euclidean"
+    task: ClassVar[Task] = Task(depth=4, eps=0.2)
+    reversible: ClassVar[bool] = True
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.n, (int, np.integer)) or self.n < 1:
+            raise InputError(f"euclidean dimension must be a positive integer, got {self.n!r}")
+
+    @property
+    def domain(self) -> Domain:
+        return Box((-1.0,) * self.n, (1.0,) * self.n)
+
+    def F_sx(self, x: ca.SX, v: ca.SX) -> ca.SX:
+        return _norm_sx(v)
+
+    def _distance(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        return np.linalg.norm(y - x, axis=1)
+
+
+@dataclass(frozen=True)
+class Minkowski(ClosedFormMetric):
+    """Constant asymmetric (Randers-type) norm ``F(v) = sqrt(v^T A v) + <b, v>`` on
+    ``[-1, 1]**2`` with ``A = [[a11, a12], [a12, a22]]`` positive definite and
+    ``|b|_{A^-1} < 1``. Geodesics are straight lines and ``d(x, y) = F(y - x)``."""
+
+    a11: float = 1.0
+    a12: float = 0.3
+    a22: float = 2.0
+    b1: float = 0.4
+    b2: float = -0.2
+
+    name: ClassVar[str] = "minkowski"
+    task: ClassVar[Task] = Task(depth=4, eps=0.3)
+    reversible: ClassVar[bool] = False
+
+    def __post_init__(self) -> None:
+        a = self._a()
+        if not np.all(np.linalg.eigvalsh(a) > 0):
+            raise InputError("minkowski: A must be positive definite")
+        b = np.array([self.b1, self.b2])
+        if not b @ np.linalg.solve(a, b) < 1.0:
+            raise InputError("minkowski: need |b|_{A^-1} < 1 for a norm")
+
+    def _a(self) -> np.ndarray:
+        return np.array([[self.a11, self.a12], [self.a12, self.a22]])
+
+    @property
+    def domain(self) -> Domain:
+        return Box((-1.0, -1.0), (1.0, 1.0))
+
+    def F_sx(self, x: ca.SX, v: ca.SX) -> ca.SX:
+        q = self.a11 * v[0] * v[0] + 2 * self.a12 * v[0] * v[1] + self.a22 * v[1] * v[1]
+        return ca.sqrt(q) + self.b1 * v[0] + self.b2 * v[1]
+
+    def _distance(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        d = y - x
+        q = np.einsum("ni,ij,nj->n", d, self._a(), d)
+        return np.sqrt(q) + d @ np.array([self.b1, self.b2])
+
+
+@dataclass(frozen=True)
+class Randers(ClosedFormMetric):
+    """Zermelo navigation on the Euclidean plane with a constant wind ``W`` (``|W| < 1``):
+    the travel-time metric ``F(v) = (sqrt(lam |v|**2 + <W, v>**2) - <W, v>) / lam`` with
+    ``lam = 1 - |W|**2``, on ``[-1, 1]**2``. Straight-line geodesics; ``d(x, y) = F(y - x)``
+    is the time to travel from ``x`` to ``y`` at unit speed relative to the wind."""
+
+    wind_x: float = 0.5
+    wind_y: float = 0.2
+
+    name: ClassVar[str] = "randers"
+    task: ClassVar[Task] = Task(depth=4, eps=0.4)
+    reversible: ClassVar[bool] = False
+
+    def __post_init__(self) -> None:
+        if not (self.wind_x**2 + self.wind_y**2 < 1.0):
+            raise InputError("randers: the wind speed |W| must be < 1")
+
+    @property
+    def domain(self) -> Domain:
+        return Box((-1.0, -1.0), (1.0, 1.0))
+
+    def F_sx(self, x: ca.SX, v: ca.SX) -> ca.SX:
+        lam = 1.0 - self.wind_x**2 - self.wind_y**2
+        wv = self.wind_x * v[0] + self.wind_y * v[1]
+        return (ca.sqrt(lam * ca.dot(v, v) + wv * wv) - wv) / lam
+
+    def _distance(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        # Independent of the formula above: the time T with |d - T W| = T (unit speed in
+        # the moving medium), the positive root of (1 - |W|^2) T^2 + 2 <d, W> T - |d|^2 = 0.
+        w = np.array([self.wind_x, self.wind_y])
+        d = y - x
+        a = 1.0 - w @ w
+        bq = 2.0 * (d @ w)
+        c = -np.einsum("ni,ni->n", d, d)
+        return (-bq + np.sqrt(bq * bq - 4 * a * c)) / (2 * a)
+
+
+@dataclass(frozen=True)
+class Poincare(ClosedFormMetric):
+    """Hyperbolic plane, Poincare disk model: ``F(x, v) = 2 |v| / (1 - |x|**2)`` on the disk
+    ``|x| <= radius < 1`` (a hyperbolic ball, hence geodesically convex)."""
+
+    radius: float = 0.8
+
+    name: ClassVar[str] = "poincare"
+    task: ClassVar[Task] = Task(depth=5, eps=0.3)
+    reversible: ClassVar[bool] = True
+    convexity_note: ClassVar[str] = "Riemannian: Finsler everywhere"
+
+    def __post_init__(self) -> None:
+        if not (0.0 < self.radius < 1.0):
+            raise InputError(f"poincare radius must be in (0, 1), got {self.radius!r}")
+
+    @property
+    def domain(self) -> Domain:
+        return Disk(radius=self.radius)
+
+    def F_sx(self, x: ca.SX, v: ca.SX) -> ca.SX:
+        return 2.0 * _norm_sx(v) / (1.0 - ca.dot(x, x))
+
+    def _distance(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        num = 2.0 * np.sum((x - y) ** 2, axis=1)
+        den = (1 - np.sum(x * x, axis=1)) * (1 - np.sum(y * y, axis=1))
+        return np.arccosh(1.0 + num / den)
+
+    def _geodesic(self, x: np.ndarray, y: np.ndarray, t: np.ndarray) -> np.ndarray:
+        # Moebius map sending x to 0: geodesics through 0 are diameters.
+        zx = x[:, 0] + 1j * x[:, 1]
+        zy = y[:, 0] + 1j * y[:, 1]
+        w = (zy - zx) / (1 - np.conj(zx) * zy)
+        d = self._distance(x, y)
+        direction = np.where(np.abs(w) > 0, w / np.where(np.abs(w) > 0, np.abs(w), 1), 0)
+        u = np.tanh(t[None, :] * d[:, None] / 2.0) * direction[:, None]
+        z = (u + zx[:, None]) / (1 + np.conj(zx)[:, None] * u)
+        return np.stack([z.real, z.imag], -1)
+
+
+@dataclass(frozen=True)
+class Sphere(ClosedFormMetric):
+    """Unit sphere in the stereographic chart from the south pole:
+    ``F(u, v) = 2 |v| / (1 + |u|**2)`` on the disk ``|u| <= radius`` (a spherical cap of
+    polar angle ``2 atan(radius)``, geodesically convex for ``radius < 1``). Distances are
+    great-circle angles."""
+
+    radius: float = 0.8
+
+    name: ClassVar[str] = "sphere"
+    task: ClassVar[Task] = Task(depth=5, eps=0.2)
+    reversible: ClassVar[bool] = True
+    convexity_note: ClassVar[str] = "Riemannian: Finsler everywhere"
+
+    def __post_init__(self) -> None:
+        if not (0.0 < self.radius < 1.0):
+            raise InputError(f"sphere chart radius must be in (0, 1), got {self.radius!r}")
+
+    @property
+    def domain(self) -> Domain:
+        return Disk(radius=self.radius)
+
+    def F_sx(self, x: ca.SX, v: ca.SX) -> ca.SX:
+        return 2.0 * _norm_sx(v) / (1.0 + ca.dot(x, x))
+
+    @staticmethod
+    def to_sphere(u: np.ndarray) -> np.ndarray:
+        """Inverse stereographic projection ``(N, 2)`` -> unit vectors ``(N, 3)``."""
+        s = np.sum(u * u, axis=-1, keepdims=True)
+        return np.concatenate([2 * u, 1 - s], -1) / (1 + s)
+
+    @staticmethod
+    def from_sphere(p: np.ndarray) -> np.ndarray:
+        """Stereographic projection from the south pole, unit vectors -> chart."""
+        return p[..., :2] / (1 + p[..., 2:3])
+
+    def _distance(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        a, b = self.to_sphere(x), self.to_sphere(y)
+        cross = np.linalg.norm(np.cross(a, b), axis=1)
+        return np.arctan2(cross, np.sum(a * b, axis=1))
+
+    def _geodesic(self, x: np.ndarray, y: np.ndarray, t: np.ndarray) -> np.ndarray:
+        a, b = self.to_sphere(x), self.to_sphere(y)
+        ang = self._distance(x, y)
+        s = np.sin(ang)
+        safe = np.where(s > 1e-15, s, 1.0)
+        ta = t[None, :, None]
+        wa = np.where(s[:, None, None] > 1e-15, np.sin((1 - ta) * ang[:, None, None]) / safe[:, None, None], 1 - ta)
+        wb = np.where(s[:, None, None] > 1e-15, np.sin(ta * ang[:, None, None]) / safe[:, None, None], ta)
+        p = wa * a[:, None] + wb * b[:, None]
+        p /= np.linalg.norm(p, axis=-1, keepdims=True)
+        return self.from_sphere(p)

@@ -1,0 +1,67 @@
+"""Registry of metrics by name: ``get_metric(name, **params)`` and ``list_metrics()``."""
+
+from __future__ import annotations
+
+import dataclasses
+import difflib
+
+from finsler.errors import InputError, UnknownMetricError
+from finsler.metric import Metric
+from finsler.metrics import (
+    CarLike,
+    Euclidean,
+    Matsumoto,
+    Minkowski,
+    PandaPole,
+    Poincare,
+    Randers,
+    Sphere,
+)
+
+__all__ = ["get_metric", "list_metrics", "register_metric"]
+
+_REGISTRY: dict[str, type[Metric]] = {}
+
+
+def register_metric(cls: type[Metric]) -> type[Metric]:
+    """Register a metric class (a frozen dataclass subclass of :class:`Metric`) by its
+    ``name``. Usable as a decorator; re-registering a name replaces it."""
+    if not (isinstance(cls, type) and issubclass(cls, Metric) and dataclasses.is_dataclass(cls)):
+        raise InputError("register_metric needs a dataclass subclass of finsler.Metric")
+    _REGISTRY[cls.name] = cls
+    return cls
+
+
+for _cls in (Matsumoto, CarLike, PandaPole, Euclidean, Minkowski, Randers, Poincare, Sphere):
+    register_metric(_cls)
+
+
+def list_metrics() -> list[str]:
+    """Names of the registered metrics, in registration order."""
+    return list(_REGISTRY)
+
+
+def get_metric(name: str, **params: float) -> Metric:
+    """The metric registered as ``name`` with its parameters overridden by ``params``.
+
+    Raises :class:`UnknownMetricError` for an unknown name or parameter.
+    """
+    if isinstance(name, Metric):
+        if params:
+            raise InputError("parameters can only be given with a metric name")
+        return name
+    cls = _REGISTRY.get(name)
+    if cls is None:
+        close = difflib.get_close_matches(str(name), _REGISTRY, n=1)
+        hint = f" (did you mean {close[0]!r}?)" if close else ""
+        raise UnknownMetricError(
+            f"unknown metric {name!r}{hint}; registered: {', '.join(_REGISTRY)}"
+        )
+    fields = {f.name for f in dataclasses.fields(cls)}
+    unknown = sorted(set(params) - fields)
+    if unknown:
+        raise UnknownMetricError(
+            f"metric {name!r} has no parameter {', '.join(map(repr, unknown))}; "
+            f"its parameters are: {', '.join(sorted(fields)) or '(none)'}"
+        )
+    return cls(**params)
