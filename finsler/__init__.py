@@ -16,9 +16,13 @@ from finsler.metrics import (
     Randers,
     Sphere,
 )
+from finsler.pairs import DEFAULT_EVAL_SEED, default_pairs, sample_pairs
 from finsler.registry import get_metric, list_metrics, register_metric
 
 __all__ = [
+    "DEFAULT_EVAL_SEED",
+    "default_pairs",
+    "sample_pairs",
     "MATSUMOTO_CONVEX_RADIUS",
     "Box",
     "CarLike",
