@@ -90,19 +90,24 @@ class Metric(ABC):
     def dim(self) -> int:
         return self.domain.dim
 
+    @property
+    def _ident(self) -> str:
+        """The name as a CasADi identifier (letters, digits, single underscores)."""
+        return "".join(c if c.isalnum() else "_" for c in self.name).strip("_")
+
     @functools.cached_property
     def casadi_F(self) -> ca.Function:
         """CasADi function ``F(x, v)`` of two ``dim``-vectors."""
         x = ca.SX.sym("x", self.dim)
         v = ca.SX.sym("v", self.dim)
-        return ca.Function(f"F_{self.name}", [x, v], [self.F_sx(x, v)], ["x", "v"], ["F"])
+        return ca.Function(f"F_{self._ident}", [x, v], [self.F_sx(x, v)], ["x", "v"], ["F"])
 
     @functools.cached_property
     def casadi_cost(self) -> ca.Function:
         """CasADi function ``C(x, y) = F(x, y - x)`` (eq. 4; the chart is the identity)."""
         x = ca.SX.sym("x", self.dim)
         y = ca.SX.sym("y", self.dim)
-        return ca.Function(f"C_{self.name}", [x, y], [self.F_sx(x, y - x)], ["x", "y"], ["C"])
+        return ca.Function(f"C_{self._ident}", [x, y], [self.F_sx(x, y - x)], ["x", "y"], ["C"])
 
     @functools.cached_property
     def casadi_hessian(self) -> ca.Function:
@@ -111,7 +116,7 @@ class Metric(ABC):
         v = ca.SX.sym("v", self.dim)
         e = 0.5 * self.F_sx(x, v) ** 2
         h, _ = ca.hessian(e, v)
-        return ca.Function(f"g_{self.name}", [x, v], [ca.densify(h)], ["x", "v"], ["g"])
+        return ca.Function(f"g_{self._ident}", [x, v], [ca.densify(h)], ["x", "v"], ["g"])
 
     @functools.cached_property
     def lowered_F(self) -> LoweredFunction:
@@ -132,24 +137,20 @@ class Metric(ABC):
         xb = _as_batch(x, self.dim, "x")
         vb = _as_batch(v, self.dim, "v")
         _same_kind(xb, vb)
-        (out,) = self.lowered_F(xb, vb)
-        out = out[..., 0]
+        out = self._eval_F(xb, vb)
         return out[0] if single else out
 
     def cost(self, x: Any, y: Any) -> Any:
         """Local cost ``C(x, y) = F(x, y - x)`` of eq. (4), batch ``(N, dim)`` -> ``(N,)``."""
         xb, yb, single = self._pair(x, y)
-        (out,) = self.lowered_F(xb, yb - xb)
-        out = out[..., 0]
+        out = self._eval_F(xb, yb - xb)
         return out[0] if single else out
 
     def cost_symmetric(self, x: Any, y: Any) -> Any:
         """Symmetrised cost of eq. (59): ``(F(x, y - x) + F(y, y - x)) / 2``."""
         xb, yb, single = self._pair(x, y)
         d = yb - xb
-        (a,) = self.lowered_F(xb, d)
-        (b,) = self.lowered_F(yb, d)
-        out = 0.5 * (a[..., 0] + b[..., 0])
+        out = 0.5 * (self._eval_F(xb, d) + self._eval_F(yb, d))
         return out[0] if single else out
 
     def segment_length(self, x: Any, y: Any, order: int = 8) -> Any:
@@ -168,13 +169,13 @@ class Metric(ABC):
             ww = torch.as_tensor(w, dtype=xb.dtype, device=xb.device)
             pts = (xb[None] + tt * d[None]).reshape(-1, self.dim)
             dirs = d[None].expand(len(t), n, self.dim).reshape(-1, self.dim)
-            (f,) = self.lowered_F(pts, dirs)
-            out = (f[..., 0].reshape(len(t), n) * ww[:, None]).sum(0)
+            f = self._eval_F(pts, dirs)
+            out = (f.reshape(len(t), n) * ww[:, None]).sum(0)
         else:
             pts = (xb[None] + t[:, None, None] * d[None]).reshape(-1, self.dim)
             dirs = np.broadcast_to(d[None], (len(t), n, self.dim)).reshape(-1, self.dim)
-            (f,) = self.lowered_F(pts, dirs)
-            out = w @ f[:, 0].reshape(len(t), n)
+            f = self._eval_F(pts, dirs)
+            out = w @ f.reshape(len(t), n)
         return out[0] if single else out
 
     def path_costs(self, points: Any) -> Any:
@@ -221,6 +222,26 @@ class Metric(ABC):
         )
 
     # -- helpers --------------------------------------------------------------------------
+    def _eval_F(self, x: Any, v: Any) -> Any:
+        """Lowered ``F`` on validated batches -> ``(N,)``, with ``F(x, 0) = 0`` exactly
+        (formulas such as Matsumoto's ``alpha**2 / (alpha - beta)`` are 0/0 there)."""
+        if is_torch(v):
+            import torch
+
+            (out,) = self.lowered_F(x, v)
+            out = out[..., 0]
+            zero = (v == 0).all(dim=-1)
+            if bool(zero.any()):
+                out = torch.where(zero, torch.zeros_like(out), out)
+            return out
+        zero = np.all(v == 0, axis=-1)
+        if zero.any():
+            with np.errstate(invalid="ignore", divide="ignore"):
+                (out,) = self.lowered_F(x, v)
+            return np.where(zero, 0.0, out[..., 0])
+        (out,) = self.lowered_F(x, v)
+        return out[..., 0]
+
     def _pair(self, x: Any, y: Any) -> tuple[Any, Any, bool]:
         single = _ndim(x) == 1 and _ndim(y) == 1
         xb = _as_batch(x, self.dim, "x")
