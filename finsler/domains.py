@@ -26,20 +26,21 @@ def is_torch(a: Any) -> bool:
     return mod.startswith("torch")
 
 
-def _as_batch(x: Any, dim: int, name: str) -> Any:
-    """Validate shape ``(N, dim)`` or ``(dim,)`` and finiteness; return a 2-D view."""
+def _as_batch(x: Any, dim: int, name: str, check_finite: bool = True) -> Any:
+    """Validate shape ``(N, dim)`` or ``(dim,)`` (and finiteness unless ``check_finite`` is
+    false, for callers that check their outputs instead); return a 2-D view."""
     if is_torch(x):
         import torch
 
         if x.ndim not in (1, 2) or x.shape[-1] != dim:
             raise InputError(f"{name} must have shape (N, {dim}) or ({dim},), got {tuple(x.shape)}")
-        if not bool(torch.isfinite(x).all()):
+        if check_finite and not bool(torch.isfinite(x).all()):
             raise InputError(f"{name} contains NaN or inf")
         return x.reshape(-1, dim)
     x = np.asarray(x, dtype=np.float64)
     if x.ndim not in (1, 2) or x.shape[-1] != dim:
         raise InputError(f"{name} must have shape (N, {dim}) or ({dim},), got {x.shape}")
-    if not np.all(np.isfinite(x)):
+    if check_finite and not np.all(np.isfinite(x)):
         raise InputError(f"{name} contains NaN or inf")
     return x.reshape(-1, dim)
 

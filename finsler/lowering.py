@@ -255,29 +255,38 @@ class LoweredFunction:
             is_torch = isinstance(first, torch.Tensor)
         except ImportError:  # pragma: no cover - torch is a dependency
             is_torch = False
-        cols = []
         for k, (a, n) in enumerate(zip(args, self.in_sizes, strict=True)):
             if a.shape[-1] != n:
                 raise ValueError(
                     f"{self.name}: input {k} must have last dimension {n}, got shape "
                     f"{tuple(a.shape)}"
                 )
-            cols.append([a[..., i] for i in range(n)])
         if is_torch:
+            cols = [list(a.reshape(-1, a.shape[-1]).unbind(-1)) for a in args]
             outs = self._program(_torch_backend(), cols)
-            return tuple(_stack_torch(o, first) for o in outs)
+            batch = torch.broadcast_shapes(*(a.shape[:-1] for a in args))
+            return tuple(_stack_torch(o, first).reshape(*batch, -1) for o in outs)
+        arrs = [np.asarray(a, dtype=np.float64) for a in args]
+        # coordinate-major contiguous columns: unit-stride operands run faster in numpy
+        cols = [list(np.ascontiguousarray(a.reshape(-1, a.shape[-1]).T)) for a in arrs]
         outs = self._program(_NUMPY, cols)
-        shape = np.broadcast_shapes(*(a.shape[:-1] for a in args))
-        return tuple(
-            np.stack([np.broadcast_to(np.asarray(c, dtype=np.float64), shape) for c in o], -1)
-            for o in outs
-        )
+        batch = np.broadcast_shapes(*(a.shape[:-1] for a in arrs))
+        flat = (int(np.prod(batch)),)
+        result = []
+        for o in outs:
+            full = [np.broadcast_to(np.asarray(c, dtype=np.float64), flat) for c in o]
+            stacked = full[0][:, None] if len(full) == 1 else np.stack(full, -1)
+            result.append(stacked.reshape(*batch, len(full)))
+        return tuple(result)
 
 
 def _stack_torch(cols: list[Any], like: Any) -> Any:
     import torch
 
-    shape = torch.broadcast_shapes(*(c.shape for c in cols if isinstance(c, torch.Tensor)))
+    shapes = [c.shape for c in cols if isinstance(c, torch.Tensor)]
+    shape = torch.broadcast_shapes(*shapes) if shapes else torch.Size([1])
+    if len(cols) == 1 and isinstance(cols[0], torch.Tensor):
+        return cols[0].expand(shape).unsqueeze(-1)
     full = []
     for c in cols:
         if not isinstance(c, torch.Tensor):
@@ -305,16 +314,17 @@ def lower(fn: ca.Function) -> LoweredFunction:
             raise ValueError(f"lower: input {i} of {fn.name()} is not dense")
     lines = ["def program(B, I):"]
     out_exprs: list[list[str]] = [["0.0"] * n for n in out_sizes]
-    # Work variables are renamed on every write (SSA) so no aliasing can occur
-    # between array objects.
-    current: dict[int, str] = {}
-    counter = 0
+    # Work variables are named after CasADi's work-vector slots, which CasADi reuses once
+    # a value is dead: rebinding a name frees the old array (every operation returns a new
+    # array, so no aliasing can occur) and keeps the memory footprint small.
     for k in range(fn.n_instructions()):
         op = fn.instruction_id(k)
         if op == _OP_OUTPUT:
             (w,) = fn.instruction_input(k)
             o, nz = fn.instruction_output(k)
-            out_exprs[o][nz] = current[w]
+            name = f"o{o}_{nz}"
+            lines.append(f"    {name} = w{w}")
+            out_exprs[o][nz] = name
             continue
         (w,) = fn.instruction_output(k)
         if op == _OP_INPUT:
@@ -324,16 +334,13 @@ def lower(fn: ca.Function) -> LoweredFunction:
             expr = _const(fn.instruction_constant(k))
         elif op in _UNARY:
             (a,) = fn.instruction_input(k)[:1]
-            expr = _UNARY[op].format(current[a])
+            expr = _UNARY[op].format(f"w{a}")
         elif op in _BINARY:
             a, b = fn.instruction_input(k)[:2]
-            expr = _BINARY[op].format(current[a], current[b])
+            expr = _BINARY[op].format(f"w{a}", f"w{b}")
         else:
             raise NotImplementedError(f"lower: CasADi operation {op} is not supported")
-        name = f"w{counter}"
-        counter += 1
-        lines.append(f"    {name} = {expr}")
-        current[w] = name
+        lines.append(f"    w{w} = {expr}")
     ret = ", ".join("[" + ", ".join(o) + "]" for o in out_exprs)
     lines.append(f"    return ({ret},)")
     source = "\n".join(lines) + "\n"

@@ -134,8 +134,8 @@ class Metric(ABC):
         numpy in, numpy (float64) out; torch in, torch out (same device, differentiable).
         """
         single = _ndim(x) == 1 and _ndim(v) == 1
-        xb = _as_batch(x, self.dim, "x")
-        vb = _as_batch(v, self.dim, "v")
+        xb = _as_batch(x, self.dim, "x", check_finite=False)
+        vb = _as_batch(v, self.dim, "v", check_finite=False)
         _same_kind(xb, vb)
         out = self._eval_F(xb, vb)
         return out[0] if single else out
@@ -223,29 +223,34 @@ class Metric(ABC):
 
     # -- helpers --------------------------------------------------------------------------
     def _eval_F(self, x: Any, v: Any) -> Any:
-        """Lowered ``F`` on validated batches -> ``(N,)``, with ``F(x, 0) = 0`` exactly
-        (formulas such as Matsumoto's ``alpha**2 / (alpha - beta)`` are 0/0 there)."""
+        """Lowered ``F`` on shape-checked batches -> ``(N,)``.
+
+        Finiteness is checked on the output (one pass over N values instead of 2N inputs):
+        a non-finite result is traced back to non-finite inputs (:class:`InputError`), or
+        to zero vectors, where ``F(x, 0) = 0`` exactly (formulas such as Matsumoto's
+        ``alpha**2 / (alpha - beta)`` are 0/0 there).
+        """
         if is_torch(v):
             import torch
 
             (out,) = self.lowered_F(x, v)
             out = out[..., 0]
-            zero = (v == 0).all(dim=-1)
-            if bool(zero.any()):
-                out = torch.where(zero, torch.zeros_like(out), out)
+            if not bool(torch.isfinite(out).all()):
+                _raise_non_finite(x, v)
+                out = torch.where((v == 0).all(dim=-1), torch.zeros_like(out), out)
             return out
-        zero = np.all(v == 0, axis=-1)
-        if zero.any():
-            with np.errstate(invalid="ignore", divide="ignore"):
-                (out,) = self.lowered_F(x, v)
-            return np.where(zero, 0.0, out[..., 0])
-        (out,) = self.lowered_F(x, v)
-        return out[..., 0]
+        with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+            (out,) = self.lowered_F(x, v)
+        out = out[..., 0]
+        if not np.isfinite(out).all():
+            _raise_non_finite(x, v)
+            out = np.where(np.all(v == 0, axis=-1), 0.0, out)
+        return out
 
     def _pair(self, x: Any, y: Any) -> tuple[Any, Any, bool]:
         single = _ndim(x) == 1 and _ndim(y) == 1
-        xb = _as_batch(x, self.dim, "x")
-        yb = _as_batch(y, self.dim, "y")
+        xb = _as_batch(x, self.dim, "x", check_finite=False)
+        yb = _as_batch(y, self.dim, "y", check_finite=False)
         _same_kind(xb, yb)
         if xb.shape[0] != yb.shape[0] and 1 not in (xb.shape[0], yb.shape[0]):
             raise InputError(
@@ -264,6 +269,15 @@ class Metric(ABC):
             "reversible": self.reversible,
             "convexity": self.convexity_note,
         }
+
+
+def _raise_non_finite(x: Any, v: Any) -> None:
+    """Raise :class:`InputError` if ``x`` or ``v`` holds NaN or inf (called only after a
+    non-finite result, so the check costs nothing on good input)."""
+    for arr in (x, v):
+        finite = arr.isfinite() if is_torch(arr) else np.isfinite(arr)
+        if not bool(finite.all()):
+            raise InputError("input points or vectors contain NaN or inf")
 
 
 def _ndim(a: Any) -> int:
