@@ -1,0 +1,42 @@
+"""The README's Python examples run as written and do what they say."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+
+import finsler
+
+README = Path(__file__).resolve().parents[1] / "README.md"
+
+
+def _python_blocks() -> list[str]:
+    return re.findall(r"```python\n(.*?)```", README.read_text(), flags=re.S)
+
+
+def test_readme_examples_run_and_define_a_working_metric() -> None:
+    blocks = _python_blocks()
+    assert len(blocks) >= 2
+    namespace: dict = {}
+    for block in blocks:
+        exec(compile(block, str(README), "exec"), namespace)  # noqa: S102
+    try:
+        m = finsler.get_metric("wavy", a=0.2)
+        x = np.array([[0.1, 0.2], [0.0, 0.0]])
+        y = np.array([[0.3, -0.1], [0.5, 0.0]])
+        ref = (1 + 0.2 * np.sin(3 * x[:, 0]) ** 2) * np.linalg.norm(y - x, axis=1)
+        assert np.allclose(m.cost(x, y), ref, rtol=1e-14)
+        assert np.all(m.convexity(x) > 0)
+    finally:
+        finsler.registry._REGISTRY.pop("wavy", None)
+
+
+def test_readme_names_the_two_commands() -> None:
+    text = README.read_text()
+    assert 'pip install -e ".[dev]"' in text
+    assert ".venv/bin/python -m pytest -n 2" in text
+    ci = (README.parent / ".ci" / "run").read_text()
+    assert '.venv/bin/pip install -e ".[dev]"' in ci
+    assert ".venv/bin/python -m pytest -n 2" in ci
