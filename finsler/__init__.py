@@ -21,8 +21,6 @@ from finsler.registry import get_metric, list_metrics, register_metric
 
 __all__ = [
     "DEFAULT_EVAL_SEED",
-    "default_pairs",
-    "sample_pairs",
     "MATSUMOTO_CONVEX_RADIUS",
     "Box",
     "CarLike",
@@ -43,7 +41,9 @@ __all__ = [
     "Sphere",
     "Task",
     "UnknownMetricError",
+    "default_pairs",
     "get_metric",
     "list_metrics",
     "register_metric",
+    "sample_pairs",
 ]

@@ -345,7 +345,7 @@ def lower(fn: ca.Function) -> LoweredFunction:
     lines.append(f"    return ({ret},)")
     source = "\n".join(lines) + "\n"
     namespace: dict[str, Any] = {}
-    exec(compile(source, f"<lowered {fn.name()}>", "exec"), namespace)  # noqa: S102
+    exec(compile(source, f"<lowered {fn.name()}>", "exec"), namespace)
     return LoweredFunction(
         name=fn.name(),
         n_in=fn.n_in(),

@@ -401,11 +401,12 @@ class Sphere(ClosedFormMetric):
     def _geodesic(self, x: np.ndarray, y: np.ndarray, t: np.ndarray) -> np.ndarray:
         a, b = self.to_sphere(x), self.to_sphere(y)
         ang = self._distance(x, y)
-        s = np.sin(ang)
-        safe = np.where(s > 1e-15, s, 1.0)
-        ta = t[None, :, None]
-        wa = np.where(s[:, None, None] > 1e-15, np.sin((1 - ta) * ang[:, None, None]) / safe[:, None, None], 1 - ta)
-        wb = np.where(s[:, None, None] > 1e-15, np.sin(ta * ang[:, None, None]) / safe[:, None, None], ta)
+        s = np.sin(ang)[:, None, None]
+        big = s > 1e-15  # slerp; linear interpolation for (nearly) equal points
+        safe = np.where(big, s, 1.0)
+        ta, an = t[None, :, None], ang[:, None, None]
+        wa = np.where(big, np.sin((1 - ta) * an) / safe, 1 - ta)
+        wb = np.where(big, np.sin(ta * an) / safe, ta)
         p = wa * a[:, None] + wb * b[:, None]
         p /= np.linalg.norm(p, axis=-1, keepdims=True)
         return self.from_sphere(p)

@@ -8,6 +8,8 @@ Matsumoto metric outside that radius is detected, with the sizes measured in the
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, assume, given, settings
@@ -142,7 +144,7 @@ def test_proposition1_cost_over_distance_tends_to_one(name: str) -> None:
     if name in ("euclidean", "minkowski", "randers"):  # constant norms: C = d exactly
         assert max(errors) < 1e-12
     else:  # first order in the step for a metric varying in space
-        for a, b in zip(errors, errors[1:]):
+        for a, b in itertools.pairwise(errors):
             assert b < a / 5
         assert errors[-1] < 1e-3
 
