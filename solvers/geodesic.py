@@ -1,0 +1,363 @@
+"""Discrete geodesics of the task: global seeding, energy solve, min-max refinement, batches.
+
+``solve_geodesic`` solves the task discretisation (eq. 7's energy ``sum C(p_i, p_{i+1})**2``
+over ``n`` segments) from every seed of a :class:`~solvers.seeding.SeedPlan` and keeps the
+lowest energy among the converged solves (selection by energy, not by length: a car-like
+local minimum can hide a cheap turn in one long segment, which the energy penalises).
+``refine_minmax`` then minimises the largest segment cost: the exact ceiling of the
+paper's task.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import time
+from collections.abc import Sequence
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from typing import Any
+
+import numpy as np
+
+from finsler.errors import InputError
+from finsler.metric import Metric
+from finsler.registry import get_metric
+from solvers.result import (
+    GeodesicResult,
+    MidpointResult,
+    MinMaxResult,
+    SolverError,
+    Status,
+)
+from solvers.seeding import SeedPlan, graph_seeder, resample, seed_curves
+from solvers.transcription import energy_nlp, minmax_nlp
+
+__all__ = [
+    "check_pairs",
+    "check_segments",
+    "midpoint",
+    "refine_minmax",
+    "solve_batch",
+    "solve_geodesic",
+]
+
+#: Relative energy difference under which two seeds count as agreeing with the best.
+AGREE_RTOL = 1e-6
+
+#: Pairs with ``max |g - s| <= SHORT_PAIR * domain size`` are solved as straight segments.
+SHORT_PAIR = 1e-7
+
+
+def domain_scale(m: Metric) -> float:
+    """Largest side of the domain's bounding box (1 if unbounded)."""
+    lo, hi = m.domain.bounds()
+    span = np.asarray(hi, float) - np.asarray(lo, float)
+    span = span[np.isfinite(span)]
+    return float(np.max(span)) if span.size else 1.0
+
+
+def is_short_pair(m: Metric, s: np.ndarray, g: np.ndarray) -> bool:
+    """True if start and goal are closer than ``SHORT_PAIR`` times the domain size."""
+    return bool(np.max(np.abs(g - s)) <= SHORT_PAIR * domain_scale(m))
+
+
+def _metric(metric: Metric | str) -> Metric:
+    if isinstance(metric, Metric):
+        return metric
+    if isinstance(metric, str):
+        return get_metric(metric)
+    raise InputError(f"metric must be a finsler.Metric or a registered name, got {metric!r}")
+
+
+def check_segments(metric: Metric, segments: int | None) -> int:
+    """Validate the number of segments (``None`` -> the task's ``2**D``); ``n >= 2``."""
+    if segments is None:
+        return metric.task.segments
+    if isinstance(segments, bool) or not isinstance(segments, (int, np.integer)):
+        raise InputError(f"segments must be an integer >= 2, got {segments!r}")
+    if segments < 2:
+        raise InputError(f"segments must be >= 2 (interior points to optimise), got {segments}")
+    if segments > 1 << 16:
+        raise InputError(f"segments = {segments} is too large (max 65536)")
+    return int(segments)
+
+
+def _point(metric: Metric, x: Any, name: str) -> np.ndarray:
+    arr = np.asarray(x, dtype=np.float64) if not hasattr(x, "detach") else x
+    if getattr(arr, "ndim", 0) == 2 and arr.shape[0] != 1:
+        raise InputError(f"{name} must be a single point of shape ({metric.dim},), got "
+                         f"{tuple(arr.shape)}")
+    return metric.domain.check(arr, name)[0].astype(np.float64)
+
+
+def check_pairs(metric: Metric, pairs: Any) -> np.ndarray:
+    """Validate start/goal pairs ``(K, 2, dim)``: shape, finiteness, domain membership."""
+    arr = np.asarray(pairs, dtype=np.float64)
+    if arr.ndim != 3 or arr.shape[1] != 2 or arr.shape[2] != metric.dim or arr.shape[0] < 1:
+        raise InputError(
+            f"pairs must have shape (K, 2, {metric.dim}) with K >= 1 for metric "
+            f"{metric.name!r}, got {arr.shape}"
+        )
+    metric.domain.check(arr[:, 0], "pairs[:, 0] (starts)")
+    metric.domain.check(arr[:, 1], "pairs[:, 1] (goals)")
+    return arr
+
+
+def _finish(metric: Metric, points: np.ndarray) -> dict[str, Any]:
+    costs = metric.path_costs(points[None])[0]
+    quad = metric.segment_length(points[:-1], points[1:], 8)
+    nonconvex = 0
+    if not metric.convex_everywhere:
+        nonconvex = int(np.sum(metric.convexity(points) < 0.0))
+    return {
+        "segment_costs": costs,
+        "energy": float(np.sum(costs**2)),
+        "length": float(np.sum(costs)),
+        "length_quadrature": float(np.sum(quad)),
+        "max_segment_cost": float(np.max(costs)),
+        "nonconvex_points": nonconvex,
+    }
+
+
+def _onto_domain(m: Metric, pts: np.ndarray) -> np.ndarray:
+    """Project IPOPT's points into the domain: IPOPT relaxes constraints by ~1e-8
+    (``bound_relax_factor``); the projection moves points by at most that much, and every
+    reported figure is computed from the projected points."""
+    out = np.asarray(m.domain.project(pts), dtype=np.float64)
+    out[0], out[-1] = pts[0], pts[-1]
+    return out
+
+
+def solve_geodesic(
+    metric: Metric | str,
+    start: Any,
+    goal: Any,
+    segments: int | None = None,
+    *,
+    seeds: SeedPlan | None = None,
+    initial: Sequence[np.ndarray] = (),
+    minmax: bool = False,
+    strict: bool = False,
+) -> GeodesicResult:
+    """Globally seeded discrete geodesic from ``start`` to ``goal`` (each ``(dim,)``).
+
+    Minimises ``sum_i C(p_i, p_{i+1})**2`` over the interior points of an ``n``-segment path
+    (default ``n = 2**D`` of the metric's task) from every seed of ``seeds`` (default
+    :meth:`SeedPlan.default`) plus the given ``initial`` paths ``(n+1, dim)`` (e.g. a
+    learned path); returns the lowest energy among IPOPT-converged solves, with
+    ``seeds_tried`` / ``seeds_agreeing``. With ``minmax=True`` the min-max refinement is
+    attached (``result.minmax``). ``strict=True`` raises :class:`SolverError` unless
+    converged.
+    """
+    t0 = time.perf_counter()
+    m = _metric(metric)
+    n = check_segments(m, segments)
+    s = _point(m, start, "start")
+    g = _point(m, goal, "goal")
+    plan = seeds if seeds is not None else SeedPlan.default(m)
+    if not isinstance(plan, SeedPlan):
+        raise InputError(f"seeds must be a SeedPlan, got {type(plan).__name__}")
+    if is_short_pair(m, s, g):
+        same = np.array_equal(s, g)
+        pts = s + np.linspace(0.0, 1.0, n + 1)[:, None] * (g - s)
+        pts[-1] = g
+        st = Status.TRIVIAL if same else Status.SHORT
+        res = GeodesicResult(
+            metric=m.name, points=pts, status=st, iterations=0,
+            wall_time=time.perf_counter() - t0, seeds_tried=0, seeds_agreeing=0,
+            **_finish(m, pts),
+        )
+        if minmax:
+            res.minmax = MinMaxResult(pts, res.segment_costs, res.max_segment_cost, st, 0, 0.0,
+                                      False)
+        return res
+
+    candidates = seed_curves(m, s, g, n, plan)
+    if plan.graph:
+        gp = graph_seeder(m).path(s, g)
+        if gp is not None:
+            candidates.append(("graph", resample(gp[0], gp[1], n)))
+    for k, init in enumerate(initial):
+        arr = np.array(init, dtype=np.float64)
+        if arr.shape != (n + 1, m.dim) or not np.all(np.isfinite(arr)):
+            raise InputError(f"initial path {k} must be a finite ({n + 1}, {m.dim}) array")
+        arr = np.asarray(m.domain.project(arr), dtype=np.float64)
+        arr[0], arr[-1] = s, g
+        candidates.append((f"initial{k}", arr))
+
+    total_iter = 0
+    if plan.coarse is not None and plan.coarse < n and len(candidates) > plan.refine_top:
+        nc = plan.coarse
+        coarse_nlp = energy_nlp(m, nc)
+        ranked = []
+        for name, seed in candidates:
+            cs = resample(seed, np.ones(n), nc) if seed.shape[0] != nc + 1 else seed
+            cs[0], cs[-1] = s, g
+            pts, status, its, _ = coarse_nlp.solve(cs)
+            total_iter += max(its, 0)
+            e = float(np.sum(m.path_costs(_onto_domain(m, pts)[None])[0] ** 2))
+            ranked.append((e if status.converged and np.isfinite(e) else np.inf, name, pts))
+        ranked.sort(key=lambda r: r[0])
+        candidates = [
+            (f"{name}@{nc}", resample(pts, np.ones(nc), n)) for _, name, pts in
+            ranked[: plan.refine_top]
+        ]
+    nlp = energy_nlp(m, n)
+    solved = []
+    for name, seed in candidates:
+        pts, status, its, _ = nlp.solve(seed)
+        total_iter += max(its, 0)
+        pts = _onto_domain(m, pts)
+        feasible = bool(np.all(m.domain.contains(pts, tol=1e-9)))
+        energy = float(np.sum(m.path_costs(pts[None])[0] ** 2))
+        solved.append((name, pts, status, its, energy, feasible))
+    ok = [r for r in solved if r[2].converged and r[5] and np.isfinite(r[4])]
+    pool = ok or [r for r in solved if r[5] and np.isfinite(r[4])] or solved
+    best = min(pool, key=lambda r: r[4])
+    agree = sum(1 for r in ok if abs(r[4] - best[4]) <= AGREE_RTOL * max(best[4], 1e-300))
+    res = GeodesicResult(
+        metric=m.name,
+        points=best[1],
+        status=best[2],
+        iterations=total_iter,
+        wall_time=0.0,
+        seeds_tried=len(solved),
+        seeds_agreeing=agree,
+        seed_energies={r[0]: (r[4] if r[2].converged else float("nan")) for r in solved},
+        best_seed=best[0],
+        **_finish(m, best[1]),
+    )
+    if minmax:
+        res.minmax = refine_minmax(m, res)
+    res.wall_time = time.perf_counter() - t0
+    if strict and not (res.converged and (res.minmax is None or res.minmax.converged)):
+        raise SolverError(
+            f"{m.name}: solve did not converge (status {res.status.value}"
+            + (f", min-max {res.minmax.status.value}" if res.minmax is not None else "")
+            + ")",
+            res,
+        )
+    return res
+
+
+def refine_minmax(metric: Metric | str, result: GeodesicResult) -> MinMaxResult:
+    """Minimise the largest segment cost, warm started from ``result`` (epigraph form, cap
+    on the max just above its starting value, relaxed if IPOPT finds that infeasible).
+
+    The returned points are the refined ones if they lie in the domain and lower the max,
+    else the starting points (the status then tells why); costs are recomputed in float64.
+    """
+    t0 = time.perf_counter()
+    m = _metric(metric)
+    if result.status in (Status.TRIVIAL, Status.SHORT):
+        return MinMaxResult(result.points, result.segment_costs, result.max_segment_cost,
+                            result.status, 0, 0.0, False)
+    n = result.segments
+    nlp = minmax_nlp(m, n)
+    pts, status, its, relaxed = nlp.solve(result.points, result.max_segment_cost)
+    pts = _onto_domain(m, pts)
+    costs = m.path_costs(pts[None])[0]
+    feasible = bool(np.all(m.domain.contains(pts, tol=1e-9))) and np.all(np.isfinite(costs))
+    if not feasible or float(np.max(costs)) > result.max_segment_cost:
+        pts, costs = result.points, result.segment_costs
+    return MinMaxResult(
+        points=pts,
+        segment_costs=costs,
+        max_segment_cost=float(np.max(costs)),
+        status=status,
+        iterations=its,
+        wall_time=time.perf_counter() - t0,
+        cap_relaxed=relaxed,
+    )
+
+
+def midpoint(
+    metric: Metric | str,
+    start: Any,
+    goal: Any,
+    segments: int | None = None,
+    **kwargs: Any,
+) -> MidpointResult:
+    """Midpoint ``p_{n/2}`` of the discrete geodesic (``n`` even; default ``2**D``); keyword
+    arguments go to :func:`solve_geodesic`."""
+    m = _metric(metric)
+    n = check_segments(m, segments)
+    if n % 2:
+        raise InputError(f"midpoint needs an even number of segments, got {n}")
+    res = solve_geodesic(m, start, goal, n, **kwargs)
+    return MidpointResult(point=res.points[n // 2].copy(), geodesic=res)
+
+
+# ----------------------------------------------------------------------------------------
+# batches
+# ----------------------------------------------------------------------------------------
+def _metric_spec(m: Metric) -> tuple[type, dict[str, Any]]:
+    return type(m), {f.name: getattr(m, f.name) for f in dataclasses.fields(m)}
+
+
+def _batch_worker(args: tuple) -> tuple[int, GeodesicResult]:
+    (cls, params), k, s, g, n, plan, minmax = args
+    m = _cached_metric(cls, tuple(sorted(params.items())))
+    return k, solve_geodesic(m, s, g, n, seeds=plan, minmax=minmax)
+
+
+_METRICS: dict[tuple, Metric] = {}
+
+
+def _cached_metric(cls: type, items: tuple) -> Metric:
+    key = (cls, items)
+    if key not in _METRICS:
+        _METRICS[key] = cls(**dict(items))
+    return _METRICS[key]
+
+
+def solve_batch(
+    metric: Metric | str,
+    pairs: Any,
+    segments: int | None = None,
+    *,
+    seeds: SeedPlan | None = None,
+    minmax: bool = False,
+    workers: int | None = None,
+    progress: bool = True,
+) -> list[GeodesicResult]:
+    """Solve every pair of ``pairs`` ``(K, 2, dim)``; results in the order of the pairs.
+
+    ``workers`` processes (default: the CPU count, at most ``K``; ``1`` runs in this
+    process); each worker builds the NLP once and reuses it for all its pairs. A tqdm bar
+    shows progress unless ``progress=False``. Same inputs give the same results.
+    """
+    from tqdm.auto import tqdm
+
+    m = _metric(metric)
+    arr = check_pairs(m, pairs)
+    n = check_segments(m, segments)
+    plan = seeds if seeds is not None else SeedPlan.default(m)
+    if workers is None:
+        workers = os.cpu_count() or 1
+    if isinstance(workers, bool) or not isinstance(workers, (int, np.integer)) or workers < 1:
+        raise InputError(f"workers must be a positive integer, got {workers!r}")
+    workers = int(min(workers, arr.shape[0]))
+    results: list[GeodesicResult | None] = [None] * arr.shape[0]
+    bar = tqdm(total=arr.shape[0], desc=f"solve {m.name}", disable=not progress, unit="pair")
+    try:
+        if workers == 1:
+            for k in range(arr.shape[0]):
+                results[k] = solve_geodesic(m, arr[k, 0], arr[k, 1], n, seeds=plan,
+                                            minmax=minmax)
+                bar.update(1)
+        else:
+            import multiprocessing as mp
+
+            spec = _metric_spec(m)
+            jobs = [(spec, k, arr[k, 0], arr[k, 1], n, plan, minmax) for k in range(len(arr))]
+            ctx = mp.get_context("spawn")
+            with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as ex:
+                futures = [ex.submit(_batch_worker, j) for j in jobs]
+                for fut in as_completed(futures):
+                    k, res = fut.result()
+                    results[k] = res
+                    bar.update(1)
+    finally:
+        bar.close()
+    return [r for r in results if r is not None]

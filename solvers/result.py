@@ -1,0 +1,248 @@
+"""Result objects of the solvers: every solve returns one, with its status.
+
+Non-convergence is a :class:`Status`, never a silent number; ``strict=True`` in the API
+turns a non-converged status into a :class:`SolverError`.
+"""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from finsler.errors import InputError
+
+__all__ = [
+    "DistanceResult",
+    "DistanceStatus",
+    "GeodesicResult",
+    "MidpointResult",
+    "MinMaxResult",
+    "SolverError",
+    "Status",
+]
+
+
+class SolverError(RuntimeError):
+    """Raised by ``strict=True`` solves that did not converge (the result is attached)."""
+
+    def __init__(self, message: str, result: Any = None) -> None:
+        super().__init__(message)
+        self.result = result
+
+
+class Status(enum.Enum):
+    """IPOPT's return status (``return_status`` of CasADi's ``nlpsol`` stats), plus the
+    toolkit's own ``TRIVIAL`` (start == goal: nothing to solve) and ``SHORT`` (start and goal
+    closer than :data:`solvers.geodesic.SHORT_PAIR` times the domain's size: the straight
+    segment, equally divided, is the geodesic to within ``O(|g - s|**2)`` ~ 1e-14 in
+    coordinates, below what IPOPT resolves, and ``F**2`` is not differentiable at zero
+    velocity, so no NLP is solved)."""
+
+    SUCCESS = "Solve_Succeeded"
+    ACCEPTABLE = "Solved_To_Acceptable_Level"
+    INFEASIBLE = "Infeasible_Problem_Detected"
+    SEARCH_DIRECTION_TOO_SMALL = "Search_Direction_Becomes_Too_Small"
+    DIVERGING_ITERATES = "Diverging_Iterates"
+    USER_STOP = "User_Requested_Stop"
+    FEASIBLE_POINT_FOUND = "Feasible_Point_Found"
+    MAX_ITERATIONS = "Maximum_Iterations_Exceeded"
+    RESTORATION_FAILED = "Restoration_Failed"
+    STEP_COMPUTATION_ERROR = "Error_In_Step_Computation"
+    MAX_CPU_TIME = "Maximum_CpuTime_Exceeded"
+    MAX_WALL_TIME = "Maximum_WallTime_Exceeded"
+    NOT_ENOUGH_DEGREES_OF_FREEDOM = "Not_Enough_Degrees_Of_Freedom"
+    INVALID_PROBLEM = "Invalid_Problem_Definition"
+    INVALID_OPTION = "Invalid_Option"
+    INVALID_NUMBER = "Invalid_Number_Detected"
+    UNRECOVERABLE = "Unrecoverable_Exception"
+    NONIPOPT_EXCEPTION = "NonIpopt_Exception_Thrown"
+    INSUFFICIENT_MEMORY = "Insufficient_Memory"
+    INTERNAL_ERROR = "Internal_Error"
+    TRIVIAL = "Trivial_Start_Equals_Goal"
+    SHORT = "Short_Pair_Straight_Segment"
+    UNKNOWN = "Unknown"
+
+    @classmethod
+    def from_ipopt(cls, text: str) -> Status:
+        """Map IPOPT's ``return_status`` string to the enum (``UNKNOWN`` if unrecognised)."""
+        for s in cls:
+            if s.value == text:
+                return s
+        return cls.UNKNOWN
+
+    @property
+    def converged(self) -> bool:
+        """Only a full IPOPT success, or a trivial / short pair, counts as converged."""
+        return self in (Status.SUCCESS, Status.TRIVIAL, Status.SHORT)
+
+
+class DistanceStatus(enum.Enum):
+    """Outcome of :func:`solvers.distance`."""
+
+    CONVERGED = "converged"
+    """The error estimate is below ``rtol * distance``."""
+    TOLERANCE_NOT_REACHED = "tolerance_not_reached"
+    """The finest discretisation was solved but the estimate is above the tolerance."""
+    NOT_CONVEX = "not_convex"
+    """The path crosses a region where ``F(x, .)`` is not convex: the continuum infimum is
+    the length for the convexified metric, discretised paths chatter, and the number is
+    only the length of a smooth local minimiser (an upper bound of the infimum)."""
+    SOLVER_FAILED = "solver_failed"
+    """IPOPT did not converge at some level."""
+    TRIVIAL = "trivial"
+    """Start equals goal."""
+
+    @property
+    def converged(self) -> bool:
+        return self in (DistanceStatus.CONVERGED, DistanceStatus.TRIVIAL)
+
+
+@dataclass
+class MinMaxResult:
+    """Min-max refinement of a discrete geodesic: minimise the largest segment cost.
+
+    ``points`` ``(n+1, dim)``; ``segment_costs`` ``(n,)`` recomputed in float64 from the
+    points with ``metric.cost``; ``cap_relaxed`` tells whether the cap on the max (just
+    above the starting value) had to be removed.
+    """
+
+    points: np.ndarray
+    segment_costs: np.ndarray
+    max_segment_cost: float
+    status: Status
+    iterations: int
+    wall_time: float
+    cap_relaxed: bool
+
+    @property
+    def converged(self) -> bool:
+        return self.status.converged
+
+
+@dataclass
+class GeodesicResult:
+    """Discrete geodesic of the task (energy minimiser of ``sum_i C(p_i, p_{i+1})**2``).
+
+    Shapes: ``points`` ``(n+1, dim)`` with ``points[0] = start``, ``points[n] = goal``;
+    ``segment_costs`` ``(n,)``. ``length`` is ``sum C`` (eq. 4 costs); ``length_quadrature``
+    the polyline's length by Gauss-Legendre quadrature (eq. 58), an upper bound of the
+    distance where the metric is Finsler. ``status`` is IPOPT's status of the returned
+    solve; ``seeds_tried`` initial curves were solved, ``seeds_agreeing`` of them reached the
+    best energy (relative 1e-6). ``nonconvex_points`` counts path points where ``F(x, .)``
+    is not convex (for metrics not convex everywhere; there the discrete minimiser may
+    chatter). ``minmax`` holds the min-max refinement when it was requested.
+    """
+
+    metric: str
+    points: np.ndarray
+    energy: float
+    length: float
+    length_quadrature: float
+    segment_costs: np.ndarray
+    max_segment_cost: float
+    status: Status
+    iterations: int
+    wall_time: float
+    seeds_tried: int
+    seeds_agreeing: int
+    seed_energies: dict[str, float] = field(default_factory=dict)
+    best_seed: str = ""
+    nonconvex_points: int = 0
+    minmax: MinMaxResult | None = None
+
+    @property
+    def segments(self) -> int:
+        return int(self.points.shape[0] - 1)
+
+    @property
+    def converged(self) -> bool:
+        return self.status.converged
+
+    @property
+    def cost_ratio(self) -> float:
+        """Largest over mean segment cost (1 for exactly equal segment costs)."""
+        mean = float(np.mean(self.segment_costs))
+        return self.max_segment_cost / mean if mean > 0 else 1.0
+
+    def success(self, eps: float) -> bool:
+        """The paper's task criterion on the exact ceiling: every segment cost of the
+        min-max refined path (or, without refinement, of this path) is ``<= eps``."""
+        if not (np.isfinite(eps) and eps > 0):
+            raise InputError(f"eps must be positive and finite, got {eps!r}")
+        m = self.minmax.max_segment_cost if self.minmax is not None else self.max_segment_cost
+        return bool(m <= eps)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready summary (the schema of ``geodesics solve``)."""
+        out: dict[str, Any] = {
+            "points": self.points.tolist(),
+            "energy": self.energy,
+            "length": self.length,
+            "length_quadrature": self.length_quadrature,
+            "max_segment_cost": self.max_segment_cost,
+            "status": self.status.value,
+            "iterations": self.iterations,
+            "wall_time": self.wall_time,
+            "seeds_tried": self.seeds_tried,
+            "seeds_agreeing": self.seeds_agreeing,
+            "nonconvex_points": self.nonconvex_points,
+        }
+        if self.minmax is not None:
+            out["minmax_max_segment_cost"] = self.minmax.max_segment_cost
+            out["minmax_status"] = self.minmax.status.value
+        return out
+
+
+@dataclass
+class MidpointResult:
+    """Midpoint ``p_{n/2}`` ``(dim,)`` of the discrete geodesic, with the full result."""
+
+    point: np.ndarray
+    geodesic: GeodesicResult
+
+
+@dataclass
+class DistanceResult:
+    """Continuum distance ``d(start, goal)`` from the pseudospectral transcription.
+
+    ``distance`` is the length of the finest polynomial curve; ``error_estimate`` the
+    difference to the previous (half-degree) level plus a rounding floor, an estimate of
+    ``|distance - d|`` valid in the regime of spectral convergence (smooth metric, no active
+    domain constraint). ``degrees`` and ``lengths`` list every level. ``nodes`` ``(N+1, dim)``
+    are the curve's values at the Chebyshev-Gauss-Lobatto nodes of ``[0, 1]``;
+    :meth:`curve` evaluates the polynomial at parameters ``t`` in ``[0, 1]`` (proportional
+    to arc length at the optimum). ``upper_bound`` is the eq. (58) quadrature length of the
+    globally seeded discrete path (``discrete``), an independent upper bound of the distance
+    where the metric is Finsler; a ``distance`` above it means the transcription has not
+    resolved the geodesic (the status is then never ``CONVERGED``).
+    """
+
+    distance: float
+    error_estimate: float
+    rtol: float
+    status: DistanceStatus
+    degrees: list[int]
+    lengths: list[float]
+    nodes: np.ndarray
+    min_convexity: float
+    wall_time: float
+    ipopt_status: Status
+    upper_bound: float = float("inf")
+    discrete: GeodesicResult | None = None
+
+    @property
+    def converged(self) -> bool:
+        return self.status.converged
+
+    def curve(self, t: Any) -> np.ndarray:
+        """Points of the curve at parameters ``t`` ``(T,)`` in ``[0, 1]`` -> ``(T, dim)``."""
+        from solvers.spectral import interpolation_matrix
+
+        t = np.asarray(t, dtype=np.float64).reshape(-1)
+        if not np.all(np.isfinite(t)) or np.any(t < 0) or np.any(t > 1):
+            raise InputError("curve parameters t must be finite and lie in [0, 1]")
+        n = self.nodes.shape[0] - 1
+        return interpolation_matrix(n, 2.0 * t - 1.0) @ self.nodes

@@ -1,0 +1,396 @@
+"""Tests of the exact solvers against independent references.
+
+* continuum distances and curves against the closed-form metrics' exact distances and
+  geodesics (50 fixed-seed pairs per metric);
+* the task discretisation on the Matsumoto evaluation set (IPOPT success, segment-cost
+  ratio, no seed below the returned energy);
+* global seeding on Matsumoto pairs where both routes around the mountain compete, against
+  solves forced to each side;
+* the exactness of the car-like slack reformulation, min-max refinement, batch == single,
+  determinism, bad input, and the ``geodesics solve`` command.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import finsler
+import solvers
+from finsler.errors import DomainError, InputError
+from solvers import DistanceStatus, SeedPlan, Status
+from solvers.baseline import adam_energy_baseline
+from solvers.transcription import energy_nlp
+
+CLOSED_FORM = ["euclidean", "minkowski", "randers", "poincare", "sphere"]
+
+
+# ----------------------------------------------------------------------------------------
+# continuum accuracy on the closed-form references
+# ----------------------------------------------------------------------------------------
+@pytest.mark.parametrize("name", CLOSED_FORM)
+def test_distance_matches_closed_form(name: str) -> None:
+    m = finsler.get_metric(name)
+    pairs = finsler.sample_pairs(m, 50, seed=11)
+    exact = m.distance(pairs[:, 0], pairs[:, 1])
+    t = np.linspace(0.0, 1.0, 9)
+    exact_curves = m.geodesic(pairs[:, 0], pairs[:, 1], t)
+    for k, (s, g) in enumerate(pairs):
+        r = solvers.distance(m, s, g)
+        assert r.status is DistanceStatus.CONVERGED, (k, r.status, r.lengths)
+        err = abs(r.distance - exact[k])
+        assert err <= 1e-8 * exact[k], (k, r.distance, exact[k])
+        assert r.error_estimate >= err, (k, r.error_estimate, err)
+        assert r.error_estimate <= 1e-8 * r.distance
+        assert np.max(np.abs(r.curve(t) - exact_curves[k])) <= 1e-6
+        # the discrete path's quadrature length is an upper bound of the distance
+        assert r.upper_bound >= exact[k] * (1 - 1e-12)
+
+
+def test_distance_estimate_tracks_error_before_convergence() -> None:
+    """Stopping at a degree too low for rtol: the status says so and the estimate still
+    bounds the actual error (Poincare pair near the boundary, curved geodesic)."""
+    m = finsler.get_metric("poincare")
+    s, g = np.array([0.78, 0.05]), np.array([-0.1, 0.77])
+    exact = float(m.distance(s[None], g[None])[0])
+    r = solvers.distance(m, s, g, rtol=1e-14, degrees=(4, 6))
+    assert r.status is DistanceStatus.TOLERANCE_NOT_REACHED
+    assert not r.converged
+    assert abs(r.distance - exact) <= r.error_estimate
+    with pytest.raises(solvers.SolverError):
+        solvers.distance(m, s, g, rtol=1e-14, degrees=(4, 6), strict=True)
+
+
+def test_distance_reports_nonconvex_matsumoto() -> None:
+    m = finsler.get_metric("matsumoto")
+    # inside the convex disk |p| < 0.2887: a certified distance
+    r = solvers.distance(m, np.array([0.1, 0.0]), np.array([-0.1, 0.12]))
+    assert r.status is DistanceStatus.CONVERGED and r.min_convexity > 0
+    # across the non-convex annulus: never passed off as converged
+    r = solvers.distance(m, np.array([0.5, 0.3]), np.array([-0.6, -0.2]))
+    assert r.status is DistanceStatus.NOT_CONVEX and not r.converged
+    assert r.min_convexity < 0
+    with pytest.raises(solvers.SolverError):
+        solvers.distance(m, np.array([0.5, 0.3]), np.array([-0.6, -0.2]), strict=True)
+
+
+def test_distance_trivial_pair() -> None:
+    r = solvers.distance("sphere", np.array([0.1, 0.2]), np.array([0.1, 0.2]))
+    assert r.distance == 0.0 and r.converged
+
+
+# ----------------------------------------------------------------------------------------
+# task discretisation
+# ----------------------------------------------------------------------------------------
+def test_matsumoto_task_set() -> None:
+    """100 uniform pairs, n=64: IPOPT success everywhere, near-equal segment costs, no seed
+    found a lower energy than the returned one, and neither did Adam."""
+    m = finsler.get_metric("matsumoto")
+    pairs = finsler.default_pairs(m, 100)
+    ratios, energies = [], []
+    for s, g in pairs:
+        r = solvers.solve_geodesic(m, s, g, 64)
+        energies.append(r.energy)
+        assert r.status is Status.SUCCESS
+        assert r.points.shape == (65, 2)
+        np.testing.assert_array_equal(r.points[0], s)
+        np.testing.assert_array_equal(r.points[-1], g)
+        finite = [e for e in r.seed_energies.values() if np.isfinite(e)]
+        assert min(finite) >= r.energy * (1 - 1e-12)
+        assert r.seeds_agreeing >= 1
+        # reported figures are consistent with the points
+        c = m.path_costs(r.points[None])[0]
+        np.testing.assert_allclose(r.segment_costs, c, rtol=0, atol=0)
+        assert r.energy == pytest.approx(float(np.sum(c**2)), rel=1e-14)
+        assert r.length == pytest.approx(float(np.sum(c)), rel=1e-14)
+        ratios.append(r.cost_ratio)
+    ratios = np.asarray(ratios)
+    # the paper authors' "true" geodesics (Adam, lr 1e-3, 1000 steps, straight-line start)
+    # never reach a lower energy than ours
+    _, e_adam, _ = adam_energy_baseline(m, pairs, 64)
+    assert np.all(e_adam >= np.asarray(energies) * (1 - 1e-12))
+    # measured: median 1.0026, max 1.026 (C evaluates F at the left point; bounds active)
+    assert np.median(ratios) < 1.01
+    assert ratios.max() < 1.1
+
+
+def test_energy_optimum_is_a_local_minimum() -> None:
+    """Independent check of IPOPT's answer: random feasible perturbations of the interior
+    points never lower the energy (Matsumoto, inside the convex region)."""
+    m = finsler.get_metric("matsumoto")
+    s, g = np.array([0.15, -0.1]), np.array([-0.12, 0.14])
+    r = solvers.solve_geodesic(m, s, g, 16)
+    rng = np.random.default_rng(0)
+    for _ in range(200):
+        p = r.points.copy()
+        p[1:-1] += rng.normal(scale=1e-4, size=p[1:-1].shape)
+        assert np.sum(m.path_costs(p[None]) ** 2) >= r.energy * (1 - 1e-13)
+
+
+def _side(points: np.ndarray, s: np.ndarray, g: np.ndarray) -> float:
+    """Sign of the path's mid-point offset from the chord (left/right of s -> g)."""
+    d = g - s
+    mid = points[len(points) // 2] - s
+    return float(np.sign(d[0] * mid[1] - d[1] * mid[0]))
+
+
+@pytest.mark.parametrize(
+    "s, g",
+    [
+        ((0.6, 0.05), (-0.6, 0.0)),
+        ((0.6, -0.05), (-0.6, 0.0)),
+        ((0.0, 0.7), (0.05, -0.7)),
+        ((0.5, 0.5), (-0.45, -0.55)),
+        ((-0.7, 0.1), (0.7, 0.12)),
+    ],
+)
+def test_matsumoto_picks_better_route_around_mountain(s: tuple, g: tuple) -> None:
+    m = finsler.get_metric("matsumoto")
+    s, g = np.asarray(s), np.asarray(g)
+    n = 64
+    nlp = energy_nlp(m, n)
+    t = np.linspace(0, 1, n + 1)[:, None]
+    d = g - s
+    perp = np.array([-d[1], d[0]]) / np.linalg.norm(d)
+    sides = {}
+    for sign in (1.0, -1.0):
+        seed = np.asarray(m.domain.project(s + t * d + sign * 0.5 * np.sin(np.pi * t) * perp))
+        seed[0], seed[-1] = s, g
+        pts, st, _, _ = nlp.solve(seed)
+        assert st is Status.SUCCESS
+        assert _side(pts, s, g) == sign  # a route on that side of the mountain
+        sides[sign] = float(np.sum(m.path_costs(pts[None]) ** 2))
+    best_sign = min(sides, key=sides.get)
+    r = solvers.solve_geodesic(m, s, g, n)
+    assert r.energy <= min(sides.values()) * (1 + 1e-9)
+    if abs(sides[1.0] - sides[-1.0]) > 1e-6 * min(sides.values()):
+        assert _side(r.points, s, g) == best_sign
+
+
+# ----------------------------------------------------------------------------------------
+# car-like reformulation and min-max refinement
+# ----------------------------------------------------------------------------------------
+def test_carlike_slack_reformulation_is_exact() -> None:
+    """IPOPT's objective (smooth, with slacks) equals the energy recomputed from the points
+    with the metric's own non-smooth C, and a seed from the true optimum stays put."""
+    m = finsler.get_metric("carlike")
+    n = 32
+    nlp = energy_nlp(m, n)
+    for s, g in finsler.default_pairs(m, 4):
+        r = solvers.solve_geodesic(m, s, g, n)
+        assert r.status is Status.SUCCESS
+        pts, st, _, obj = nlp.solve(r.points)
+        assert st is Status.SUCCESS
+        e = float(np.sum(m.path_costs(pts[None]) ** 2))
+        assert obj == pytest.approx(n * e, rel=1e-8)
+        assert e == pytest.approx(r.energy, rel=1e-7)
+
+
+@pytest.mark.parametrize("name, n", [("matsumoto", 64), ("carlike", 64), ("panda-pole", 32)])
+def test_minmax_refinement(name: str, n: int) -> None:
+    m = finsler.get_metric(name)
+    for s, g in finsler.default_pairs(m, 3):
+        r = solvers.solve_geodesic(m, s, g, n, minmax=True)
+        mm = r.minmax
+        assert mm is not None and mm.status is Status.SUCCESS
+        assert mm.max_segment_cost <= r.max_segment_cost * (1 + 1e-12)
+        np.testing.assert_allclose(mm.segment_costs, m.path_costs(mm.points[None])[0])
+        assert np.all(m.domain.contains(mm.points, tol=1e-8))
+        # a min-max solution has no single segment sticking out
+        assert mm.max_segment_cost <= 1.02 * np.sort(mm.segment_costs)[-2] + 1e-12
+        assert r.success(m.task.eps) == (mm.max_segment_cost <= m.task.eps)
+
+
+# ----------------------------------------------------------------------------------------
+# API: midpoint, batch, determinism, bad input
+# ----------------------------------------------------------------------------------------
+def test_midpoint_euclidean_and_sphere() -> None:
+    s, g = np.array([-0.5, 0.2]), np.array([0.7, -0.4])
+    mp = solvers.midpoint("euclidean", s, g, 8)
+    np.testing.assert_allclose(mp.point, 0.5 * (s + g), atol=1e-9)
+    sphere = finsler.get_metric("sphere")
+    s, g = np.array([-0.6, 0.1]), np.array([0.5, 0.45])
+    exact = sphere.geodesic(s[None], g[None], np.array([0.5]))[0, 0]
+    errs = [np.linalg.norm(solvers.midpoint(sphere, s, g, n).point - exact) for n in (16, 64)]
+    assert errs[1] < errs[0] / 3  # the discrete midpoint converges to the exact one
+    assert errs[1] < 5e-3
+
+
+def test_solve_batch_equals_single_and_is_deterministic() -> None:
+    m = finsler.get_metric("matsumoto")
+    pairs = finsler.sample_pairs(m, 4, seed=3)
+    batch = solvers.solve_batch(m, pairs, 16, minmax=True, workers=2, progress=False)
+    assert len(batch) == 4
+    for (s, g), b in zip(pairs, batch):
+        r = solvers.solve_geodesic(m, s, g, 16, minmax=True)
+        np.testing.assert_allclose(b.points, r.points, rtol=0, atol=1e-12)
+        assert b.minmax.max_segment_cost == pytest.approx(r.minmax.max_segment_cost, rel=1e-12)
+    again = solvers.solve_geodesic(m, pairs[0, 0], pairs[0, 1], 16)
+    np.testing.assert_array_equal(again.points, solvers.solve_geodesic(m, *pairs[0], 16).points)
+
+
+def test_trivial_pair() -> None:
+    p = np.array([0.3, -0.2])
+    r = solvers.solve_geodesic("matsumoto", p, p, 8, minmax=True)
+    assert r.status is Status.TRIVIAL and r.converged
+    assert r.length == 0.0 and np.all(r.points == p)
+
+
+def test_non_convergence_is_a_status_and_strict_raises(monkeypatch) -> None:
+    """With a 2-iteration IPOPT budget nothing converges: the result says so, strict raises."""
+    import solvers.geodesic as sg
+    from solvers.transcription import EnergyNLP
+
+    assert Status.from_ipopt("Maximum_Iterations_Exceeded") is Status.MAX_ITERATIONS
+    assert Status.from_ipopt("something new") is Status.UNKNOWN
+    m = finsler.get_metric("matsumoto")
+    s, g = np.array([0.6, 0.1]), np.array([-0.5, -0.3])
+    monkeypatch.setattr(sg, "energy_nlp", lambda metric, n: EnergyNLP(metric, n, max_iter=2))
+    r = solvers.solve_geodesic(m, s, g, 16)
+    assert r.status is Status.MAX_ITERATIONS and not r.converged
+    assert r.seeds_agreeing == 0
+    with pytest.raises(solvers.SolverError, match="did not converge"):
+        solvers.solve_geodesic(m, s, g, 16, strict=True)
+
+
+@pytest.mark.parametrize(
+    "start, goal, segments, err",
+    [
+        ((1.2, 0.0), (0.0, 0.0), 8, DomainError),
+        ((0.0, 0.0), (0.0, -1.01), 8, DomainError),
+        ((0.0, 0.0, 0.0), (0.1, 0.0), 8, InputError),
+        ((np.nan, 0.0), (0.1, 0.0), 8, InputError),
+        ((0.0, np.inf), (0.1, 0.0), 8, InputError),
+        ((0.0, 0.0), (0.1, 0.0), 1, InputError),
+        ((0.0, 0.0), (0.1, 0.0), 0, InputError),
+        ((0.0, 0.0), (0.1, 0.0), 4.5, InputError),
+        ((0.0, 0.0), (0.1, 0.0), True, InputError),
+    ],
+)
+def test_bad_input(start: tuple, goal: tuple, segments: object, err: type) -> None:
+    with pytest.raises(err):
+        solvers.solve_geodesic("matsumoto", np.asarray(start), np.asarray(goal), segments)
+
+
+def test_bad_input_other_entry_points() -> None:
+    with pytest.raises(InputError, match="even"):
+        solvers.midpoint("matsumoto", np.zeros(2), np.array([0.1, 0.1]), 7)
+    with pytest.raises(InputError, match="shape"):
+        solvers.solve_batch("matsumoto", np.zeros((3, 2)), progress=False)
+    with pytest.raises(DomainError):
+        solvers.solve_batch("carlike", np.full((2, 2, 3), 4.0), progress=False)
+    with pytest.raises(InputError, match="workers"):
+        solvers.solve_batch("matsumoto", np.zeros((1, 2, 2)), workers=0, progress=False)
+    with pytest.raises(InputError, match="rtol"):
+        solvers.distance("sphere", np.zeros(2), np.array([0.1, 0.1]), rtol=0.0)
+    with pytest.raises(DomainError):
+        solvers.distance("sphere", np.zeros(2), np.array([0.9, 0.1]))
+    with pytest.raises(finsler.UnknownMetricError):
+        solvers.solve_geodesic("no-such-metric", np.zeros(2), np.zeros(2))
+    with pytest.raises(InputError, match="SeedPlan"):
+        solvers.solve_geodesic("matsumoto", np.zeros(2), np.array([0.1, 0]), seeds="many")
+    with pytest.raises(InputError, match="initial path"):
+        solvers.solve_geodesic("matsumoto", np.zeros(2), np.array([0.1, 0]), 8,
+                               initial=[np.zeros((5, 2))])
+
+
+def test_learned_or_custom_initial_path_is_used() -> None:
+    m = finsler.get_metric("matsumoto")
+    s, g = np.array([0.6, 0.05]), np.array([-0.6, 0.0])
+    r = solvers.solve_geodesic(m, s, g, 16, seeds=SeedPlan(bulges=(), graph=False),
+                               initial=[np.linspace(s, g, 17)])
+    assert r.seeds_tried == 2 and r.status is Status.SUCCESS
+
+
+# ----------------------------------------------------------------------------------------
+# CLI
+# ----------------------------------------------------------------------------------------
+def test_cli_solve(tmp_path) -> None:
+    from typer.testing import CliRunner
+
+    from validation.cli import app
+
+    runner = CliRunner()
+    res = runner.invoke(app, ["solve", "--metric", "matsumoto", "--start", "0.5,0.1",
+                              "--goal", "-0.5,-0.2", "--segments", "16", "--json"])
+    assert res.exit_code == 0, res.output
+    doc = json.loads(res.stdout)
+    assert set(doc) == {"metric", "segments", "eps", "success_rate", "results"}
+    row = doc["results"][0]
+    for key in ("points", "energy", "length", "length_quadrature", "max_segment_cost",
+                "minmax_max_segment_cost", "success", "status"):
+        assert key in row
+    assert np.asarray(row["points"]).shape == (17, 2)
+    assert row["status"] == "Solve_Succeeded"
+    assert row["success"] == (row["minmax_max_segment_cost"] <= doc["eps"])
+
+    m = finsler.get_metric("matsumoto")
+    pairs = finsler.sample_pairs(m, 3, seed=5)
+    f = tmp_path / "pairs.npy"
+    np.save(f, pairs)
+    out = tmp_path / "res.json"
+    res = runner.invoke(app, ["solve", "--metric", "matsumoto", "--pairs", str(f),
+                              "--segments", "16", "--out", str(out), "--workers", "1",
+                              "--no-progress"])
+    assert res.exit_code == 0, res.output
+    doc = json.loads(out.read_text())
+    assert doc["segments"] == 16 and len(doc["results"]) == 3
+    assert doc["success_rate"] == pytest.approx(np.mean([r["success"] for r in doc["results"]]))
+    for (s, g), r in zip(pairs, doc["results"]):
+        np.testing.assert_array_equal(np.asarray(r["points"])[[0, -1]], np.stack([s, g]))
+
+    bad = tmp_path / "bad.npy"
+    bad.write_bytes(b"not an npy file")
+    for args, msg in [
+        (["--pairs", str(bad)], "not a readable"),
+        (["--pairs", str(tmp_path / "missing.npy")], "does not exist"),
+        (["--start", "2,0", "--goal", "0,0"], "outside"),
+        (["--start", "0,0", "--goal", "0.1,0", "--segments", "1"], "segments"),
+        (["--start", "0,0"], "--goal"),
+    ]:
+        res = runner.invoke(app, ["solve", "--metric", "matsumoto", *args])
+        assert res.exit_code == 2, (args, res.output)
+        assert msg in res.output or msg in (res.stderr or ""), (args, res.output)
+    np.save(bad, np.zeros((3, 2, 3)))
+    res = runner.invoke(app, ["solve", "--metric", "matsumoto", "--pairs", str(bad)])
+    assert res.exit_code == 2 and "shape" in res.output
+
+
+# ----------------------------------------------------------------------------------------
+# property-based: arbitrary pairs on a curved reference
+# ----------------------------------------------------------------------------------------
+_coord = st.floats(-0.55, 0.55, allow_nan=False, allow_infinity=False)
+
+
+@settings(max_examples=25, deadline=None, derandomize=True)
+@given(_coord, _coord, _coord, _coord)
+def test_distance_property_sphere(a: float, b: float, c: float, d: float) -> None:
+    """Any pair in the chart disk of radius 0.8 (the box [-0.55, 0.55]^2 lies inside it):
+    the solver distance matches the great-circle angle, is never below the exact value by
+    more than its estimate, and never above the independent upper bound."""
+    m = finsler.get_metric("sphere")
+    s, g = np.array([a, b]), np.array([c, d])
+    exact = float(m.distance(s[None], g[None])[0])
+    r = solvers.distance(m, s, g)
+    assert r.converged
+    assert abs(r.distance - exact) <= max(r.error_estimate, 0.0)
+    assert abs(r.distance - exact) <= 1e-8 * max(exact, 1e-300) or exact == 0.0
+    if exact > 0:
+        assert r.upper_bound >= exact * (1 - 1e-12)
+
+
+def test_coarse_to_fine_seed_plan() -> None:
+    m = finsler.get_metric("carlike")
+    s, g = finsler.default_pairs(m, 1)[0]
+    plan = SeedPlan(bulges=(0.3,), random=1, coarse=16, refine_top=2)
+    r = solvers.solve_geodesic(m, s, g, 64, seeds=plan)
+    assert r.status is Status.SUCCESS and r.seeds_tried == 2
+    assert r.best_seed.endswith("@16")
+    with pytest.raises(InputError, match="coarse"):
+        SeedPlan(coarse=1)
+    with pytest.raises(InputError, match="bulge"):
+        SeedPlan(bulges=(-0.1,))
