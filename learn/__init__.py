@@ -1,1 +1,56 @@
-"""learn package."""
+"""learn: the midpoint-tree actor-critic of the paper (Algorithm 1) and its variants.
+
+Train with :func:`train` and a :class:`TrainConfig` (:func:`default_config` gives the
+documented per-environment defaults); load a trained or shipped policy with
+:func:`load_policy` and generate paths with ``policy.generate(starts, goals)``.
+"""
+
+from learn.config import (
+    METHODS,
+    TrainConfig,
+    beyond_paper,
+    default_config,
+    package_versions,
+    paper_config,
+)
+from learn.networks import Actor, Critic
+from learn.policy import (
+    EvalResult,
+    Policy,
+    evaluate_paths,
+    evaluate_policy,
+    export_policy,
+    load_policy,
+    shipped_policies,
+)
+from learn.storage import CorruptFileError
+from learn.train import Trainer, TrainResult, read_run_config, resolve_device, train
+from learn.tree import build_tree, level_pairs, mc_targets, td_lambda_targets
+
+__all__ = [
+    "METHODS",
+    "Actor",
+    "CorruptFileError",
+    "Critic",
+    "EvalResult",
+    "Policy",
+    "TrainConfig",
+    "TrainResult",
+    "Trainer",
+    "beyond_paper",
+    "build_tree",
+    "default_config",
+    "evaluate_paths",
+    "evaluate_policy",
+    "export_policy",
+    "level_pairs",
+    "load_policy",
+    "mc_targets",
+    "package_versions",
+    "paper_config",
+    "read_run_config",
+    "resolve_device",
+    "shipped_policies",
+    "td_lambda_targets",
+    "train",
+]

@@ -1,0 +1,150 @@
+"""Actor and critic networks of the midpoint actor-critic (section 4.2, appendix B.1).
+
+* :class:`Actor`: MLP on ``(s, g)`` -> diagonal Gaussian (mean, log-std) over coordinates,
+  reparametrised sampling, output projected into the domain with the domain's
+  differentiable torch projection. Evaluation uses the mean.
+* :class:`Critic`: MLP on ``(s, g)`` -> distance estimate ``V(s, g)``, optionally through a
+  target transform (``log1p``: the network regresses ``log(1 + c)``).
+
+Networks work in float32; callers cast to float64 for costs and success checks.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+from torch import nn
+
+import finsler
+
+__all__ = ["Actor", "Critic", "mlp"]
+
+
+def mlp(n_in: int, n_out: int, hidden: tuple[int, ...], activation: str) -> nn.Sequential:
+    """Plain MLP ``n_in -> hidden... -> n_out``."""
+    act = {"relu": nn.ReLU, "tanh": nn.Tanh}[activation]
+    layers: list[nn.Module] = []
+    width = n_in
+    for h in hidden:
+        layers += [nn.Linear(width, h), act()]
+        width = h
+    layers.append(nn.Linear(width, n_out))
+    return nn.Sequential(*layers)
+
+
+class _Scaler(nn.Module):
+    """Affine map of coordinates to [-1, 1] by the domain's bounds (identity if disabled)."""
+
+    def __init__(self, domain: finsler.Domain, enabled: bool) -> None:
+        super().__init__()
+        lo, hi = domain.bounds()
+        finite = np.isfinite(lo) & np.isfinite(hi) & enabled
+        center = np.where(finite, 0.5 * (lo + hi), 0.0)
+        half = np.where(finite, 0.5 * (hi - lo), 1.0)
+        self.register_buffer("center", torch.as_tensor(center, dtype=torch.float32))
+        self.register_buffer("span", torch.as_tensor(half, dtype=torch.float32))
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return (x - self.center) / self.span
+
+
+class Actor(nn.Module):
+    """Midpoint predictor ``pi(s, g)``: ``(N, dim), (N, dim)`` -> Gaussian over ``(N, dim)``.
+
+    With ``residual`` the mean is ``(s + g) / 2 + half_range * out`` (the network predicts a
+    correction to the coordinate midpoint); otherwise the mean is the raw output, mapped
+    back from normalised coordinates. Samples and means are projected into the domain.
+    """
+
+    def __init__(
+        self,
+        metric: finsler.Metric,
+        hidden: tuple[int, ...] = (64, 64),
+        activation: str = "relu",
+        normalize_inputs: bool = False,
+        residual: bool = False,
+        log_std_min: float = -20.0,
+        log_std_max: float = 2.0,
+        init_log_std: float | None = None,
+    ) -> None:
+        super().__init__()
+        self.domain = metric.domain
+        self.dim = metric.dim
+        self.residual = residual
+        self.log_std_min = float(log_std_min)
+        self.log_std_max = float(log_std_max)
+        self.scaler = _Scaler(metric.domain, normalize_inputs)
+        self.net = mlp(2 * self.dim, 2 * self.dim, hidden, activation)
+        if init_log_std is not None:
+            last = self.net[-1]
+            with torch.no_grad():
+                last.weight[self.dim :] *= 0.01
+                last.bias[self.dim :] = float(init_log_std)
+
+    def distribution(self, s: torch.Tensor, g: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Unprojected Gaussian mean ``(N, dim)`` and standard deviation ``(N, dim)``."""
+        out = self.net(torch.cat([self.scaler(s), self.scaler(g)], -1))
+        mu, log_std = out[:, : self.dim], out[:, self.dim :]
+        log_std = log_std.clamp(self.log_std_min, self.log_std_max)
+        half = self.scaler.span
+        mean = 0.5 * (s + g) + half * mu if self.residual else self.scaler.center + half * mu
+        return mean, half * log_std.exp()
+
+    def forward(
+        self, s: torch.Tensor, g: torch.Tensor, generator: torch.Generator | None = None,
+        deterministic: bool = False,
+    ) -> torch.Tensor:
+        """A reparametrised sample (or the mean if ``deterministic``), projected into the
+        domain: ``(N, dim)``."""
+        mean, std = self.distribution(s, g)
+        if deterministic:
+            x = mean
+        else:
+            noise = torch.randn(mean.shape, generator=generator, device=mean.device,
+                                dtype=mean.dtype)
+            x = mean + std * noise
+        return self.domain.project(x)
+
+
+class Critic(nn.Module):
+    """Distance estimate ``V(s, g)``: ``(N, dim), (N, dim)`` -> ``(N,)``.
+
+    :meth:`raw` returns the network output on the regression scale (``log(1 + c)`` for the
+    ``log1p`` transform); :meth:`forward` returns the distance estimate. With
+    ``symmetric`` the output is ``(net(s, g) + net(g, s)) / 2`` (reversible metrics).
+    """
+
+    def __init__(
+        self,
+        metric: finsler.Metric,
+        hidden: tuple[int, ...] = (64, 64),
+        activation: str = "relu",
+        normalize_inputs: bool = False,
+        transform: str = "none",
+        symmetric: bool = False,
+    ) -> None:
+        super().__init__()
+        if transform not in ("none", "log1p"):
+            raise finsler.InputError(f"unknown critic transform {transform!r}")
+        self.transform = transform
+        self.symmetric = symmetric
+        self.scaler = _Scaler(metric.domain, normalize_inputs)
+        self.net = mlp(2 * metric.dim, 1, hidden, activation)
+
+    def raw(self, s: torch.Tensor, g: torch.Tensor) -> torch.Tensor:
+        a, b = self.scaler(s), self.scaler(g)
+        out = self.net(torch.cat([a, b], -1))[:, 0]
+        if self.symmetric:
+            out = 0.5 * (out + self.net(torch.cat([b, a], -1))[:, 0])
+        return out
+
+    def to_raw(self, c: torch.Tensor) -> torch.Tensor:
+        """Map distances (targets) to the regression scale."""
+        return torch.log1p(c) if self.transform == "log1p" else c
+
+    def from_raw(self, z: torch.Tensor) -> torch.Tensor:
+        """Map network outputs back to distances."""
+        return torch.expm1(z) if self.transform == "log1p" else z
+
+    def forward(self, s: torch.Tensor, g: torch.Tensor) -> torch.Tensor:
+        return self.from_raw(self.raw(s, g))

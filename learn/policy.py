@@ -1,0 +1,283 @@
+"""Trained midpoint policies: loading, path generation and the section 5.1 evaluation.
+
+``load_policy(run_dir_or_env)`` accepts a run directory written by :func:`learn.train`
+or the name of an environment with a shipped policy (``matsumoto``, ``carlike``,
+``panda-pole``); the returned :class:`Policy` generates paths by ``D`` batched actor calls.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+import finsler
+from finsler.errors import InputError
+from learn.config import TrainConfig
+from learn.networks import Actor
+from learn.storage import (
+    BEST_FILE,
+    CONFIG_FILE,
+    LATEST_FILE,
+    POLICY_FILE,
+    CorruptFileError,
+    load_checkpoint,
+    read_json,
+)
+from learn.tree import build_tree
+
+__all__ = [
+    "EvalResult",
+    "Policy",
+    "build_actor",
+    "evaluate_paths",
+    "evaluate_policy",
+    "export_policy",
+    "load_policy",
+    "shipped_policies",
+]
+
+
+def build_actor(cfg: TrainConfig, metric: finsler.Metric | None = None) -> Actor:
+    """The actor network described by ``cfg`` (untrained)."""
+    return Actor(
+        metric if metric is not None else cfg.metric,
+        hidden=cfg.hidden,
+        activation=cfg.activation,
+        normalize_inputs=cfg.normalize_inputs,
+        residual=cfg.actor_residual,
+        log_std_min=cfg.log_std_min,
+        log_std_max=cfg.log_std_max,
+        init_log_std=cfg.init_log_std,
+    )
+
+
+def generate_paths(
+    actor: Actor, metric: finsler.Metric, starts: torch.Tensor, goals: torch.Tensor, depth: int
+) -> torch.Tensor:
+    """Deterministic (mean) midpoint trees, float64: ``(K, dim)`` x2 -> ``(K, 2**D+1, dim)``.
+
+    The actor runs in float32; midpoints are cast to float64 and projected into the domain.
+    """
+    param = next(actor.parameters())
+
+    def predict(s: torch.Tensor, g: torch.Tensor) -> torch.Tensor:
+        m = actor(s.to(param), g.to(param), deterministic=True)
+        return metric.domain.project(m.to(torch.float64))
+
+    with torch.no_grad():
+        return build_tree(starts.to(torch.float64), goals.to(torch.float64), depth, predict)
+
+
+@dataclass
+class EvalResult:
+    """Section 5.1 evaluation of paths on a pair set."""
+
+    success_rate: float
+    """Fraction of pairs whose every segment cost C(p_i, p_{i+1}) <= eps."""
+    mean_length: float
+    """Mean over pairs of the path length sum_i C(p_i, p_{i+1})."""
+    mean_max_segment_cost: float
+    """Mean over pairs of max_i C(p_i, p_{i+1})."""
+    eps: float
+    depth: int
+    success: np.ndarray = field(repr=False)
+    """(K,) bool."""
+    length: np.ndarray = field(repr=False)
+    """(K,) float64."""
+    max_segment_cost: np.ndarray = field(repr=False)
+    """(K,) float64."""
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready dict with keys success_rate, mean_length, mean_max_segment_cost,
+        eps, depth and per_pair (list of success, length, max_segment_cost)."""
+        return {
+            "success_rate": float(self.success_rate),
+            "mean_length": float(self.mean_length),
+            "mean_max_segment_cost": float(self.mean_max_segment_cost),
+            "eps": float(self.eps),
+            "depth": int(self.depth),
+            "per_pair": [
+                {"success": bool(s), "length": float(length), "max_segment_cost": float(c)}
+                for s, length, c in zip(self.success, self.length, self.max_segment_cost)
+            ],
+        }
+
+
+def evaluate_paths(metric: finsler.Metric, paths: np.ndarray, eps: float) -> EvalResult:
+    """Success (every segment cost <= eps), length and max segment cost of paths
+    ``(K, n + 1, dim)``, all in float64."""
+    if not (np.isfinite(eps) and eps > 0):
+        raise InputError(f"eps must be positive and finite, got {eps!r}")
+    paths = np.asarray(paths, dtype=np.float64)
+    costs = metric.path_costs(paths)
+    mx = costs.max(axis=1)
+    length = costs.sum(axis=1)
+    ok = mx <= eps
+    depth = (paths.shape[1] - 1).bit_length() - 1
+    return EvalResult(
+        success_rate=float(ok.mean()),
+        mean_length=float(length.mean()),
+        mean_max_segment_cost=float(mx.mean()),
+        eps=float(eps),
+        depth=depth,
+        success=ok,
+        length=length,
+        max_segment_cost=mx,
+    )
+
+
+def _check_pairs(metric: finsler.Metric, pairs: Any) -> np.ndarray:
+    arr = np.asarray(pairs, dtype=np.float64)
+    if arr.ndim != 3 or arr.shape[1] != 2 or arr.shape[2] != metric.dim:
+        raise InputError(
+            f"pairs must have shape (K, 2, {metric.dim}) for {metric.name}, got {arr.shape}"
+        )
+    if arr.shape[0] < 1:
+        raise InputError("pairs is empty")
+    if not np.all(np.isfinite(arr)):
+        raise InputError("pairs contain NaN or inf")
+    metric.domain.check(arr[:, 0], "pair starts")
+    metric.domain.check(arr[:, 1], "pair goals")
+    return arr
+
+
+class Policy:
+    """A trained midpoint policy (deterministic means) for one metric."""
+
+    def __init__(self, actor: Actor, config: TrainConfig, source: str = "") -> None:
+        self.actor = actor.eval()
+        self.config = config
+        self.metric = config.metric
+        self.depth = config.max_depth
+        self.eps = config.eval_eps
+        self.source = source
+
+    def __repr__(self) -> str:
+        return f"Policy(env={self.metric.name!r}, depth={self.depth}, source={self.source!r})"
+
+    def _points(self, x: Any, name: str) -> torch.Tensor:
+        xn = self.metric.domain.check(x, name)
+        return torch.as_tensor(xn, dtype=torch.float64)
+
+    def generate(self, starts: Any, goals: Any, depth: int | None = None) -> np.ndarray:
+        """Paths by recursive midpoint insertion: ``(K, dim)`` x2 -> ``(K, 2**D + 1, dim)``
+        float64 (D = ``depth`` or the task's depth). Endpoints are the given points."""
+        d = self.depth if depth is None else depth
+        if not isinstance(d, (int, np.integer)) or isinstance(d, bool) or d < 0:
+            raise InputError(f"depth must be a non-negative integer, got {depth!r}")
+        s = self._points(starts, "starts")
+        g = self._points(goals, "goals")
+        if s.shape != g.shape:
+            raise InputError(f"starts and goals differ in shape: {tuple(s.shape)} vs "
+                             f"{tuple(g.shape)}")
+        return generate_paths(self.actor, self.metric, s, g, int(d)).cpu().numpy()
+
+    def midpoint(self, starts: Any, goals: Any) -> np.ndarray:
+        """Predicted midpoints ``(K, dim)`` (the deterministic mean, projected)."""
+        single = np.ndim(starts) == 1
+        out = self.generate(starts, goals, depth=1)[:, 1]
+        return out[0] if single else out
+
+    def evaluate(
+        self, pairs: Any = None, eps: float | None = None, depth: int | None = None
+    ) -> EvalResult:
+        """Section 5.1 evaluation on ``pairs`` ``(K, 2, dim)`` (default: the environment's
+        default evaluation set, ``finsler.default_pairs``)."""
+        p = finsler.default_pairs(self.metric) if pairs is None else _check_pairs(
+            self.metric, pairs)
+        paths = self.generate(p[:, 0], p[:, 1], depth=depth)
+        return evaluate_paths(self.metric, paths, self.eps if eps is None else eps)
+
+
+def evaluate_policy(
+    policy: Policy, pairs: Any = None, eps: float | None = None, depth: int | None = None
+) -> EvalResult:
+    """Functional form of :meth:`Policy.evaluate`."""
+    return policy.evaluate(pairs, eps=eps, depth=depth)
+
+
+def shipped_policies() -> list[str]:
+    """Environments with a policy shipped inside the package."""
+    root = resources.files("learn") / "policies"
+    if not root.is_dir():
+        return []
+    return sorted(p.name for p in root.iterdir() if (p / POLICY_FILE).is_file())
+
+
+def _shipped_dir(name: str) -> Path:
+    return Path(str(resources.files("learn") / "policies" / name))
+
+
+def load_policy(run: str | Path, device: str = "cpu", checkpoint: str = "best") -> Policy:
+    """Load a policy from a run directory or, given an environment name, the policy
+    shipped with the package. ``checkpoint``: ``best`` (best success on the default
+    evaluation set during training; falls back to the latest) or ``latest``.
+
+    Raises :class:`InputError` for a missing directory or unknown name and
+    :class:`CorruptFileError` for unreadable files.
+    """
+    path = Path(run)
+    if not path.is_dir():
+        if str(run) in shipped_policies():
+            path = _shipped_dir(str(run))
+        else:
+            known = ", ".join(shipped_policies()) or "none"
+            raise InputError(
+                f"run directory {str(run)!r} does not exist and is not the name of a shipped "
+                f"policy (shipped: {known})"
+            )
+    doc = read_json(path / CONFIG_FILE)
+    try:
+        cfg = TrainConfig.from_dict(doc["config"])
+    except KeyError as err:
+        raise CorruptFileError(f"{path / CONFIG_FILE} has no 'config' section") from err
+    if checkpoint not in ("best", "latest"):
+        raise InputError(f"checkpoint must be 'best' or 'latest', got {checkpoint!r}")
+    order = (BEST_FILE, POLICY_FILE, LATEST_FILE) if checkpoint == "best" else (
+        LATEST_FILE, POLICY_FILE)
+    for name in order:
+        if (path / name).is_file():
+            ckpt = load_checkpoint(path / name)
+            break
+    else:
+        raise InputError(f"run directory {path} holds no checkpoint ({BEST_FILE}, "
+                         f"{POLICY_FILE} or {LATEST_FILE})")
+    actor = build_actor(cfg)
+    try:
+        actor.load_state_dict(ckpt["actor"])
+    except (KeyError, RuntimeError) as err:
+        raise CorruptFileError(f"checkpoint in {path} does not match its config: {err}") from err
+    if device != "cpu":
+        from learn.train import resolve_device
+
+        actor = actor.to(resolve_device(device))
+    return Policy(actor, cfg, source=str(path))
+
+
+def export_policy(run_dir: str | Path, dest: str | Path, checkpoint: str = "best") -> Path:
+    """Copy a run's policy (actor weights only, float32), its ``config.json`` and its
+    ``metrics.csv`` (the learning curve) into ``dest`` -- the layout of the shipped
+    policies in ``learn/policies/<env>/``. Returns ``dest``."""
+    from learn.storage import METRICS_FILE, atomic_write_bytes, save_checkpoint
+
+    src = Path(run_dir)
+    pol = load_policy(src, checkpoint=checkpoint)
+    dest = Path(dest)
+    dest.mkdir(parents=True, exist_ok=True)
+    ck = load_checkpoint(src / (BEST_FILE if checkpoint == "best" and (src / BEST_FILE)
+                                .is_file() else LATEST_FILE))
+    save_checkpoint(dest / POLICY_FILE, {
+        "format": "learn-checkpoint-v1",
+        "config": pol.config.to_dict(),
+        "actor": {k: v.detach().cpu().clone() for k, v in pol.actor.state_dict().items()},
+        "eval": ck.get("eval", {}),
+    })
+    atomic_write_bytes(dest / CONFIG_FILE, (src / CONFIG_FILE).read_bytes())
+    if (src / METRICS_FILE).is_file():
+        atomic_write_bytes(dest / METRICS_FILE, (src / METRICS_FILE).read_bytes())
+    return dest

@@ -1,0 +1,135 @@
+"""Run-directory files written atomically (temporary file in the same folder, then
+``os.replace``), and checked loading with clear errors."""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import os
+import tempfile
+from pathlib import Path
+from typing import Any
+
+import torch
+
+from finsler.errors import InputError
+
+__all__ = [
+    "BEST_FILE",
+    "CONFIG_FILE",
+    "LATEST_FILE",
+    "METRICS_FILE",
+    "POLICY_FILE",
+    "CorruptFileError",
+    "atomic_write_bytes",
+    "atomic_write_text",
+    "load_checkpoint",
+    "read_json",
+    "read_metrics",
+    "save_checkpoint",
+    "write_metrics",
+]
+
+CONFIG_FILE = "config.json"
+LATEST_FILE = "checkpoint_latest.pt"
+BEST_FILE = "checkpoint_best.pt"
+POLICY_FILE = "policy.pt"
+METRICS_FILE = "metrics.csv"
+
+
+class CorruptFileError(InputError):
+    """A run-directory file exists but cannot be read (truncated, wrong format)."""
+
+
+def atomic_write_bytes(path: Path, data: bytes) -> None:
+    """Write ``data`` to ``path`` so that readers see either the old or the new file."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+        os.chmod(tmp, 0o644)  # mkstemp creates 0600; run files and policies are shared
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+
+
+def atomic_write_text(path: Path, text: str) -> None:
+    atomic_write_bytes(path, text.encode("utf-8"))
+
+
+def save_checkpoint(path: Path, obj: dict[str, Any]) -> None:
+    """``torch.save`` to memory, then atomic write."""
+    buf = io.BytesIO()
+    torch.save(obj, buf)
+    atomic_write_bytes(path, buf.getvalue())
+
+
+def load_checkpoint(path: Path) -> dict[str, Any]:
+    """Load a checkpoint written by :func:`save_checkpoint` (tensors and plain data only).
+
+    Raises :class:`InputError` if missing and :class:`CorruptFileError` if unreadable.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"checkpoint {path} does not exist")
+    try:
+        obj = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as err:  # torch raises many types for truncated / foreign files
+        raise CorruptFileError(f"checkpoint {path} is corrupt or unreadable: {err}") from err
+    if not isinstance(obj, dict) or obj.get("format") != "learn-checkpoint-v1":
+        raise CorruptFileError(f"checkpoint {path} is not a learn checkpoint")
+    return obj
+
+
+def read_json(path: Path) -> dict[str, Any]:
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"{path} does not exist")
+    try:
+        doc = json.loads(path.read_text(encoding="utf-8"))
+    except (json.JSONDecodeError, UnicodeDecodeError) as err:
+        raise CorruptFileError(f"{path} is not valid JSON: {err}") from err
+    if not isinstance(doc, dict):
+        raise CorruptFileError(f"{path} does not hold a JSON object")
+    return doc
+
+
+def write_metrics(path: Path, rows: list[dict[str, Any]]) -> None:
+    """Write the metrics log (CSV, one row per evaluation) atomically."""
+    if not rows:
+        return
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=list(rows[0]), lineterminator="\n")
+    w.writeheader()
+    for r in rows:
+        w.writerow(r)
+    atomic_write_text(path, buf.getvalue())
+
+
+def read_metrics(path: Path) -> list[dict[str, Any]]:
+    """Rows of a metrics log (numbers parsed); an absent file gives no rows."""
+    path = Path(path)
+    if not path.is_file():
+        return []
+    with path.open(newline="", encoding="utf-8") as f:
+        rows = list(csv.DictReader(f))
+    out = []
+    for r in rows:
+        parsed: dict[str, Any] = {}
+        for k, v in r.items():
+            try:
+                parsed[k] = int(v)
+            except (TypeError, ValueError):
+                try:
+                    parsed[k] = float(v)
+                except (TypeError, ValueError):
+                    parsed[k] = v
+        out.append(parsed)
+    return out

@@ -1,0 +1,408 @@
+"""Algorithm 1 (actor-critic midpoint learning), vectorised, with run directories.
+
+One iteration of :class:`Trainer` reads like Algorithm 1:
+
+1. **collect**: sample pairs uniformly, build whole midpoint trees with the stochastic
+   actor (one batched actor call per level), leaf costs with the lowered torch ``cost``
+   of the metric in float64;
+2. **targets**: Monte-Carlo sums of leaf costs for every node (or TD(lambda), eq. 8);
+3. **update**: ``epochs`` passes of minibatch steps, critic (eq. 5) then actor
+   (eq. 6 / 17 / 18).
+
+Timesteps count evaluations of C, as in the paper (a tree of depth D counts 2**D).
+Every ``eval_every`` iterations the deterministic policy is evaluated on the default
+pair set (section 5.1), a metrics row is written and the latest checkpoint saved
+atomically; resuming from it replays the run exactly (all RNG and optimiser states are
+in the checkpoint).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+import finsler
+from finsler.errors import InputError
+from learn.config import TrainConfig, config_json
+from learn.networks import Critic
+from learn.policy import EvalResult, build_actor, evaluate_paths, generate_paths
+from learn.storage import (
+    BEST_FILE,
+    CONFIG_FILE,
+    LATEST_FILE,
+    METRICS_FILE,
+    CorruptFileError,
+    atomic_write_text,
+    load_checkpoint,
+    read_json,
+    read_metrics,
+    save_checkpoint,
+    write_metrics,
+)
+from learn.tree import build_tree, level_pairs, mc_targets, td_lambda_targets
+
+__all__ = ["TrainResult", "Trainer", "actor_loss", "resolve_device", "train"]
+
+
+def resolve_device(name: str) -> torch.device:
+    """``cpu`` or ``cuda[:k]``; a clear :class:`InputError` if CUDA is unavailable."""
+    if name == "cpu":
+        return torch.device("cpu")
+    if name == "cuda" or name.startswith("cuda:"):
+        if not torch.cuda.is_available():
+            raise InputError(f"device {name!r} requested but CUDA is not available on this "
+                             "machine (torch.cuda.is_available() is False); use --device cpu")
+        return torch.device(name)
+    raise InputError(f"device must be 'cpu' or 'cuda', got {name!r}")
+
+
+def actor_loss(method: str, v_first: torch.Tensor, v_second: torch.Tensor) -> torch.Tensor:
+    """Per-pair actor loss from ``V(s, m)`` and ``V(m, g)`` ``(N,)``: eq. (6) ``midpoint``,
+    eq. (17) ``inter``, eq. (18) ``two-to-one``."""
+    if method == "midpoint":
+        return v_first**2 + v_second**2
+    if method == "inter":
+        return v_first + v_second
+    if method == "two-to-one":
+        return v_first**2 + 2.0 * v_second**2
+    raise InputError(f"unknown method {method!r}")
+
+
+def paper_depth(trees_before: int, total_timesteps: int, max_depth: int) -> int:
+    """Depth of the c-th tree (appendix B.1): ``floor(c / c_d)`` capped at ``max_depth``,
+    ``c_d = floor(T / (2**(max_depth + 1) - 1)) + 1``."""
+    c_d = total_timesteps // (2 ** (max_depth + 1) - 1) + 1
+    return min(trees_before // c_d, max_depth)
+
+
+@dataclass
+class TrainResult:
+    """Summary of a finished (or time-limited) run."""
+
+    run_dir: Path
+    timesteps: int
+    iterations: int
+    wall_seconds: float
+    final: dict[str, float]
+    best: dict[str, float]
+    history: list[dict[str, Any]] = field(repr=False, default_factory=list)
+
+
+class Trainer:
+    """Run Algorithm 1 for a :class:`TrainConfig` into a run directory."""
+
+    def __init__(self, cfg: TrainConfig, run_dir: str | Path, resume: bool = False,
+                 progress: bool = True) -> None:
+        self.run_dir = Path(run_dir)
+        self.progress = progress
+        if resume:
+            cfg = self._resume_config(cfg)
+        elif self.run_dir.exists() and any(self.run_dir.iterdir()):
+            raise InputError(
+                f"run directory {self.run_dir} exists and is not empty; pass --resume to "
+                "continue it or choose a new --out"
+            )
+        self.cfg = cfg
+        self.device = resolve_device(cfg.device)
+        torch.set_num_threads(cfg.threads)
+        self.metric = cfg.metric
+        self.dim = self.metric.dim
+        self.depth_max = cfg.max_depth
+        self.eval_pairs = finsler.sample_pairs(self.metric, cfg.eval_pairs,
+                                               finsler.DEFAULT_EVAL_SEED)
+
+        # networks, initialised from the seed without touching the global RNG
+        with torch.random.fork_rng(devices=[]):
+            torch.manual_seed(cfg.seed)
+            self.actor = build_actor(cfg, self.metric).to(self.device)
+            self.critic = Critic(
+                self.metric, hidden=cfg.hidden, activation=cfg.activation,
+                normalize_inputs=cfg.normalize_inputs, transform=cfg.critic_transform,
+                symmetric=cfg.symmetric_critic,
+            ).to(self.device)
+        self.opt_actor = torch.optim.Adam(self.actor.parameters(), lr=cfg.lr)
+        self.opt_critic = torch.optim.Adam(self.critic.parameters(), lr=cfg.lr)
+        self.np_rng = np.random.default_rng(cfg.seed)
+        self.gen = torch.Generator(device=self.device)
+        self.gen.manual_seed(cfg.seed + 1)
+
+        self.iteration = 0
+        self.timesteps = 0
+        self.trees = 0
+        self.updates = 0
+        self.wall_before = 0.0
+        self.best: dict[str, float] = {"success_rate": -1.0, "mean_max_segment_cost": math.inf}
+        self.history: list[dict[str, Any]] = []
+        self._losses: list[tuple[float, float]] = []
+        if resume and (self.run_dir / LATEST_FILE).is_file():
+            self._load_state(load_checkpoint(self.run_dir / LATEST_FILE))
+        else:
+            self.run_dir.mkdir(parents=True, exist_ok=True)
+            atomic_write_text(self.run_dir / CONFIG_FILE, config_json(cfg))
+
+    # -- resume ---------------------------------------------------------------------------
+    def _resume_config(self, cfg: TrainConfig) -> TrainConfig:
+        if not self.run_dir.is_dir():
+            raise InputError(f"cannot resume: run directory {self.run_dir} does not exist")
+        doc = read_json(self.run_dir / CONFIG_FILE)
+        if "config" not in doc:
+            raise CorruptFileError(f"{self.run_dir / CONFIG_FILE} has no 'config' section")
+        saved = TrainConfig.from_dict(doc["config"])
+        # Only run-control fields may change on resume; everything else defines the run.
+        free = {"minutes", "device", "eval_pairs"}
+        new, old = cfg.to_dict(), saved.to_dict()
+        changed = [k for k in old if k not in free and new[k] != old[k]]
+        if cfg.env != saved.env:
+            raise InputError(f"cannot resume: run {self.run_dir} trains {saved.env!r}, "
+                             f"not {cfg.env!r}")
+        if changed:
+            raise InputError("cannot resume with different settings: " + ", ".join(
+                f"{k} ({old[k]!r} in the run, {new[k]!r} given)" for k in changed))
+        return saved.replace(minutes=cfg.minutes, device=cfg.device)
+
+    def _state(self) -> dict[str, Any]:
+        return {
+            "format": "learn-checkpoint-v1",
+            "config": self.cfg.to_dict(),
+            "actor": self.actor.state_dict(),
+            "critic": self.critic.state_dict(),
+            "opt_actor": self.opt_actor.state_dict(),
+            "opt_critic": self.opt_critic.state_dict(),
+            "np_rng": self.np_rng.bit_generator.state,
+            "torch_rng": self.gen.get_state(),
+            "counters": {
+                "iteration": self.iteration,
+                "timesteps": self.timesteps,
+                "trees": self.trees,
+                "updates": self.updates,
+                "wall_seconds": self._wall(),
+            },
+            "best": dict(self.best),
+        }
+
+    def _load_state(self, st: dict[str, Any]) -> None:
+        try:
+            self.actor.load_state_dict(st["actor"])
+            self.critic.load_state_dict(st["critic"])
+            self.opt_actor.load_state_dict(st["opt_actor"])
+            self.opt_critic.load_state_dict(st["opt_critic"])
+            self.np_rng.bit_generator.state = st["np_rng"]
+            self.gen.set_state(st["torch_rng"])
+            c = st["counters"]
+            self.iteration, self.timesteps = int(c["iteration"]), int(c["timesteps"])
+            self.trees, self.updates = int(c["trees"]), int(c["updates"])
+            self.wall_before = float(c["wall_seconds"])
+            self.best = dict(st["best"])
+        except (KeyError, RuntimeError, TypeError, ValueError) as err:
+            raise CorruptFileError(
+                f"checkpoint {self.run_dir / LATEST_FILE} does not match the run: {err}"
+            ) from err
+        rows = read_metrics(self.run_dir / METRICS_FILE)
+        self.history = [r for r in rows if int(r["iteration"]) <= self.iteration]
+
+    # -- the algorithm --------------------------------------------------------------------
+    def depth_for(self, trees_before: int) -> int:
+        if self.cfg.depth_schedule == "full":
+            return self.depth_max
+        return paper_depth(trees_before, self.cfg.timesteps, self.depth_max)
+
+    def _sample(self, s: torch.Tensor, g: torch.Tensor) -> torch.Tensor:
+        m = self.actor(s.float(), g.float(), generator=self.gen)
+        return m.to(torch.float64)
+
+    def collect(self) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, int]:
+        """COLLECTDATA of Alg. 1 for a batch of trees: returns starts, goals ``(N, dim)``
+        float64, targets ``(N,)`` float64 and the timesteps spent."""
+        depth = self.depth_for(self.trees)
+        per_tree = 2 ** (depth + 1) - 1 + (2**depth + 1 if self.cfg.zero_pairs else 0)
+        n_trees = max(1, math.ceil(self.cfg.collection_size / per_tree))
+        ends = self.metric.domain.sample(2 * n_trees, self.np_rng).reshape(n_trees, 2, self.dim)
+        ends_t = torch.as_tensor(ends, dtype=torch.float64, device=self.device)
+        with torch.no_grad():
+            pts = build_tree(ends_t[:, 0], ends_t[:, 1], depth, self._sample)
+            leaf = self.metric.cost(pts[:, :-1].reshape(-1, self.dim),
+                                    pts[:, 1:].reshape(-1, self.dim)).reshape(n_trees, -1)
+            pairs = [level_pairs(pts, i) for i in range(depth + 1)]
+            if self.cfg.targets == "td" and depth > 0:
+                values = [
+                    self.critic(s.reshape(-1, self.dim).float(),
+                                g.reshape(-1, self.dim).float()).double().reshape(n_trees, -1)
+                    for s, g in pairs
+                ]
+                targets = td_lambda_targets(leaf, values, self.cfg.td_lambda)
+            else:
+                targets = mc_targets(leaf)
+        starts = [s.reshape(-1, self.dim) for s, _ in pairs]
+        goals = [g.reshape(-1, self.dim) for _, g in pairs]
+        costs = [c.reshape(-1) for c in targets]
+        if self.cfg.zero_pairs:
+            flat = pts.reshape(-1, self.dim)
+            starts.append(flat)
+            goals.append(flat)
+            costs.append(torch.zeros(flat.shape[0], dtype=torch.float64, device=self.device))
+        self.trees += n_trees
+        return torch.cat(starts), torch.cat(goals), torch.cat(costs), n_trees * 2**depth
+
+    def update(self, s: torch.Tensor, g: torch.Tensor, c: torch.Tensor) -> tuple[float, float]:
+        """``epochs`` passes of minibatch updates: critic (eq. 5), then actor."""
+        s32, g32 = s.float(), g.float()
+        target = self.critic.to_raw(c).float()
+        n = s.shape[0]
+        mb = self.cfg.minibatch_size
+        lc_sum = la_sum = 0.0
+        steps = 0
+        for _ in range(self.cfg.epochs):
+            perm = torch.randperm(n, generator=self.gen, device=self.device)
+            for k in range(0, n, mb):
+                idx = perm[k : k + mb]
+                bs, bg = s32[idx], g32[idx]
+                # critic step, eq. (5)
+                lc = ((self.critic.raw(bs, bg) - target[idx]) ** 2).mean()
+                self.opt_critic.zero_grad(set_to_none=True)
+                lc.backward()
+                self.opt_critic.step()
+                # actor step, eq. (6) / (17) / (18); the critic is held fixed
+                self.critic.requires_grad_(False)
+                m = self.actor(bs, bg, generator=self.gen)
+                la = actor_loss(self.cfg.method, self.critic(bs, m), self.critic(m, bg)).mean()
+                self.opt_actor.zero_grad(set_to_none=True)
+                la.backward()
+                self.opt_actor.step()
+                self.critic.requires_grad_(True)
+                lc_sum += float(lc.detach())
+                la_sum += float(la.detach())
+                steps += 1
+        self.updates += steps
+        return lc_sum / max(steps, 1), la_sum / max(steps, 1)
+
+    def _set_lr(self) -> float:
+        cfg = self.cfg
+        p = min(1.0, self.timesteps / cfg.timesteps)
+        f = cfg.lr_final_fraction
+        if cfg.lr_schedule == "linear":
+            scale = 1.0 - (1.0 - f) * p
+        elif cfg.lr_schedule == "cosine":
+            scale = f + (1.0 - f) * 0.5 * (1.0 + math.cos(math.pi * p))
+        else:
+            scale = 1.0
+        lr = cfg.lr * scale
+        for opt in (self.opt_actor, self.opt_critic):
+            for group in opt.param_groups:
+                group["lr"] = lr
+        return lr
+
+    # -- evaluation, logging, checkpoints -------------------------------------------------
+    def evaluate(self, pairs: np.ndarray | None = None) -> EvalResult:
+        """Section 5.1 evaluation of the deterministic policy (default pair set)."""
+        p = self.eval_pairs if pairs is None else pairs
+        pt = torch.as_tensor(p, dtype=torch.float64, device=self.device)
+        self.actor.eval()
+        paths = generate_paths(self.actor, self.metric, pt[:, 0], pt[:, 1], self.depth_max)
+        self.actor.train()
+        return evaluate_paths(self.metric, paths.cpu().numpy(), self.cfg.eval_eps)
+
+    def _wall(self) -> float:
+        return self.wall_before + (time.perf_counter() - self._t0)
+
+    def _log_and_checkpoint(self, lr: float) -> dict[str, Any]:
+        ev = self.evaluate()
+        wall = self._wall()
+        lc, la = (np.mean(self._losses, axis=0) if self._losses else (float("nan"),) * 2)
+        self._losses = []
+        row = {
+            "iteration": self.iteration,
+            "timesteps": self.timesteps,
+            "wall_seconds": round(wall, 3),
+            "depth": self.depth_for(self.trees),
+            "success_rate": ev.success_rate,
+            "mean_length": round(ev.mean_length, 8),
+            "mean_max_segment_cost": round(ev.mean_max_segment_cost, 8),
+            "critic_loss": float(lc),
+            "actor_loss": float(la),
+            "lr": lr,
+            "timesteps_per_second": round(self.timesteps / max(wall, 1e-9), 1),
+        }
+        self.history.append(row)
+        write_metrics(self.run_dir / METRICS_FILE, self.history)
+        key = (ev.success_rate, -ev.mean_max_segment_cost)
+        if key > (self.best["success_rate"], -self.best["mean_max_segment_cost"]):
+            self.best = {
+                "success_rate": ev.success_rate,
+                "mean_max_segment_cost": ev.mean_max_segment_cost,
+                "mean_length": ev.mean_length,
+                "timesteps": self.timesteps,
+                "wall_seconds": wall,
+            }
+            save_checkpoint(self.run_dir / BEST_FILE, {
+                "format": "learn-checkpoint-v1",
+                "config": self.cfg.to_dict(),
+                "actor": self.actor.state_dict(),
+                "critic": self.critic.state_dict(),
+                "eval": dict(self.best),
+            })
+        save_checkpoint(self.run_dir / LATEST_FILE, self._state())
+        return row
+
+    def run(self) -> TrainResult:
+        """Train until ``timesteps`` (or ``minutes``) are spent; returns the summary."""
+        from tqdm.auto import tqdm
+
+        cfg = self.cfg
+        self._t0 = time.perf_counter()
+        bar = tqdm(total=cfg.timesteps, initial=self.timesteps, unit="ts", unit_scale=True,
+                   disable=not self.progress, desc=f"train {cfg.env}", dynamic_ncols=True)
+        lr = self._set_lr()
+        if self.iteration == 0 and not self.history:
+            self._log_and_checkpoint(lr)
+        last_logged = self.iteration
+        try:
+            while self.timesteps < cfg.timesteps:
+                if cfg.minutes is not None and self._wall() >= 60.0 * cfg.minutes:
+                    break
+                lr = self._set_lr()
+                s, g, c, ts = self.collect()
+                self._losses.append(self.update(s, g, c))
+                self.timesteps += ts
+                self.iteration += 1
+                bar.update(ts)
+                if self.iteration % cfg.eval_every == 0:
+                    row = self._log_and_checkpoint(lr)
+                    last_logged = self.iteration
+                    bar.set_postfix(success=f"{row['success_rate']:.2f}",
+                                    ts_s=f"{row['timesteps_per_second']:.0f}")
+            if self.iteration != last_logged:
+                self._log_and_checkpoint(lr)
+        finally:
+            bar.close()
+        final = self.history[-1]
+        return TrainResult(
+            run_dir=self.run_dir,
+            timesteps=self.timesteps,
+            iterations=self.iteration,
+            wall_seconds=float(final["wall_seconds"]),
+            final={k: final[k] for k in ("success_rate", "mean_length",
+                                         "mean_max_segment_cost", "timesteps_per_second")},
+            best=dict(self.best),
+            history=list(self.history),
+        )
+
+
+def train(cfg: TrainConfig, out: str | Path, resume: bool = False,
+          progress: bool = True) -> TrainResult:
+    """Train a midpoint policy with ``cfg`` into run directory ``out`` (``resume``
+    continues the run saved there, replaying exactly what an uninterrupted run does)."""
+    return Trainer(cfg, out, resume=resume, progress=progress).run()
+
+
+def read_run_config(run_dir: str | Path) -> TrainConfig:
+    """The :class:`TrainConfig` saved in a run directory."""
+    doc = read_json(Path(run_dir) / CONFIG_FILE)
+    if "config" not in doc:
+        raise CorruptFileError(f"{Path(run_dir) / CONFIG_FILE} has no 'config' section")
+    return TrainConfig.from_dict(doc["config"])

@@ -1,0 +1,279 @@
+"""Tests of the midpoint actor-critic: targets by hand, determinism, learning on the
+Euclidean plane against true midpoints, exact resume, run-directory errors."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+import finsler
+import learn
+from learn.train import Trainer, actor_loss, paper_depth
+
+
+# ----------------------------------------------------------------------------------------
+# trees and targets, by hand
+# ----------------------------------------------------------------------------------------
+def _hand_tree() -> torch.Tensor:
+    """One depth-2 tree on a horizontal line of the Euclidean plane:
+    p_{2,*} = 0, 0.1, 0.3, 0.6, 1.0 (leaf costs 0.1, 0.2, 0.3, 0.4)."""
+    x = torch.tensor([0.0, 0.1, 0.3, 0.6, 1.0], dtype=torch.float64) - 0.5
+    return torch.stack([x, torch.full_like(x, 0.25)], -1)[None]
+
+
+def test_build_tree_inserts_midpoints_level_by_level() -> None:
+    calls = []
+
+    def mean(s: torch.Tensor, g: torch.Tensor) -> torch.Tensor:
+        calls.append(s.shape[0])
+        return 0.5 * (s + g)
+
+    s = torch.tensor([[0.0], [10.0]], dtype=torch.float64)
+    g = torch.tensor([[4.0], [2.0]], dtype=torch.float64)
+    pts = learn.build_tree(s, g, 2, mean)
+    assert pts.shape == (2, 5, 1)
+    assert pts[0, :, 0].tolist() == [0.0, 1.0, 2.0, 3.0, 4.0]
+    assert pts[1, :, 0].tolist() == [10.0, 8.0, 6.0, 4.0, 2.0]
+    assert calls == [2, 4]  # one batched call per level
+    s1, g1 = learn.level_pairs(pts, 1)
+    assert s1[0, :, 0].tolist() == [0.0, 2.0] and g1[0, :, 0].tolist() == [2.0, 4.0]
+
+
+def test_monte_carlo_targets_of_a_hand_built_depth2_tree() -> None:
+    m = finsler.get_metric("euclidean")
+    pts = _hand_tree()
+    leaf = m.cost(pts[0, :-1], pts[0, 1:])[None]
+    targets = learn.mc_targets(leaf)
+    # by hand: level 2 = leaf costs, level 1 = 0.1 + 0.2, 0.3 + 0.4, level 0 = 1.0
+    np.testing.assert_allclose(targets[2].numpy(), [[0.1, 0.2, 0.3, 0.4]], atol=1e-15)
+    np.testing.assert_allclose(targets[1].numpy(), [[0.3, 0.7]], atol=1e-15)
+    np.testing.assert_allclose(targets[0].numpy(), [[1.0]], atol=1e-15)
+
+
+def test_td_lambda_targets_of_a_hand_built_depth2_tree() -> None:
+    leaf = torch.tensor([[1.0, 2.0, 3.0, 4.0]], dtype=torch.float64)
+    values = [
+        torch.tensor([[100.0]], dtype=torch.float64),  # unused (root has no parent)
+        torch.tensor([[2.5, 8.0]], dtype=torch.float64),
+        torch.tensor([[0.5, 1.5, 2.5, 3.5]], dtype=torch.float64),
+    ]
+    t = learn.td_lambda_targets(leaf, values, 0.5)
+    # eq. (8) by hand with lambda = 1/2:
+    # c_{1,0} = .5 (0.5 + 1.5) + .5 (1 + 2) = 2.5 ; c_{1,1} = .5 (2.5 + 3.5) + .5 (3 + 4) = 6.5
+    # c_{0,0} = .5 (2.5 + 8.0) + .5 (2.5 + 6.5) = 9.75
+    assert t[2].tolist() == [[1.0, 2.0, 3.0, 4.0]]
+    assert t[1].tolist() == [[2.5, 6.5]]
+    assert t[0].tolist() == [[9.75]]
+    # lambda = 0: pure bootstrap from the children's values; lambda = 1: Monte Carlo
+    t0 = learn.td_lambda_targets(leaf, values, 0.0)
+    assert t0[1].tolist() == [[2.0, 6.0]] and t0[0].tolist() == [[10.5]]
+    t1 = learn.td_lambda_targets(leaf, values, 1.0)
+    for a, b in zip(t1, learn.mc_targets(leaf)):
+        assert torch.equal(a, b)
+
+
+def test_trainer_collect_uses_td_targets_of_its_own_critic() -> None:
+    cfg = learn.default_config("euclidean", depth=2, targets="td", td_lambda=0.3,
+                               collection_size=7, zero_pairs=False)
+    tr = Trainer(cfg, _tmp_run_dir(), progress=False)
+    s, g, c, ts = tr.collect()
+    assert ts == 4 and s.shape == (7, 2)  # one tree: 1 + 2 + 4 pairs, 4 evaluations of C
+    # the collected pairs are ordered level 0, level 1, level 2
+    v = tr.critic(s.float(), g.float()).double()
+    leaf = (g[3:] - s[3:]).norm(dim=1)
+    c1 = 0.7 * torch.stack([v[3] + v[4], v[5] + v[6]]) + 0.3 * torch.stack(
+        [leaf[0] + leaf[1], leaf[2] + leaf[3]])
+    c0 = 0.7 * (v[1] + v[2]) + 0.3 * (c1[0] + c1[1])
+    torch.testing.assert_close(c, torch.cat([c0[None], c1, leaf]), rtol=1e-6, atol=1e-6)
+    assert torch.equal(s[1], s[0]) and torch.equal(g[2], g[0]) and torch.equal(g[1], s[2])
+
+
+def test_paper_depth_schedule() -> None:
+    # T = 127 * 10 timesteps, D = 6: c_d = 11 trees per depth, depths 0..6
+    assert [paper_depth(c, 1270, 6) for c in (0, 10, 11, 21, 22, 65, 66, 76, 77, 10**6)] == [
+        0, 0, 1, 1, 2, 5, 6, 6, 6, 6]
+
+
+@pytest.mark.parametrize("method", ["midpoint", "inter", "two-to-one"])
+def test_actor_losses(method: str) -> None:
+    a = torch.tensor([1.0, 2.0])
+    b = torch.tensor([3.0, 0.5])
+    want = {"midpoint": a**2 + b**2, "inter": a + b, "two-to-one": a**2 + 2 * b**2}[method]
+    assert torch.equal(actor_loss(method, a, b), want)
+
+
+# ----------------------------------------------------------------------------------------
+# determinism, learning, resume
+# ----------------------------------------------------------------------------------------
+_COUNTER = [0]
+
+
+def _tmp_run_dir() -> str:
+    import tempfile
+
+    _COUNTER[0] += 1
+    return tempfile.mkdtemp(prefix=f"learn_test_{_COUNTER[0]}_")
+
+
+def _small(**over: object) -> learn.TrainConfig:
+    base = dict(timesteps=60_000, collection_size=1024, minibatch_size=256, epochs=2,
+                eval_every=5, depth=3)
+    base.update(over)
+    return learn.default_config("euclidean", **base)
+
+
+def test_same_seed_same_midpoints_different_seed_different(tmp_path) -> None:
+    pairs = finsler.default_pairs(finsler.get_metric("euclidean"), 20)
+    mids = []
+    for k, seed in enumerate((3, 3, 4)):
+        out = tmp_path / f"run{k}"
+        learn.train(_small(seed=seed, timesteps=6_000), out, progress=False)
+        mids.append(learn.load_policy(out).midpoint(pairs[:, 0], pairs[:, 1]))
+    assert np.array_equal(mids[0], mids[1])
+    assert not np.allclose(mids[0], mids[2])
+
+
+def test_short_euclidean_training_learns_true_midpoints(tmp_path) -> None:
+    """Independent check: on the Euclidean plane the midpoint is (s + g) / 2 and the
+    distance |g - s|. The untrained actor (random init) is off by ~0.1 on average; after
+    a 1e5-timestep run (depth-2 trees) the mean midpoint error must be below 0.02 (box
+    side 2, mean pair distance ~1) and the critic within 10% of the true distance."""
+    cfg = learn.default_config("euclidean", depth=2, timesteps=100_000, collection_size=1024,
+                               minibatch_size=256, epochs=2, eval_every=1000)
+    m = finsler.get_metric("euclidean")
+    pairs = finsler.sample_pairs(m, 500, seed=11)
+    truth = 0.5 * (pairs[:, 0] + pairs[:, 1])
+    tr = Trainer(cfg, tmp_path / "run", progress=False)
+    err0 = np.linalg.norm(learn.Policy(tr.actor, cfg).midpoint(pairs[:, 0], pairs[:, 1])
+                          - truth, axis=1)
+    tr.run()
+    pol = learn.load_policy(tmp_path / "run", checkpoint="latest")
+    err = np.linalg.norm(pol.midpoint(pairs[:, 0], pairs[:, 1]) - truth, axis=1)
+    assert err0.mean() > 0.08
+    assert err.mean() < 0.02, err.mean()
+    assert np.quantile(err, 0.95) < 0.05
+    dist = np.linalg.norm(pairs[:, 1] - pairs[:, 0], axis=1)
+    with torch.no_grad():
+        v = tr.critic(torch.as_tensor(pairs[:, 0]).float(),
+                      torch.as_tensor(pairs[:, 1]).float()).double().numpy()
+    rel = np.abs(v - dist) / dist
+    assert np.median(rel) < 0.1, np.median(rel)
+
+
+def test_resume_equals_uninterrupted(tmp_path, monkeypatch) -> None:
+    cfg = _small(timesteps=12_000, eval_every=3)
+    full = learn.train(cfg, tmp_path / "full", progress=False)
+
+    calls = [0]
+    real_update = Trainer.update
+
+    def crashing_update(self, *a):
+        calls[0] += 1
+        if calls[0] == 8:  # crash between checkpoints (iterations 6 and 9)
+            raise RuntimeError("simulated crash")
+        return real_update(self, *a)
+
+    monkeypatch.setattr(Trainer, "update", crashing_update)
+    with pytest.raises(RuntimeError, match="simulated crash"):
+        learn.train(cfg, tmp_path / "crash", progress=False)
+    monkeypatch.setattr(Trainer, "update", real_update)
+    with pytest.raises(finsler.InputError, match="--resume"):
+        learn.train(cfg, tmp_path / "crash", progress=False)
+    resumed = learn.train(cfg, tmp_path / "crash", resume=True, progress=False)
+
+    a = learn.storage.load_checkpoint(tmp_path / "full" / learn.storage.LATEST_FILE)
+    b = learn.storage.load_checkpoint(tmp_path / "crash" / learn.storage.LATEST_FILE)
+    for net in ("actor", "critic"):
+        for k in a[net]:
+            assert torch.equal(a[net][k], b[net][k]), (net, k)
+    assert a["counters"]["timesteps"] == b["counters"]["timesteps"] == full.timesteps
+    keys = ("iteration", "timesteps", "success_rate", "mean_length", "critic_loss",
+            "actor_loss")
+    def clean(v):  # losses are NaN before the first update
+        return None if isinstance(v, float) and np.isnan(v) else v
+
+    rows_a = [{k: clean(r[k]) for k in keys} for r in full.history]
+    rows_b = [{k: clean(r[k]) for k in keys} for r in resumed.history]
+    assert rows_a == rows_b
+    assert len(rows_a) > 3
+
+
+def test_resume_refuses_changed_settings(tmp_path) -> None:
+    cfg = _small(timesteps=5_000)
+    learn.train(cfg, tmp_path / "r", progress=False)
+    with pytest.raises(finsler.InputError, match="lr"):
+        learn.train(cfg.replace(lr=0.5), tmp_path / "r", resume=True, progress=False)
+
+
+# ----------------------------------------------------------------------------------------
+# configuration and loading errors
+# ----------------------------------------------------------------------------------------
+@pytest.mark.parametrize(
+    ("over", "match"),
+    [
+        (dict(method="sideways"), "method"),
+        (dict(targets="q"), "targets"),
+        (dict(epochs=0), "epochs"),
+        (dict(lr=-1.0), "lr"),
+        (dict(td_lambda=1.5), "td_lambda"),
+        (dict(device="tpu"), "device"),
+    ],
+)
+def test_config_rejects_impossible_options(over: dict, match: str) -> None:
+    with pytest.raises(finsler.InputError, match=match):
+        learn.default_config("matsumoto", **over)
+
+
+def test_config_rejects_symmetric_critic_for_irreversible_metric() -> None:
+    with pytest.raises(finsler.InputError, match="reversible"):
+        learn.default_config("matsumoto", symmetric_critic=True)
+    with pytest.raises(finsler.UnknownMetricError):
+        learn.default_config("klein-bottle")
+
+
+def test_cuda_request_without_cuda_is_a_clear_error() -> None:
+    if torch.cuda.is_available():
+        pytest.skip("CUDA present")
+    with pytest.raises(finsler.InputError, match="CUDA is not available"):
+        learn.resolve_device("cuda")
+
+
+def test_config_json_records_versions_and_beyond_paper_choices(tmp_path) -> None:
+    import json
+
+    learn.train(_small(timesteps=2_000), tmp_path / "r", progress=False)
+    doc = json.loads((tmp_path / "r" / "config.json").read_text())
+    assert set(doc["versions"]) == {"python", "torch", "numpy", "casadi"}
+    assert doc["config"]["seed"] == 0 and doc["task"] == {"depth": 3, "eps": 0.2,
+                                                          "segments": 8}
+    assert doc["beyond_paper"]["critic_transform"] == {"used": "log1p", "paper": "none"}
+    assert "lr" in doc["beyond_paper"]
+    assert learn.beyond_paper(learn.paper_config("matsumoto")) == {}
+
+
+def test_load_policy_errors(tmp_path) -> None:
+    with pytest.raises(finsler.InputError, match="does not exist"):
+        learn.load_policy(tmp_path / "nowhere")
+    learn.train(_small(timesteps=2_000), tmp_path / "r", progress=False)
+    pol = learn.load_policy(tmp_path / "r")
+    with pytest.raises(finsler.DomainError):
+        pol.generate(np.array([[3.0, 0.0]]), np.array([[0.0, 0.0]]))
+    with pytest.raises(finsler.InputError, match="shape"):
+        pol.evaluate(np.zeros((4, 2, 3)))
+    for f in ("checkpoint_best.pt", "checkpoint_latest.pt"):
+        (tmp_path / "r" / f).write_bytes(b"not a checkpoint")
+    with pytest.raises(learn.CorruptFileError, match="corrupt"):
+        learn.load_policy(tmp_path / "r")
+
+
+def test_generate_shapes_and_endpoints(tmp_path) -> None:
+    learn.train(_small(timesteps=2_000), tmp_path / "r", progress=False)
+    pol = learn.load_policy(tmp_path / "r")
+    pairs = finsler.default_pairs(pol.metric, 7)
+    paths = pol.generate(pairs[:, 0], pairs[:, 1])
+    assert paths.shape == (7, 2**3 + 1, 2) and paths.dtype == np.float64
+    assert np.array_equal(paths[:, 0], pairs[:, 0]) and np.array_equal(paths[:, -1], pairs[:, 1])
+    assert pol.generate(pairs[:, 0], pairs[:, 1], depth=5).shape == (7, 33, 2)
+    assert np.array_equal(pol.midpoint(pairs[:, 0], pairs[:, 1]),
+                          pol.generate(pairs[:, 0], pairs[:, 1], depth=1)[:, 1])

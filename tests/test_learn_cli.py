@@ -1,0 +1,136 @@
+"""`geodesics train` / `geodesics evaluate`: happy paths and clear errors on bad input."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+import finsler
+import learn
+from validation.cli import app
+
+runner = CliRunner()
+
+
+def _run(*args: str):
+    return runner.invoke(app, list(args))
+
+
+@pytest.fixture(scope="module")
+def run_dir(tmp_path_factory):
+    out = tmp_path_factory.mktemp("cli") / "run"
+    res = _run("train", "--env", "euclidean", "--out", str(out), "--timesteps", "20000",
+               "--quiet")
+    assert res.exit_code == 0, res.output
+    assert "timesteps/s" in res.output
+    return out
+
+
+def test_train_writes_a_complete_run_directory(run_dir) -> None:
+    names = {p.name for p in run_dir.iterdir()}
+    assert {"config.json", "metrics.csv", "checkpoint_latest.pt", "checkpoint_best.pt"} <= names
+    rows = learn.storage.read_metrics(run_dir / "metrics.csv")
+    assert rows[0]["timesteps"] == 0 and rows[-1]["timesteps"] >= 20000
+    for key in ("wall_seconds", "success_rate", "mean_length", "critic_loss", "actor_loss",
+                "timesteps_per_second"):
+        assert key in rows[-1]
+
+
+def test_evaluate_json_on_default_and_given_pairs(run_dir, tmp_path) -> None:
+    res = _run("evaluate", "--run", str(run_dir), "--json")
+    assert res.exit_code == 0, res.output
+    doc = json.loads(res.output)
+    assert {"success_rate", "mean_length", "mean_max_segment_cost", "per_pair"} <= set(doc)
+    assert len(doc["per_pair"]) == 100
+    assert set(doc["per_pair"][0]) == {"success", "length", "max_segment_cost"}
+    # the JSON agrees with the Python API
+    ev = learn.load_policy(run_dir).evaluate()
+    assert doc["success_rate"] == ev.success_rate
+    pairs = finsler.sample_pairs(finsler.get_metric("euclidean"), 5, seed=1)
+    np.save(tmp_path / "p.npy", pairs)
+    res = _run("evaluate", "--run", str(run_dir), "--pairs", str(tmp_path / "p.npy"),
+               "--eps", "0.5", "--depth", "2", "--json")
+    assert res.exit_code == 0, res.output
+    doc = json.loads(res.output)
+    assert len(doc["per_pair"]) == 5 and doc["eps"] == 0.5 and doc["depth"] == 2
+
+
+def test_evaluate_missing_run_dir(tmp_path) -> None:
+    res = _run("evaluate", "--run", str(tmp_path / "absent"))
+    assert res.exit_code == 2
+    assert "does not exist" in res.output
+
+
+def test_evaluate_corrupt_checkpoint(run_dir, tmp_path) -> None:
+    import shutil
+
+    bad = tmp_path / "bad"
+    shutil.copytree(run_dir, bad)
+    (bad / "checkpoint_best.pt").write_bytes(b"\x00garbage")
+    res = _run("evaluate", "--run", str(bad))
+    assert res.exit_code == 2
+    assert "corrupt" in res.output and "checkpoint_best.pt" in res.output
+
+
+def test_evaluate_pairs_of_wrong_dim(run_dir, tmp_path) -> None:
+    np.save(tmp_path / "p3.npy", np.zeros((4, 2, 3)))
+    res = _run("evaluate", "--run", str(run_dir), "--pairs", str(tmp_path / "p3.npy"))
+    assert res.exit_code == 2
+    assert "(K, 2, 2)" in res.output
+    (tmp_path / "junk.npy").write_bytes(b"junk")
+    res = _run("evaluate", "--run", str(run_dir), "--pairs", str(tmp_path / "junk.npy"))
+    assert res.exit_code == 2 and "not a readable .npy" in res.output
+    np.save(tmp_path / "out.npy", np.full((2, 2, 2), 5.0))
+    res = _run("evaluate", "--run", str(run_dir), "--pairs", str(tmp_path / "out.npy"))
+    assert res.exit_code == 2 and "outside the domain" in res.output
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (("evaluate",), "give --run DIR or --env NAME"),
+        (("evaluate", "--env", "klein"), "unknown environment"),
+        (("evaluate", "--env", "poincare"), "no shipped policy"),
+        (("train", "--env", "klein", "--out", "x"), "unknown environment"),
+        (("train", "--env", "euclidean", "--out", "x", "--method", "sideways"), "method"),
+        (("train", "--env", "euclidean", "--out", "x", "--device", "cuda"), "CUDA"),
+        (("train", "--env", "euclidean", "--out", "x", "--timesteps", "0"), "timesteps"),
+    ],
+)
+def test_bad_cli_input_gives_clear_error(args, message, tmp_path, monkeypatch) -> None:
+    import torch
+
+    if "cuda" in args and torch.cuda.is_available():
+        pytest.skip("CUDA present")
+    monkeypatch.chdir(tmp_path)
+    res = _run(*args)
+    assert res.exit_code == 2, res.output
+    assert message in res.output
+    assert not (tmp_path / "x").exists()
+
+
+def test_train_refuses_existing_dir_and_resume_of_missing(run_dir, tmp_path) -> None:
+    res = _run("train", "--env", "euclidean", "--out", str(run_dir), "--timesteps", "100")
+    assert res.exit_code == 2 and "--resume" in res.output
+    res = _run("train", "--env", "euclidean", "--out", str(tmp_path / "none"), "--resume")
+    assert res.exit_code == 2 and "does not exist" in res.output
+
+
+@pytest.mark.parametrize("env", ["matsumoto", "carlike", "panda-pole"])
+def test_shipped_policy_evaluates_as_recorded(env) -> None:
+    """`geodesics evaluate --env NAME` works from the package data and reproduces the
+    success rate recorded when the policy was exported."""
+    assert env in learn.shipped_policies()
+    res = _run("evaluate", "--env", env, "--json")
+    assert res.exit_code == 0, res.output
+    doc = json.loads(res.output)
+    recorded = learn.storage.load_checkpoint(
+        learn.policy._shipped_dir(env) / "policy.pt")["eval"]
+    assert doc["success_rate"] == pytest.approx(recorded["success_rate"])
+    assert doc["mean_length"] == pytest.approx(recorded["mean_length"], rel=1e-6)
+    pol = learn.load_policy(env)
+    p = finsler.default_pairs(pol.metric, 3)
+    assert pol.generate(p[:, 0], p[:, 1]).shape == (3, 2**pol.depth + 1, pol.metric.dim)

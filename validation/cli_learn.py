@@ -1,0 +1,165 @@
+"""``geodesics train`` and ``geodesics evaluate``: thin CLI over :mod:`learn`.
+
+Per-environment defaults (``learn.default_config``) are the settings of the shipped
+policies; e.g. the shipped Matsumoto policy is reproduced by
+``geodesics train --env matsumoto --out runs/matsumoto --seed 0``.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Annotated
+
+import numpy as np
+import typer
+
+import finsler
+from finsler.errors import InputError
+
+__all__ = ["evaluate_command", "register", "train_command"]
+
+
+def _fail(message: str) -> None:
+    from validation.cli import fail
+
+    fail(message)
+
+
+def train_command(
+    env: Annotated[str, typer.Option(help="Environment (metric) name, e.g. matsumoto.")],
+    out: Annotated[Path, typer.Option(help="Run directory to create (or resume).")],
+    method: Annotated[str | None, typer.Option(
+        help="Actor loss: midpoint (eq. 6, default), inter (eq. 17) or two-to-one (eq. 18).")
+    ] = None,
+    timesteps: Annotated[int | None, typer.Option(
+        help="Budget of evaluations of C (default: the environment's default).")] = None,
+    minutes: Annotated[float | None, typer.Option(
+        help="Wall-clock limit in minutes (stops at whichever limit comes first).")] = None,
+    seed: Annotated[int | None, typer.Option(help="Random seed (default 0).")] = None,
+    device: Annotated[str, typer.Option(help="cpu or cuda.")] = "cpu",
+    resume: Annotated[bool, typer.Option(
+        "--resume", help="Continue the run in --out from its latest checkpoint.")] = False,
+    paper: Annotated[bool, typer.Option(
+        "--paper", help="Use the paper's appendix B.1 settings instead of the defaults.")
+    ] = False,
+    quiet: Annotated[bool, typer.Option("--quiet", help="No progress bar.")] = False,
+) -> None:
+    """Train a midpoint policy (Algorithm 1) into a run directory.
+
+    Defaults per environment (learn.default_config; the settings of the shipped policies):
+    matsumoto 2e7 timesteps, carlike 4e7 (MLPs 128-128, 2 epochs), panda-pole 1e7
+    (MLPs 128-128, symmetric critic); all at full depth, lr 1e-3 cosine-decayed to 5%,
+    log1p critic targets, inputs scaled to [-1, 1], residual actor mean, collections of
+    16384 pairs, minibatches of 1024, 3 epochs. config.json in the run directory lists
+    every choice beyond the paper.
+    """
+    import learn
+
+    try:
+        if env not in finsler.list_metrics():
+            raise finsler.UnknownMetricError(
+                f"unknown environment {env!r}; known: {', '.join(finsler.list_metrics())}")
+        if timesteps is not None and timesteps < 1:
+            raise InputError(f"--timesteps must be a positive integer, got {timesteps}")
+        if minutes is not None and not minutes > 0:
+            raise InputError(f"--minutes must be positive, got {minutes}")
+        learn.resolve_device(device)
+        given: dict[str, object] = {"method": method, "seed": seed, "timesteps": timesteps}
+        over = {k: v for k, v in given.items() if v is not None}
+        if resume:
+            # the run's saved settings; explicitly given options must agree with them
+            cfg = learn.read_run_config(out).replace(minutes=minutes, device=device)
+            if cfg.env != env:
+                raise InputError(f"cannot resume: run {out} trains {cfg.env!r}, not {env!r}")
+            cfg = cfg.replace(**over)
+        else:
+            base = learn.paper_config if paper else learn.default_config
+            cfg = base(env, minutes=minutes, device=device, **over)
+        result = learn.train(cfg, out, resume=resume, progress=not quiet)
+    except InputError as err:
+        _fail(str(err))
+        return
+    f = result.final
+    typer.echo(
+        f"{env}: {result.timesteps} timesteps in {result.wall_seconds:.1f} s "
+        f"({f['timesteps_per_second']:.0f} timesteps/s); success {f['success_rate']:.2%} "
+        f"(best {result.best['success_rate']:.2%}), mean length {f['mean_length']:.4f}; "
+        f"run directory {result.run_dir}"
+    )
+
+
+def _load_pairs(path: Path, metric: finsler.Metric) -> np.ndarray:
+    if not path.is_file():
+        raise InputError(f"pairs file {path} does not exist")
+    try:
+        arr = np.load(path, allow_pickle=False)
+    except (ValueError, OSError, EOFError) as err:
+        raise InputError(f"pairs file {path} is not a readable .npy array: {err}") from err
+    if arr.ndim != 3 or arr.shape[1] != 2 or arr.shape[2] != metric.dim:
+        raise InputError(
+            f"pairs file {path} must hold an array of shape (K, 2, {metric.dim}) for "
+            f"{metric.name}, got {arr.shape}"
+        )
+    return arr.astype(np.float64)
+
+
+def evaluate_command(
+    run: Annotated[Path | None, typer.Option(help="Run directory written by `train`.")] = None,
+    env: Annotated[str | None, typer.Option(
+        help="Environment: evaluates its shipped policy (unless --run is given).")] = None,
+    pairs: Annotated[Path | None, typer.Option(
+        help="PAIRS.npy of shape (K, 2, dim); default: the environment's 100 default "
+             "evaluation pairs.")] = None,
+    eps: Annotated[float | None, typer.Option(help="Success threshold (default: task's).")
+                   ] = None,
+    depth: Annotated[int | None, typer.Option(help="Tree depth D (default: task's).")] = None,
+    as_json: Annotated[bool, typer.Option("--json", help="Print JSON.")] = False,
+) -> None:
+    """Evaluate a trained policy (section 5.1): success rate, mean length, max segment cost."""
+    import learn
+
+    try:
+        if run is None and env is None:
+            raise InputError("give --run DIR or --env NAME")
+        if run is not None:
+            if not run.is_dir():
+                raise InputError(f"run directory {run} does not exist")
+            policy = learn.load_policy(run)
+            if env is not None and env != policy.metric.name:
+                raise InputError(f"--env {env} does not match the run's environment "
+                                 f"{policy.metric.name}")
+        else:
+            if env not in finsler.list_metrics():
+                raise finsler.UnknownMetricError(
+                    f"unknown environment {env!r}; known: {', '.join(finsler.list_metrics())}")
+            if env not in learn.shipped_policies():
+                raise InputError(f"no shipped policy for {env!r}; shipped: "
+                                 f"{', '.join(learn.shipped_policies())}; train one with "
+                                 "`geodesics train` and pass --run")
+            policy = learn.load_policy(env)
+        if eps is not None and not (np.isfinite(eps) and eps > 0):
+            raise InputError(f"--eps must be positive and finite, got {eps}")
+        if depth is not None and depth < 0:
+            raise InputError(f"--depth must be a non-negative integer, got {depth}")
+        p = _load_pairs(pairs, policy.metric) if pairs is not None else None
+        res = policy.evaluate(p, eps=eps, depth=depth)
+    except InputError as err:
+        _fail(str(err))
+        return
+    out = {"env": policy.metric.name, "source": policy.source, **res.to_dict()}
+    if as_json:
+        typer.echo(json.dumps(out, indent=2))
+        return
+    typer.echo(f"policy      {policy.source}")
+    typer.echo(f"environment {policy.metric.name}  depth {res.depth}  eps {res.eps:g}  "
+               f"pairs {len(res.success)}")
+    typer.echo(f"success     {res.success_rate:.2%}")
+    typer.echo(f"mean length {res.mean_length:.6g}")
+    typer.echo(f"mean max segment cost {res.mean_max_segment_cost:.6g}")
+
+
+def register(app: typer.Typer) -> None:
+    """Add ``train`` and ``evaluate`` to the ``geodesics`` app."""
+    app.command("train")(train_command)
+    app.command("evaluate")(evaluate_command)
