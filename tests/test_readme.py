@@ -21,7 +21,7 @@ def test_readme_examples_run_and_define_a_working_metric() -> None:
     assert len(blocks) >= 2
     namespace: dict = {}
     for block in blocks:
-        exec(compile(block, str(README), "exec"), namespace)  # noqa: S102
+        exec(compile(block, str(README), "exec"), namespace)
     try:
         m = finsler.get_metric("wavy", a=0.2)
         x = np.array([[0.1, 0.2], [0.0, 0.0]])

@@ -117,7 +117,10 @@ def cost_command(
 
 def _register_optional_commands() -> None:
     """Commands of the other layers, registered here so the CLI stays one entry point."""
-    # (solve / train / evaluate / report are registered below as they are added)
+    from validation import cli_learn, cli_report, cli_solve
+
+    for module in (cli_solve, cli_learn, cli_report):
+        module.register(app)
 
 
 _register_optional_commands()

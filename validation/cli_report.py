@@ -1,0 +1,67 @@
+"""``geodesics report``: the learned-vs-exact benchmark report (a thin layer over
+:func:`validation.report.build_report`)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from finsler.errors import InputError
+
+__all__ = ["register", "report_command"]
+
+
+def report_command(
+    out: Annotated[Path, typer.Option(help="Output folder for report.md, report.json and "
+                                      "the PNG figures (created if missing).")],
+    env: Annotated[str | None, typer.Option(
+        help="Environment (see `geodesics metrics`); uses its shipped policy unless --run "
+             "is given.")] = None,
+    run: Annotated[Path | None, typer.Option(help="Run directory written by `geodesics "
+                                             "train`.")] = None,
+    pairs: Annotated[Path | None, typer.Option(
+        help="PAIRS.npy of shape (K, 2, dim); default: the environment's 100 default "
+             "evaluation pairs.")] = None,
+    quick: Annotated[bool, typer.Option(
+        "--quick", help="Use the shipped policy (or train a small Matsumoto one in a few "
+        "minutes) and skip continuum distances.")] = False,
+    continuum: Annotated[bool | None, typer.Option(
+        "--continuum/--no-continuum",
+        help="Continuum distances for the midpoint error where the metric is Finsler along "
+             "the path (default: on unless --quick).")] = None,
+    workers: Annotated[int | None, typer.Option(
+        help="Processes for the exact solves (default: CPU count).")] = None,
+    progress: Annotated[bool, typer.Option("--progress/--no-progress",
+                                           help="Show progress bars.")] = True,
+) -> None:
+    """Benchmark a learned policy against exact geodesics and the straight-line baseline:
+    success rates, length ratios, midpoint errors, timing, figures."""
+    from validation.cli import fail
+    from validation.report import build_report
+
+    try:
+        if workers is not None and workers < 1:
+            raise InputError(f"--workers must be >= 1, got {workers}")
+        if out.exists() and not out.is_dir():
+            raise InputError(f"--out {out} exists and is not a directory")
+        doc = build_report(env, out, run=run, pairs=pairs, quick=quick, continuum=continuum,
+                           workers=workers, progress=progress)
+    except InputError as err:
+        fail(str(err))
+        return
+    sr = doc["success_rate"]
+    lr = doc["length_ratio"]["learned"]["length"]
+    typer.echo(f"report for {doc['metric']} ({doc['pairs']} pairs) written to {out}/report.md")
+    typer.echo(f"success: learned {sr['learned']:.0%}, exact ceiling {sr['exact_ceiling']:.0%}, "
+               f"straight line {sr['straight']:.0%}")
+    if lr["mean"] is not None:
+        typer.echo(f"length learned/exact: mean {lr['mean']:.4f}, median {lr['median']:.4f}, "
+                   f"95th pct {lr['p95']:.4f}, max {lr['max']:.4f}")
+    typer.echo(f"figures: {', '.join(doc['figures'])}")
+
+
+def register(app: typer.Typer) -> None:
+    """Add ``report`` to the ``geodesics`` app."""
+    app.command("report")(report_command)
