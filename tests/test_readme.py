@@ -22,6 +22,13 @@ def test_readme_examples_run_and_define_a_working_metric() -> None:
     namespace: dict = {}
     for block in blocks:
         exec(compile(block, str(README), "exec"), namespace)
+    # the Python API block: shapes and values it claims
+    assert namespace["paths"].shape == (100, 65, 2)
+    pm = finsler.get_metric("poincare")
+    exact = pm.distance(np.array([[0.1, 0.2]]), np.array([[-0.3, 0.4]]))[0]
+    d = namespace["d"]
+    assert abs(d.distance - exact) <= 1e-8 * exact
+    assert np.allclose(namespace["res"].points[[0, -1]], namespace["pairs"][0])
     try:
         m = finsler.get_metric("wavy", a=0.2)
         x = np.array([[0.1, 0.2], [0.0, 0.0]])
