@@ -16,7 +16,7 @@ from finsler.metrics import (
     Randers,
     Sphere,
 )
-from finsler.pairs import DEFAULT_EVAL_SEED, default_pairs, sample_pairs
+from finsler.pairs import DEFAULT_EVAL_SEED, default_pairs, load_pairs, sample_pairs
 from finsler.registry import get_metric, list_metrics, register_metric
 
 __all__ = [
@@ -44,6 +44,7 @@ __all__ = [
     "default_pairs",
     "get_metric",
     "list_metrics",
+    "load_pairs",
     "register_metric",
     "sample_pairs",
 ]

@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+import os
+from pathlib import Path
+
 import numpy as np
 
 from finsler.errors import InputError
 from finsler.metric import Metric
 
-__all__ = ["DEFAULT_EVAL_SEED", "default_pairs", "sample_pairs"]
+__all__ = ["DEFAULT_EVAL_SEED", "default_pairs", "load_pairs", "sample_pairs"]
 
 #: Seed of every environment's default evaluation set (100 uniform pairs).
 DEFAULT_EVAL_SEED = 20240531
@@ -28,3 +31,32 @@ def sample_pairs(metric: Metric, k: int, seed: int) -> np.ndarray:
 def default_pairs(metric: Metric, k: int = 100) -> np.ndarray:
     """The environment's default evaluation set: ``k`` (100) uniform pairs, fixed seed."""
     return sample_pairs(metric, k, DEFAULT_EVAL_SEED)
+
+
+def load_pairs(path: str | os.PathLike[str], metric: Metric) -> np.ndarray:
+    """Read a ``.npy`` file of start/goal pairs for ``metric`` -> float64 ``(K, 2, dim)``.
+
+    Raises :class:`InputError` (or :class:`DomainError`) naming the problem if the file is
+    missing or unreadable, is not a numeric array of that shape, holds NaN/inf, or holds a
+    point outside the metric's domain.
+    """
+    p = Path(path)
+    if not p.is_file():
+        raise InputError(f"pairs file {str(p)!r} does not exist")
+    try:
+        arr = np.load(p, allow_pickle=False)
+    except (ValueError, OSError, EOFError) as err:
+        raise InputError(f"pairs file {str(p)!r} is not a readable .npy array ({err})") from err
+    if not isinstance(arr, np.ndarray) or arr.dtype.kind not in "fiu":
+        raise InputError(f"pairs file {str(p)!r} must hold a numeric array")
+    if arr.ndim != 3 or arr.shape[1] != 2 or arr.shape[2] != metric.dim or arr.shape[0] < 1:
+        raise InputError(
+            f"pairs file {str(p)!r} must hold an array of shape (K, 2, {metric.dim}) for "
+            f"{metric.name}, got {arr.shape}"
+        )
+    arr = arr.astype(np.float64)
+    if not np.all(np.isfinite(arr)):
+        raise InputError(f"pairs file {str(p)!r} contains NaN or inf")
+    metric.domain.check(arr[:, 0], f"{p} starts")
+    metric.domain.check(arr[:, 1], f"{p} goals")
+    return arr

@@ -99,3 +99,24 @@ def test_cli_cost_bad_input(args: list[str], message: str) -> None:
     res = runner.invoke(app, ["cost", *args])
     assert res.exit_code == 2
     assert message in res.output
+
+
+def test_load_pairs_validates_files(tmp_path) -> None:
+    m = finsler.get_metric("matsumoto")
+    good = finsler.default_pairs(m, 5)
+    np.save(tmp_path / "good.npy", good)
+    assert np.array_equal(finsler.load_pairs(tmp_path / "good.npy", m), good)
+    assert np.array_equal(good, finsler.default_pairs(m, 5))  # deterministic
+    with pytest.raises(InputError, match="does not exist"):
+        finsler.load_pairs(tmp_path / "missing.npy", m)
+    (tmp_path / "corrupt.npy").write_bytes(b"not a numpy file")
+    with pytest.raises(InputError, match="not a readable"):
+        finsler.load_pairs(tmp_path / "corrupt.npy", m)
+    np.save(tmp_path / "dim.npy", np.zeros((4, 2, 3)))
+    with pytest.raises(InputError, match=r"shape \(K, 2, 2\)"):
+        finsler.load_pairs(tmp_path / "dim.npy", m)
+    bad = good.copy()
+    bad[1, 1] = [2.0, 0.0]
+    np.save(tmp_path / "out.npy", bad)
+    with pytest.raises(finsler.DomainError, match="outside"):
+        finsler.load_pairs(tmp_path / "out.npy", m)

@@ -89,20 +89,6 @@ def train_command(
     )
 
 
-def _load_pairs(path: Path, metric: finsler.Metric) -> np.ndarray:
-    if not path.is_file():
-        raise InputError(f"pairs file {path} does not exist")
-    try:
-        arr = np.load(path, allow_pickle=False)
-    except (ValueError, OSError, EOFError) as err:
-        raise InputError(f"pairs file {path} is not a readable .npy array: {err}") from err
-    if arr.ndim != 3 or arr.shape[1] != 2 or arr.shape[2] != metric.dim:
-        raise InputError(
-            f"pairs file {path} must hold an array of shape (K, 2, {metric.dim}) for "
-            f"{metric.name}, got {arr.shape}"
-        )
-    return arr.astype(np.float64)
-
 
 def evaluate_command(
     run: Annotated[Path | None, typer.Option(help="Run directory written by `train`.")] = None,
@@ -142,7 +128,7 @@ def evaluate_command(
             raise InputError(f"--eps must be positive and finite, got {eps}")
         if depth is not None and depth < 0:
             raise InputError(f"--depth must be a non-negative integer, got {depth}")
-        p = _load_pairs(pairs, policy.metric) if pairs is not None else None
+        p = finsler.load_pairs(pairs, policy.metric) if pairs is not None else None
         res = policy.evaluate(p, eps=eps, depth=depth)
     except InputError as err:
         _fail(str(err))

@@ -20,6 +20,7 @@ from typing import Annotated, Any
 import numpy as np
 import typer
 
+import finsler
 import solvers
 from finsler.errors import InputError
 from validation.cli import fail, metric_or_fail, parse_point
@@ -48,18 +49,13 @@ def solve_payload(metric: Any, results: list[solvers.GeodesicResult], n: int) ->
     }
 
 
-def _load_pairs(path: Path, dim: int) -> np.ndarray:
-    if not path.is_file():
-        fail(f"--pairs file {str(path)!r} does not exist")
+
+def _pairs_or_fail(path: Path, metric: finsler.Metric) -> np.ndarray:
     try:
-        arr = np.load(path, allow_pickle=False)
-    except (ValueError, OSError, EOFError) as err:
-        fail(f"--pairs file {str(path)!r} is not a readable .npy array ({err})")
-    if not isinstance(arr, np.ndarray) or arr.dtype.kind not in "fiu":
-        fail(f"--pairs file {str(path)!r} must hold a numeric array, got {type(arr).__name__}")
-    if arr.ndim != 3 or arr.shape[1] != 2 or arr.shape[2] != dim or arr.shape[0] < 1:
-        fail(f"--pairs array must have shape (K, 2, {dim}), got {arr.shape}")
-    return arr.astype(np.float64)
+        return finsler.load_pairs(path, metric)
+    except InputError as err:
+        fail(f"--pairs: {err}")
+        raise  # unreachable
 
 
 def solve_command(
@@ -86,7 +82,7 @@ def solve_command(
     if workers < 1:
         fail(f"--workers must be >= 1, got {workers}")
     if pairs is not None:
-        arr = _load_pairs(pairs, m.dim)
+        arr = _pairs_or_fail(pairs, m)
     else:
         s = parse_point(start, m.dim, "--start")  # type: ignore[arg-type]
         g = parse_point(goal, m.dim, "--goal")  # type: ignore[arg-type]

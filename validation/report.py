@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 import finsler
-from finsler import Metric
+from finsler import Metric, load_pairs
 from finsler.errors import InputError
 from validation.comparison import Comparison, compare, midpoint_error, ratio_stats
 
@@ -550,24 +550,6 @@ def _markdown(doc: dict[str, Any], figures: list[str], metric: Metric) -> str:
 # ----------------------------------------------------------------------------------------
 # entry point
 # ----------------------------------------------------------------------------------------
-def _load_pairs(path: Path, metric: Metric) -> np.ndarray:
-    path = Path(path)
-    if not path.is_file():
-        raise InputError(f"pairs file {path} does not exist")
-    try:
-        arr = np.load(path, allow_pickle=False)
-    except (ValueError, OSError, EOFError) as err:
-        raise InputError(f"pairs file {path} is not a readable .npy array: {err}") from err
-    if arr.ndim != 3 or arr.shape[1] != 2 or arr.shape[2] != metric.dim or len(arr) < 1:
-        raise InputError(f"pairs file {path} must hold an array of shape (K, 2, {metric.dim}) "
-                         f"for {metric.name}, got {arr.shape}")
-    arr = arr.astype(np.float64)
-    if not np.all(np.isfinite(arr)):
-        raise InputError(f"pairs file {path} contains NaN or inf")
-    metric.domain.check(arr[:, 0], f"{path} starts")
-    metric.domain.check(arr[:, 1], f"{path} goals")
-    return arr
-
 
 def build_report(
     env: str | None,
@@ -596,7 +578,7 @@ def build_report(
     metric = finsler.get_metric(pol.metric.name) if hasattr(pol, "metric") else \
         finsler.get_metric(env)
     if isinstance(pairs, (str, Path)):
-        arr = _load_pairs(Path(pairs), metric)
+        arr = load_pairs(pairs, metric)
         pairs_note = f"from {pairs}"
     elif pairs is not None:
         arr = np.asarray(pairs, dtype=np.float64)
