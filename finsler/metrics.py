@@ -304,7 +304,10 @@ class Randers(ClosedFormMetric):
     def F_sx(self, x: ca.SX, v: ca.SX) -> ca.SX:
         lam = 1.0 - self.wind_x**2 - self.wind_y**2
         wv = self.wind_x * v[0] + self.wind_y * v[1]
-        return (ca.sqrt(lam * ca.dot(v, v) + wv * wv) - wv) / lam
+        vv = ca.dot(v, v)
+        # = (sqrt(lam |v|^2 + <W, v>^2) - <W, v>) / lam, written without the cancellation
+        # (which made F slightly negative for tiny v against the wind)
+        return vv / (ca.sqrt(lam * vv + wv * wv) + wv)
 
     def _distance(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
         # Independent of the formula above: the time T with |d - T W| = T (unit speed in
