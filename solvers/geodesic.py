@@ -311,6 +311,44 @@ def _cached_metric(cls: type, items: tuple) -> Metric:
     return _METRICS[key]
 
 
+class _BatchStore:
+    """Per-pair result files of a resumable :func:`solve_batch` (pickle, atomic rename)."""
+
+    def __init__(self, folder: Any, metric: Metric, n: int, plan: SeedPlan, minmax: bool):
+        import pathlib
+
+        self.folder = pathlib.Path(folder)
+        self.folder.mkdir(parents=True, exist_ok=True)
+        self.key = (repr(metric), int(n), repr(plan), bool(minmax))
+
+    def _path(self, k: int) -> Any:
+        return self.folder / f"pair_{k:07d}.pkl"
+
+    def load(self, k: int, pair: np.ndarray) -> GeodesicResult | None:
+        import pickle
+
+        path = self._path(k)
+        if not path.is_file():
+            return None
+        try:
+            with path.open("rb") as fh:
+                key, saved_pair, result = pickle.load(fh)
+        except Exception:  # a corrupt or foreign file is recomputed, never trusted
+            return None
+        if key != self.key or not np.array_equal(saved_pair, pair):
+            return None
+        return result
+
+    def save(self, k: int, pair: np.ndarray, result: GeodesicResult) -> None:
+        import pickle
+
+        path = self._path(k)
+        tmp = path.with_suffix(".tmp")
+        with tmp.open("wb") as fh:
+            pickle.dump((self.key, np.array(pair), result), fh)
+        os.replace(tmp, path)
+
+
 def solve_batch(
     metric: Metric | str,
     pairs: Any,
@@ -320,12 +358,18 @@ def solve_batch(
     minmax: bool = False,
     workers: int | None = None,
     progress: bool = True,
+    checkpoint_dir: str | os.PathLike[str] | None = None,
 ) -> list[GeodesicResult]:
     """Solve every pair of ``pairs`` ``(K, 2, dim)``; results in the order of the pairs.
 
     ``workers`` processes (default: the CPU count, at most ``K``; ``1`` runs in this
     process); each worker builds the NLP once and reuses it for all its pairs. A tqdm bar
     shows progress unless ``progress=False``. Same inputs give the same results.
+
+    With ``checkpoint_dir``, every finished pair is saved there at once (written, then
+    renamed), and a rerun with the same pairs, segments, seeds and ``minmax`` reuses
+    them: an interrupted batch resumes without losing finished work. Files saved for
+    other inputs are ignored and recomputed.
     """
     from tqdm.auto import tqdm
 
@@ -333,30 +377,40 @@ def solve_batch(
     arr = check_pairs(m, pairs)
     n = check_segments(m, segments)
     plan = seeds if seeds is not None else SeedPlan.default(m)
+    store = _BatchStore(checkpoint_dir, m, n, plan, minmax) if checkpoint_dir else None
     if workers is None:
         workers = os.cpu_count() or 1
     if isinstance(workers, bool) or not isinstance(workers, (int, np.integer)) or workers < 1:
         raise InputError(f"workers must be a positive integer, got {workers!r}")
     workers = int(min(workers, arr.shape[0]))
     results: list[GeodesicResult | None] = [None] * arr.shape[0]
-    bar = tqdm(total=arr.shape[0], desc=f"solve {m.name}", disable=not progress, unit="pair")
+    if store is not None:
+        for k in range(arr.shape[0]):
+            results[k] = store.load(k, arr[k])
+    todo = [k for k in range(arr.shape[0]) if results[k] is None]
+    bar = tqdm(total=arr.shape[0], desc=f"solve {m.name}", disable=not progress, unit="pair",
+               initial=arr.shape[0] - len(todo))
     try:
-        if workers == 1:
-            for k in range(arr.shape[0]):
+        if workers == 1 or len(todo) <= 1:
+            for k in todo:
                 results[k] = solve_geodesic(m, arr[k, 0], arr[k, 1], n, seeds=plan,
                                             minmax=minmax)
+                if store is not None:
+                    store.save(k, arr[k], results[k])
                 bar.update(1)
         else:
             import multiprocessing as mp
 
             spec = _metric_spec(m)
-            jobs = [(spec, k, arr[k, 0], arr[k, 1], n, plan, minmax) for k in range(len(arr))]
+            jobs = [(spec, k, arr[k, 0], arr[k, 1], n, plan, minmax) for k in todo]
             ctx = mp.get_context("spawn")
             with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as ex:
                 futures = [ex.submit(_batch_worker, j) for j in jobs]
                 for fut in as_completed(futures):
                     k, res = fut.result()
                     results[k] = res
+                    if store is not None:
+                        store.save(k, arr[k], res)
                     bar.update(1)
     finally:
         bar.close()

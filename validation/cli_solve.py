@@ -14,6 +14,8 @@ segment cost ``<= eps``: the exact ceiling of the paper's task.
 from __future__ import annotations
 
 import json
+import os
+import shutil
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -92,8 +94,12 @@ def solve_command(
             m.domain.check(arr[0, 0], "--start")
             m.domain.check(arr[0, 1], "--goal")
         n = solvers.check_segments(m, segments)
+        # With --out, finished pairs are kept beside it until the JSON is written, so an
+        # interrupted run resumes where it stopped when the same command is run again.
+        parts = out.with_name(out.name + ".parts") if out is not None and pairs else None
         results = solvers.solve_batch(
-            m, arr, n, minmax=True, workers=workers, progress=progress and pairs is not None
+            m, arr, n, minmax=True, workers=workers, progress=progress and pairs is not None,
+            checkpoint_dir=parts,
         )
     except InputError as err:
         fail(str(err))
@@ -102,7 +108,11 @@ def solve_command(
     if out is not None:
         try:
             out.parent.mkdir(parents=True, exist_ok=True)
-            out.write_text(text)
+            tmp = out.with_name(out.name + ".tmp")
+            tmp.write_text(text)
+            os.replace(tmp, out)
+            if parts is not None:
+                shutil.rmtree(parts, ignore_errors=True)
         except OSError as err:
             fail(f"cannot write --out {str(out)!r}: {err}")
     if as_json:
