@@ -30,7 +30,7 @@ import numpy as np
 from finsler.errors import InputError
 from finsler.metric import Metric
 from solvers.result import DistanceResult, DistanceStatus, SolverError, Status
-from solvers.transcription import _ident, ipopt_options, smooth_square
+from solvers.transcription import Constraints, _ident, ipopt_options, smooth_square
 
 __all__ = [
     "SpectralNLP",
@@ -113,22 +113,13 @@ class SpectralNLP:
         link = ca.vertcat(ca.vec(P - ca.mtimes(ca.DM(self.Lq), Y)),
                           ca.vec(V - ca.mtimes(ca.DM(self.Dq), Y)))
         obj = 0
-        slack, lbw, ubw, gs, lbg, ubg, slack_val = [], [], [], [], [], [], []
+        c = Constraints()
         for q in range(mq):
-            sq = smooth_square(metric, P[q, :].T, V[q, :].T, tag=str(q))
-            obj += wq[q] * sq.f2
-            if sq.w.numel():
-                slack.append(sq.w)
-                lbw += sq.lbw
-                ubw += sq.ubw
-                gs.append(sq.g)
-                lbg += sq.lbg
-                ubg += sq.ubg
-                slack_val.append(sq.w_value)
-            for expr, lb, ub in metric.domain.constraints_sx(P[q, :].T):
-                gs.append(expr)
-                lbg.append(lb)
-                ubg.append(ub)
+            obj += wq[q] * c.add_square(smooth_square(metric, P[q, :].T, V[q, :].T, tag=str(q)))
+            c.add_domain(metric, P[q, :].T)
+        slack, lbw, ubw, gs, lbg, ubg, slack_val = (
+            c.slack, c.lbw, c.ubw, c.g, c.lbg, c.ubg, c.slack_values
+        )
         z = ca.vertcat(ca.vec(X), ca.vec(P), ca.vec(V), *slack)
         cons = ca.vertcat(link, *gs)
         nlink = link.shape[0]

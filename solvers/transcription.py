@@ -17,7 +17,7 @@ at a minimiser ``xi`` equals the max and the reformulation is exact.
 from __future__ import annotations
 
 import functools
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import casadi as ca
 import numpy as np
@@ -73,6 +73,39 @@ def smooth_square(metric: Metric, x: ca.SX, v: ca.SX, tag: str = "") -> SmoothSq
     return SmoothSquare(f * f, empty, empty, [], [], empty, [], [])
 
 
+@dataclass
+class Constraints:
+    """Slack variables (with bounds and initial values) and constraints ``lbg <= g <= ubg``
+    collected while a transcription is built (shared by the polyline and spectral NLPs)."""
+
+    slack: list[ca.SX] = field(default_factory=list)
+    lbw: list[float] = field(default_factory=list)
+    ubw: list[float] = field(default_factory=list)
+    g: list[ca.SX] = field(default_factory=list)
+    lbg: list[float] = field(default_factory=list)
+    ubg: list[float] = field(default_factory=list)
+    slack_values: list[ca.SX] = field(default_factory=list)
+
+    def add_square(self, sq: SmoothSquare) -> ca.SX:
+        """Record the slacks and constraints of a smooth square; return its ``f2``."""
+        if sq.w.numel():
+            self.slack.append(sq.w)
+            self.lbw += sq.lbw
+            self.ubw += sq.ubw
+            self.g.append(sq.g)
+            self.lbg += sq.lbg
+            self.ubg += sq.ubg
+            self.slack_values.append(sq.w_value)
+        return sq.f2
+
+    def add_domain(self, metric: Metric, x: ca.SX) -> None:
+        """Record the domain's nonlinear constraints at point ``x``."""
+        for expr, lb, ub in metric.domain.constraints_sx(x):
+            self.g.append(expr)
+            self.lbg.append(lb)
+            self.ubg.append(ub)
+
+
 def ipopt_options(tol: float = 1e-10, max_iter: int = 1000, **extra: object) -> dict:
     """IPOPT options used by every solver here (mumps, silent)."""
     ipopt = {
@@ -115,23 +148,14 @@ def _build_path(metric: Metric, n: int) -> _Path:
     pts = [s] + [X[:, i] for i in range(n - 1)] + [goal]
     Pn = ca.SX.sym("P", dim, n + 1)
     lo, hi = metric.domain.bounds()
-    f2, g, lbg, ubg, slack, lbw, ubw, slack_vals = [], [], [], [], [], [], [], []
-    for i in range(n):
-        sq = smooth_square(metric, pts[i], pts[i + 1] - pts[i], tag=str(i))
-        f2.append(sq.f2)
-        if sq.w.numel():
-            slack.append(sq.w)
-            lbw += sq.lbw
-            ubw += sq.ubw
-            g.append(sq.g)
-            lbg += sq.lbg
-            ubg += sq.ubg
-            slack_vals.append(sq.w_value)
+    c = Constraints()
+    f2 = [c.add_square(smooth_square(metric, pts[i], pts[i + 1] - pts[i], tag=str(i)))
+          for i in range(n)]
     for i in range(n - 1):
-        for expr, lb, ub in metric.domain.constraints_sx(X[:, i]):
-            g.append(expr)
-            lbg.append(lb)
-            ubg.append(ub)
+        c.add_domain(metric, X[:, i])
+    g, lbg, ubg, slack, lbw, ubw, slack_vals = (
+        c.g, c.lbg, c.ubg, c.slack, c.lbw, c.ubw, c.slack_values
+    )
     # slack values as a function of the whole path Pn = [s, X, g]
     if slack_vals:
         sv = ca.vertcat(*slack_vals)
