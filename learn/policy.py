@@ -213,13 +213,15 @@ def _shipped_dir(name: str) -> Path:
     return Path(str(resources.files("learn") / "policies" / name))
 
 
-def load_policy(run: str | Path, device: str = "cpu", checkpoint: str = "best") -> Policy:
+def load_policy(run: str | Path, device: str = "cpu", checkpoint: str = "best",
+                env: str | None = None) -> Policy:
     """Load a policy from a run directory or, given an environment name, the policy
     shipped with the package. ``checkpoint``: ``best`` (best success on the default
-    evaluation set during training; falls back to the latest) or ``latest``.
+    evaluation set during training; falls back to the latest) or ``latest``. With
+    ``env``, the policy must belong to that environment.
 
-    Raises :class:`InputError` for a missing directory or unknown name and
-    :class:`CorruptFileError` for unreadable files.
+    Raises :class:`InputError` for a missing directory, an unknown name or an ``env``
+    mismatch, and :class:`CorruptFileError` for unreadable files.
     """
     path = Path(run)
     if not path.is_dir():
@@ -236,6 +238,8 @@ def load_policy(run: str | Path, device: str = "cpu", checkpoint: str = "best") 
         cfg = TrainConfig.from_dict(doc["config"])
     except KeyError as err:
         raise CorruptFileError(f"{path / CONFIG_FILE} has no 'config' section") from err
+    if env is not None and env != cfg.env:
+        raise InputError(f"--env {env} does not match the run's environment {cfg.env}")
     if checkpoint not in ("best", "latest"):
         raise InputError(f"checkpoint must be 'best' or 'latest', got {checkpoint!r}")
     order = (BEST_FILE, POLICY_FILE, LATEST_FILE) if checkpoint == "best" else (

@@ -134,3 +134,12 @@ def test_shipped_policy_evaluates_as_recorded(env) -> None:
     pol = learn.load_policy(env)
     p = finsler.default_pairs(pol.metric, 3)
     assert pol.generate(p[:, 0], p[:, 1]).shape == (3, 2**pol.depth + 1, pol.metric.dim)
+
+
+def test_load_policy_rejects_env_mismatch() -> None:
+    import learn
+    from finsler.errors import InputError
+
+    assert learn.load_policy("matsumoto", env="matsumoto").metric.name == "matsumoto"
+    with pytest.raises(InputError, match="does not match the run's environment matsumoto"):
+        learn.load_policy("matsumoto", env="carlike")

@@ -111,10 +111,7 @@ def evaluate_command(
         if run is not None:
             if not run.is_dir():
                 raise InputError(f"run directory {run} does not exist")
-            policy = learn.load_policy(run)
-            if env is not None and env != policy.metric.name:
-                raise InputError(f"--env {env} does not match the run's environment "
-                                 f"{policy.metric.name}")
+            policy = learn.load_policy(run, env=env)
         else:
             if env not in finsler.list_metrics():
                 raise finsler.UnknownMetricError(

@@ -49,10 +49,7 @@ def load_report_policy(
         run = Path(run)
         if not run.is_dir():
             raise InputError(f"run directory {run} does not exist")
-        pol = learn.load_policy(run)
-        if env is not None and env != pol.metric.name:
-            raise InputError(f"--env {env} does not match the run's environment "
-                             f"{pol.metric.name}")
+        pol = learn.load_policy(run, env=env)
         return pol, run, f"run directory {run}"
     if env is None:
         raise InputError("give --env NAME or --run DIR")
