@@ -99,6 +99,17 @@ class TrainConfig:
     init_log_std: float | None = None
     """If set, the actor's log-std head starts near this value (bias = value, weights
     scaled by 0.01); None keeps PyTorch's default initialisation (log-std ~ 0)."""
+    fused_adam: bool = False
+    """Use PyTorch's fused Adam kernel (same update rule, fewer kernel launches; the
+    floating-point results differ from the default implementation in the last bits)."""
+    path_energy_weight: float = 0.0
+    """Beyond the paper: weight of an extra actor term, the discrete energy
+    ``n * sum_i C(x_i, x_i+1)**2`` of the actor's own deterministic depth-D path between
+    the collected pairs, differentiated through every level of the tree with the lowered
+    torch ``cost`` (0 = off). The energy is smallest for a shortest path with equal
+    segment costs, i.e. exactly the recursive geodesic midpoints."""
+    path_energy_pairs: int = 256
+    """Pairs (whole trees) per path-energy step; one step per epoch."""
     eval_every: int = 50
     """Iterations (collections) between evaluations on the default pair set; each
     evaluation also writes the latest checkpoint (deterministic resume points)."""
@@ -107,8 +118,28 @@ class TrainConfig:
 
     # ------------------------------------------------------------------------------------
     def __post_init__(self) -> None:
+        self._check_types()
         self.hidden = tuple(int(h) for h in self.hidden)
         self.validate()
+
+    def _check_types(self) -> None:
+        """Raise :class:`finsler.InputError` naming the first field of the wrong type
+        (configs also come from JSON files and ``--set FIELD=VALUE``)."""
+        kinds = {"str": (str,), "int": (int,), "float": (int, float), "bool": (bool,)}
+        for f in dataclasses.fields(self):
+            v = getattr(self, f.name)
+            ann = str(f.type)
+            if ann.endswith(" | None"):
+                if v is None:
+                    continue
+                ann = ann[: -len(" | None")]
+            if ann == "tuple[int, ...]":
+                ok = isinstance(v, (tuple, list)) and all(
+                    isinstance(h, int) and not isinstance(h, bool) for h in v)
+            else:
+                ok = isinstance(v, kinds[ann]) and (ann == "bool" or not isinstance(v, bool))
+            if not ok:
+                raise InputError(f"config field {f.name} must be {ann}, got {v!r}")
 
     def validate(self) -> None:
         """Raise :class:`finsler.InputError` naming the first impossible option."""
@@ -125,7 +156,7 @@ class TrainConfig:
         if self.device not in ("cpu", "cuda") and not self.device.startswith("cuda:"):
             raise InputError(f"device must be 'cpu' or 'cuda', got {self.device!r}")
         for name in ("timesteps", "minibatch_size", "collection_size", "epochs", "threads",
-                     "eval_every", "eval_pairs"):
+                     "eval_every", "eval_pairs", "path_energy_pairs"):
             v = getattr(self, name)
             if not isinstance(v, int) or isinstance(v, bool) or v < 1:
                 raise InputError(f"{name} must be a positive integer, got {v!r}")
@@ -141,6 +172,9 @@ class TrainConfig:
             raise InputError(f"lr must be in (0, 1), got {self.lr!r}")
         if not (0 < self.lr_final_fraction <= 1):
             raise InputError(f"lr_final_fraction must be in (0, 1], got {self.lr_final_fraction}")
+        if not (0.0 <= self.path_energy_weight < float("inf")):
+            raise InputError("path_energy_weight must be finite and >= 0, got "
+                             f"{self.path_energy_weight!r}")
         if not (0.0 <= self.td_lambda <= 1.0):
             raise InputError(f"td_lambda must be in [0, 1], got {self.td_lambda!r}")
         if not self.log_std_min < self.log_std_max:

@@ -126,8 +126,9 @@ class Trainer:
                 normalize_inputs=cfg.normalize_inputs, transform=cfg.critic_transform,
                 symmetric=cfg.symmetric_critic,
             ).to(self.device)
-        self.opt_actor = torch.optim.Adam(self.actor.parameters(), lr=cfg.lr)
-        self.opt_critic = torch.optim.Adam(self.critic.parameters(), lr=cfg.lr)
+        adam = dict(fused=True) if cfg.fused_adam else {}
+        self.opt_actor = torch.optim.Adam(self.actor.parameters(), lr=cfg.lr, **adam)
+        self.opt_critic = torch.optim.Adam(self.critic.parameters(), lr=cfg.lr, **adam)
         self.np_rng = np.random.default_rng(cfg.seed)
         self.gen = torch.Generator(device=self.device)
         self.gen.manual_seed(cfg.seed + 1)
@@ -249,6 +250,19 @@ class Trainer:
         self.trees += n_trees
         return torch.cat(starts), torch.cat(goals), torch.cat(costs), n_trees * 2**depth
 
+    def path_energy(self) -> torch.Tensor:
+        """Discrete energy ``n * sum_i C(x_i, x_i+1)**2`` ``(k,)`` of the actor's deterministic
+        depth-D paths between ``path_energy_pairs`` fresh uniform pairs, differentiable in
+        the actor's parameters through every level of the tree (costs in float64)."""
+        k = self.cfg.path_energy_pairs
+        ends = self.metric.domain.sample(2 * k, self.np_rng).reshape(k, 2, self.dim)
+        e = torch.as_tensor(ends, dtype=torch.float32, device=self.device)
+        pts = build_tree(e[:, 0], e[:, 1], self.depth_max,
+                         lambda a, b: self.actor(a, b, deterministic=True)).double()
+        c = self.metric.cost(pts[:, :-1].reshape(-1, self.dim),
+                             pts[:, 1:].reshape(-1, self.dim)).reshape(k, -1)
+        return (c.shape[1] * (c**2).sum(1)).float()
+
     def update(self, s: torch.Tensor, g: torch.Tensor, c: torch.Tensor) -> tuple[float, float]:
         """``epochs`` passes of minibatch updates: critic (eq. 5), then actor."""
         s32, g32 = s.float(), g.float()
@@ -271,6 +285,8 @@ class Trainer:
                 self.critic.requires_grad_(False)
                 m = self.actor(bs, bg, generator=self.gen)
                 la = actor_loss(self.cfg.method, self.critic(bs, m), self.critic(m, bg)).mean()
+                if self.cfg.path_energy_weight > 0:
+                    la = la + self.cfg.path_energy_weight * self.path_energy().mean()
                 self.opt_actor.zero_grad(set_to_none=True)
                 la.backward()
                 self.opt_actor.step()

@@ -98,6 +98,12 @@ def test_evaluate_pairs_of_wrong_dim(run_dir, tmp_path) -> None:
         (("train", "--env", "euclidean", "--out", "x", "--method", "sideways"), "method"),
         (("train", "--env", "euclidean", "--out", "x", "--device", "cuda"), "CUDA"),
         (("train", "--env", "euclidean", "--out", "x", "--timesteps", "0"), "timesteps"),
+        (("train", "--env", "euclidean", "--out", "x", "--set", "epoch=2"),
+         "unknown config field 'epoch' (did you mean epochs"),
+        (("train", "--env", "euclidean", "--out", "x", "--set", "lr=fast"),
+         "lr must be float"),
+        (("train", "--env", "euclidean", "--out", "x", "--set", "hidden"), "FIELD=VALUE"),
+        (("train", "--env", "euclidean", "--out", "x", "--set", "env=carlike"), "use --env"),
     ],
 )
 def test_bad_cli_input_gives_clear_error(args, message, tmp_path, monkeypatch) -> None:
@@ -110,6 +116,23 @@ def test_bad_cli_input_gives_clear_error(args, message, tmp_path, monkeypatch) -
     assert res.exit_code == 2, res.output
     assert message in res.output
     assert not (tmp_path / "x").exists()
+
+
+def test_train_set_overrides_config_fields(tmp_path) -> None:
+    out = tmp_path / "run"
+    res = _run("train", "--env", "euclidean", "--out", str(out), "--timesteps", "3000",
+               "--quiet", "--set", "hidden=[16,8]", "--set", "path_energy_weight=0.5",
+               "--set", "activation=tanh")
+    assert res.exit_code == 0, res.output
+    cfg = json.loads((out / "config.json").read_text())["config"]
+    assert cfg["hidden"] == [16, 8] and cfg["path_energy_weight"] == 0.5
+    assert cfg["activation"] == "tanh"
+    pol = learn.load_policy(out)
+    assert [m.out_features for m in pol.actor.net if hasattr(m, "out_features")] == [16, 8, 4]
+    # resuming with a different value of a run-defining field is refused
+    res = _run("train", "--env", "euclidean", "--out", str(out), "--resume", "--quiet",
+               "--set", "path_energy_weight=2")
+    assert res.exit_code == 2 and "path_energy_weight" in res.output
 
 
 def test_train_refuses_existing_dir_and_resume_of_missing(run_dir, tmp_path) -> None:

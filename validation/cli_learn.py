@@ -44,6 +44,11 @@ def train_command(
         "--paper", help="Use the paper's appendix B.1 settings instead of the defaults.")
     ] = False,
     quiet: Annotated[bool, typer.Option("--quiet", help="No progress bar.")] = False,
+    settings: Annotated[list[str] | None, typer.Option(
+        "--set", metavar="FIELD=VALUE",
+        help="Override any field of learn.TrainConfig (repeatable; VALUE is JSON or a "
+             "bare string), e.g. --set path_energy_weight=0 --set hidden=[128,128].")
+    ] = None,
 ) -> None:
     """Train a midpoint policy (Algorithm 1) into a run directory.
 
@@ -67,6 +72,7 @@ def train_command(
         learn.resolve_device(device)
         given: dict[str, object] = {"method": method, "seed": seed, "timesteps": timesteps}
         over = {k: v for k, v in given.items() if v is not None}
+        over.update(parse_settings(settings or []))
         if resume:
             # the run's saved settings; explicitly given options must agree with them
             cfg = learn.read_run_config(out).replace(minutes=minutes, device=device)
@@ -88,6 +94,38 @@ def train_command(
         f"run directory {result.run_dir}"
     )
 
+
+
+def parse_settings(items: list[str]) -> dict[str, object]:
+    """``["field=value", ...]`` -> overrides of :class:`learn.TrainConfig` fields (values
+    parsed as JSON, else kept as strings); unknown or run-control fields are an error."""
+    import dataclasses
+    import difflib
+
+    import learn
+
+    names = [f.name for f in dataclasses.fields(learn.TrainConfig)]
+    reserved = {"env": "--env", "device": "--device", "minutes": "--minutes"}
+    out: dict[str, object] = {}
+    for item in items:
+        key, sep, raw = item.partition("=")
+        key = key.strip()
+        if not sep or not key:
+            raise InputError(f"--set expects FIELD=VALUE, got {item!r}")
+        if key in reserved:
+            raise InputError(f"--set {key}=... is not allowed; use {reserved[key]}")
+        if key not in names:
+            close = difflib.get_close_matches(key, names, n=3)
+            hint = f" (did you mean {', '.join(close)}?)" if close else ""
+            raise InputError(f"--set: unknown config field {key!r}{hint}")
+        try:
+            value = json.loads(raw)
+        except json.JSONDecodeError:
+            value = raw
+        if isinstance(value, list):
+            value = tuple(value)
+        out[key] = value
+    return out
 
 
 def evaluate_command(
