@@ -53,7 +53,9 @@ class Actor(nn.Module):
 
     With ``residual`` the mean is ``(s + g) / 2 + half_range * out`` (the network predicts a
     correction to the coordinate midpoint); otherwise the mean is the raw output, mapped
-    back from normalised coordinates. Samples and means are projected into the domain.
+    back from normalised coordinates. With ``explore_std > 0`` the standard deviation is
+    at least ``explore_std * |g - s|`` (the learned one otherwise collapses to its clamp
+    and exploration stops). Samples and means are projected into the domain.
     """
 
     def __init__(
@@ -66,9 +68,11 @@ class Actor(nn.Module):
         log_std_min: float = -20.0,
         log_std_max: float = 2.0,
         init_log_std: float | None = None,
+        explore_std: float = 0.0,
     ) -> None:
         super().__init__()
         self.domain = metric.domain
+        self.explore_std = float(explore_std)
         self.dim = metric.dim
         self.residual = residual
         self.log_std_min = float(log_std_min)
@@ -88,7 +92,13 @@ class Actor(nn.Module):
         log_std = log_std.clamp(self.log_std_min, self.log_std_max)
         half = self.scaler.span
         mean = 0.5 * (s + g) + half * mu if self.residual else self.scaler.center + half * mu
-        return mean, half * log_std.exp()
+        std = half * log_std.exp()
+        if self.explore_std > 0:
+            # exploration floor proportional to the pair's coordinate distance, so every
+            # level of the tree keeps exploring at its own scale
+            gap = (g - s).norm(dim=-1, keepdim=True)
+            std = torch.maximum(std, self.explore_std * gap)
+        return mean, std
 
     def forward(
         self, s: torch.Tensor, g: torch.Tensor, generator: torch.Generator | None = None,

@@ -263,10 +263,44 @@ class Trainer:
                              pts[:, 1:].reshape(-1, self.dim)).reshape(k, -1)
         return (c.shape[1] * (c**2).sum(1)).float()
 
+    def route_search(self) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor] | None:
+        """Better routes for fresh pairs (see ``TrainConfig.route_candidates``): float32
+        ``(s, g, m)`` of the pairs where a stitched path ``s -> m -> g`` of the actor's
+        deterministic halves costs at least 1% less than the actor's own path; None if
+        no pair improved."""
+        k, n_c, dim, depth = self.cfg.route_pairs, self.cfg.route_candidates, self.dim, \
+            self.depth_max
+        ends = self.metric.domain.sample(2 * k, self.np_rng).reshape(k, 2, dim)
+        cand = self.metric.domain.sample(k * n_c, self.np_rng).reshape(k, n_c, dim)
+        e = torch.as_tensor(ends, dtype=torch.float32, device=self.device)
+        m = torch.as_tensor(cand, dtype=torch.float32, device=self.device).reshape(-1, dim)
+        s_rep = e[:, 0].repeat_interleave(n_c, 0)
+        g_rep = e[:, 1].repeat_interleave(n_c, 0)
+
+        def mean(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+            return self.actor(a, b, deterministic=True)
+
+        def total(pts: torch.Tensor) -> torch.Tensor:
+            p = pts.double()
+            return self.metric.cost(p[:, :-1].reshape(-1, dim),
+                                    p[:, 1:].reshape(-1, dim)).reshape(p.shape[0], -1).sum(1)
+
+        with torch.no_grad():
+            own = total(build_tree(e[:, 0], e[:, 1], depth, mean))
+            alt = (total(build_tree(s_rep, m, depth - 1, mean))
+                   + total(build_tree(m, g_rep, depth - 1, mean))).reshape(k, n_c)
+            best, idx = alt.min(1)
+        better = best < 0.99 * own
+        if not bool(better.any()):
+            return None
+        m_best = m.reshape(k, n_c, dim)[torch.arange(k, device=self.device), idx]
+        return e[better, 0], e[better, 1], m_best[better]
+
     def update(self, s: torch.Tensor, g: torch.Tensor, c: torch.Tensor) -> tuple[float, float]:
         """``epochs`` passes of minibatch updates: critic (eq. 5), then actor."""
         s32, g32 = s.float(), g.float()
         target = self.critic.to_raw(c).float()
+        route = self.route_search() if self.cfg.route_candidates > 0 else None
         n = s.shape[0]
         mb = self.cfg.minibatch_size
         lc_sum = la_sum = 0.0
@@ -287,6 +321,9 @@ class Trainer:
                 la = actor_loss(self.cfg.method, self.critic(bs, m), self.critic(m, bg)).mean()
                 if self.cfg.path_energy_weight > 0:
                     la = la + self.cfg.path_energy_weight * self.path_energy().mean()
+                if route is not None:
+                    mean = self.actor.distribution(route[0], route[1])[0]
+                    la = la + self.cfg.route_weight * ((mean - route[2]) ** 2).sum(-1).mean()
                 self.opt_actor.zero_grad(set_to_none=True)
                 la.backward()
                 self.opt_actor.step()

@@ -9,6 +9,7 @@ import torch
 
 import finsler
 import learn
+from learn.policy import build_actor, generate_paths
 from learn.train import Trainer, actor_loss, paper_depth
 
 
@@ -135,6 +136,48 @@ def test_path_energy_term_alone_learns_euclidean_midpoints(tmp_path) -> None:
     assert err.mean() < 0.02, err.mean()
 
 
+def test_exploration_floor_scales_with_the_pair_distance() -> None:
+    m = finsler.get_metric("matsumoto")
+    cfg = learn.default_config("matsumoto", explore_std=0.1, log_std_min=-10.0,
+                               init_log_std=-10.0)
+    actor = build_actor(cfg, m)
+    s = torch.tensor([[0.0, 0.0], [0.1, 0.1], [-0.5, 0.2]])
+    g = torch.tensor([[0.6, 0.8], [0.1, 0.1], [-0.5, 0.25]])
+    mean, std = actor.distribution(s, g)
+    gap = (g - s).norm(dim=1)
+    # the learned std is about exp(-10) = 4.5e-5 (the coincident pair keeps it)
+    torch.testing.assert_close(std, (0.1 * gap)[:, None].expand(3, 2), rtol=1e-6, atol=1e-4)
+    assert std[0].min() > 0.09 and std[1].max() < 1e-4
+    # the mean (evaluation) is the same with and without the floor
+    plain = build_actor(cfg.replace(explore_std=0.0), m)
+    plain.load_state_dict(actor.state_dict())
+    torch.testing.assert_close(plain.distribution(s, g)[0], mean)
+    assert plain.distribution(s, g)[1].max() < 1e-4
+
+
+def test_route_search_returns_only_real_improvements() -> None:
+    cfg = learn.default_config("euclidean", depth=3, route_candidates=16, route_pairs=40)
+    tr = Trainer(cfg, _tmp_run_dir(), progress=False)
+    _exact_midpoint_actor(tr)
+    # straight, evenly split paths are optimal: no candidate can be 1% cheaper
+    assert tr.route_search() is None
+    # a bent actor (every midpoint pushed 0.3 along y): stitched routes can win
+    with torch.no_grad():
+        tr.actor.net[-1].bias[1] = 0.3
+    found = tr.route_search()
+    assert found is not None and 0 < found[0].shape[0] <= 40
+    m = tr.metric
+
+    def cost(a: torch.Tensor, b: torch.Tensor, depth: int) -> np.ndarray:
+        paths = generate_paths(tr.actor, m, a.double(), b.double(), depth).numpy()
+        return m.path_costs(paths).sum(1)
+
+    s, g, mid = found
+    own = cost(s, g, 3)
+    via = cost(s, mid, 2) + cost(mid, g, 2)
+    assert (via < 0.99 * own).all()
+
+
 def test_paper_depth_schedule() -> None:
     # T = 127 * 10 timesteps, D = 6: c_d = 11 trees per depth, depths 0..6
     assert [paper_depth(c, 1270, 6) for c in (0, 10, 11, 21, 22, 65, 66, 76, 77, 10**6)] == [
@@ -169,12 +212,18 @@ def _small(**over: object) -> learn.TrainConfig:
     return learn.default_config("euclidean", **base)
 
 
-def test_same_seed_same_midpoints_different_seed_different(tmp_path) -> None:
+@pytest.mark.parametrize("extras", [
+    {},
+    # the Matsumoto defaults' additions: fused Adam, path energy, plus route search
+    {"fused_adam": True, "path_energy_weight": 1.0, "path_energy_pairs": 8, "epochs": 1,
+     "route_candidates": 4, "route_pairs": 16},
+])
+def test_same_seed_same_midpoints_different_seed_different(tmp_path, extras) -> None:
     pairs = finsler.default_pairs(finsler.get_metric("euclidean"), 20)
     mids = []
     for k, seed in enumerate((3, 3, 4)):
         out = tmp_path / f"run{k}"
-        learn.train(_small(seed=seed, timesteps=6_000), out, progress=False)
+        learn.train(_small(seed=seed, timesteps=6_000, **extras), out, progress=False)
         mids.append(learn.load_policy(out).midpoint(pairs[:, 0], pairs[:, 1]))
     assert np.array_equal(mids[0], mids[1])
     assert not np.allclose(mids[0], mids[2])
