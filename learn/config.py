@@ -259,10 +259,11 @@ def paper_config(env: str, **overrides: Any) -> TrainConfig:
     return base.replace(**overrides) if overrides else base
 
 
-# Beyond the paper (measured, see benchmarks and the closing note): full depth from the
-# start, big collections and minibatches with few epochs (vectorised trees), a higher
-# learning rate with cosine decay, log1p critic targets, inputs scaled to [-1, 1] and a
-# residual actor mean around the coordinate midpoint.
+# Beyond the paper (measured, see benchmarks/learn_ablation.py and the closing notes):
+# full depth from the start, big collections and minibatches with few epochs (vectorised
+# trees), a higher learning rate with cosine decay, log1p critic targets, inputs scaled to
+# [-1, 1] and a residual actor mean around the coordinate midpoint; for Matsumoto and
+# car-like also the path-energy actor term with one pass per collection.
 _OURS_COMMON: dict[str, Any] = dict(
     depth_schedule="full",
     critic_transform="log1p",
@@ -284,6 +285,8 @@ _OURS: dict[str, dict[str, Any]] = {
                       path_energy_weight=1.0, path_energy_pairs=16),
     "carlike": dict(timesteps=30_000_000, hidden=(128, 128), epochs=1, fused_adam=True,
                     path_energy_weight=1.0, path_energy_pairs=16),
+    # path energy at weight 1 was tried here and failed (1% success at 7.5e6 timesteps:
+    # the joint-space energy dwarfs the critic's term); Panda keeps Algorithm 1 alone
     "panda-pole": dict(timesteps=10_000_000, hidden=(128, 128), symmetric_critic=True,
                        eval_every=25),
     "euclidean": dict(timesteps=400_000, lr=3e-3, collection_size=4096, minibatch_size=512,

@@ -212,12 +212,12 @@ def _small(**over: object) -> learn.TrainConfig:
     return learn.default_config("euclidean", **base)
 
 
-@pytest.mark.parametrize("extras", [
-    {},
-    # the Matsumoto defaults' additions: fused Adam, path energy, plus route search
-    {"fused_adam": True, "path_energy_weight": 1.0, "path_energy_pairs": 8, "epochs": 1,
-     "route_candidates": 4, "route_pairs": 16},
-])
+# the Matsumoto defaults' additions (fused Adam, path energy, one pass) plus route search
+_EXTRAS = {"fused_adam": True, "path_energy_weight": 1.0, "path_energy_pairs": 8,
+           "epochs": 1, "route_candidates": 4, "route_pairs": 16}
+
+
+@pytest.mark.parametrize("extras", [{}, _EXTRAS])
 def test_same_seed_same_midpoints_different_seed_different(tmp_path, extras) -> None:
     pairs = finsler.default_pairs(finsler.get_metric("euclidean"), 20)
     mids = []
@@ -257,8 +257,9 @@ def test_short_euclidean_training_learns_true_midpoints(tmp_path) -> None:
     assert np.median(rel) < 0.1, np.median(rel)
 
 
-def test_resume_equals_uninterrupted(tmp_path, monkeypatch) -> None:
-    cfg = _small(timesteps=12_000, eval_every=3)
+@pytest.mark.parametrize("extras", [{}, _EXTRAS])
+def test_resume_equals_uninterrupted(tmp_path, monkeypatch, extras) -> None:
+    cfg = _small(timesteps=12_000, eval_every=3, **extras)
     full = learn.train(cfg, tmp_path / "full", progress=False)
 
     calls = [0]

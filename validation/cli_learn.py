@@ -53,11 +53,13 @@ def train_command(
     """Train a midpoint policy (Algorithm 1) into a run directory.
 
     Defaults per environment (learn.default_config; the settings of the shipped policies):
-    matsumoto 2e7 timesteps, carlike 4e7 (MLPs 128-128, 2 epochs), panda-pole 1e7
-    (MLPs 128-128, symmetric critic); all at full depth, lr 1e-3 cosine-decayed to 5%,
-    log1p critic targets, inputs scaled to [-1, 1], residual actor mean, collections of
-    16384 pairs, minibatches of 1024, 3 epochs. config.json in the run directory lists
-    every choice beyond the paper.
+    all at full depth, lr 1e-3 cosine-decayed to 5%, log1p critic targets, inputs scaled
+    to [-1, 1], residual actor mean, collections of 16384 pairs, minibatches of 1024.
+    matsumoto: 6e7 timesteps, one pass per collection, fused Adam and the path-energy
+    actor term (weight 1, 16 fresh pairs per actor step); carlike: the same with MLPs
+    128-128 and 3e7 timesteps; panda-pole: 1e7 timesteps, MLPs 128-128, symmetric critic,
+    3 epochs, no path energy. config.json in the run directory lists every choice beyond
+    the paper; --set FIELD=VALUE overrides any of them.
     """
     import learn
 
