@@ -227,8 +227,7 @@ class Trainer:
         ends_t = torch.as_tensor(ends, dtype=torch.float64, device=self.device)
         with torch.no_grad():
             pts = build_tree(ends_t[:, 0], ends_t[:, 1], depth, self._sample)
-            leaf = self.metric.cost(pts[:, :-1].reshape(-1, self.dim),
-                                    pts[:, 1:].reshape(-1, self.dim)).reshape(n_trees, -1)
+            leaf = self.metric.path_costs(pts)
             pairs = [level_pairs(pts, i) for i in range(depth + 1)]
             if self.cfg.targets == "td" and depth > 0:
                 values = [
@@ -259,8 +258,7 @@ class Trainer:
         e = torch.as_tensor(ends, dtype=torch.float32, device=self.device)
         pts = build_tree(e[:, 0], e[:, 1], self.depth_max,
                          lambda a, b: self.actor(a, b, deterministic=True)).double()
-        c = self.metric.cost(pts[:, :-1].reshape(-1, self.dim),
-                             pts[:, 1:].reshape(-1, self.dim)).reshape(k, -1)
+        c = self.metric.path_costs(pts)
         return (c.shape[1] * (c**2).sum(1)).float()
 
     def route_search(self) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor] | None:
@@ -281,9 +279,7 @@ class Trainer:
             return self.actor(a, b, deterministic=True)
 
         def total(pts: torch.Tensor) -> torch.Tensor:
-            p = pts.double()
-            return self.metric.cost(p[:, :-1].reshape(-1, dim),
-                                    p[:, 1:].reshape(-1, dim)).reshape(p.shape[0], -1).sum(1)
+            return self.metric.path_costs(pts.double()).sum(1)
 
         with torch.no_grad():
             own = total(build_tree(e[:, 0], e[:, 1], depth, mean))
