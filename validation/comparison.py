@@ -391,6 +391,11 @@ class Comparison:
     policy_source: str = ""
     timing: dict[str, float] = field(default_factory=dict)
 
+    def _means(self, attr: str) -> dict[str, float]:
+        """Mean of one per-pair field for the learned, exact and straight paths."""
+        return {w: float(getattr(getattr(self, w), attr).mean())
+                for w in ("learned", "exact", "straight")}
+
     def ratios(self, which: str, measure: str = "length") -> np.ndarray:
         """Per-pair ratio ``which / exact`` of ``length`` or ``length_quadrature`` ``(K,)``
         (NaN where the exact solve did not converge or the exact length is 0)."""
@@ -442,16 +447,8 @@ class Comparison:
                 "exact_energy_path": self.exact.success_rate,
                 "straight": self.straight.success_rate,
             },
-            "mean_length": {
-                "learned": float(self.learned.length.mean()),
-                "exact": float(self.exact.length.mean()),
-                "straight": float(self.straight.length.mean()),
-            },
-            "mean_max_segment_cost": {
-                "learned": float(self.learned.max_segment_cost.mean()),
-                "exact": float(self.exact.max_segment_cost.mean()),
-                "straight": float(self.straight.max_segment_cost.mean()),
-            },
+            "mean_length": self._means("length"),
+            "mean_max_segment_cost": self._means("max_segment_cost"),
             "length_ratio": ratios,
             "exact_solver": {
                 "converged": int(self.exact.converged.sum()),
@@ -459,11 +456,7 @@ class Comparison:
                 "mean_seeds_tried": float(self.exact.seeds_tried.mean()),
                 "mean_seeds_agreeing": float(self.exact.seeds_agreeing.mean()),
             },
-            "nonconvex_point_fraction": {
-                "learned": float(self.learned.nonconvex_fraction.mean()),
-                "exact": float(self.exact.nonconvex_fraction.mean()),
-                "straight": float(self.straight.nonconvex_fraction.mean()),
-            },
+            "nonconvex_point_fraction": self._means("nonconvex_fraction"),
             "timing": dict(self.timing),
             "per_pair": per_pair,
         }
