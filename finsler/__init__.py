@@ -16,12 +16,20 @@ from finsler.metrics import (
     Randers,
     Sphere,
 )
-from finsler.pairs import DEFAULT_EVAL_SEED, default_pairs, load_pairs, sample_pairs
+from finsler.pairs import (
+    DEFAULT_EVAL_SEED,
+    VALIDATION_SEED,
+    default_pairs,
+    load_pairs,
+    sample_pairs,
+    validation_pairs,
+)
 from finsler.registry import get_metric, list_metrics, register_metric
 
 __all__ = [
     "DEFAULT_EVAL_SEED",
     "MATSUMOTO_CONVEX_RADIUS",
+    "VALIDATION_SEED",
     "Box",
     "CarLike",
     "ClosedFormMetric",
@@ -47,4 +55,5 @@ __all__ = [
     "load_pairs",
     "register_metric",
     "sample_pairs",
+    "validation_pairs",
 ]

@@ -10,10 +10,21 @@ import numpy as np
 from finsler.errors import InputError
 from finsler.metric import Metric
 
-__all__ = ["DEFAULT_EVAL_SEED", "default_pairs", "load_pairs", "sample_pairs"]
+__all__ = [
+    "DEFAULT_EVAL_SEED",
+    "VALIDATION_SEED",
+    "default_pairs",
+    "load_pairs",
+    "sample_pairs",
+    "validation_pairs",
+]
 
 #: Seed of every environment's default evaluation set (100 uniform pairs).
 DEFAULT_EVAL_SEED = 20240531
+#: Seed of the validation set that training evaluates on and selects checkpoints by; it is
+#: distinct from the default evaluation set, so that ``evaluate`` and ``report`` never
+#: report on the pairs a checkpoint was chosen on.
+VALIDATION_SEED = 20240607
 
 
 def sample_pairs(metric: Metric, k: int, seed: int) -> np.ndarray:
@@ -31,6 +42,13 @@ def sample_pairs(metric: Metric, k: int, seed: int) -> np.ndarray:
 def default_pairs(metric: Metric, k: int = 100) -> np.ndarray:
     """The environment's default evaluation set: ``k`` (100) uniform pairs, fixed seed."""
     return sample_pairs(metric, k, DEFAULT_EVAL_SEED)
+
+
+def validation_pairs(metric: Metric, k: int = 100) -> np.ndarray:
+    """The environment's validation set (checkpoint selection during training): ``k``
+    uniform pairs drawn with :data:`VALIDATION_SEED`, disjoint in seed from the default
+    evaluation set."""
+    return sample_pairs(metric, k, VALIDATION_SEED)
 
 
 def load_pairs(path: str | os.PathLike[str], metric: Metric) -> np.ndarray:
