@@ -61,7 +61,7 @@ def run(env: str, name: str, timesteps: int, minutes: float | None, seed: int,
     ratio = policy.metric.path_costs(paths).sum(1) / exact
     return {"variant": name, "timesteps": res.timesteps, "wall_s": res.wall_seconds,
             "ratio": float(np.mean(ratio)),
-            "ts_per_s": res.final["timesteps_per_second"],
+            "ts_per_s": res.final["evaluations_per_second"],
             "success": res.final["success_rate"],
             "mean_max_cost": res.final["mean_max_segment_cost"]}
 

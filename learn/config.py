@@ -17,12 +17,14 @@ from typing import Any
 
 import finsler
 from finsler.errors import InputError
+from learn.methods import derivative_terms, describe
 
 __all__ = [
     "METHODS",
     "TrainConfig",
     "beyond_paper",
     "default_config",
+    "model_free_overrides",
     "package_versions",
     "paper_config",
 ]
@@ -45,7 +47,8 @@ class TrainConfig:
     method: str = "midpoint"
     """Actor loss: ``midpoint`` (eq. 6), ``inter`` (eq. 17) or ``two-to-one`` (eq. 18)."""
     timesteps: int = 20_000_000
-    """Budget T of evaluations of C (the paper's timesteps); also the horizon of the
+    """Budget T of evaluations of C, all-inclusive: the collected trees (the paper's
+    timesteps) and every evaluation an extra actor term makes; also the horizon of the
     learning-rate schedule and of the paper's depth schedule."""
     minutes: float | None = None
     """Optional wall-clock limit; training stops at whichever limit comes first."""
@@ -108,11 +111,12 @@ class TrainConfig:
     """Use PyTorch's fused Adam kernel (same update rule, fewer kernel launches; the
     floating-point results differ from the default implementation in the last bits)."""
     path_energy_weight: float = 0.0
-    """Beyond the paper: weight of an extra actor term, the discrete energy
-    ``n * sum_i C(x_i, x_i+1)**2`` of the actor's own deterministic depth-D path between
-    the collected pairs, differentiated through every level of the tree with the lowered
-    torch ``cost`` (0 = off). The energy is smallest for a shortest path with equal
-    segment costs, i.e. exactly the recursive geodesic midpoints."""
+    """Beyond the paper, and NOT model-free (it differentiates C): weight of an extra actor
+    term, the discrete energy ``n * sum_i C(x_i, x_i+1)**2`` of the actor's own
+    deterministic depth-D path between fresh pairs, differentiated through every level of
+    the tree with the lowered torch ``cost`` (0 = off). The energy is smallest for a
+    shortest path with equal segment costs, i.e. exactly the recursive geodesic
+    midpoints."""
     path_energy_pairs: int = 256
     """Pairs (whole trees) per path-energy step; one step per epoch."""
     route_candidates: int = 0
@@ -127,10 +131,11 @@ class TrainConfig:
     route_weight: float = 1.0
     """Weight of the squared distance of the actor's mean to a better route's midpoint."""
     eval_every: int = 50
-    """Iterations (collections) between evaluations on the default pair set; each
+    """Iterations (collections) between evaluations on the validation pair set; each
     evaluation also writes the latest checkpoint (deterministic resume points)."""
     eval_pairs: int = 100
-    """Size of the default evaluation set (``finsler.default_pairs``)."""
+    """Size of the validation set (``finsler.validation_pairs``: its own seed, distinct
+    from the default evaluation set) on which ``checkpoint_best`` is chosen."""
 
     # ------------------------------------------------------------------------------------
     def __post_init__(self) -> None:
@@ -212,6 +217,12 @@ class TrainConfig:
         return finsler.get_metric(self.env)
 
     @property
+    def model_free(self) -> bool:
+        """True if training uses values of C only (like the paper); False if a term
+        differentiates C (see :mod:`learn.methods`)."""
+        return not derivative_terms(self)
+
+    @property
     def max_depth(self) -> int:
         return int(self.depth if self.depth is not None else self.metric.task.depth)
 
@@ -281,9 +292,13 @@ _OURS_COMMON: dict[str, Any] = dict(
 _OURS: dict[str, dict[str, Any]] = {
     # one pass per collection plus the path-energy term: 99-100% success and lengths
     # within 1% (median) of exact at 40k timesteps/s (see the learn issue's note)
-    "matsumoto": dict(timesteps=60_000_000, epochs=1, fused_adam=True,
+    # Budgets count every evaluation of C (all-inclusive). The path-energy term makes 4.16x
+    # (Matsumoto: 5504 in trees + 17 steps * 16 pairs * 64 per collection) and 13.4x
+    # (car-like) the trees' count, so 2.5e8 and 4e8 train as long as the shipped policies'
+    # 6e7 and 3e7 trees' evaluations did. NOT model-free: the energy differentiates C.
+    "matsumoto": dict(timesteps=250_000_000, epochs=1, fused_adam=True,
                       path_energy_weight=1.0, path_energy_pairs=16),
-    "carlike": dict(timesteps=30_000_000, hidden=(128, 128), epochs=1, fused_adam=True,
+    "carlike": dict(timesteps=400_000_000, hidden=(128, 128), epochs=1, fused_adam=True,
                     path_energy_weight=1.0, path_energy_pairs=16),
     # path energy at weight 1 was tried here and failed (1% success at 7.5e6 timesteps:
     # the joint-space energy dwarfs the critic's term); Panda keeps Algorithm 1 alone
@@ -304,6 +319,11 @@ def default_config(env: str, **overrides: Any) -> TrainConfig:
     settings = {**_OURS_COMMON, **_OURS.get(env, dict(timesteps=20_000_000))}
     settings.update(overrides)
     return TrainConfig(env=env, **settings)
+
+
+def model_free_overrides() -> dict[str, Any]:
+    """Settings that switch off every term differentiating C (``learn.methods``)."""
+    return {"path_energy_weight": 0.0}
 
 
 def beyond_paper(cfg: TrainConfig) -> dict[str, dict[str, Any]]:
@@ -341,6 +361,12 @@ def config_json(cfg: TrainConfig) -> str:
         "config": cfg.to_dict(),
         "metric": m.info(),
         "task": {"depth": cfg.max_depth, "eps": cfg.eval_eps, "segments": 2**cfg.max_depth},
+        **describe(cfg),
+        "counts": "timesteps = every evaluation of C made in training (all-inclusive); "
+                  "timesteps_paper = evaluations in collected trees (the paper's count); "
+                  "timesteps_derivative = evaluations whose derivative was used",
+        "selection": f"checkpoint_best by success on finsler.validation_pairs (seed "
+                     f"{finsler.VALIDATION_SEED}, {cfg.eval_pairs} pairs)",
         "versions": package_versions(),
         "beyond_paper": beyond_paper(cfg),
     }

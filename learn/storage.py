@@ -21,6 +21,7 @@ __all__ = [
     "LATEST_FILE",
     "METRICS_FILE",
     "POLICY_FILE",
+    "RESULT_FILE",
     "CorruptFileError",
     "atomic_write_bytes",
     "atomic_write_text",
@@ -29,6 +30,7 @@ __all__ = [
     "read_metrics",
     "save_checkpoint",
     "write_metrics",
+    "write_result",
 ]
 
 CONFIG_FILE = "config.json"
@@ -36,6 +38,8 @@ LATEST_FILE = "checkpoint_latest.pt"
 BEST_FILE = "checkpoint_best.pt"
 POLICY_FILE = "policy.pt"
 METRICS_FILE = "metrics.csv"
+#: Written when a run ends normally (budget or time limit reached); absent = unfinished.
+RESULT_FILE = "result.json"
 
 
 class CorruptFileError(InputError):
@@ -133,3 +137,20 @@ def read_metrics(path: Path) -> list[dict[str, Any]]:
                     parsed[k] = v
         out.append(parsed)
     return out
+
+
+def write_result(run_dir: Path, final: dict[str, Any], best: dict[str, Any],
+                 stopped_by: str) -> None:
+    """Mark a run finished: ``result.json`` with the all-inclusive and paper counts of
+    evaluations of C, wall time, which bound stopped it, the last metrics row and the best
+    (validation-selected) checkpoint's figures."""
+    doc = {
+        "timesteps": int(final["timesteps"]),
+        "timesteps_paper": int(final.get("timesteps_paper", final["timesteps"])),
+        "timesteps_derivative": int(final.get("timesteps_derivative", 0)),
+        "wall_seconds": float(final["wall_seconds"]),
+        "stopped_by": stopped_by,
+        "final": dict(final),
+        "best": dict(best),
+    }
+    atomic_write_text(Path(run_dir) / RESULT_FILE, json.dumps(doc, indent=2))

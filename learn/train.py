@@ -9,11 +9,16 @@ One iteration of :class:`Trainer` reads like Algorithm 1:
 3. **update**: ``epochs`` passes of minibatch steps, critic (eq. 5) then actor
    (eq. 6 / 17 / 18).
 
-Timesteps count evaluations of C, as in the paper (a tree of depth D counts 2**D).
-Every ``eval_every`` iterations the deterministic policy is evaluated on the default
-pair set (section 5.1), a metrics row is written and the latest checkpoint saved
-atomically; resuming from it replays the run exactly (all RNG and optimiser states are
-in the checkpoint).
+``timesteps`` count **every** evaluation of C the learner makes during training: the
+collected trees (the paper's count, 2**D per tree of depth D, kept as ``timesteps_paper``)
+and whatever the extra actor terms of :mod:`learn.methods` evaluate (path energy, route
+search); ``timesteps_derivative`` counts the evaluations whose derivative the learner
+used. The ``timesteps`` budget binds the all-inclusive count.
+Every ``eval_every`` iterations the deterministic policy is evaluated on the
+**validation** pair set (``finsler.validation_pairs``, never the default evaluation set
+that ``evaluate`` and ``report`` use), a metrics row is written, the best checkpoint is
+chosen there and the latest checkpoint saved atomically; resuming from it replays the run
+exactly (all RNG and optimiser states are in the checkpoint).
 """
 
 from __future__ import annotations
@@ -30,6 +35,7 @@ import torch
 import finsler
 from finsler.errors import InputError
 from learn.config import TrainConfig, config_json
+from learn.methods import actor_loss_of, actor_terms
 from learn.networks import Critic
 from learn.policy import EvalResult, build_actor, evaluate_paths, generate_paths
 from learn.storage import (
@@ -37,6 +43,7 @@ from learn.storage import (
     CONFIG_FILE,
     LATEST_FILE,
     METRICS_FILE,
+    RESULT_FILE,
     CorruptFileError,
     atomic_write_text,
     load_checkpoint,
@@ -44,6 +51,7 @@ from learn.storage import (
     read_metrics,
     save_checkpoint,
     write_metrics,
+    write_result,
 )
 from learn.tree import build_tree, level_pairs, mc_targets, td_lambda_targets
 
@@ -64,14 +72,8 @@ def resolve_device(name: str) -> torch.device:
 
 def actor_loss(method: str, v_first: torch.Tensor, v_second: torch.Tensor) -> torch.Tensor:
     """Per-pair actor loss from ``V(s, m)`` and ``V(m, g)`` ``(N,)``: eq. (6) ``midpoint``,
-    eq. (17) ``inter``, eq. (18) ``two-to-one``."""
-    if method == "midpoint":
-        return v_first**2 + v_second**2
-    if method == "inter":
-        return v_first + v_second
-    if method == "two-to-one":
-        return v_first**2 + 2.0 * v_second**2
-    raise InputError(f"unknown method {method!r}")
+    eq. (17) ``inter``, eq. (18) ``two-to-one`` (see :data:`learn.methods.ACTOR_LOSSES`)."""
+    return actor_loss_of(method)(v_first, v_second)
 
 
 def paper_depth(trees_before: int, total_timesteps: int, max_depth: int) -> int:
@@ -87,6 +89,7 @@ class TrainResult:
 
     run_dir: Path
     timesteps: int
+    """All-inclusive evaluations of C made during training."""
     iterations: int
     wall_seconds: float
     final: dict[str, float]
@@ -114,8 +117,9 @@ class Trainer:
         self.metric = cfg.metric
         self.dim = self.metric.dim
         self.depth_max = cfg.max_depth
-        self.eval_pairs = finsler.sample_pairs(self.metric, cfg.eval_pairs,
-                                               finsler.DEFAULT_EVAL_SEED)
+        self.eval_pairs = finsler.validation_pairs(self.metric, cfg.eval_pairs)
+        self.loss = actor_loss_of(cfg.method)
+        self.terms = actor_terms(cfg)
 
         # networks, initialised from the seed without touching the global RNG
         with torch.random.fork_rng(devices=[]):
@@ -134,14 +138,21 @@ class Trainer:
         self.gen.manual_seed(cfg.seed + 1)
 
         self.iteration = 0
-        self.timesteps = 0
+        self.timesteps = 0  # all-inclusive evaluations of C
+        self.timesteps_paper = 0  # evaluations of C in collected trees (the paper's count)
+        self.timesteps_derivative = 0  # evaluations of C that were differentiated
         self.trees = 0
         self.updates = 0
         self.wall_before = 0.0
         self.best: dict[str, float] = {"success_rate": -1.0, "mean_max_segment_cost": math.inf}
         self.history: list[dict[str, Any]] = []
         self._losses: list[tuple[float, float]] = []
-        if resume and (self.run_dir / LATEST_FILE).is_file():
+        if resume:
+            if not (self.run_dir / LATEST_FILE).is_file():
+                raise InputError(
+                    f"cannot resume: {self.run_dir / LATEST_FILE} is missing (the run's "
+                    "progress cannot be restored; nothing was changed). Start a new run "
+                    "with another --out")
             self._load_state(load_checkpoint(self.run_dir / LATEST_FILE))
         else:
             self.run_dir.mkdir(parents=True, exist_ok=True)
@@ -180,6 +191,8 @@ class Trainer:
             "counters": {
                 "iteration": self.iteration,
                 "timesteps": self.timesteps,
+                "timesteps_paper": self.timesteps_paper,
+                "timesteps_derivative": self.timesteps_derivative,
                 "trees": self.trees,
                 "updates": self.updates,
                 "wall_seconds": self._wall(),
@@ -197,6 +210,8 @@ class Trainer:
             self.gen.set_state(st["torch_rng"])
             c = st["counters"]
             self.iteration, self.timesteps = int(c["iteration"]), int(c["timesteps"])
+            self.timesteps_paper = int(c["timesteps_paper"])
+            self.timesteps_derivative = int(c["timesteps_derivative"])
             self.trees, self.updates = int(c["trees"]), int(c["updates"])
             self.wall_before = float(c["wall_seconds"])
             self.best = dict(st["best"])
@@ -249,54 +264,14 @@ class Trainer:
         self.trees += n_trees
         return torch.cat(starts), torch.cat(goals), torch.cat(costs), n_trees * 2**depth
 
-    def path_energy(self) -> torch.Tensor:
-        """Discrete energy ``n * sum_i C(x_i, x_i+1)**2`` ``(k,)`` of the actor's deterministic
-        depth-D paths between ``path_energy_pairs`` fresh uniform pairs, differentiable in
-        the actor's parameters through every level of the tree (costs in float64)."""
-        k = self.cfg.path_energy_pairs
-        ends = self.metric.domain.sample(2 * k, self.np_rng).reshape(k, 2, self.dim)
-        e = torch.as_tensor(ends, dtype=torch.float32, device=self.device)
-        pts = build_tree(e[:, 0], e[:, 1], self.depth_max,
-                         lambda a, b: self.actor(a, b, deterministic=True)).double()
-        c = self.metric.path_costs(pts)
-        return (c.shape[1] * (c**2).sum(1)).float()
-
-    def route_search(self) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor] | None:
-        """Better routes for fresh pairs (see ``TrainConfig.route_candidates``): float32
-        ``(s, g, m)`` of the pairs where a stitched path ``s -> m -> g`` of the actor's
-        deterministic halves costs at least 1% less than the actor's own path; None if
-        no pair improved."""
-        k, n_c, dim, depth = self.cfg.route_pairs, self.cfg.route_candidates, self.dim, \
-            self.depth_max
-        ends = self.metric.domain.sample(2 * k, self.np_rng).reshape(k, 2, dim)
-        cand = self.metric.domain.sample(k * n_c, self.np_rng).reshape(k, n_c, dim)
-        e = torch.as_tensor(ends, dtype=torch.float32, device=self.device)
-        m = torch.as_tensor(cand, dtype=torch.float32, device=self.device).reshape(-1, dim)
-        s_rep = e[:, 0].repeat_interleave(n_c, 0)
-        g_rep = e[:, 1].repeat_interleave(n_c, 0)
-
-        def mean(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
-            return self.actor(a, b, deterministic=True)
-
-        def total(pts: torch.Tensor) -> torch.Tensor:
-            return self.metric.path_costs(pts.double()).sum(1)
-
-        with torch.no_grad():
-            own = total(build_tree(e[:, 0], e[:, 1], depth, mean))
-            alt = (total(build_tree(s_rep, m, depth - 1, mean))
-                   + total(build_tree(m, g_rep, depth - 1, mean))).reshape(k, n_c)
-            best, idx = alt.min(1)
-        better = best < 0.99 * own
-        if not bool(better.any()):
-            return None
-        m_best = m.reshape(k, n_c, dim)[torch.arange(k, device=self.device), idx]
-        return e[better, 0], e[better, 1], m_best[better]
-
     def update(self, s: torch.Tensor, g: torch.Tensor, c: torch.Tensor) -> tuple[float, float]:
-        """``epochs`` passes of minibatch updates: critic (eq. 5), then actor."""
+        """``epochs`` passes of minibatch updates: critic (eq. 5), then actor (the method's
+        loss, eq. 6 / 17 / 18, plus the extra terms of :mod:`learn.methods`). Adds the
+        terms' evaluations of C to the counters."""
         s32, g32 = s.float(), g.float()
         target = self.critic.to_raw(c).float()
-        route = self.route_search() if self.cfg.route_candidates > 0 else None
+        for term in self.terms:
+            self.timesteps += term.prepare(self)
         n = s.shape[0]
         mb = self.cfg.minibatch_size
         lc_sum = la_sum = 0.0
@@ -311,15 +286,16 @@ class Trainer:
                 self.opt_critic.zero_grad(set_to_none=True)
                 lc.backward()
                 self.opt_critic.step()
-                # actor step, eq. (6) / (17) / (18); the critic is held fixed
+                # actor step: the method's loss with the critic held fixed, plus the terms
                 self.critic.requires_grad_(False)
                 m = self.actor(bs, bg, generator=self.gen)
-                la = actor_loss(self.cfg.method, self.critic(bs, m), self.critic(m, bg)).mean()
-                if self.cfg.path_energy_weight > 0:
-                    la = la + self.cfg.path_energy_weight * self.path_energy().mean()
-                if route is not None:
-                    mean = self.actor.distribution(route[0], route[1])[0]
-                    la = la + self.cfg.route_weight * ((mean - route[2]) ** 2).sum(-1).mean()
+                la = self.loss(self.critic(bs, m), self.critic(m, bg)).mean()
+                for term in self.terms:
+                    out = term.step(self)
+                    self.timesteps += out.evaluations
+                    self.timesteps_derivative += out.derivative
+                    if out.loss is not None:
+                        la = la + out.loss
                 self.opt_actor.zero_grad(set_to_none=True)
                 la.backward()
                 self.opt_actor.step()
@@ -367,6 +343,8 @@ class Trainer:
         row = {
             "iteration": self.iteration,
             "timesteps": self.timesteps,
+            "timesteps_paper": self.timesteps_paper,
+            "timesteps_derivative": self.timesteps_derivative,
             "wall_seconds": round(wall, 3),
             "depth": self.depth_for(self.trees),
             "success_rate": ev.success_rate,
@@ -375,7 +353,7 @@ class Trainer:
             "critic_loss": float(lc),
             "actor_loss": float(la),
             "lr": lr,
-            "timesteps_per_second": round(self.timesteps / max(wall, 1e-9), 1),
+            "evaluations_per_second": round(self.timesteps / max(wall, 1e-9), 1),
         }
         self.history.append(row)
         write_metrics(self.run_dir / METRICS_FILE, self.history)
@@ -404,39 +382,45 @@ class Trainer:
 
         cfg = self.cfg
         self._t0 = time.perf_counter()
-        bar = tqdm(total=cfg.timesteps, initial=self.timesteps, unit="ts", unit_scale=True,
+        (self.run_dir / RESULT_FILE).unlink(missing_ok=True)  # finished again at the end
+        bar = tqdm(total=cfg.timesteps, initial=self.timesteps, unit="C", unit_scale=True,
                    disable=not self.progress, desc=f"train {cfg.env}", dynamic_ncols=True)
         lr = self._set_lr()
         if self.iteration == 0 and not self.history:
             self._log_and_checkpoint(lr)
         last_logged = self.iteration
+        stopped_by = "timesteps"
         try:
             while self.timesteps < cfg.timesteps:
                 if cfg.minutes is not None and self._wall() >= 60.0 * cfg.minutes:
+                    stopped_by = "minutes"
                     break
                 lr = self._set_lr()
+                before = self.timesteps
                 s, g, c, ts = self.collect()
-                self._losses.append(self.update(s, g, c))
                 self.timesteps += ts
+                self.timesteps_paper += ts
+                self._losses.append(self.update(s, g, c))
                 self.iteration += 1
-                bar.update(ts)
+                bar.update(self.timesteps - before)
                 if self.iteration % cfg.eval_every == 0:
                     row = self._log_and_checkpoint(lr)
                     last_logged = self.iteration
                     bar.set_postfix(success=f"{row['success_rate']:.2f}",
-                                    ts_s=f"{row['timesteps_per_second']:.0f}")
+                                    C_s=f"{row['evaluations_per_second']:.0f}")
             if self.iteration != last_logged:
                 self._log_and_checkpoint(lr)
         finally:
             bar.close()
         final = self.history[-1]
+        write_result(self.run_dir, final, self.best, stopped_by)
         return TrainResult(
             run_dir=self.run_dir,
             timesteps=self.timesteps,
             iterations=self.iteration,
             wall_seconds=float(final["wall_seconds"]),
             final={k: final[k] for k in ("success_rate", "mean_length",
-                                         "mean_max_segment_cost", "timesteps_per_second")},
+                                         "mean_max_segment_cost", "evaluations_per_second")},
             best=dict(self.best),
             history=list(self.history),
         )

@@ -9,6 +9,7 @@ import torch
 
 import finsler
 import learn
+from learn.methods import PathEnergy, RouteSearch
 from learn.policy import build_actor, generate_paths
 from learn.train import Trainer, actor_loss, paper_depth
 
@@ -104,8 +105,9 @@ def test_path_energy_of_exact_midpoints_is_squared_distance() -> None:
                                path_energy_pairs=5)
     tr = Trainer(cfg, _tmp_run_dir(), progress=False)
     _exact_midpoint_actor(tr)
+    term = PathEnergy(weight=1.0, pairs=5)
     state = tr.np_rng.bit_generator.state
-    e = tr.path_energy()
+    e = term.energy(tr)
     rng = np.random.default_rng()
     rng.bit_generator.state = state
     ends = tr.metric.domain.sample(10, rng).reshape(5, 2, 2)
@@ -115,7 +117,7 @@ def test_path_energy_of_exact_midpoints_is_squared_distance() -> None:
     with torch.no_grad():
         tr.actor.net[-1].bias[:2] = 0.05
     tr.np_rng.bit_generator.state = state
-    e2 = tr.path_energy()
+    e2 = term.energy(tr)
     assert (e2.detach().numpy() > want).all()
     e2.mean().backward()
     assert tr.actor.net[-1].bias.grad[:2].abs().min() > 0
@@ -159,12 +161,15 @@ def test_route_search_returns_only_real_improvements() -> None:
     cfg = learn.default_config("euclidean", depth=3, route_candidates=16, route_pairs=40)
     tr = Trainer(cfg, _tmp_run_dir(), progress=False)
     _exact_midpoint_actor(tr)
+    term = RouteSearch(candidates=16, pairs=40, weight=1.0)
     # straight, evenly split paths are optimal: no candidate can be 1% cheaper
-    assert tr.route_search() is None
+    assert term.prepare(tr) == 40 * 2**3 * (1 + 16)  # evaluations of C it made
+    assert term.target is None
     # a bent actor (every midpoint pushed 0.3 along y): stitched routes can win
     with torch.no_grad():
         tr.actor.net[-1].bias[1] = 0.3
-    found = tr.route_search()
+    term.prepare(tr)
+    found = term.target
     assert found is not None and 0 < found[0].shape[0] <= 40
     m = tr.metric
 
@@ -337,6 +342,58 @@ def test_cuda_request_without_cuda_is_a_clear_error() -> None:
         pytest.skip("CUDA present")
     with pytest.raises(finsler.InputError, match="CUDA is not available"):
         learn.resolve_device("cuda")
+
+
+def test_all_inclusive_count_equals_a_hand_count(tmp_path, monkeypatch) -> None:
+    """Euclidean, depth 3, collections of 1024 pairs: a tree gives 15 + 9 = 24 pairs, so
+    ceil(1024 / 24) = 43 trees = 1032 pairs = 5 minibatches of 256 (one epoch). Per
+    iteration: trees 43 * 8 = 344 evaluations of C (the paper's count); path energy
+    5 steps * 8 pairs * 8 segments = 320 (differentiated); route search
+    16 pairs * 8 * (1 + 4 candidates) = 640. The budget 3000 binds the all-inclusive count:
+    3 iterations, 3 * 1304 = 3912. Every torch evaluation of C is also counted by a spy."""
+    seen = [0]
+    real = finsler.Metric.path_costs
+
+    def spy(self, points):
+        if isinstance(points, torch.Tensor):
+            seen[0] += points.shape[0] * (points.shape[1] - 1)
+        return real(self, points)
+
+    monkeypatch.setattr(finsler.Metric, "path_costs", spy)
+    cfg = _small(timesteps=3000, epochs=1, eval_every=1, path_energy_weight=1.0,
+                 path_energy_pairs=8, route_candidates=4, route_pairs=16)
+    res = learn.train(cfg, tmp_path / "r", progress=False)
+    rows = res.history
+    assert [r["timesteps"] for r in rows] == [0, 1304, 2608, 3912]
+    assert [r["timesteps_paper"] for r in rows] == [0, 344, 688, 1032]
+    assert [r["timesteps_derivative"] for r in rows] == [0, 320, 640, 960]
+    assert seen[0] == 3912
+    assert not cfg.model_free and learn.paper_config("matsumoto").model_free
+    doc = learn.storage.read_json(tmp_path / "r" / "config.json")
+    assert doc["model_free"] is False and doc["uses_derivative_of_C"] == ["path_energy"]
+    result = learn.storage.read_json(tmp_path / "r" / "result.json")
+    assert result["timesteps"] == 3912 and result["stopped_by"] == "timesteps"
+
+
+def test_best_checkpoint_is_chosen_on_the_validation_set(tmp_path, monkeypatch) -> None:
+    """Training never touches the default evaluation set; checkpoint_best's recorded
+    success is the success of that checkpoint on the validation pairs."""
+    def forbidden(*a, **k):
+        raise AssertionError("training used the default evaluation set")
+
+    monkeypatch.setattr(finsler, "default_pairs", forbidden)
+    cfg = _small(timesteps=8_000, eval_every=1, eval_pairs=30)
+    res = learn.train(cfg, tmp_path / "r", progress=False)
+    monkeypatch.undo()
+    m = finsler.get_metric("euclidean")
+    val = finsler.validation_pairs(m, 30)
+    assert not np.allclose(val, finsler.default_pairs(m, 30))
+    best = learn.load_policy(tmp_path / "r", checkpoint="best")
+    ev = best.evaluate(val)
+    assert ev.success_rate == res.best["success_rate"]
+    assert ev.mean_max_segment_cost == pytest.approx(res.best["mean_max_segment_cost"],
+                                                     rel=1e-6)
+    assert res.best["success_rate"] == max(r["success_rate"] for r in res.history)
 
 
 def test_config_json_records_versions_and_beyond_paper_choices(tmp_path) -> None:

@@ -1,0 +1,201 @@
+"""The midpoint learner's losses and extra terms as small named objects.
+
+:class:`learn.Trainer` reads as Algorithm 1: a critic step of eq. (5), an actor step of
+the :class:`ActorLoss` chosen by ``TrainConfig.method`` (eq. 6, 17 or 18), plus a list of
+named :class:`ActorTerm` objects added to the actor's loss. Each term states whether it
+differentiates C (not model-free: the paper's method uses values of C only) and returns
+the number of evaluations of C it made, so that the trainer's ``timesteps`` count every
+evaluation whatever it is for.
+
+The paper's baselines live beside this learner, in :mod:`learn.seq` and :mod:`learn.pg`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, ClassVar
+
+import torch
+
+from finsler.errors import InputError
+from learn.tree import build_tree
+
+if TYPE_CHECKING:  # pragma: no cover
+    from learn.config import TrainConfig
+    from learn.train import Trainer
+
+__all__ = [
+    "ACTOR_LOSSES",
+    "ActorLoss",
+    "ActorTerm",
+    "PathEnergy",
+    "RouteSearch",
+    "TermOutput",
+    "actor_loss_of",
+    "actor_terms",
+    "derivative_terms",
+    "describe",
+]
+
+
+@dataclass(frozen=True)
+class ActorLoss:
+    """Per-pair actor loss from ``V(s, m)`` and ``V(m, g)`` ``(N,)`` (critic held fixed)."""
+
+    name: str
+    equation: str
+    fn: Callable[[torch.Tensor, torch.Tensor], torch.Tensor]
+
+    def __call__(self, v_first: torch.Tensor, v_second: torch.Tensor) -> torch.Tensor:
+        return self.fn(v_first, v_second)
+
+
+#: eq. (6) midpoints, eq. (17) intermediate points, eq. (18) 2:1 points.
+ACTOR_LOSSES: dict[str, ActorLoss] = {
+    "midpoint": ActorLoss("midpoint", "eq. (6)", lambda a, b: a**2 + b**2),
+    "inter": ActorLoss("inter", "eq. (17)", lambda a, b: a + b),
+    "two-to-one": ActorLoss("two-to-one", "eq. (18)", lambda a, b: a**2 + 2.0 * b**2),
+}
+
+
+@dataclass
+class TermOutput:
+    """One actor step's contribution of a term: its weighted loss and the evaluations of
+    C it made (``derivative``: how many of them were differentiated)."""
+
+    loss: torch.Tensor | None
+    evaluations: int = 0
+    derivative: int = 0
+
+
+class ActorTerm:
+    """An extra actor term: :meth:`prepare` runs once per collection, :meth:`step` once
+    per actor step; both return the evaluations of C they made."""
+
+    name: ClassVar[str] = ""
+    uses_derivative_of_C: ClassVar[bool] = False
+
+    def prepare(self, trainer: Trainer) -> int:
+        """Work done once per collection (before its updates); returns C evaluations."""
+        return 0
+
+    def step(self, trainer: Trainer) -> TermOutput:
+        raise NotImplementedError
+
+
+@dataclass
+class PathEnergy(ActorTerm):
+    """Beyond the paper: ``weight * n * sum_i C(x_i, x_i+1)**2``, the discrete energy of the
+    actor's own deterministic depth-D path between ``pairs`` fresh uniform pairs,
+    differentiated through every level of the tree with the lowered torch cost (float64).
+    Smallest for a shortest path with equal segment costs: the recursive geodesic midpoints.
+    Uses the derivative of C (``pairs * 2**D`` evaluations per actor step)."""
+
+    weight: float
+    pairs: int
+    name: ClassVar[str] = "path_energy"
+    uses_derivative_of_C: ClassVar[bool] = True
+
+    def energy(self, trainer: Trainer) -> torch.Tensor:
+        """Energies ``(pairs,)`` of the actor's paths between fresh pairs drawn from the
+        run's generator, differentiable in the actor's parameters."""
+        k, dim, depth = self.pairs, trainer.dim, trainer.depth_max
+        ends = trainer.metric.domain.sample(2 * k, trainer.np_rng).reshape(k, 2, dim)
+        e = torch.as_tensor(ends, dtype=torch.float32, device=trainer.device)
+        pts = build_tree(e[:, 0], e[:, 1], depth,
+                         lambda a, b: trainer.actor(a, b, deterministic=True)).double()
+        c = trainer.metric.path_costs(pts)
+        return (c.shape[1] * (c**2).sum(1)).float()
+
+    def step(self, trainer: Trainer) -> TermOutput:
+        n = self.pairs * 2**trainer.depth_max
+        return TermOutput(self.weight * self.energy(trainer).mean(), evaluations=n,
+                          derivative=n)
+
+
+@dataclass
+class RouteSearch(ActorTerm):
+    """Beyond the paper: per collection, for ``pairs`` fresh uniform pairs try
+    ``candidates`` uniform midpoints ``m`` and stitch the actor's deterministic
+    depth-(D-1) paths ``s -> m -> g``; where a stitched path costs at least 1% less (true
+    cost) than the actor's own, pull the actor's mean at ``(s, g)`` towards that ``m``
+    (squared distance, ``weight``) in every actor step of the collection. Values of C only:
+    ``pairs * 2**D * (1 + candidates)`` evaluations per collection."""
+
+    candidates: int
+    pairs: int
+    weight: float
+    name: ClassVar[str] = "route_search"
+    uses_derivative_of_C: ClassVar[bool] = False
+
+    def __post_init__(self) -> None:
+        self.target: tuple[torch.Tensor, torch.Tensor, torch.Tensor] | None = None
+
+    def prepare(self, trainer: Trainer) -> int:
+        k, n_c, dim, depth = self.pairs, self.candidates, trainer.dim, trainer.depth_max
+        dom, rng, dev = trainer.metric.domain, trainer.np_rng, trainer.device
+        e = torch.as_tensor(dom.sample(2 * k, rng).reshape(k, 2, dim), dtype=torch.float32,
+                            device=dev)
+        m = torch.as_tensor(dom.sample(k * n_c, rng), dtype=torch.float32, device=dev)
+        s_rep = e[:, 0].repeat_interleave(n_c, 0)
+        g_rep = e[:, 1].repeat_interleave(n_c, 0)
+
+        def mean(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+            return trainer.actor(a, b, deterministic=True)
+
+        def total(pts: torch.Tensor) -> torch.Tensor:
+            return trainer.metric.path_costs(pts.double()).sum(1)
+
+        with torch.no_grad():
+            own = total(build_tree(e[:, 0], e[:, 1], depth, mean))
+            alt = (total(build_tree(s_rep, m, depth - 1, mean))
+                   + total(build_tree(m, g_rep, depth - 1, mean))).reshape(k, n_c)
+            best, idx = alt.min(1)
+        better = best < 0.99 * own
+        self.target = None
+        if bool(better.any()):
+            m_best = m.reshape(k, n_c, dim)[torch.arange(k, device=dev), idx]
+            self.target = (e[better, 0], e[better, 1], m_best[better])
+        return k * 2**depth * (1 + n_c)
+
+    def step(self, trainer: Trainer) -> TermOutput:
+        if self.target is None:
+            return TermOutput(None)
+        s, g, m = self.target
+        mean = trainer.actor.distribution(s, g)[0]
+        return TermOutput(self.weight * ((mean - m) ** 2).sum(-1).mean())
+
+
+def actor_terms(cfg: TrainConfig) -> list[ActorTerm]:
+    """The extra actor terms a config switches on, in the order they are added."""
+    terms: list[ActorTerm] = []
+    if cfg.path_energy_weight > 0:
+        terms.append(PathEnergy(cfg.path_energy_weight, cfg.path_energy_pairs))
+    if cfg.route_candidates > 0:
+        terms.append(RouteSearch(cfg.route_candidates, cfg.route_pairs, cfg.route_weight))
+    return terms
+
+
+def actor_loss_of(method: str) -> ActorLoss:
+    """The :class:`ActorLoss` of a method name (``midpoint``, ``inter``, ``two-to-one``)."""
+    if method not in ACTOR_LOSSES:
+        raise InputError(f"unknown method {method!r}; known: {', '.join(ACTOR_LOSSES)}")
+    return ACTOR_LOSSES[method]
+
+
+def derivative_terms(cfg: TrainConfig) -> list[str]:
+    """Names of the terms of ``cfg`` that differentiate C (empty = model-free)."""
+    return [t.name for t in actor_terms(cfg) if t.uses_derivative_of_C]
+
+
+def describe(cfg: TrainConfig) -> dict[str, Any]:
+    """What ``config.json`` says about the method: loss, terms, model-free or not."""
+    loss = actor_loss_of(cfg.method)
+    uses = derivative_terms(cfg)
+    return {
+        "actor_loss": f"{loss.name} ({loss.equation})",
+        "actor_terms": [t.name for t in actor_terms(cfg)],
+        "model_free": not uses,
+        "uses_derivative_of_C": uses,
+    }
