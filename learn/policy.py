@@ -150,13 +150,17 @@ def _check_pairs(metric: finsler.Metric, pairs: Any) -> np.ndarray:
 class Policy:
     """A trained midpoint policy (deterministic means) for one metric."""
 
-    def __init__(self, actor: Actor, config: TrainConfig, source: str = "") -> None:
+    def __init__(self, actor: Actor, config: TrainConfig, source: str = "",
+                 checkpoint: str = "") -> None:
         self.actor = actor.eval()
         self.config = config
         self.metric = config.metric
         self.depth = config.max_depth
         self.eps = config.eval_eps
         self.source = source
+        self.checkpoint = checkpoint
+        """File the weights came from (``checkpoint_best.pt``, ``checkpoint_latest.pt`` or
+        ``policy.pt`` for shipped policies)."""
 
     def __repr__(self) -> str:
         return f"Policy(env={self.metric.name!r}, depth={self.depth}, source={self.source!r})"
@@ -217,8 +221,9 @@ def _shipped_dir(name: str) -> Path:
 def load_policy(run: str | Path, device: str = "cpu", checkpoint: str = "best",
                 env: str | None = None) -> Policy:
     """Load a policy from a run directory or, given an environment name, the policy
-    shipped with the package. ``checkpoint``: ``best`` (best success on the default
-    evaluation set during training; falls back to the latest) or ``latest``. With
+    shipped with the package. ``checkpoint``: ``best`` (best success on the validation
+    set during training; falls back to the latest) or ``latest``; the policy's
+    ``checkpoint`` attribute names the file actually loaded. With
     ``env``, the policy must belong to that environment.
 
     Raises :class:`InputError` for a missing directory, an unknown name or an ``env``
@@ -248,6 +253,7 @@ def load_policy(run: str | Path, device: str = "cpu", checkpoint: str = "best",
     for name in order:
         if (path / name).is_file():
             ckpt = load_checkpoint(path / name)
+            loaded = name
             break
     else:
         raise InputError(f"run directory {path} holds no checkpoint ({BEST_FILE}, "
@@ -261,7 +267,7 @@ def load_policy(run: str | Path, device: str = "cpu", checkpoint: str = "best",
         from learn.train import resolve_device
 
         actor = actor.to(resolve_device(device))
-    return Policy(actor, cfg, source=str(path))
+    return Policy(actor, cfg, source=str(path), checkpoint=loaded)
 
 
 def export_policy(run_dir: str | Path, dest: str | Path, checkpoint: str = "best") -> Path:

@@ -25,7 +25,7 @@ def run_dir(tmp_path_factory):
     res = _run("train", "--env", "euclidean", "--out", str(out), "--timesteps", "20000",
                "--quiet")
     assert res.exit_code == 0, res.output
-    assert "timesteps/s" in res.output
+    assert "evaluations of C/s" in res.output
     return out
 
 
@@ -35,7 +35,7 @@ def test_train_writes_a_complete_run_directory(run_dir) -> None:
     rows = learn.storage.read_metrics(run_dir / "metrics.csv")
     assert rows[0]["timesteps"] == 0 and rows[-1]["timesteps"] >= 20000
     for key in ("wall_seconds", "success_rate", "mean_length", "critic_loss", "actor_loss",
-                "timesteps_per_second"):
+                "evaluations_per_second"):
         assert key in rows[-1]
 
 
@@ -166,3 +166,30 @@ def test_load_policy_rejects_env_mismatch() -> None:
     assert learn.load_policy("matsumoto", env="matsumoto").metric.name == "matsumoto"
     with pytest.raises(InputError, match="does not match the run's environment matsumoto"):
         learn.load_policy("matsumoto", env="carlike")
+
+
+def test_evaluate_names_the_checkpoint_and_takes_latest(run_dir) -> None:
+    best = json.loads(_run("evaluate", "--run", str(run_dir), "--json").output)
+    latest = json.loads(_run("evaluate", "--run", str(run_dir), "--json", "--checkpoint",
+                             "latest").output)
+    assert best["checkpoint"] == "checkpoint_best.pt"
+    assert latest["checkpoint"] == "checkpoint_latest.pt"
+    want = learn.load_policy(run_dir, checkpoint="latest").evaluate()
+    assert latest["mean_length"] == pytest.approx(want.mean_length, rel=1e-12)
+    res = _run("evaluate", "--run", str(run_dir), "--checkpoint", "newest")
+    assert res.exit_code == 2 and "best or latest" in res.output
+    res = _run("evaluate", "--run", str(run_dir))
+    assert "(checkpoint_best.pt)" in res.output
+
+
+def test_model_free_flag_switches_off_the_derivative_terms(tmp_path) -> None:
+    out = tmp_path / "mf"
+    res = _run("train", "--env", "euclidean", "--out", str(out), "--timesteps", "2000",
+               "--quiet", "--model-free", "--set", "path_energy_weight=0")
+    assert res.exit_code == 0, res.output
+    doc = json.loads((out / "config.json").read_text())
+    assert doc["model_free"] is True and doc["uses_derivative_of_C"] == []
+    res = _run("train", "--env", "euclidean", "--out", str(tmp_path / "x"), "--paper",
+               "--model-free")
+    assert res.exit_code == 2 and "one of --paper, --model-free" in res.output
+    assert learn.default_config("matsumoto").model_free is False

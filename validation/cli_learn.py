@@ -30,10 +30,12 @@ def train_command(
     env: Annotated[str, typer.Option(help="Environment (metric) name, e.g. matsumoto.")],
     out: Annotated[Path, typer.Option(help="Run directory to create (or resume).")],
     method: Annotated[str | None, typer.Option(
-        help="Actor loss: midpoint (eq. 6, default), inter (eq. 17) or two-to-one (eq. 18).")
+        help="midpoint (eq. 6, default), inter (eq. 17), two-to-one (eq. 18), or the "
+             "paper's baselines seq (PPO, eqs. 14/57) and pg (policy gradient, eqs. 15/16).")
     ] = None,
     timesteps: Annotated[int | None, typer.Option(
-        help="Budget of evaluations of C (default: the environment's default).")] = None,
+        help="Budget of evaluations of C, all-inclusive: every evaluation the learner makes "
+             "(default: the environment's default).")] = None,
     minutes: Annotated[float | None, typer.Option(
         help="Wall-clock limit in minutes (stops at whichever limit comes first).")] = None,
     seed: Annotated[int | None, typer.Option(help="Random seed (default 0).")] = None,
@@ -43,25 +45,38 @@ def train_command(
     paper: Annotated[bool, typer.Option(
         "--paper", help="Use the paper's appendix B.1 settings instead of the defaults.")
     ] = False,
+    model_free: Annotated[bool, typer.Option(
+        "--model-free", help="Switch off every term that differentiates C (values of C "
+                             "only, like the paper).")] = False,
     quiet: Annotated[bool, typer.Option("--quiet", help="No progress bar.")] = False,
     settings: Annotated[list[str] | None, typer.Option(
         "--set", metavar="FIELD=VALUE",
-        help="Override any field of learn.TrainConfig (repeatable; VALUE is JSON or a "
-             "bare string), e.g. --set path_energy_weight=0 --set hidden=[128,128].")
+        help="Override any field of the method's config (learn.TrainConfig, or SeqConfig / "
+             "PGConfig for seq / pg; repeatable; VALUE is JSON or a bare string), e.g. "
+             "--set path_energy_weight=0 --set hidden=[128,128].")
     ] = None,
 ) -> None:
-    """Train a midpoint policy (Algorithm 1) into a run directory.
+    """Train a midpoint policy (Algorithm 1), or one of the paper's baselines, into a run
+    directory (config.json, metrics.csv, checkpoints, result.json when finished).
 
-    Defaults per environment (learn.default_config; the settings of the shipped policies):
-    all at full depth, lr 1e-3 cosine-decayed to 5%, log1p critic targets, inputs scaled
-    to [-1, 1], residual actor mean, collections of 16384 pairs, minibatches of 1024.
-    matsumoto: 6e7 timesteps, one pass per collection, fused Adam and the path-energy
-    actor term (weight 1, 16 fresh pairs per actor step); carlike: the same with MLPs
-    128-128 and 3e7 timesteps; panda-pole: 1e7 timesteps, MLPs 128-128, symmetric critic,
-    3 epochs, no path energy. config.json in the run directory lists every choice beyond
-    the paper; --set FIELD=VALUE overrides any of them.
+    Counting: --timesteps and the metrics' `timesteps` column count EVERY evaluation of C
+    made in training (all-inclusive); `timesteps_paper` is the paper's count (trees only)
+    and `timesteps_derivative` the evaluations whose derivative was used. Checkpoints are
+    selected on a validation pair set, never on the default evaluation set.
+
+    MODEL-FREE OR NOT: the paper's method uses values of C only. The Matsumoto and
+    car-like defaults add the path-energy actor term, which DIFFERENTIATES C (model-based);
+    --model-free (or --paper) switches it off; config.json says which ("model_free").
+
+    Defaults per environment (learn.default_config): full depth, lr 1e-3 cosine-decayed to
+    5%, log1p critic targets, inputs scaled to [-1, 1], residual actor mean, collections
+    of 16384 pairs, minibatches of 1024. matsumoto: 2.5e8 evaluations of C, one pass per
+    collection, fused Adam, path energy (weight 1, 16 pairs per actor step; 4.2x the
+    trees' evaluations); carlike: the same with MLPs 128-128 and 4e8 (13.4x); panda-pole:
+    1e7, MLPs 128-128, symmetric critic, 3 epochs, model-free.
     """
     import learn
+    from learn import runs
 
     try:
         if env not in finsler.list_metrics():
@@ -72,41 +87,67 @@ def train_command(
         if minutes is not None and not minutes > 0:
             raise InputError(f"--minutes must be positive, got {minutes}")
         learn.resolve_device(device)
-        given: dict[str, object] = {"method": method, "seed": seed, "timesteps": timesteps}
-        over = {k: v for k, v in given.items() if v is not None}
-        over.update(parse_settings(settings or []))
         if resume:
             # the run's saved settings; explicitly given options must agree with them
-            cfg = learn.read_run_config(out).replace(minutes=minutes, device=device)
+            cfg = runs.load_run_config(out)
             if cfg.env != env:
                 raise InputError(f"cannot resume: run {out} trains {cfg.env!r}, not {env!r}")
-            cfg = cfg.replace(**over)
+            given = {"method": method, "seed": seed, "timesteps": timesteps}
+            over = {k: v for k, v in given.items() if v is not None}
+            over.update(parse_settings(settings or [], type(cfg)))
+            cfg = cfg.replace(minutes=minutes, device=device, **over)
         else:
-            base = learn.paper_config if paper else learn.default_config
-            cfg = base(env, minutes=minutes, device=device, **over)
-        result = learn.train(cfg, out, resume=resume, progress=not quiet)
+            cfg = _new_config(env, method, paper, model_free, seed, timesteps, minutes,
+                              device, settings or [])
+        result = runs.train_run(cfg, out, resume=resume, progress=not quiet)
     except InputError as err:
         _fail(str(err))
         return
     f = result.final
     typer.echo(
-        f"{env}: {result.timesteps} timesteps in {result.wall_seconds:.1f} s "
-        f"({f['timesteps_per_second']:.0f} timesteps/s); success {f['success_rate']:.2%} "
-        f"(best {result.best['success_rate']:.2%}), mean length {f['mean_length']:.4f}; "
-        f"run directory {result.run_dir}"
+        f"{env}: {result.timesteps} evaluations of C (all-inclusive) in "
+        f"{result.wall_seconds:.1f} s ({f['evaluations_per_second']:.0f} evaluations of C/s); "
+        f"validation success {f['success_rate']:.2%} (best {result.best['success_rate']:.2%}),"
+        f" mean length {f['mean_length']:.4f}; run directory {result.run_dir}"
     )
 
 
+def _new_config(env: str, method: str | None, paper: bool, model_free: bool,
+                seed: int | None, timesteps: int | None, minutes: float | None,
+                device: str, settings: list[str]) -> object:
+    """The config of a new run from the command-line options."""
+    from learn import runs
 
-def parse_settings(items: list[str]) -> dict[str, object]:
-    """``["field=value", ...]`` -> overrides of :class:`learn.TrainConfig` fields (values
-    parsed as JSON, else kept as strings); unknown or run-control fields are an error."""
+    method = method or "midpoint"
+    if method in ("seq", "pg"):
+        if paper or model_free:
+            raise InputError(f"--paper and --model-free apply to the midpoint learner, not "
+                             f"--method {method} (its defaults are the paper's, model-free)")
+        variant = method
+    elif paper and model_free:
+        raise InputError("--paper already is model-free; give one of --paper, --model-free")
+    elif paper:
+        variant = "paper"
+    else:
+        variant = "midpoint-free" if model_free else "midpoint"
+    cls = type(runs.make_config(env, variant))
+    over = parse_settings(settings, cls)
+    if variant in ("paper", "midpoint", "midpoint-free"):
+        over.setdefault("method", method)
+    return runs.make_config(env, variant, seed=0 if seed is None else seed,
+                            timesteps=timesteps, minutes=minutes, device=device, **over)
+
+
+def parse_settings(items: list[str], cls: type | None = None) -> dict[str, object]:
+    """``["field=value", ...]`` -> overrides of fields of the config class ``cls``
+    (default :class:`learn.TrainConfig`; values parsed as JSON, else kept as strings);
+    unknown or run-control fields are an error."""
     import dataclasses
     import difflib
 
     import learn
 
-    names = [f.name for f in dataclasses.fields(learn.TrainConfig)]
+    names = [f.name for f in dataclasses.fields(cls or learn.TrainConfig)]
     reserved = {"env": "--env", "device": "--device", "minutes": "--minutes"}
     out: dict[str, object] = {}
     for item in items:
@@ -140,18 +181,28 @@ def evaluate_command(
     eps: Annotated[float | None, typer.Option(help="Success threshold (default: task's).")
                    ] = None,
     depth: Annotated[int | None, typer.Option(help="Tree depth D (default: task's).")] = None,
+    checkpoint: Annotated[str, typer.Option(
+        help="best (selected on the validation set during training) or latest (the last "
+             "one, no selection).")] = "best",
     as_json: Annotated[bool, typer.Option("--json", help="Print JSON.")] = False,
 ) -> None:
-    """Evaluate a trained policy (section 5.1): success rate, mean length, max segment cost."""
+    """Evaluate a trained policy (section 5.1): success rate, mean length, max segment cost.
+
+    The default pairs are the environment's default evaluation set, which training never
+    sees (checkpoints are selected on a separate validation set). The output names the
+    checkpoint file used."""
     import learn
+    from learn.runs import load_any_policy
 
     try:
         if run is None and env is None:
             raise InputError("give --run DIR or --env NAME")
+        if checkpoint not in ("best", "latest"):
+            raise InputError(f"--checkpoint must be best or latest, got {checkpoint!r}")
         if run is not None:
             if not run.is_dir():
                 raise InputError(f"run directory {run} does not exist")
-            policy = learn.load_policy(run, env=env)
+            policy = load_any_policy(run, checkpoint=checkpoint, env=env)
         else:
             if env not in finsler.list_metrics():
                 raise finsler.UnknownMetricError(
@@ -160,7 +211,7 @@ def evaluate_command(
                 raise InputError(f"no shipped policy for {env!r}; shipped: "
                                  f"{', '.join(learn.shipped_policies())}; train one with "
                                  "`geodesics train` and pass --run")
-            policy = learn.load_policy(env)
+            policy = learn.load_policy(env, checkpoint=checkpoint)
         if eps is not None and not (np.isfinite(eps) and eps > 0):
             raise InputError(f"--eps must be positive and finite, got {eps}")
         if depth is not None and depth < 0:
@@ -170,11 +221,12 @@ def evaluate_command(
     except InputError as err:
         _fail(str(err))
         return
-    out = {"env": policy.metric.name, "source": policy.source, **res.to_dict()}
+    out = {"env": policy.metric.name, "source": policy.source,
+           "checkpoint": policy.checkpoint, **res.to_dict()}
     if as_json:
         typer.echo(json.dumps(out, indent=2))
         return
-    typer.echo(f"policy      {policy.source}")
+    typer.echo(f"policy      {policy.source} ({policy.checkpoint})")
     typer.echo(f"environment {policy.metric.name}  depth {res.depth}  eps {res.eps:g}  "
                f"pairs {len(res.success)}")
     typer.echo(f"success     {res.success_rate:.2%}")

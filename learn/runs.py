@@ -1,0 +1,156 @@
+"""One entry point for every learning method: named variants, training, status, loading.
+
+The midpoint learner (:mod:`learn.train`) and the paper's baselines (:mod:`learn.seq`,
+:mod:`learn.pg`) write run directories of the same layout (``config.json``,
+``metrics.csv``, ``checkpoint_latest.pt``, ``checkpoint_best.pt`` and, once finished,
+``result.json``). This module picks the right one from a config's ``method`` so that the
+CLI, sweeps and reports never branch on it themselves.
+
+Variants (:data:`VARIANTS`) are the configurations compared in the paper's experiment:
+
+* ``midpoint``: the toolkit's defaults (:func:`learn.default_config`); for some
+  environments they differentiate C (the path-energy term): not model-free;
+* ``midpoint-free``: the same with every term that uses the derivative of C switched off
+  (values of C only, like the paper's method);
+* ``paper``: appendix B.1's settings (:func:`learn.paper_config`);
+* ``inter`` / ``two-to-one``: ``midpoint-free`` with the actor loss of eq. (17) / (18);
+* ``seq``: goal-conditioned PPO (section 5.2, appendix B.2);
+* ``pg``: per-depth policy gradient (section 5.2, appendix B.3).
+"""
+
+from __future__ import annotations
+
+import importlib
+from pathlib import Path
+from typing import Any
+
+from finsler.errors import InputError
+from learn.storage import CONFIG_FILE, RESULT_FILE, CorruptFileError, read_json
+
+__all__ = [
+    "VARIANTS",
+    "load_any_policy",
+    "load_run_config",
+    "make_config",
+    "run_one",
+    "run_status",
+    "train_run",
+]
+
+VARIANTS: dict[str, str] = {
+    "midpoint": "the toolkit's defaults (may differentiate C: see config.json model_free)",
+    "midpoint-free": "the defaults with every term that differentiates C off (values only)",
+    "paper": "appendix B.1's settings (values of C only)",
+    "inter": "midpoint-free with the actor loss of eq. (17)",
+    "two-to-one": "midpoint-free with the actor loss of eq. (18)",
+    "seq": "goal-conditioned PPO on a gymnasium environment (eqs. 14, 57)",
+    "pg": "per-depth policies trained by policy gradient (eqs. 15, 16)",
+}
+
+# baseline method -> (module, config class, default-config factory, trainer, loader)
+_BASELINES = {
+    "seq": ("learn.seq", "SeqConfig", "default_seq_config", "train_seq", "load_seq_policy"),
+    "pg": ("learn.pg", "PGConfig", "default_pg_config", "train_pg", "load_pg_policy"),
+}
+
+
+def _baseline(method: str, what: int) -> Any:
+    entry = _BASELINES[method]
+    return getattr(importlib.import_module(entry[0]), entry[what])
+
+
+def _backend(method: str) -> tuple[Any, Any, Any]:
+    """``(config class, trainer, policy loader)`` of a method."""
+    if method in _BASELINES:
+        return _baseline(method, 1), _baseline(method, 3), _baseline(method, 4)
+    from learn.config import METHODS, TrainConfig
+    from learn.policy import load_policy
+    from learn.train import train
+
+    if method not in METHODS:
+        raise InputError(f"unknown method {method!r}; known: "
+                         f"{', '.join((*METHODS, *_BASELINES))}")
+    return TrainConfig, train, load_policy
+
+
+def make_config(env: str, variant: str, seed: int = 0, timesteps: int | None = None,
+                minutes: float | None = None, device: str = "cpu",
+                **overrides: Any) -> Any:
+    """The config of ``variant`` (a key of :data:`VARIANTS`) for ``env``; ``timesteps`` and
+    ``minutes`` bound the run (all-inclusive evaluations of C / wall minutes)."""
+    from learn.config import default_config, model_free_overrides, paper_config
+
+    if variant not in VARIANTS:
+        raise InputError(f"unknown variant {variant!r}; known: {', '.join(VARIANTS)}")
+    common: dict[str, Any] = {"seed": seed, "minutes": minutes, "device": device}
+    if timesteps is not None:
+        common["timesteps"] = timesteps
+    common.update(overrides)
+    if variant == "midpoint":
+        return default_config(env, **common)
+    if variant == "paper":
+        return paper_config(env, **common)
+    if variant in ("midpoint-free", "inter", "two-to-one"):
+        method = "midpoint" if variant == "midpoint-free" else variant
+        return default_config(env, **{**model_free_overrides(), "method": method, **common})
+    return _baseline(variant, 2)(env, **common)
+
+
+def load_run_config(run_dir: str | Path) -> Any:
+    """The config saved in a run directory, as the method's config class."""
+    doc = read_json(Path(run_dir) / CONFIG_FILE)
+    cfg = doc.get("config")
+    if not isinstance(cfg, dict):
+        raise CorruptFileError(f"{Path(run_dir) / CONFIG_FILE} has no 'config' section")
+    cls, _, _ = _backend(str(cfg.get("method", "midpoint")))
+    return cls.from_dict(cfg)
+
+
+def train_run(cfg: Any, out: str | Path, resume: bool = False, progress: bool = True) -> Any:
+    """Train ``cfg`` (any method's config) into run directory ``out``."""
+    _, trainer, _ = _backend(cfg.method)
+    return trainer(cfg, out, resume=resume, progress=progress)
+
+
+def load_any_policy(run: str | Path, checkpoint: str = "best", device: str = "cpu",
+                    env: str | None = None) -> Any:
+    """Load the policy of any method from a run directory (or a shipped policy's name)."""
+    path = Path(run)
+    method = "midpoint"
+    if path.is_dir() and (path / CONFIG_FILE).is_file():
+        method = str(read_json(path / CONFIG_FILE).get("config", {}).get("method", "midpoint"))
+    _, _, loader = _backend(method)
+    if method in _BASELINES:
+        pol = loader(path, checkpoint=checkpoint, device=device)
+        if env is not None and env != pol.metric.name:
+            raise InputError(f"--env {env} does not match the run's environment "
+                             f"{pol.metric.name}")
+        return pol
+    return loader(run, device=device, checkpoint=checkpoint, env=env)
+
+
+def run_status(out: str | Path) -> str:
+    """``finished`` (result.json present), ``unfinished`` (config.json, no result) or
+    ``absent`` (no run there yet)."""
+    p = Path(out)
+    if (p / RESULT_FILE).is_file():
+        return "finished"
+    if (p / CONFIG_FILE).is_file():
+        return "unfinished"
+    return "absent"
+
+
+def run_one(env: str, variant: str, seed: int, out: str | Path, timesteps: int | None = None,
+            minutes: float | None = None, progress: bool = False,
+            **overrides: Any) -> dict[str, Any]:
+    """Make sure the run ``(env, variant, seed)`` in ``out`` is finished: skip it if it is,
+    resume it if it started, start it otherwise. Returns ``result.json``'s content plus
+    ``"action"``: ``skipped``, ``resumed`` or ``started``."""
+    status = run_status(out)
+    if status == "finished":
+        return {**read_json(Path(out) / RESULT_FILE), "action": "skipped"}
+    cfg = make_config(env, variant, seed=seed, timesteps=timesteps, minutes=minutes,
+                      **overrides)
+    train_run(cfg, out, resume=status == "unfinished", progress=progress)
+    return {**read_json(Path(out) / RESULT_FILE),
+            "action": "resumed" if status == "unfinished" else "started"}
