@@ -20,18 +20,31 @@ Variants (:data:`VARIANTS`) are the configurations compared in the paper's exper
 
 from __future__ import annotations
 
+import contextlib
 import importlib
+import os
+import shutil
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 from finsler.errors import InputError
-from learn.storage import CONFIG_FILE, RESULT_FILE, CorruptFileError, read_json
+from learn.storage import (
+    BEST_FILE,
+    CONFIG_FILE,
+    LATEST_FILE,
+    METRICS_FILE,
+    RESULT_FILE,
+    CorruptFileError,
+    read_json,
+)
 
 __all__ = [
     "VARIANTS",
     "load_any_policy",
     "load_run_config",
     "make_config",
+    "run_lock",
     "run_one",
     "run_status",
     "train_run",
@@ -130,14 +143,73 @@ def load_any_policy(run: str | Path, checkpoint: str = "best", device: str = "cp
 
 
 def run_status(out: str | Path) -> str:
-    """``finished`` (result.json present), ``unfinished`` (config.json, no result) or
-    ``absent`` (no run there yet)."""
+    """``finished`` (result.json present), ``unfinished`` (a resumable checkpoint, no
+    result) or ``absent`` (nothing to resume: no run there, or one that stopped before
+    its first checkpoint)."""
     p = Path(out)
     if (p / RESULT_FILE).is_file():
         return "finished"
-    if (p / CONFIG_FILE).is_file():
+    if (p / CONFIG_FILE).is_file() and (p / LATEST_FILE).is_file():
         return "unfinished"
     return "absent"
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+@contextlib.contextmanager
+def run_lock(out: str | Path) -> Iterator[None]:
+    """Hold ``.<name>.lock`` beside run directory ``out`` while training it, so that two
+    sweeps (or a sweep and a user) never train the same run at once on this machine. A
+    lock left by a process that no longer exists is taken over."""
+    p = Path(out)
+    p.parent.mkdir(parents=True, exist_ok=True)
+    lock = p.parent / f".{p.name}.lock"
+    for _ in range(2):
+        try:
+            fd = os.open(lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
+        except FileExistsError:
+            try:
+                pid = int(lock.read_text().strip() or "0")
+            except (OSError, ValueError):
+                pid = 0
+            if pid and _alive(pid):
+                raise InputError(f"run {p} is being trained by process {pid} (lock {lock})")\
+                    from None
+            lock.unlink(missing_ok=True)
+            continue
+        with os.fdopen(fd, "w") as f:
+            f.write(str(os.getpid()))
+        break
+    else:  # pragma: no cover - a third process raced us twice
+        raise InputError(f"could not lock run {p} ({lock})")
+    try:
+        yield
+    finally:
+        lock.unlink(missing_ok=True)
+
+
+def _clear_unstarted(out: Path) -> None:
+    """Remove what a run that stopped before its first checkpoint left (config, metrics,
+    temporary files); anything else in the directory is not ours: refuse."""
+    ours = {CONFIG_FILE, METRICS_FILE, BEST_FILE}
+    files = list(out.iterdir())
+    foreign = [f.name for f in files if f.name not in ours and not f.name.startswith(".")]
+    if foreign:
+        raise InputError(f"{out} holds files that are not a run's ({', '.join(foreign)}); "
+                         "choose another output directory")
+    for f in files:
+        if f.is_dir():
+            shutil.rmtree(f)
+        else:
+            f.unlink()
 
 
 def run_one(env: str, variant: str, seed: int, out: str | Path, timesteps: int | None = None,
@@ -146,11 +218,14 @@ def run_one(env: str, variant: str, seed: int, out: str | Path, timesteps: int |
     """Make sure the run ``(env, variant, seed)`` in ``out`` is finished: skip it if it is,
     resume it if it started, start it otherwise. Returns ``result.json``'s content plus
     ``"action"``: ``skipped``, ``resumed`` or ``started``."""
-    status = run_status(out)
-    if status == "finished":
-        return {**read_json(Path(out) / RESULT_FILE), "action": "skipped"}
     cfg = make_config(env, variant, seed=seed, timesteps=timesteps, minutes=minutes,
                       **overrides)
-    train_run(cfg, out, resume=status == "unfinished", progress=progress)
-    return {**read_json(Path(out) / RESULT_FILE),
-            "action": "resumed" if status == "unfinished" else "started"}
+    with run_lock(out):
+        status = run_status(out)
+        if status == "finished":
+            return {**read_json(Path(out) / RESULT_FILE), "action": "skipped"}
+        if status == "absent" and Path(out).is_dir():
+            _clear_unstarted(Path(out))
+        train_run(cfg, out, resume=status == "unfinished", progress=progress)
+        return {**read_json(Path(out) / RESULT_FILE),
+                "action": "resumed" if status == "unfinished" else "started"}
