@@ -1,0 +1,908 @@
+"""The paper's policy-gradient baseline "PG" (section 5.2, eqs. (15)-(16), appendix B.3).
+
+Per-depth stochastic policies ``pi_1 .. pi_Dmax`` (:class:`DepthPolicy`, MLPs 64-64 tanh on
+``(s, g)``): ``pi_D`` predicts the midpoint of a depth-``D`` tree's endpoints, the lower
+policies ``pi_{D-1} .. pi_1`` fill the halves with their means. Training goes in ascending
+depth; while ``pi_D`` is trained (only its parameters change), each **cycle**
+
+1. samples ``pairs_per_cycle`` (30) start-goal pairs uniformly on the domain and
+   ``samples_per_pair`` (10) midpoints per pair from ``pi_D`` (projected into the domain),
+   completes each path deterministically and evaluates its ``2**D`` segment costs C in
+   float64 with the metric's lowered torch program (``30 * 10 * 2**D`` evaluations: the
+   paper's count, appendix B.3);
+2. scores each path by ``c_tau`` of eq. (15), the sum of the squared costs of its two halves
+   (:func:`c_tau`), and subtracts the baseline ``b(p_0, p_{2^D})`` of eq. (16), the mean of
+   the pair's 10 samples (:func:`pair_baseline`);
+3. takes ``epochs`` (1) Adam steps (lr 5e-3) on the PPO-style clipped surrogate with an
+   entropy bonus (:func:`pg_loss`: clip 0.2, entropy coefficient 1).
+
+``pi_1`` is trained for ``cycles_first`` (1000) cycles, every other ``pi_D`` for
+``cycles_other`` (538; Panda: 1077 for every level), so the default budget is the paper's
+total: 20,613,600 evaluations of C for Matsumoto, 82,591,200 for car-like, 20,032,200 for
+Panda. A budget larger than the schedule keeps training ``pi_Dmax``; a smaller one stops
+mid-schedule.
+
+Beyond the paper's text, as in the authors' SGT-PG code (``scripts/SGT_PG`` of
+omron-sinicx/midpoint_learning, read for reference): ``pi_D`` starts from ``pi_{D-1}``'s
+weights (``init_from_lower``) and, when its level ends, ``pi_D`` is reset to its best
+state of the level on the validation set (``restore_level_best``). Options reproduce two
+more details of that code (both off by default, the paper's text is followed):
+``objective="sum"`` (its labels are the plain path length, not eq. 15) and
+``surrogate="sgt-pg-code"`` (its clipped ratio is the constant ``1 + clip``), and
+``swap_augment`` (it also trains on every pair reversed with the same label).
+
+Accounting: PG uses values of C only (model-free); every evaluation of C made during
+training is in a collected path, so ``timesteps`` (all-inclusive) equals
+``timesteps_paper``; ``timesteps_derivative`` is 0. Validation evaluations are not counted.
+
+Logged ``success_rate`` / ``mean_length`` / ``mean_max_segment_cost`` are measured, as the
+paper does, at the depth ``D`` of the policy being trained (``2**D`` segments); the
+``*_task_depth`` columns measure the same policies at the task's depth ``Dmax`` so the
+curves compare with the other methods. ``checkpoint_best`` is chosen on the task depth.
+"""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+import json
+import math
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+import finsler
+from finsler.errors import InputError
+from learn.config import package_versions
+from learn.networks import mlp
+from learn.policy import EvalResult, _check_pairs, evaluate_paths
+from learn.storage import (
+    BEST_FILE,
+    CONFIG_FILE,
+    LATEST_FILE,
+    METRICS_FILE,
+    RESULT_FILE,
+    CorruptFileError,
+    atomic_write_text,
+    load_checkpoint,
+    read_json,
+    read_metrics,
+    save_checkpoint,
+    write_metrics,
+    write_result,
+)
+from learn.train import TrainResult, resolve_device
+from learn.tree import build_tree
+
+__all__ = [
+    "DepthPolicy",
+    "PGConfig",
+    "PGPolicy",
+    "PGTrainer",
+    "c_tau",
+    "cycle_depth",
+    "default_pg_config",
+    "gaussian_entropy",
+    "gaussian_log_prob",
+    "generate_pg_paths",
+    "load_pg_policy",
+    "pair_baseline",
+    "pg_loss",
+    "sample_training_paths",
+    "schedule_total",
+    "train_pg",
+]
+
+#: (cycles of pi_1, cycles of every other pi_D) per environment (appendix B.3).
+_CYCLES: dict[str, tuple[int, int]] = {"panda-pole": (1077, 1077)}
+_DEFAULT_CYCLES = (1000, 538)
+_OBJECTIVES = ("halves-squared", "sum")
+_SURROGATES = ("ppo", "sgt-pg-code")
+_ACTIVATIONS = ("tanh", "relu")
+#: Config fields that may change when a run is resumed (run control, not the run itself).
+_FREE_ON_RESUME = ("minutes", "device", "timesteps")
+_WALL_COLUMNS = ("wall_seconds", "evaluations_per_second", "cycles_per_second")
+
+
+# ----------------------------------------------------------------------------------------
+# Configuration
+# ----------------------------------------------------------------------------------------
+@dataclass
+class PGConfig:
+    """Every setting of one PG training run (saved as ``config.json``)."""
+
+    env: str = "matsumoto"
+    """Registered metric name (``finsler.list_metrics()``)."""
+    method: str = "pg"
+    """Always ``pg``."""
+    seed: int = 0
+    """Seed of the run's numpy and torch generators and of the network initialisation."""
+    timesteps: int | None = None
+    """Budget of evaluations of C (all-inclusive; here equal to the paper's count). None =
+    the schedule's total (:func:`schedule_total`, the paper's total for the environment)."""
+    minutes: float | None = None
+    """Optional wall-clock limit (cumulative across resumes); whichever limit comes first."""
+    device: str = "cpu"
+    """``cpu`` or ``cuda``."""
+    threads: int = 1
+    """torch intra-op threads."""
+    depth: int | None = None
+    """Number of policies D_max; None = the task's depth (``metric.task.depth``)."""
+    eps: float | None = None
+    """Success threshold of the logged evaluations; None = the task's."""
+    hidden: tuple[int, ...] = (64, 64)
+    """Hidden layer sizes of every policy (paper: 64, 64)."""
+    activation: str = "tanh"
+    """``tanh`` (paper) or ``relu``."""
+    normalize_inputs: bool = False
+    """Beyond the paper: scale (s, g) to [-1, 1] by the domain's bounds before the MLP."""
+    base_std: float = 0.05
+    """Base standard deviation: std_i = Softplus(sigma_i) + (base_std + Softplus(c_i)) |s - g|."""
+    init_c: float = 0.0
+    """Initial value of the learnable c_i of the standard deviation."""
+    lr: float = 5e-3
+    """Adam learning rate (paper: 5e-3)."""
+    pairs_per_cycle: int = 30
+    """Start-goal pairs sampled per cycle (paper: 30)."""
+    samples_per_pair: int = 10
+    """Midpoints sampled from pi_D per pair (paper: 10); at least 2 (the baseline is their
+    mean)."""
+    clip: float = 0.2
+    """PPO clipping parameter (paper: 0.2)."""
+    entropy_coef: float = 1.0
+    """Entropy coefficient (paper: 1)."""
+    epochs: int = 1
+    """Full-batch gradient steps per cycle (paper: 1)."""
+    cycles_first: int | None = None
+    """Cycles of pi_1; None = 1000 (Panda: 1077)."""
+    cycles_other: int | None = None
+    """Cycles of each pi_D, D >= 2; None = 538 (Panda: 1077). pi_Dmax keeps training if the
+    budget is larger than the schedule."""
+    objective: str = "halves-squared"
+    """``halves-squared``: c_tau of eq. (15); ``sum``: the path length (the labels of the
+    authors' SGT-PG code and of the original SGT-PG)."""
+    surrogate: str = "ppo"
+    """``ppo``: max(r A, clip(r, 1-clip, 1+clip) A); ``sgt-pg-code``: max(r A, (1+clip) A),
+    what the authors' code computes."""
+    init_from_lower: bool = True
+    """Start pi_D from pi_{D-1}'s weights (the authors' code: init_from_lower_level)."""
+    restore_level_best: bool = True
+    """When pi_D's level ends, reset pi_D to its best state of the level on the validation
+    set at depth D (success, then lower mean max segment cost), as the authors' code restores
+    its best model at the end of each level."""
+    swap_augment: bool = False
+    """Also train on every pair reversed (g, s) with the same midpoint and advantage (the
+    authors' code does; questionable for non-reversible metrics)."""
+    eval_every: int = 10
+    """Cycles between evaluations on the validation set (each also saves checkpoint_latest);
+    every level's last cycle is also evaluated."""
+    eval_pairs: int = 100
+    """Size of the validation set (``finsler.validation_pairs``)."""
+
+    def __post_init__(self) -> None:
+        self._check_types()
+        self.hidden = tuple(int(h) for h in self.hidden)
+        self.validate()
+        first, other = _CYCLES.get(self.env, _DEFAULT_CYCLES)
+        if self.cycles_first is None:
+            self.cycles_first = first
+        if self.cycles_other is None:
+            self.cycles_other = other
+        if self.timesteps is None:
+            self.timesteps = schedule_total(self)
+
+    def _check_types(self) -> None:
+        kinds = {"str": (str,), "int": (int,), "float": (int, float), "bool": (bool,)}
+        for f in dataclasses.fields(self):
+            v = getattr(self, f.name)
+            ann = str(f.type)
+            if ann.endswith(" | None"):
+                if v is None:
+                    continue
+                ann = ann[: -len(" | None")]
+            if ann == "tuple[int, ...]":
+                ok = isinstance(v, (tuple, list)) and all(
+                    isinstance(h, int) and not isinstance(h, bool) for h in v)
+            else:
+                ok = isinstance(v, kinds[ann]) and (ann == "bool" or not isinstance(v, bool))
+            if not ok:
+                raise InputError(f"PG config field {f.name} must be {ann}, got {v!r}")
+
+    def validate(self) -> None:
+        """Raise :class:`InputError` naming the first impossible field."""
+        if self.env not in finsler.list_metrics():
+            raise finsler.UnknownMetricError(
+                f"unknown environment {self.env!r}; known: {', '.join(finsler.list_metrics())}")
+        if self.method != "pg":
+            raise InputError(f"method must be 'pg' for a PGConfig, got {self.method!r}")
+        _choice("activation", self.activation, _ACTIVATIONS)
+        _choice("objective", self.objective, _OBJECTIVES)
+        _choice("surrogate", self.surrogate, _SURROGATES)
+        if self.device not in ("cpu", "cuda") and not self.device.startswith("cuda:"):
+            raise InputError(f"device must be 'cpu' or 'cuda', got {self.device!r}")
+        if self.seed < 0:
+            raise InputError(f"seed must be a non-negative integer, got {self.seed!r}")
+        for name in ("threads", "pairs_per_cycle", "epochs", "eval_every", "eval_pairs",
+                     "timesteps", "cycles_first", "cycles_other", "depth"):
+            v = getattr(self, name)
+            if v is not None and v < 1:
+                raise InputError(f"{name} must be a positive integer, got {v!r}")
+        if self.samples_per_pair < 2:
+            raise InputError("samples_per_pair must be at least 2 (the baseline is the mean "
+                             f"of the pair's samples), got {self.samples_per_pair!r}")
+        if not self.hidden or any(h < 1 for h in self.hidden):
+            raise InputError(f"hidden sizes must be positive, got {self.hidden!r}")
+        _real("lr", self.lr, 0.0, 1.0)
+        _real("clip", self.clip, 0.0, 1.0)
+        _real("base_std", self.base_std, 0.0, math.inf)
+        if not (0.0 <= self.entropy_coef < math.inf):
+            raise InputError(f"entropy_coef must be finite and >= 0, got {self.entropy_coef!r}")
+        if not math.isfinite(self.init_c):
+            raise InputError(f"init_c must be finite, got {self.init_c!r}")
+        if self.minutes is not None:
+            _real("minutes", self.minutes, 0.0, math.inf)
+        if self.eps is not None:
+            _real("eps", self.eps, 0.0, math.inf)
+
+    # ------------------------------------------------------------------------------------
+    @property
+    def metric(self) -> finsler.Metric:
+        return finsler.get_metric(self.env)
+
+    @property
+    def max_depth(self) -> int:
+        return int(self.depth if self.depth is not None else self.metric.task.depth)
+
+    @property
+    def eval_eps(self) -> float:
+        return float(self.eps if self.eps is not None else self.metric.task.eps)
+
+    @property
+    def model_free(self) -> bool:
+        """Always True: PG uses values of C only."""
+        return True
+
+    def cycle_evaluations(self, depth: int) -> int:
+        """Evaluations of C in one cycle at ``depth``: pairs * samples * 2**depth."""
+        return self.pairs_per_cycle * self.samples_per_pair * 2**depth
+
+    def to_dict(self) -> dict[str, Any]:
+        d = dataclasses.asdict(self)
+        d["hidden"] = list(self.hidden)
+        return d
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> PGConfig:
+        """Build from a dict; unknown keys are an :class:`InputError` naming them."""
+        names = {f.name for f in dataclasses.fields(cls)}
+        unknown = sorted(set(d) - names)
+        if unknown:
+            raise InputError(f"unknown PG config field(s): {', '.join(unknown)}")
+        return cls(**d)
+
+    def replace(self, **changes: Any) -> PGConfig:
+        return dataclasses.replace(self, **changes)
+
+
+def _choice(name: str, value: str, allowed: tuple[str, ...]) -> None:
+    if value not in allowed:
+        raise InputError(f"{name} must be one of {', '.join(allowed)}; got {value!r}")
+
+
+def _real(name: str, value: float, lo: float, hi: float) -> None:
+    """``lo < value < hi`` (open interval; hi may be inf)."""
+    if not (lo < value < hi):
+        raise InputError(f"{name} must be in ({lo:g}, {hi:g}), got {value!r}")
+
+
+def default_pg_config(env: str, **overrides: Any) -> PGConfig:
+    """The paper's PG settings (appendix B.3) for ``env``; ``overrides`` replace fields."""
+    if env not in finsler.list_metrics():
+        raise finsler.UnknownMetricError(
+            f"unknown environment {env!r}; known: {', '.join(finsler.list_metrics())}")
+    return PGConfig(env=env, **overrides)
+
+
+def cycle_depth(cfg: PGConfig, cycle: int) -> int:
+    """Depth D of the policy trained in the ``cycle``-th cycle (0-based): 1 for the first
+    ``cycles_first`` cycles, then ``cycles_other`` cycles per depth, Dmax for ever after."""
+    assert cfg.cycles_first is not None and cfg.cycles_other is not None
+    if cycle < cfg.cycles_first:
+        return 1
+    return min(2 + (cycle - cfg.cycles_first) // cfg.cycles_other, cfg.max_depth)
+
+
+def schedule_total(cfg: PGConfig) -> int:
+    """Evaluations of C of the whole schedule (the paper's total, appendix B.3):
+    ``P * K * (2 * cycles_first + sum_{D=2..Dmax} 2**D * cycles_other)``."""
+    first, other = _CYCLES.get(cfg.env, _DEFAULT_CYCLES)
+    cf = cfg.cycles_first if cfg.cycles_first is not None else first
+    co = cfg.cycles_other if cfg.cycles_other is not None else other
+    per = cfg.pairs_per_cycle * cfg.samples_per_pair
+    return per * (2 * cf + sum(2**d * co for d in range(2, cfg.max_depth + 1)))
+
+
+# ----------------------------------------------------------------------------------------
+# Policies
+# ----------------------------------------------------------------------------------------
+class DepthPolicy(nn.Module):
+    """``pi_D`` of appendix B.3: ``(s, g)`` ``(N, dim)`` -> diagonal Gaussian over the
+    midpoint, mean ``(s + g) / 2 + m`` and standard deviation
+    ``Softplus(sigma_i) + (base_std + Softplus(c_i)) ||s - g||`` (Euclidean norm of the
+    coordinate difference, as in the paper and the SGT-PG code), where ``(m, sigma)`` is the
+    MLP's output ``(N, 2 dim)`` and ``c`` a learnable ``(dim,)`` parameter.
+
+    The MLP runs in float32; mean and std are returned in the dtype of ``s`` (float64 for
+    costs and log-probabilities).
+    """
+
+    def __init__(self, metric: finsler.Metric, hidden: tuple[int, ...] = (64, 64),
+                 activation: str = "tanh", normalize_inputs: bool = False,
+                 base_std: float = 0.05, init_c: float = 0.0) -> None:
+        super().__init__()
+        self.dim = metric.dim
+        self.base_std = float(base_std)
+        self.net = mlp(2 * self.dim, 2 * self.dim, hidden, activation)
+        self.c = nn.Parameter(torch.full((self.dim,), float(init_c)))
+        lo, hi = metric.domain.bounds()
+        finite = np.isfinite(lo) & np.isfinite(hi) & bool(normalize_inputs)
+        center = np.where(finite, 0.5 * (lo + hi), 0.0)
+        span = np.where(finite, 0.5 * (hi - lo), 1.0)
+        self.register_buffer("center", torch.as_tensor(center, dtype=torch.float64))
+        self.register_buffer("span", torch.as_tensor(span, dtype=torch.float64))
+
+    def distribution(self, s: torch.Tensor, g: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Unprojected mean and std, both ``(N, dim)`` in the dtype of ``s``."""
+        x = torch.cat([(s - self.center) / self.span, (g - self.center) / self.span], -1)
+        out = self.net(x.to(self.c.dtype)).to(s.dtype)
+        m, sigma = out[:, : self.dim], out[:, self.dim :]
+        gap = torch.linalg.vector_norm(g - s, dim=-1, keepdim=True)
+        std = F.softplus(sigma) + (self.base_std + F.softplus(self.c.to(s.dtype))) * gap
+        return 0.5 * (s + g) + m, std
+
+
+def _build_policies(cfg: PGConfig, metric: finsler.Metric) -> nn.ModuleList:
+    return nn.ModuleList(
+        DepthPolicy(metric, hidden=cfg.hidden, activation=cfg.activation,
+                    normalize_inputs=cfg.normalize_inputs, base_std=cfg.base_std,
+                    init_c=cfg.init_c)
+        for _ in range(cfg.max_depth)
+    )
+
+
+def _means_predictor(
+    levels: Sequence[DepthPolicy], project: Callable[[torch.Tensor], torch.Tensor]
+) -> Callable[[torch.Tensor, torch.Tensor], torch.Tensor]:
+    """A ``predict(s, g)`` for :func:`learn.tree.build_tree` that uses ``levels[0]`` on its
+    first call, ``levels[1]`` on the second, ... (build_tree calls it once per level, top
+    down): projected means."""
+    it = iter(levels)
+
+    def predict(s: torch.Tensor, g: torch.Tensor) -> torch.Tensor:
+        mean, _ = next(it).distribution(s, g)
+        return project(mean)
+
+    return predict
+
+
+def generate_pg_paths(policies: Sequence[DepthPolicy], metric: finsler.Metric,
+                      starts: torch.Tensor, goals: torch.Tensor, depth: int) -> torch.Tensor:
+    """Deterministic paths of depth ``depth``: ``pi_depth`` (``policies[depth - 1]``) gives
+    the midpoint of (start, goal), ``pi_{depth-1} .. pi_1`` the lower levels, all by their
+    projected means. ``(K, dim)`` x2 -> ``(K, 2**depth + 1, dim)`` float64."""
+    if not 0 <= depth <= len(policies):
+        raise InputError(f"depth must be in [0, {len(policies)}] (one policy per depth), "
+                         f"got {depth}")
+    levels = [policies[d - 1] for d in range(depth, 0, -1)]
+    with torch.no_grad():
+        return build_tree(starts.to(torch.float64), goals.to(torch.float64), depth,
+                          _means_predictor(levels, metric.domain.project))
+
+
+def sample_training_paths(
+    policies: Sequence[DepthPolicy], metric: finsler.Metric, starts: torch.Tensor,
+    goals: torch.Tensor, depth: int, samples: int, generator: torch.Generator | None,
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """The paths of one training cycle at ``depth`` (no gradient).
+
+    ``starts``, ``goals`` ``(P, dim)`` float64 -> ``raw`` ``(P, samples, dim)``: the
+    unprojected Gaussian samples of ``pi_depth`` (their log-probabilities enter eq. 16) and
+    ``paths`` ``(P * samples, 2**depth + 1, dim)`` (pair-major): start, the lower policies'
+    means, the projected sample at index ``2**(depth-1)``, ..., goal.
+    """
+    p, dim = starts.shape
+    with torch.no_grad():
+        mean, std = policies[depth - 1].distribution(starts, goals)
+        noise = torch.randn((p, samples, dim), generator=generator, dtype=mean.dtype,
+                            device=mean.device)
+        raw = mean[:, None] + std[:, None] * noise
+        mid = metric.domain.project(raw.reshape(-1, dim))
+        s = starts.repeat_interleave(samples, 0)
+        g = goals.repeat_interleave(samples, 0)
+        levels = [policies[d - 1] for d in range(depth - 1, 0, -1)]
+        halves = build_tree(torch.cat([s, mid]), torch.cat([mid, g]), depth - 1,
+                            _means_predictor(levels, metric.domain.project))
+        n = p * samples
+        paths = torch.cat([halves[:n], halves[n:, 1:]], 1)
+    return raw, paths
+
+
+# ----------------------------------------------------------------------------------------
+# Objective and gradient estimator (eqs. 15, 16)
+# ----------------------------------------------------------------------------------------
+def c_tau(segment_costs: torch.Tensor) -> torch.Tensor:
+    """Eq. (15): ``(sum of the first half's costs)**2 + (sum of the second half's)**2``.
+    ``(N, 2**D)`` -> ``(N,)``."""
+    n = segment_costs.shape[-1]
+    if n < 2 or n % 2:
+        raise InputError(f"c_tau needs an even number (>= 2) of segment costs, got {n}")
+    first = segment_costs[..., : n // 2].sum(-1)
+    second = segment_costs[..., n // 2 :].sum(-1)
+    return first**2 + second**2
+
+
+def pair_baseline(costs: torch.Tensor) -> torch.Tensor:
+    """Baseline ``b(p_0, p_{2^D})`` of eq. (16): the mean over a pair's samples.
+    ``(P, K)`` -> ``(P,)``."""
+    return costs.mean(-1)
+
+
+def gaussian_log_prob(x: torch.Tensor, mean: torch.Tensor, std: torch.Tensor) -> torch.Tensor:
+    """Log-density of the diagonal Gaussian: ``(N, dim)`` x3 -> ``(N,)``."""
+    z = (x - mean) / std
+    return (-0.5 * z**2 - torch.log(std) - 0.5 * math.log(2.0 * math.pi)).sum(-1)
+
+
+def gaussian_entropy(std: torch.Tensor) -> torch.Tensor:
+    """Entropy of the diagonal Gaussian ``sum_i log(std_i) + dim (1 + log 2 pi) / 2``:
+    ``(N, dim)`` -> ``(N,)``."""
+    dim = std.shape[-1]
+    return torch.log(std).sum(-1) + 0.5 * dim * (1.0 + math.log(2.0 * math.pi))
+
+
+def pg_loss(log_prob: torch.Tensor, log_prob_old: torch.Tensor, advantage: torch.Tensor,
+            entropy: torch.Tensor, clip: float = 0.2, entropy_coef: float = 1.0,
+            surrogate: str = "ppo") -> tuple[torch.Tensor, dict[str, float]]:
+    """The PPO-style estimator of eq. (16) for a cost to MINIMISE, all inputs ``(N,)``:
+
+    ``loss = mean(max(r A, r_clip A)) - entropy_coef * mean(entropy)``, with
+    ``r = exp(log_prob - log_prob_old)``, ``A = c_tau - b`` (``advantage``) and
+    ``r_clip = clip(r, 1 - clip, 1 + clip)`` (``surrogate="ppo"``) or the constant
+    ``1 + clip`` (``"sgt-pg-code"``, what the authors' code computes). At ``r = 1`` the
+    gradient is ``mean(A grad log pi) - entropy_coef grad mean(entropy)``, eq. (16).
+    Returns the scalar loss and its parts (``surrogate``, ``entropy``, ``clipped_fraction``).
+    """
+    ratio = torch.exp(log_prob - log_prob_old)
+    if surrogate == "ppo":
+        clipped = ratio.clamp(1.0 - clip, 1.0 + clip)
+    elif surrogate == "sgt-pg-code":
+        clipped = torch.full_like(ratio, 1.0 + clip)
+    else:
+        raise InputError(f"surrogate must be one of {', '.join(_SURROGATES)}; got {surrogate!r}")
+    surr = torch.maximum(ratio * advantage, clipped * advantage).mean()
+    ent = entropy.mean()
+    loss = surr - entropy_coef * ent
+    parts = {
+        "surrogate": float(surr.detach()),
+        "entropy": float(ent.detach()),
+        "clipped_fraction": float(((ratio - 1.0).abs() > clip).double().mean()),
+    }
+    return loss, parts
+
+
+# ----------------------------------------------------------------------------------------
+# Training
+# ----------------------------------------------------------------------------------------
+def _eval_key(ev: EvalResult) -> tuple[float, float]:
+    """Selection key: success first, then lower mean max segment cost."""
+    return (ev.success_rate, -ev.mean_max_segment_cost)
+
+
+def _config_json(cfg: PGConfig) -> str:
+    m = cfg.metric
+    doc = {
+        "config": cfg.to_dict(),
+        "metric": m.info(),
+        "task": {"depth": cfg.max_depth, "eps": cfg.eval_eps, "segments": 2**cfg.max_depth},
+        "objective": "c_tau of eq. (15)" if cfg.objective == "halves-squared"
+        else "path length (sum of C)",
+        "model_free": True,
+        "uses_derivative_of_C": [],
+        "schedule": {
+            "cycles_per_depth": [cfg.cycles_first] + [cfg.cycles_other] * (cfg.max_depth - 1),
+            "evaluations_per_cycle": [cfg.cycle_evaluations(d)
+                                      for d in range(1, cfg.max_depth + 1)],
+            "total": schedule_total(cfg),
+        },
+        "counts": "timesteps = every evaluation of C made in training (all-inclusive; all are "
+                  "in collected paths, so it equals timesteps_paper = pairs * samples * 2**D "
+                  "per cycle); timesteps_derivative = 0 (values of C only)",
+        "columns": "success_rate, mean_length, mean_max_segment_cost: validation set at the "
+                   "depth of the policy being trained (as the paper); *_task_depth: at the "
+                   "task's depth",
+        "selection": f"checkpoint_best by success_rate_task_depth on finsler.validation_pairs "
+                     f"(seed {finsler.VALIDATION_SEED}, {cfg.eval_pairs} pairs), ties by "
+                     "lower mean_max_segment_cost_task_depth",
+        "versions": package_versions(),
+    }
+    return json.dumps(doc, indent=2)
+
+
+class PGTrainer:
+    """Train the per-depth policies of a :class:`PGConfig` into a run directory."""
+
+    def __init__(self, cfg: PGConfig, run_dir: str | Path, resume: bool = False,
+                 progress: bool = True) -> None:
+        self.run_dir = Path(run_dir)
+        self.progress = progress
+        if resume:
+            cfg = self._resume_config(cfg)
+        elif self.run_dir.exists() and any(self.run_dir.iterdir()):
+            raise InputError(
+                f"run directory {self.run_dir} exists and is not empty; pass --resume to "
+                "continue it or choose a new --out")
+        self.cfg = cfg
+        self.device = resolve_device(cfg.device)
+        torch.set_num_threads(cfg.threads)
+        self.metric = cfg.metric
+        self.dim = self.metric.dim
+        self.depth_max = cfg.max_depth
+        pairs = finsler.validation_pairs(self.metric, cfg.eval_pairs)
+        self.eval_pairs = torch.as_tensor(pairs, dtype=torch.float64, device=self.device)
+
+        with torch.random.fork_rng(devices=[]):
+            torch.manual_seed(cfg.seed)
+            self.policies = _build_policies(cfg, self.metric).to(self.device)
+        self.opts = [torch.optim.Adam(p.parameters(), lr=cfg.lr) for p in self.policies]
+        self.np_rng = np.random.default_rng(cfg.seed)
+        self.gen = torch.Generator(device=self.device)
+        self.gen.manual_seed(cfg.seed + 1)
+
+        self.iteration = 0  # cycles done
+        self.timesteps = 0  # all-inclusive evaluations of C
+        self.timesteps_paper = 0
+        self.level = 1  # depth of the policy being trained
+        self.level_best: dict[str, Any] | None = None  # best state of pi_level on validation
+        self.wall_before = 0.0
+        self.best: dict[str, float] = {"success_rate": -1.0, "mean_max_segment_cost": math.inf}
+        self.history: list[dict[str, Any]] = []
+        self._stats: list[dict[str, float]] = []
+        if resume:
+            if not (self.run_dir / LATEST_FILE).is_file():
+                raise InputError(
+                    f"cannot resume: {self.run_dir / LATEST_FILE} is missing (nothing was "
+                    "changed); start a new run with another --out")
+            self._load_state(load_checkpoint(self.run_dir / LATEST_FILE))
+        else:
+            self.run_dir.mkdir(parents=True, exist_ok=True)
+            atomic_write_text(self.run_dir / CONFIG_FILE, _config_json(cfg))
+
+    # -- resume ---------------------------------------------------------------------------
+    def _resume_config(self, cfg: PGConfig) -> PGConfig:
+        if not self.run_dir.is_dir():
+            raise InputError(f"cannot resume: run directory {self.run_dir} does not exist")
+        doc = read_json(self.run_dir / CONFIG_FILE)
+        if not isinstance(doc.get("config"), dict):
+            raise CorruptFileError(f"{self.run_dir / CONFIG_FILE} has no 'config' section")
+        saved = PGConfig.from_dict(doc["config"])
+        if cfg.env != saved.env:
+            raise InputError(f"cannot resume: run {self.run_dir} trains {saved.env!r}, "
+                             f"not {cfg.env!r}")
+        new, old = cfg.to_dict(), saved.to_dict()
+        changed = [k for k in old if k not in _FREE_ON_RESUME and new[k] != old[k]]
+        if changed:
+            raise InputError("cannot resume with different settings: " + ", ".join(
+                f"{k} ({old[k]!r} in the run, {new[k]!r} given)" for k in changed))
+        return saved.replace(**{k: getattr(cfg, k) for k in _FREE_ON_RESUME})
+
+    def _state(self) -> dict[str, Any]:
+        return {
+            "format": "learn-checkpoint-v1",
+            "config": self.cfg.to_dict(),
+            "policies": [p.state_dict() for p in self.policies],
+            "optimizers": [o.state_dict() for o in self.opts],
+            "np_rng": self.np_rng.bit_generator.state,
+            "torch_rng": self.gen.get_state(),
+            "counters": {
+                "iteration": self.iteration,
+                "timesteps": self.timesteps,
+                "timesteps_paper": self.timesteps_paper,
+                "level": self.level,
+                "wall_seconds": self._wall(),
+            },
+            "level_best": self.level_best,
+            "best": dict(self.best),
+        }
+
+    def _load_state(self, st: dict[str, Any]) -> None:
+        try:
+            for p, sd in zip(self.policies, st["policies"], strict=True):
+                p.load_state_dict(sd)
+            for o, sd in zip(self.opts, st["optimizers"], strict=True):
+                o.load_state_dict(sd)
+            self.np_rng.bit_generator.state = st["np_rng"]
+            self.gen.set_state(st["torch_rng"])
+            c = st["counters"]
+            self.iteration, self.timesteps = int(c["iteration"]), int(c["timesteps"])
+            self.timesteps_paper = int(c["timesteps_paper"])
+            self.level = int(c["level"])
+            self.wall_before = float(c["wall_seconds"])
+            self.level_best = st["level_best"]
+            self.best = dict(st["best"])
+        except (KeyError, RuntimeError, TypeError, ValueError) as err:
+            raise CorruptFileError(
+                f"checkpoint {self.run_dir / LATEST_FILE} does not match the run: {err}"
+            ) from err
+        rows = read_metrics(self.run_dir / METRICS_FILE)
+        self.history = [r for r in rows if int(r["iteration"]) <= self.iteration]
+
+    # -- the algorithm --------------------------------------------------------------------
+    def _enter_level(self, depth: int) -> None:
+        """Level change ``depth - 1`` -> ``depth``: restore pi_{depth-1}'s best state of its
+        level (``restore_level_best``) and start pi_depth from it (``init_from_lower``)."""
+        below = self.policies[depth - 2]
+        if self.cfg.restore_level_best and self.level_best is not None:
+            below.load_state_dict(self.level_best["state"])
+        if self.cfg.init_from_lower:
+            self.policies[depth - 1].load_state_dict(below.state_dict())
+        self.level = depth
+        self.level_best = None
+
+    def cycle(self) -> dict[str, float]:
+        """One training cycle of ``pi_D`` (D = :attr:`level`): collect, eq. (15) costs,
+        eq. (16) baseline, ``epochs`` Adam steps on :func:`pg_loss`. Adds the evaluations
+        of C to the counters; returns statistics for the log."""
+        cfg, d = self.cfg, self.level
+        pi, opt = self.policies[d - 1], self.opts[d - 1]
+        p, k = cfg.pairs_per_cycle, cfg.samples_per_pair
+        ends = self.metric.domain.sample(2 * p, self.np_rng).reshape(p, 2, self.dim)
+        ends_t = torch.as_tensor(ends, dtype=torch.float64, device=self.device)
+        s, g = ends_t[:, 0], ends_t[:, 1]
+        raw, paths = sample_training_paths(self.policies, self.metric, s, g, d, k, self.gen)
+        with torch.no_grad():
+            seg = self.metric.path_costs(paths)  # (P*K, 2**D) float64
+            cost = (c_tau(seg) if cfg.objective == "halves-squared" else seg.sum(-1))
+            cost = cost.reshape(p, k)
+            adv = (cost - pair_baseline(cost)[:, None]).reshape(-1)
+        n_eval = paths.shape[0] * seg.shape[1]
+        self.timesteps += n_eval
+        self.timesteps_paper += n_eval
+
+        ss, gg = s.repeat_interleave(k, 0), g.repeat_interleave(k, 0)
+        xx = raw.reshape(-1, self.dim)
+        if cfg.swap_augment:
+            ss, gg = torch.cat([ss, gg]), torch.cat([gg, ss])
+            xx, adv = torch.cat([xx, xx]), torch.cat([adv, adv])
+        with torch.no_grad():
+            logp_old = gaussian_log_prob(xx, *pi.distribution(ss, gg))
+        for _ in range(cfg.epochs):
+            mean, std = pi.distribution(ss, gg)
+            loss, parts = pg_loss(gaussian_log_prob(xx, mean, std), logp_old, adv,
+                                  gaussian_entropy(std), cfg.clip, cfg.entropy_coef,
+                                  cfg.surrogate)
+            opt.zero_grad(set_to_none=True)
+            loss.backward()
+            opt.step()
+        self.iteration += 1
+        return {"loss": float(loss.detach()), **parts, "mean_cost": float(cost.mean()),
+                "mean_std": float(std.detach().mean())}
+
+    # -- evaluation, logging, checkpoints -------------------------------------------------
+    def evaluate(self, depth: int | None = None, pairs: torch.Tensor | None = None) -> EvalResult:
+        """Section 5.1 evaluation of the deterministic policies at ``depth`` (default Dmax)
+        on ``pairs`` ``(K, 2, dim)`` (default: the validation set)."""
+        pt = self.eval_pairs if pairs is None else pairs
+        d = self.depth_max if depth is None else depth
+        paths = generate_pg_paths(self.policies, self.metric, pt[:, 0], pt[:, 1], d)
+        return evaluate_paths(self.metric, paths.cpu().numpy(), self.cfg.eval_eps)
+
+    def _wall(self) -> float:
+        return self.wall_before + (time.perf_counter() - self._t0)
+
+    def _log_and_checkpoint(self) -> dict[str, Any]:
+        d = self.level
+        ev = self.evaluate(d)
+        ev_task = ev if d == self.depth_max else self.evaluate(self.depth_max)
+        wall = self._wall()
+        stats = {k: float(np.mean([s[k] for s in self._stats])) if self._stats else math.nan
+                 for k in ("loss", "surrogate", "entropy", "mean_cost", "mean_std")}
+        self._stats = []
+        row = {
+            "iteration": self.iteration,
+            "timesteps": self.timesteps,
+            "timesteps_paper": self.timesteps_paper,
+            "timesteps_derivative": 0,
+            "wall_seconds": round(wall, 3),
+            "depth": d,
+            "success_rate": ev.success_rate,
+            "mean_length": round(ev.mean_length, 8),
+            "mean_max_segment_cost": round(ev.mean_max_segment_cost, 8),
+            "success_rate_task_depth": ev_task.success_rate,
+            "mean_length_task_depth": round(ev_task.mean_length, 8),
+            "mean_max_segment_cost_task_depth": round(ev_task.mean_max_segment_cost, 8),
+            **stats,
+            "evaluations_per_second": round(self.timesteps / max(wall, 1e-9), 1),
+            "cycles_per_second": round(self.iteration / max(wall, 1e-9), 3),
+        }
+        self.history.append(row)
+        write_metrics(self.run_dir / METRICS_FILE, self.history)
+        # best state of the level's policy (restored when the level ends)
+        key = _eval_key(ev)
+        if self.level_best is None or key > tuple(self.level_best["key"]):
+            self.level_best = {"key": list(key), "iteration": self.iteration,
+                               "state": copy.deepcopy(self.policies[d - 1].state_dict())}
+        # best checkpoint: the policies as they will be used, at the task's depth
+        if _eval_key(ev_task) > (self.best["success_rate"], -self.best["mean_max_segment_cost"]):
+            self.best = {
+                "success_rate": ev_task.success_rate,
+                "mean_max_segment_cost": ev_task.mean_max_segment_cost,
+                "mean_length": ev_task.mean_length,
+                "timesteps": self.timesteps,
+                "iteration": self.iteration,
+                "depth": d,
+                "wall_seconds": wall,
+            }
+            save_checkpoint(self.run_dir / BEST_FILE, {
+                "format": "learn-checkpoint-v1",
+                "config": self.cfg.to_dict(),
+                "policies": [p.state_dict() for p in self.policies],
+                "eval": dict(self.best),
+            })
+        save_checkpoint(self.run_dir / LATEST_FILE, self._state())
+        return row
+
+    def run(self) -> TrainResult:
+        """Train until the budget (``timesteps``: a cycle is only started if it fits) or
+        ``minutes`` is spent; returns the summary."""
+        from tqdm.auto import tqdm
+
+        cfg = self.cfg
+        assert cfg.timesteps is not None
+        self._t0 = time.perf_counter()
+        (self.run_dir / RESULT_FILE).unlink(missing_ok=True)
+        bar = tqdm(total=cfg.timesteps, initial=self.timesteps, unit="C", unit_scale=True,
+                   disable=not self.progress, desc=f"pg {cfg.env}", dynamic_ncols=True)
+        if self.iteration == 0 and not self.history:
+            self._log_and_checkpoint()
+        last_logged = self.iteration
+        stopped_by = "timesteps"
+        try:
+            while True:
+                d = cycle_depth(cfg, self.iteration)
+                if self.timesteps + cfg.cycle_evaluations(d) > cfg.timesteps:
+                    break
+                if cfg.minutes is not None and self._wall() >= 60.0 * cfg.minutes:
+                    stopped_by = "minutes"
+                    break
+                if d != self.level:
+                    self._enter_level(d)
+                before = self.timesteps
+                self._stats.append(self.cycle())
+                bar.update(self.timesteps - before)
+                level_ends = cycle_depth(cfg, self.iteration) != d
+                if self.iteration % cfg.eval_every == 0 or level_ends:
+                    row = self._log_and_checkpoint()
+                    last_logged = self.iteration
+                    bar.set_postfix(depth=d, success=f"{row['success_rate']:.2f}",
+                                    task=f"{row['success_rate_task_depth']:.2f}")
+            if self.iteration != last_logged:
+                self._log_and_checkpoint()
+        finally:
+            bar.close()
+        final = self.history[-1]
+        write_result(self.run_dir, final, self.best, stopped_by)
+        return TrainResult(
+            run_dir=self.run_dir,
+            timesteps=self.timesteps,
+            iterations=self.iteration,
+            wall_seconds=float(final["wall_seconds"]),
+            final={k: final[k] for k in (
+                "success_rate", "mean_length", "mean_max_segment_cost",
+                "success_rate_task_depth", "mean_length_task_depth",
+                "mean_max_segment_cost_task_depth", "evaluations_per_second")},
+            best=dict(self.best),
+            history=list(self.history),
+        )
+
+
+def train_pg(cfg: PGConfig, out: str | Path, resume: bool = False,
+             progress: bool = True) -> TrainResult:
+    """Train PG with ``cfg`` into run directory ``out`` (``resume`` continues the run saved
+    there exactly as an uninterrupted run would; a non-empty ``out`` without ``resume`` is
+    refused)."""
+    if not isinstance(cfg, PGConfig):
+        raise InputError(f"train_pg needs a PGConfig, got {type(cfg).__name__}")
+    return PGTrainer(cfg, out, resume=resume, progress=progress).run()
+
+
+# ----------------------------------------------------------------------------------------
+# Loading and using a trained PG policy
+# ----------------------------------------------------------------------------------------
+class PGPolicy:
+    """Trained per-depth policies (deterministic means) for one metric."""
+
+    def __init__(self, policies: Sequence[DepthPolicy], config: PGConfig,
+                 source: str = "") -> None:
+        self.policies = nn.ModuleList(policies).eval()
+        self.config = config
+        self.metric = config.metric
+        self.depth = config.max_depth
+        self.eps = config.eval_eps
+        self.source = source
+
+    def __repr__(self) -> str:
+        return f"PGPolicy(env={self.metric.name!r}, depth={self.depth}, source={self.source!r})"
+
+    def _points(self, x: Any, name: str) -> torch.Tensor:
+        xn = self.metric.domain.check(x, name)
+        return torch.as_tensor(xn, dtype=torch.float64, device=self.policies[0].c.device)
+
+    def generate(self, starts: Any, goals: Any, depth: int | None = None) -> np.ndarray:
+        """Paths ``(K, dim)`` x2 -> ``(K, 2**D + 1, dim)`` float64 with D = ``depth`` (default
+        the task's depth): ``pi_D`` then ``pi_{D-1} .. pi_1``, by their means."""
+        d = self.depth if depth is None else depth
+        if (not isinstance(d, (int, np.integer)) or isinstance(d, bool)
+                or not 0 <= d <= self.depth):
+            raise InputError(f"depth must be an integer in [0, {self.depth}] (one policy per "
+                             f"depth), got {depth!r}")
+        s = self._points(starts, "starts")
+        g = self._points(goals, "goals")
+        if s.shape != g.shape:
+            raise InputError(f"starts and goals differ in shape: {tuple(s.shape)} vs "
+                             f"{tuple(g.shape)}")
+        return generate_pg_paths(self.policies, self.metric, s, g, int(d)).cpu().numpy()
+
+    def midpoint(self, starts: Any, goals: Any) -> np.ndarray:
+        """``pi_1``'s predicted midpoints ``(K, dim)`` (projected means)."""
+        single = np.ndim(starts) == 1
+        out = self.generate(starts, goals, depth=1)[:, 1]
+        return out[0] if single else out
+
+    def evaluate(self, pairs: Any = None, eps: float | None = None,
+                 depth: int | None = None) -> EvalResult:
+        """Section 5.1 evaluation on ``pairs`` ``(K, 2, dim)`` (default: the environment's
+        default evaluation set, ``finsler.default_pairs``)."""
+        p = finsler.default_pairs(self.metric) if pairs is None else _check_pairs(
+            self.metric, pairs)
+        paths = self.generate(p[:, 0], p[:, 1], depth=depth)
+        return evaluate_paths(self.metric, paths, self.eps if eps is None else eps)
+
+
+def load_pg_policy(run_dir: str | Path, checkpoint: str = "best",
+                   device: str = "cpu") -> PGPolicy:
+    """Load the PG policies of a run directory. ``checkpoint``: ``best`` (best success at
+    the task's depth on the validation set; falls back to the latest) or ``latest``."""
+    path = Path(run_dir)
+    if not path.is_dir():
+        raise InputError(f"run directory {str(run_dir)!r} does not exist")
+    if checkpoint not in ("best", "latest"):
+        raise InputError(f"checkpoint must be 'best' or 'latest', got {checkpoint!r}")
+    doc = read_json(path / CONFIG_FILE)
+    if not isinstance(doc.get("config"), dict):
+        raise CorruptFileError(f"{path / CONFIG_FILE} has no 'config' section")
+    if doc["config"].get("method") != "pg":
+        raise InputError(f"{path} is not a PG run (method {doc['config'].get('method')!r})")
+    cfg = PGConfig.from_dict(doc["config"])
+    order = (BEST_FILE, LATEST_FILE) if checkpoint == "best" else (LATEST_FILE,)
+    for name in order:
+        if (path / name).is_file():
+            ckpt = load_checkpoint(path / name)
+            break
+    else:
+        raise InputError(f"run directory {path} holds no checkpoint "
+                         f"({' or '.join(order)})")
+    policies = _build_policies(cfg, cfg.metric)
+    try:
+        for p, sd in zip(policies, ckpt["policies"], strict=True):
+            p.load_state_dict(sd)
+    except (KeyError, RuntimeError, TypeError, ValueError) as err:
+        raise CorruptFileError(f"checkpoint in {path} does not match its config: {err}") from err
+    policies = policies.to(resolve_device(device))
+    return PGPolicy(list(policies), cfg, source=str(path))
