@@ -1,0 +1,434 @@
+"""Every matplotlib figure of the project, in one module.
+
+Each drawing function returns a :class:`matplotlib.figure.Figure` built with the
+object-oriented API on an Agg canvas: no pyplot, no backend switch, no global state, at
+import or later (figures are garbage-collected, nothing to close). :func:`save_figure`
+writes one atomically (rendered in memory, then ``learn.storage.atomic_write_bytes``).
+
+Report figures (:mod:`validation.report`): :func:`learning_curve`, :func:`paths_2d`,
+:func:`carlike_headings`, :func:`panda_motion`, :func:`length_ratios`,
+:func:`midpoint_errors`. Sweep figure (Fig. 2 of the paper, ``geodesics plot-curves``):
+:func:`sweep_curves`.
+"""
+
+from __future__ import annotations
+
+import io
+import math
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import matplotlib
+import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.colors import ListedColormap
+from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
+from matplotlib.patches import Circle, Patch
+from matplotlib.ticker import MaxNLocator
+
+if TYPE_CHECKING:
+    from finsler import Metric
+    from validation.comparison import Comparison, MidpointErrors
+    from validation.curves import Curve
+
+__all__ = [
+    "EXACT_COLOR",
+    "LEARNED_COLOR",
+    "OLD_LOG_X_LABEL",
+    "PAPER_X_LABEL",
+    "STRAIGHT_COLOR",
+    "X_LABELS",
+    "carlike_headings",
+    "figure_bytes",
+    "learning_curve",
+    "length_ratios",
+    "midpoint_errors",
+    "new_figure",
+    "panda_motion",
+    "paths_2d",
+    "save_figure",
+    "sweep_curves",
+]
+
+LEARNED_COLOR = "tab:blue"
+EXACT_COLOR = "black"
+STRAIGHT_COLOR = "tab:orange"
+#: Axis labels of the two x axes of a learning curve (metrics.csv columns).
+X_LABELS = {
+    "timesteps": "evaluations of C (all-inclusive, count)",
+    "wall_seconds": "wall-clock time (s)",
+}
+PAPER_X_LABEL = "timesteps, paper's count (section 5.2)"
+#: x label of a log without ``timesteps_paper``: written before the run-directory contract
+#: made ``timesteps`` all-inclusive, so the count is not claimed to be.
+OLD_LOG_X_LABEL = "timesteps (older log: count not known to be all-inclusive)"
+
+
+# ----------------------------------------------------------------------------------------
+# plumbing
+# ----------------------------------------------------------------------------------------
+def new_figure(figsize: tuple[float, float]) -> Figure:
+    """A figure on its own Agg canvas (no pyplot)."""
+    fig = Figure(figsize=figsize)
+    FigureCanvasAgg(fig)
+    return fig
+
+
+def figure_bytes(fig: Figure, fmt: str = "png", dpi: int = 120) -> bytes:
+    """The figure rendered in memory (``fmt``: png, pdf, svg)."""
+    buf = io.BytesIO()
+    fig.savefig(buf, format=fmt, dpi=dpi)
+    return buf.getvalue()
+
+
+def save_figure(fig: Figure, path: Path, dpi: int = 120) -> None:
+    """Write ``fig`` to ``path`` atomically (format from the suffix, default png)."""
+    from learn.storage import atomic_write_bytes
+
+    path = Path(path)
+    fmt = path.suffix.lstrip(".").lower() or "png"
+    atomic_write_bytes(path, figure_bytes(fig, fmt, dpi))
+
+
+# ----------------------------------------------------------------------------------------
+# report: learning curve of one run
+# ----------------------------------------------------------------------------------------
+def learning_curve(rows: Sequence[Mapping[str, Any]], cmp: Comparison) -> Figure | None:
+    """Success rate of one run against all-inclusive evaluations of C (metrics.csv
+    ``timesteps``) and wall time, with the exact ceiling and the straight-line baseline;
+    a third panel against ``timesteps_paper`` if the log has it and it differs from
+    ``timesteps``. A log without ``timesteps_paper`` predates the run-directory contract:
+    its ``timesteps`` axis is labelled as such, not as all-inclusive. None if the rows hold
+    no (timesteps, success_rate)."""
+    rows = [r for r in rows if "timesteps" in r and "success_rate" in r]
+    if not rows:
+        return None
+    ts = np.array([r["timesteps"] for r in rows], float)
+    sr = 100 * np.array([r["success_rate"] for r in rows], float)
+    wall = np.array([r.get("wall_seconds", np.nan) for r in rows], float)
+    contract = all("timesteps_paper" in r for r in rows)
+    panels: list[tuple[np.ndarray, str]] = [
+        (ts, X_LABELS["timesteps"] if contract else OLD_LOG_X_LABEL),
+        (wall / 60, "wall-clock time (minutes)")]
+    if contract:
+        tp = np.array([r["timesteps_paper"] for r in rows], float)
+        if not np.array_equal(tp, ts):
+            panels.append((tp, PAPER_X_LABEL))
+    fig = new_figure((5.5 * len(panels), 4))
+    axes = fig.subplots(1, len(panels))
+    for ax, (x, lab) in zip(axes, panels):
+        ax.plot(x, sr, color=LEARNED_COLOR, label="learned policy (validation set)")
+        ax.axhline(100 * cmp.exact.ceiling_rate, color=EXACT_COLOR, ls="--",
+                   label="exact geodesics (ceiling)")
+        ax.axhline(100 * cmp.straight.success_rate, color=STRAIGHT_COLOR, ls=":",
+                   label="straight line (trivial baseline)")
+        ax.set_xlabel(lab)
+        if lab == PAPER_X_LABEL:
+            ax.set_title("paper's count: not every evaluation of C", fontsize=9)
+        ax.set_ylabel("success rate (%)")
+        ax.set_ylim(-2, 102)
+        ax.grid(alpha=0.3)
+    axes[0].legend(loc="lower right", fontsize=8)
+    fig.suptitle(f"Learning curve, {cmp.metric} (D = {cmp.depth}, eps = {cmp.eps:g})")
+    fig.tight_layout()
+    return fig
+
+
+# ----------------------------------------------------------------------------------------
+# report: paths
+# ----------------------------------------------------------------------------------------
+def _select_pairs(cmp: Comparison, k: int = 8) -> np.ndarray:
+    """``k`` pairs spread over the learned/exact length ratio (worst included)."""
+    r = cmp.ratios("learned")
+    order = np.argsort(np.where(np.isfinite(r), r, -np.inf))
+    if len(order) <= k:
+        return order
+    idx = np.unique(np.round(np.linspace(0, len(order) - 1, k)).astype(int))
+    return order[idx]
+
+
+def _finsler_background(ax: Any, metric: Metric, res: int = 160) -> None:
+    lo, hi = metric.domain.bounds()
+    lo, hi = lo[:2], hi[:2]
+    xs = np.linspace(lo[0], hi[0], res)
+    ys = np.linspace(lo[1], hi[1], res)
+    gx, gy = np.meshgrid(xs, ys)
+    pts = np.stack([gx.ravel(), gy.ravel()], 1)
+    if metric.dim == 2:
+        inside = metric.domain.contains(pts)
+        lam = np.full(len(pts), np.nan)
+        if metric.convex_everywhere:
+            lam[inside] = 1.0
+        else:
+            lam[inside] = metric.convexity(pts[inside], n_directions=32)
+        z = np.where(np.isnan(lam), np.nan, (lam > 0).astype(float)).reshape(gx.shape)
+    else:  # car-like: (x, y) slice; convex everywhere (C^0-Finsler)
+        inside = np.linalg.norm(pts, axis=1) <= float(hi[0])
+        z = np.where(inside, 1.0, np.nan).reshape(gx.shape)
+    ax.pcolormesh(gx, gy, z, cmap=ListedColormap(["#f4c7c3", "#e8f1e4"]), vmin=0, vmax=1,
+                  shading="auto", rasterized=True)
+    if metric.name == "matsumoto":
+        h = -float(getattr(metric, "height", 1.0)) * (gx**2 + gy**2)
+        h = np.where(np.isnan(z), np.nan, h)
+        cs = ax.contour(gx, gy, h, levels=8, colors="grey", linewidths=0.6)
+        ax.clabel(cs, fontsize=6, fmt="%.2f")
+        ax.add_patch(Circle((0, 0), metric.convex_radius, fill=False, ls="-.",
+                            color="darkgreen", lw=0.8))
+
+
+def _legend_handles() -> list[Any]:
+    return [
+        Line2D([], [], color=LEARNED_COLOR, lw=1.5, marker=".", ms=3, label="learned"),
+        Line2D([], [], color=EXACT_COLOR, lw=1.2, ls="--", label="exact (solvers)"),
+        Line2D([], [], color=STRAIGHT_COLOR, lw=1.0, ls=":", label="straight line"),
+        Patch(color="#e8f1e4", label="F(x,.) convex (Finsler)"),
+        Patch(color="#f4c7c3", label="F(x,.) not convex"),
+    ]
+
+
+def paths_2d(cmp: Comparison, metric: Metric) -> Figure:
+    """Learned, exact and straight paths of 8 pairs spread over the length ratio, over a
+    map of where ``F(x, .)`` is convex (2-D metrics; height contours for Matsumoto)."""
+    sel = _select_pairs(cmp)
+    ncol = 4
+    nrow = math.ceil(len(sel) / ncol)
+    fig = new_figure((3.5 * ncol, 3.9 * nrow + 0.8))
+    axes = fig.subplots(nrow, ncol, squeeze=False)
+    r = cmp.ratios("learned")
+    for ax, i in zip(axes.ravel(), sel):
+        _finsler_background(ax, metric, res=120)
+        for ps, col, ls, lw in ((cmp.straight, STRAIGHT_COLOR, ":", 1.0),
+                                (cmp.exact, EXACT_COLOR, "--", 1.2),
+                                (cmp.learned, LEARNED_COLOR, "-", 1.5)):
+            p = ps.paths[i]
+            ax.plot(p[:, 0], p[:, 1], color=col, ls=ls, lw=lw,
+                    marker="." if ps is cmp.learned else None, ms=3)
+        s, g = cmp.pairs[i]
+        ax.plot(*s[:2], "o", color="green", ms=5)
+        ax.plot(*g[:2], "*", color="red", ms=8)
+        ok = "success" if cmp.learned.success[i] else "fail"
+        ax.set_title(f"pair {i}: learned/exact = {r[i]:.3f} ({ok})", fontsize=8)
+        ax.set_aspect("equal")
+        ax.tick_params(labelsize=6)
+    for ax in axes[-1]:
+        ax.set_xlabel("x (coordinate)", fontsize=8)
+    for ax in axes[:, 0]:
+        ax.set_ylabel("y (coordinate)", fontsize=8)
+    for ax in axes.ravel()[len(sel):]:
+        ax.axis("off")
+    handles = [*_legend_handles(),
+               Line2D([], [], ls="", marker="o", color="green", label="start"),
+               Line2D([], [], ls="", marker="*", color="red", label="goal")]
+    if metric.name == "matsumoto":
+        handles.append(Line2D([], [], color="grey", lw=0.6, label="height h(p) contours"))
+        handles.append(Line2D([], [], color="darkgreen", ls="-.", lw=0.8,
+                              label=f"convex radius {metric.convex_radius:.4f}"))
+    fig.legend(handles=handles, loc="lower center", ncol=min(len(handles), 5), fontsize=8)
+    fig.suptitle(f"{metric.name}: learned vs exact paths ({2**cmp.depth} segments), "
+                 "pairs spread over the length ratio", fontsize=10)
+    fig.tight_layout(rect=(0, 0.07, 1, 0.97), h_pad=1.5)
+    return fig
+
+
+def carlike_headings(cmp: Comparison, metric: Metric) -> Figure:
+    """Car-like: positions with heading arrows (top row) and theta along the path."""
+    sel = _select_pairs(cmp, 4)
+    fig = new_figure((3.6 * len(sel), 7))
+    axes = fig.subplots(2, len(sel), squeeze=False)
+    r = cmp.ratios("learned")
+    for k, i in enumerate(sel):
+        ax = axes[0, k]
+        _finsler_background(ax, metric, res=80)
+        for ps, col, ls in ((cmp.exact, EXACT_COLOR, "--"), (cmp.learned, LEARNED_COLOR, "-")):
+            p = ps.paths[i]
+            ax.plot(p[:, 0], p[:, 1], color=col, ls=ls, lw=1.2)
+            step = max(1, len(p) // 16)
+            q = p[::step]
+            ax.quiver(q[:, 0], q[:, 1], np.cos(q[:, 2]), np.sin(q[:, 2]), color=col,
+                      angles="xy", scale=18, width=0.006, alpha=0.8)
+        s0, g0 = cmp.pairs[i]
+        ax.plot(s0[0], s0[1], "o", color="green", ms=5, label="start")
+        ax.plot(g0[0], g0[1], "*", color="red", ms=8, label="goal")
+        if k == 0:
+            ax.legend(handles=[
+                Line2D([], [], color=LEARNED_COLOR, label="learned (arrows: heading)"),
+                Line2D([], [], color=EXACT_COLOR, ls="--", label="exact (arrows: heading)"),
+                Line2D([], [], ls="", marker="o", color="green", label="start"),
+                Line2D([], [], ls="", marker="*", color="red", label="goal"),
+            ], fontsize=6, loc="lower left")
+        ax.set_aspect("equal")
+        ax.set_title(f"pair {i}: learned/exact = {r[i]:.3f}", fontsize=8)
+        ax.set_xlabel("x (coordinate)", fontsize=7)
+        ax.set_ylabel("y (coordinate)", fontsize=7)
+        ax2 = axes[1, k]
+        for ps, col, ls, lab in ((cmp.exact, EXACT_COLOR, "--", "exact"),
+                                 (cmp.learned, LEARNED_COLOR, "-", "learned"),
+                                 (cmp.straight, STRAIGHT_COLOR, ":", "straight")):
+            ax2.plot(ps.paths[i][:, 2], color=col, ls=ls, label=lab)
+        ax2.set_xlabel("path point index")
+        ax2.set_ylabel("heading theta (rad)")
+        ax2.grid(alpha=0.3)
+        if k == 0:
+            ax2.legend(fontsize=7)
+    fig.suptitle("car-like: positions in the unit disk (shaded) with headings (arrows point "
+                 "along theta), and theta along the path", fontsize=10)
+    fig.tight_layout()
+    return fig
+
+
+def panda_motion(cmp: Comparison, metric: Metric) -> Figure:
+    """Panda: joint angles along one path, and link positions seen from above."""
+    r = cmp.ratios("learned")
+    i = int(_select_pairs(cmp, 3)[-1]) if len(cmp.pairs) > 1 else 0
+    fig = new_figure((12, 4.8))
+    axes = fig.subplots(1, 2)
+    ax = axes[0]
+    colors = matplotlib.colormaps["tab10"](np.arange(7))
+    for j in range(7):
+        ax.plot(cmp.learned.paths[i][:, j], color=colors[j], lw=1.5, label=f"q{j + 1}")
+        ax.plot(cmp.exact.paths[i][:, j], color=colors[j], lw=1.0, ls="--")
+    ax.set_xlabel("path point index")
+    ax.set_ylabel("joint angle (rad)")
+    ax.set_title(f"pair {i}: joint angles (solid: learned, dashed: exact); "
+                 f"length ratio {r[i]:.3f}", fontsize=9)
+    ax.legend(fontsize=7, ncol=4)
+    ax.grid(alpha=0.3)
+    ax = axes[1]
+    for ps, col, lab in ((cmp.learned, LEARNED_COLOR, "learned"),
+                         (cmp.exact, EXACT_COLOR, "exact")):
+        fp = np.asarray(metric.frame_positions(ps.paths[i]))  # (n+1, 10, 3)
+        idx = np.linspace(0, len(fp) - 1, 6).round().astype(int)
+        for a, k in enumerate(idx):
+            ax.plot(fp[k, :, 0], fp[k, :, 1], "-o", color=col, ms=2, lw=0.8,
+                    alpha=0.25 + 0.75 * a / (len(idx) - 1),
+                    label=lab if a == len(idx) - 1 else None)
+        ax.plot(fp[:, -1, 0], fp[:, -1, 1], color=col, lw=1.8,
+                ls="-" if lab == "learned" else "--", label=f"hand trajectory ({lab})")
+    px, py = float(metric.pole_x), float(metric.pole_y)
+    ax.add_patch(Circle((px, py), 0.03, color="tab:red", label="pole"))
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (m, world frame)")
+    ax.set_ylabel("y (m, world frame)")
+    ax.set_title("link positions seen from above (6 poses along the path, fading = earlier)",
+                 fontsize=9)
+    ax.legend(fontsize=7, loc="best")
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    return fig
+
+
+# ----------------------------------------------------------------------------------------
+# report: path quality
+# ----------------------------------------------------------------------------------------
+def length_ratios(cmp: Comparison) -> Figure:
+    """Histograms of the per-pair length ratio to the exact geodesic (learned and
+    straight), by sum of C and by quadrature length."""
+    fig = new_figure((11, 4))
+    axes = fig.subplots(1, 2)
+    for ax, ms, lab in ((axes[0], "length", "sum of C (eq. 4)"),
+                        (axes[1], "length_quadrature", "quadrature length (eq. 58)")):
+        a = cmp.ratios("learned", ms)
+        b = cmp.ratios("straight", ms)
+        a, b = a[np.isfinite(a)], b[np.isfinite(b)]
+        hi = max(float(np.max(a, initial=1.0)), float(np.max(b, initial=1.0))) * 1.02
+        lo = min(0.98, float(np.min(a, initial=1.0)), float(np.min(b, initial=1.0)))
+        if hi / lo > 4:  # long tails (detours): logarithmic ratio axis
+            bins = np.geomspace(lo, hi, 50)
+            ax.set_xscale("log")
+        else:
+            bins = np.linspace(lo, hi, 40)
+        ax.hist(b, bins=bins, alpha=0.55, color=STRAIGHT_COLOR, label="straight / exact")
+        ax.hist(a, bins=bins, alpha=0.65, color=LEARNED_COLOR, label="learned / exact")
+        ax.axvline(1.0, color="black", lw=0.8)
+        ax.set_xlabel(f"length ratio, {lab} (1 = exact)")
+        ax.set_ylabel("number of pairs")
+        ax.yaxis.set_major_locator(MaxNLocator(integer=True))
+        ax.legend(fontsize=8)
+        ax.grid(alpha=0.3)
+    fig.suptitle(f"{cmp.metric}: path length relative to the exact discrete geodesic "
+                 f"({len(cmp.pairs)} pairs)", fontsize=10)
+    fig.tight_layout()
+    return fig
+
+
+def midpoint_errors(cmp: Comparison, floor: MidpointErrors | None = None) -> Figure:
+    """First-level midpoint error of the learned policy against the pair's distance, with
+    the exact path's own midpoint (discretisation floor) if given."""
+    me = cmp.midpoint
+    fig = new_figure((6.5, 4.2))
+    ax = fig.subplots()
+    ok = me.ok
+    ax.scatter(me.d_sg[ok], 100 * me.err_max[ok], s=12, color=LEARNED_COLOR,
+               label="learned pi(s, g)")
+    if floor is not None:
+        fo = floor.ok
+        ax.scatter(floor.d_sg[fo], 100 * floor.err_max[fo], s=12, marker="x",
+                   color=EXACT_COLOR, label="exact $p_{n/2}$ (discretisation floor)")
+    ax.set_xlabel("exact discrete distance d(s, g)")
+    ax.set_ylabel("midpoint error max(|d(s,m)-d/2|, |d(m,g)-d/2|) / d  (%)")
+    ax.set_yscale("symlog", linthresh=0.1)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    ax.set_title(f"{cmp.metric}: first-level midpoint error ({me.segments} segments)",
+                 fontsize=10)
+    fig.tight_layout()
+    return fig
+
+
+# ----------------------------------------------------------------------------------------
+# sweeps: Fig. 2 (mean +- standard error over seeds)
+# ----------------------------------------------------------------------------------------
+def _column_label(column: str) -> str:
+    if column == "success_rate":
+        return "success rate (fraction of validation pairs)"
+    if column == "mean_length":
+        return "mean path length (validation pairs, sum of C)"
+    if column == "mean_max_segment_cost":
+        return "mean max segment cost C (validation pairs)"
+    return column
+
+
+def sweep_curves(curves: Mapping[str, Mapping[tuple[str, str], Curve]],
+                 column: str = "success_rate") -> Figure:
+    """Fig. 2: one column of panels per environment, one row per x axis (``curves`` maps
+    an x kind, ``"timesteps"`` and/or ``"wall_seconds"``, to the output of
+    :func:`validation.curves.learning_curves`). One line per variant (step function of the
+    seed mean, exact on the default grid of :func:`~validation.curves.learning_curves`; a dot
+    marks its last value), shaded band = mean +- standard error (absent where one seed
+    only); colours
+    are fixed per variant across panels. Axes: ``fig.axes`` is row-major,
+    ``len(curves) * n_envs`` panels."""
+    kinds = list(curves)
+    keys = sorted({k for c in curves.values() for k in c})
+    envs = sorted({e for e, _ in keys})
+    variants = sorted({v for _, v in keys})
+    cmap = matplotlib.colormaps["tab10"]
+    color = {v: cmap(i % 10) for i, v in enumerate(variants)}
+    fig = new_figure((5.0 * len(envs) + 0.5, 3.8 * len(kinds) + 0.6))
+    axes = fig.subplots(len(kinds), len(envs), squeeze=False)
+    for row, kind in enumerate(kinds):
+        for col, env in enumerate(envs):
+            ax = axes[row, col]
+            for var in variants:
+                c = curves[kind].get((env, var))
+                if c is None:
+                    continue
+                nmax = int(c.n_seeds.max())
+                ax.plot(c.x, c.mean, drawstyle="steps-post", color=color[var], lw=1.4,
+                        marker="o", ms=3, markevery=[len(c.x) - 1],  # the last value
+                        label=f"{var} ({nmax} seed{'s' if nmax != 1 else ''})")
+                ax.fill_between(c.x, c.mean - c.stderr, c.mean + c.stderr, step="post",
+                                color=color[var], alpha=0.22, lw=0)
+            ax.set_xlabel(X_LABELS.get(kind, kind))
+            ax.set_ylabel(_column_label(column))
+            if column == "success_rate":
+                ax.set_ylim(-0.02, 1.02)
+            ax.grid(alpha=0.3)
+            ax.set_title(env, fontsize=10)
+            ax.legend(fontsize=7, loc="best")
+    fig.suptitle(f"{_column_label(column)}: mean over seeds, band = +- standard error",
+                 fontsize=10)
+    fig.tight_layout()
+    return fig
