@@ -3,6 +3,9 @@
 Train with :func:`train` and a :class:`TrainConfig` (:func:`default_config` gives the
 documented per-environment defaults); load a trained or shipped policy with
 :func:`load_policy` and generate paths with ``policy.generate(starts, goals)``.
+The paper's baselines sit beside the midpoint learner (:mod:`learn.seq`, :mod:`learn.pg`);
+:mod:`learn.runs` trains and loads any method and names the paper's variants, and
+:mod:`learn.methods` holds the actor losses and extra terms.
 """
 
 from learn.config import (
@@ -23,12 +26,14 @@ from learn.policy import (
     load_policy,
     shipped_policies,
 )
+from learn.runs import VARIANTS, load_any_policy, make_config, run_one, train_run
 from learn.storage import CorruptFileError
 from learn.train import Trainer, TrainResult, read_run_config, resolve_device, train
 from learn.tree import build_tree, level_pairs, mc_targets, td_lambda_targets
 
 __all__ = [
     "METHODS",
+    "VARIANTS",
     "Actor",
     "CorruptFileError",
     "Critic",
@@ -44,13 +49,17 @@ __all__ = [
     "evaluate_policy",
     "export_policy",
     "level_pairs",
+    "load_any_policy",
     "load_policy",
+    "make_config",
     "mc_targets",
     "package_versions",
     "paper_config",
     "read_run_config",
     "resolve_device",
+    "run_one",
     "shipped_policies",
     "td_lambda_targets",
     "train",
+    "train_run",
 ]

@@ -62,7 +62,7 @@ import finsler
 from finsler.errors import InputError
 from learn.config import package_versions
 from learn.networks import mlp
-from learn.policy import EvalResult, _check_pairs, evaluate_paths
+from learn.policy import EvalResult, check_pairs, evaluate_paths
 from learn.storage import (
     BEST_FILE,
     CONFIG_FILE,
@@ -829,13 +829,15 @@ class PGPolicy:
     """Trained per-depth policies (deterministic means) for one metric."""
 
     def __init__(self, policies: Sequence[DepthPolicy], config: PGConfig,
-                 source: str = "") -> None:
+                 source: str = "", checkpoint: str = "") -> None:
         self.policies = nn.ModuleList(policies).eval()
         self.config = config
         self.metric = config.metric
         self.depth = config.max_depth
         self.eps = config.eval_eps
         self.source = source
+        self.checkpoint = checkpoint
+        """File the weights came from."""
 
     def __repr__(self) -> str:
         return f"PGPolicy(env={self.metric.name!r}, depth={self.depth}, source={self.source!r})"
@@ -869,7 +871,7 @@ class PGPolicy:
                  depth: int | None = None) -> EvalResult:
         """Section 5.1 evaluation on ``pairs`` ``(K, 2, dim)`` (default: the environment's
         default evaluation set, ``finsler.default_pairs``)."""
-        p = finsler.default_pairs(self.metric) if pairs is None else _check_pairs(
+        p = finsler.default_pairs(self.metric) if pairs is None else check_pairs(
             self.metric, pairs)
         paths = self.generate(p[:, 0], p[:, 1], depth=depth)
         return evaluate_paths(self.metric, paths, self.eps if eps is None else eps)
@@ -894,6 +896,7 @@ def load_pg_policy(run_dir: str | Path, checkpoint: str = "best",
     for name in order:
         if (path / name).is_file():
             ckpt = load_checkpoint(path / name)
+            loaded = name
             break
     else:
         raise InputError(f"run directory {path} holds no checkpoint "
@@ -905,4 +908,4 @@ def load_pg_policy(run_dir: str | Path, checkpoint: str = "best",
     except (KeyError, RuntimeError, TypeError, ValueError) as err:
         raise CorruptFileError(f"checkpoint in {path} does not match its config: {err}") from err
     policies = policies.to(resolve_device(device))
-    return PGPolicy(list(policies), cfg, source=str(path))
+    return PGPolicy(list(policies), cfg, source=str(path), checkpoint=loaded)

@@ -34,6 +34,7 @@ __all__ = [
     "EvalResult",
     "Policy",
     "build_actor",
+    "check_pairs",
     "evaluate_paths",
     "evaluate_policy",
     "export_policy",
@@ -132,7 +133,8 @@ def evaluate_paths(metric: finsler.Metric, paths: np.ndarray, eps: float) -> Eva
     )
 
 
-def _check_pairs(metric: finsler.Metric, pairs: Any) -> np.ndarray:
+def check_pairs(metric: finsler.Metric, pairs: Any) -> np.ndarray:
+    """``pairs`` as float64 ``(K, 2, dim)``, checked: shape, K >= 1, finite, in the domain."""
     arr = np.asarray(pairs, dtype=np.float64)
     if arr.ndim != 3 or arr.shape[1] != 2 or arr.shape[2] != metric.dim:
         raise InputError(
@@ -193,7 +195,7 @@ class Policy:
     ) -> EvalResult:
         """Section 5.1 evaluation on ``pairs`` ``(K, 2, dim)`` (default: the environment's
         default evaluation set, ``finsler.default_pairs``)."""
-        p = finsler.default_pairs(self.metric) if pairs is None else _check_pairs(
+        p = finsler.default_pairs(self.metric) if pairs is None else check_pairs(
             self.metric, pairs)
         paths = self.generate(p[:, 0], p[:, 1], depth=depth)
         return evaluate_paths(self.metric, paths, self.eps if eps is None else eps)
@@ -292,3 +294,6 @@ def export_policy(run_dir: str | Path, dest: str | Path, checkpoint: str = "best
     if (src / METRICS_FILE).is_file():
         atomic_write_bytes(dest / METRICS_FILE, (src / METRICS_FILE).read_bytes())
     return dest
+
+
+_check_pairs = check_pairs  # old private name, still imported by learn.seq
