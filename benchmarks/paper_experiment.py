@@ -27,6 +27,7 @@ import finsler
 import learn
 from learn.runs import load_any_policy
 from learn.storage import RESULT_FILE, read_json, read_metrics
+from validation.curves import running_mean_threshold
 
 
 def _stats(values: list[float]) -> tuple[float, float]:
@@ -35,15 +36,11 @@ def _stats(values: list[float]) -> tuple[float, float]:
     return float(a.mean()), se
 
 
-def first_running_mean(rows: list[dict], threshold: float, window: int = 5,
-                       key: str = "timesteps") -> float | None:
-    """``key`` of the first evaluation at which the mean of the last ``window`` validation
-    success rates reaches ``threshold`` (None if never)."""
-    s = [float(r["success_rate"]) for r in rows]
-    for i in range(window - 1, len(s)):
-        if np.mean(s[i - window + 1 : i + 1]) >= threshold:
-            return float(rows[i][key])
-    return None
+def first_running_mean(rows: list[dict], threshold: float) -> float | None:
+    """Evaluations of C at which a running mean of 5 validation evaluations first reaches
+    ``threshold`` (None if never)."""
+    hit = running_mean_threshold(rows, threshold, window=5)
+    return None if hit is None else float(hit.timesteps)
 
 
 def _exact_lengths(metric: finsler.Metric, pairs: np.ndarray, cache: Path) -> np.ndarray:

@@ -322,6 +322,25 @@ def test_report_writes_markdown_json_and_figures(report_dir: Path) -> None:
     assert lr["median"] == pytest.approx(float(np.median(ratios)), rel=1e-12)
 
 
+def test_report_names_its_checkpoint_and_running_mean_times(report_dir: Path) -> None:
+    doc = json.loads((report_dir / "out" / "report.json").read_text())
+    assert "policy.pt" in doc["policy_note"] or "checkpoint_best.pt" in doc["policy_note"]
+    assert set(doc["time_to_success"]) == {"0.9", "0.95", "0.99"}
+
+
+def test_time_to_success_needs_a_running_mean_of_five() -> None:
+    from validation.report import time_to_success
+
+    succ = [0.5, 1.0, 0.9, 0.9, 0.9, 0.9, 0.96, 0.97, 1.0, 1.0]
+    rows = [{"timesteps": 100 * i, "wall_seconds": float(i), "success_rate": s}
+            for i, s in enumerate(succ)]
+    got = time_to_success(rows, thresholds=(0.9, 0.95, 0.99))
+    # means of 5: rows 0-4 0.84, 1-5 0.92 (>= 0.9 at row 5), ..., 5-9 0.966 (>= 0.95 at 9)
+    assert got["0.9"] == {"timesteps": 500.0, "wall_seconds": 5.0}
+    assert got["0.95"] == {"timesteps": 900.0, "wall_seconds": 9.0}
+    assert got["0.99"] is None  # one evaluation of 1.0 is not a running mean
+
+
 def test_report_agrees_with_geodesics_evaluate(report_dir: Path, matsumoto_policy) -> None:
     doc = json.loads((report_dir / "out" / "report.json").read_text())
     res = CliRunner().invoke(app, ["evaluate", *matsumoto_policy, "--pairs",

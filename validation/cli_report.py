@@ -31,6 +31,8 @@ def report_command(
         "--continuum/--no-continuum",
         help="Continuum distances for the midpoint error where the metric is Finsler along "
              "the path (default: on unless --quick).")] = None,
+    checkpoint: Annotated[str, typer.Option(
+        help="best (selected on the validation set during training) or latest.")] = "best",
     workers: Annotated[int | None, typer.Option(
         help="Processes for the exact solves (default: CPU count).")] = None,
     progress: Annotated[bool, typer.Option("--progress/--no-progress",
@@ -47,13 +49,14 @@ def report_command(
         if out.exists() and not out.is_dir():
             raise InputError(f"--out {out} exists and is not a directory")
         doc = build_report(env, out, run=run, pairs=pairs, quick=quick, continuum=continuum,
-                           workers=workers, progress=progress)
+                           workers=workers, progress=progress, checkpoint=checkpoint)
     except InputError as err:
         fail(str(err))
         return
     sr = doc["success_rate"]
     lr = doc["length_ratio"]["learned"]["length"]
     typer.echo(f"report for {doc['metric']} ({doc['pairs']} pairs) written to {out}/report.md")
+    typer.echo(f"policy: {doc['policy_note']}")
     typer.echo(f"success: learned {sr['learned']:.0%}, exact ceiling {sr['exact_ceiling']:.0%}, "
                f"straight line {sr['straight']:.0%}")
     if lr["mean"] is not None:

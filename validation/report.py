@@ -37,27 +37,33 @@ __all__ = ["build_report", "load_report_policy", "read_learning_curve", "write_f
 # policy
 # ----------------------------------------------------------------------------------------
 def load_report_policy(
-    env: str | None, run: str | Path | None, quick: bool, out: Path, progress: bool = True
+    env: str | None, run: str | Path | None, quick: bool, out: Path, progress: bool = True,
+    checkpoint: str = "best",
 ) -> tuple[Any, Path | None, str]:
-    """The policy to report on, its run directory (for the learning curve, may be None) and
-    a sentence saying where it came from."""
+    """The policy to report on (``checkpoint``: ``best``, selected on the validation set,
+    or ``latest``), its run directory (for the learning curve, may be None) and a sentence
+    saying where it came from and which checkpoint file was used."""
     import learn
 
+    if checkpoint not in ("best", "latest"):
+        raise InputError(f"checkpoint must be best or latest, got {checkpoint!r}")
     if run is not None:
         run = Path(run)
         if not run.is_dir():
             raise InputError(f"run directory {run} does not exist")
-        pol = learn.load_policy(run, env=env)
-        return pol, run, f"run directory {run}"
+        pol = learn.load_any_policy(run, checkpoint=checkpoint, env=env)
+        return pol, run, f"run directory {run}, {pol.checkpoint}"
     if env is None:
         raise InputError("give --env NAME or --run DIR")
     if env not in finsler.list_metrics():
         raise finsler.UnknownMetricError(
             f"unknown environment {env!r}; known: {', '.join(finsler.list_metrics())}")
     if env in learn.shipped_policies():
-        pol = learn.load_policy(env)
+        pol = learn.load_policy(env, checkpoint=checkpoint)
         src = Path(pol.source)
-        return pol, src if src.is_dir() else None, f"shipped policy for {env} ({src})"
+        return pol, src if src.is_dir() else None, (
+            f"shipped policy for {env} ({src}, {pol.checkpoint}; its checkpoint was selected "
+            "on the default evaluation set, see learn/policies/README.md for fresh pairs)")
     if quick:
         if env != "matsumoto":
             raise InputError(f"--quick trains a small policy only for matsumoto; {env!r} has "
@@ -65,19 +71,37 @@ def load_report_policy(
         run_dir = out / "quick_run"
         if (run_dir / "config.json").is_file():  # a previous --quick run: reuse its policy
             try:
-                return learn.load_policy(run_dir), run_dir, (
-                    f"small policy trained by an earlier --quick run, reused from {run_dir}")
+                pol = learn.load_policy(run_dir, checkpoint=checkpoint)
+                return pol, run_dir, (
+                    f"small policy trained by an earlier --quick run, reused from {run_dir}"
+                    f", {pol.checkpoint}")
             except InputError:
                 pass  # incomplete or corrupt: train again below
         cfg = learn.default_config("matsumoto", timesteps=3_000_000, minutes=3.0,
                                    eval_every=5)
         learn.train(cfg, run_dir, progress=progress)
-        return learn.load_policy(run_dir), run_dir, (
-            f"small policy trained by --quick ({cfg.timesteps:.0e} timesteps or "
-            f"{cfg.minutes:g} min) in {run_dir}")
+        pol = learn.load_policy(run_dir, checkpoint=checkpoint)
+        return pol, run_dir, (
+            f"small policy trained by --quick ({cfg.timesteps:.0e} evaluations of C or "
+            f"{cfg.minutes:g} min) in {run_dir}, {pol.checkpoint}")
     raise InputError(f"no shipped policy for {env!r} (shipped: "
                      f"{', '.join(learn.shipped_policies()) or 'none'}); pass --run DIR "
                      "or use --quick")
+
+
+def time_to_success(rows: list[dict[str, Any]],
+                    thresholds: tuple[float, ...] = (0.9, 0.95, 0.99)) -> dict[str, Any]:
+    """For each threshold, the first evaluations of C (all-inclusive) and wall seconds at
+    which a running mean of 5 consecutive validation evaluations reached it (None if
+    never): one lucky evaluation does not count."""
+    from validation.curves import running_mean_threshold
+
+    out: dict[str, Any] = {}
+    for t in thresholds:
+        hit = running_mean_threshold(rows, t, window=5) if rows else None
+        out[f"{t:g}"] = None if hit is None else {
+            "timesteps": float(hit.timesteps), "wall_seconds": float(hit.wall_seconds)}
+    return out
 
 
 def read_learning_curve(run_dir: Path | None) -> list[dict[str, Any]]:
@@ -258,6 +282,15 @@ def _markdown(doc: dict[str, Any], figures: list[str], metric: Metric) -> str:
     if "learning_curve.png" not in figures:
         lines += ["No learning curve: the policy's directory holds no metrics log "
                   "(`metrics.csv`).", ""]
+    else:
+        reached = []
+        for t, hit in doc.get("time_to_success", {}).items():
+            reached.append(f"{100 * float(t):.0f}%: " + (
+                "not reached" if hit is None else
+                f"{hit['timesteps']:.3g} evaluations of C, {hit['wall_seconds']:.0f} s"))
+        lines += ["Time to a success rate (the first evaluation at which a running mean of "
+                  "5 consecutive validation evaluations reached it): "
+                  + "; ".join(reached) + ".", ""]
     for f in figures:
         lines += [f"![{f}]({f})", "", captions.get(f, ""), ""]
     lines += ["All numbers are also in `report.json`.", ""]
@@ -279,16 +312,18 @@ def build_report(
     workers: int | None = None,
     progress: bool = True,
     policy: Any = None,
+    checkpoint: str = "best",
 ) -> dict[str, Any]:
     """Write the report for ``env`` (or the run's environment) into ``out``; returns the
     ``report.json`` document. ``policy`` overrides the loaded policy (any object with the
     policy interface, e.g. :class:`validation.StraightLine`). ``continuum`` (default: on
     unless ``quick``) adds continuum distances to the midpoint error, where
-    :func:`solvers.distance` converges (the metric is Finsler along the path)."""
+    :func:`solvers.distance` converges (the metric is Finsler along the path).
+    ``checkpoint``: ``best`` (selected on the validation set) or ``latest``."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     if policy is None:
-        pol, run_dir, note = load_report_policy(env, run, quick, out, progress)
+        pol, run_dir, note = load_report_policy(env, run, quick, out, progress, checkpoint)
     else:
         pol, run_dir, note = policy, (Path(run) if run is not None else None), str(
             getattr(policy, "source", type(policy).__name__))
@@ -318,6 +353,7 @@ def build_report(
     doc["pairs_note"] = pairs_note
     doc["midpoint_error_exact_floor"] = floor.summary()
     doc["learning_curve"] = read_learning_curve(run_dir)
+    doc["time_to_success"] = time_to_success(doc["learning_curve"])
     doc["learned_length_ratio_per_pair"] = [
         None if not np.isfinite(x) else float(x) for x in cmp.ratios("learned")]
     figures = write_figures(cmp, metric, out, doc["learning_curve"], floor)
