@@ -14,16 +14,37 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, ClassVar
+from typing import Any, ClassVar, Protocol
 
+import numpy as np
 import torch
 
+import finsler
 from finsler.errors import InputError
+from learn.networks import Actor
 from learn.tree import build_tree
 
-if TYPE_CHECKING:  # pragma: no cover
-    from learn.config import TrainConfig
-    from learn.train import Trainer
+
+class Trainer(Protocol):
+    """What a term reads of the trainer running it (:class:`learn.Trainer`)."""
+
+    actor: Actor
+    metric: finsler.Metric
+    np_rng: np.random.Generator
+    device: torch.device
+    dim: int
+    depth_max: int
+
+
+class TrainConfig(Protocol):
+    """The fields of :class:`learn.TrainConfig` that choose the loss and the terms."""
+
+    method: str
+    path_energy_weight: float
+    path_energy_pairs: int
+    route_candidates: int
+    route_pairs: int
+    route_weight: float
 
 __all__ = [
     "ACTOR_LOSSES",

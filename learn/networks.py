@@ -16,8 +16,21 @@ import torch
 from torch import nn
 
 import finsler
+from finsler.errors import InputError
 
-__all__ = ["Actor", "Critic", "mlp"]
+__all__ = ["Actor", "Critic", "mlp", "resolve_device"]
+
+
+def resolve_device(name: str) -> torch.device:
+    """``cpu`` or ``cuda[:k]``; a clear :class:`InputError` if CUDA is unavailable."""
+    if name == "cpu":
+        return torch.device("cpu")
+    if name == "cuda" or name.startswith("cuda:"):
+        if not torch.cuda.is_available():
+            raise InputError(f"device {name!r} requested but CUDA is not available on this "
+                             "machine (torch.cuda.is_available() is False); use --device cpu")
+        return torch.device(name)
+    raise InputError(f"device must be 'cpu' or 'cuda', got {name!r}")
 
 
 def mlp(n_in: int, n_out: int, hidden: tuple[int, ...], activation: str) -> nn.Sequential:

@@ -18,7 +18,7 @@ import torch
 import finsler
 from finsler.errors import InputError
 from learn.config import TrainConfig
-from learn.networks import Actor
+from learn.networks import Actor, resolve_device
 from learn.storage import (
     BEST_FILE,
     CONFIG_FILE,
@@ -266,8 +266,6 @@ def load_policy(run: str | Path, device: str = "cpu", checkpoint: str = "best",
     except (KeyError, RuntimeError) as err:
         raise CorruptFileError(f"checkpoint in {path} does not match its config: {err}") from err
     if device != "cpu":
-        from learn.train import resolve_device
-
         actor = actor.to(resolve_device(device))
     return Policy(actor, cfg, source=str(path), checkpoint=loaded)
 

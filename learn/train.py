@@ -36,7 +36,7 @@ import finsler
 from finsler.errors import InputError
 from learn.config import TrainConfig, config_json
 from learn.methods import actor_loss_of, actor_terms
-from learn.networks import Critic
+from learn.networks import Critic, resolve_device
 from learn.policy import EvalResult, build_actor, evaluate_paths, generate_paths
 from learn.storage import (
     BEST_FILE,
@@ -56,18 +56,6 @@ from learn.storage import (
 from learn.tree import build_tree, level_pairs, mc_targets, td_lambda_targets
 
 __all__ = ["TrainResult", "Trainer", "actor_loss", "resolve_device", "train"]
-
-
-def resolve_device(name: str) -> torch.device:
-    """``cpu`` or ``cuda[:k]``; a clear :class:`InputError` if CUDA is unavailable."""
-    if name == "cpu":
-        return torch.device("cpu")
-    if name == "cuda" or name.startswith("cuda:"):
-        if not torch.cuda.is_available():
-            raise InputError(f"device {name!r} requested but CUDA is not available on this "
-                             "machine (torch.cuda.is_available() is False); use --device cpu")
-        return torch.device(name)
-    raise InputError(f"device must be 'cpu' or 'cuda', got {name!r}")
 
 
 def actor_loss(method: str, v_first: torch.Tensor, v_second: torch.Tensor) -> torch.Tensor:
