@@ -359,6 +359,8 @@ def solve_batch(
     workers: int | None = None,
     progress: bool = True,
     checkpoint_dir: str | os.PathLike[str] | None = None,
+    ray_address: str | None = None,
+    chunk_size: int | None = None,
 ) -> list[GeodesicResult]:
     """Solve every pair of ``pairs`` ``(K, 2, dim)``; results in the order of the pairs.
 
@@ -370,6 +372,12 @@ def solve_batch(
     renamed), and a rerun with the same pairs, segments, seeds and ``minmax`` reuses
     them: an interrupted batch resumes without losing finished work. Files saved for
     other inputs are ignored and recomputed.
+
+    With ``ray_address`` (``"local"`` starts a local Ray instance of ``workers`` CPUs;
+    ``"auto"`` or ``"HOST:6379"`` joins a running cluster) the pairs are solved as Ray
+    tasks of ``chunk_size`` pairs (default: about four chunks per CPU of the cluster, at
+    most 64 pairs) by :mod:`solvers.distributed`; every finished chunk's pairs are saved
+    as the same parts as above, and the results equal the local ones.
     """
     from tqdm.auto import tqdm
 
@@ -377,11 +385,19 @@ def solve_batch(
     arr = check_pairs(m, pairs)
     n = check_segments(m, segments)
     plan = seeds if seeds is not None else SeedPlan.default(m)
-    store = _BatchStore(checkpoint_dir, m, n, plan, minmax) if checkpoint_dir else None
     if workers is None:
         workers = os.cpu_count() or 1
     if isinstance(workers, bool) or not isinstance(workers, (int, np.integer)) or workers < 1:
         raise InputError(f"workers must be a positive integer, got {workers!r}")
+    if chunk_size is not None and (isinstance(chunk_size, bool)
+                                   or not isinstance(chunk_size, (int, np.integer))
+                                   or chunk_size < 1):
+        raise InputError(f"chunk_size must be a positive integer, got {chunk_size!r}")
+    if ray_address is not None:
+        from solvers.distributed import require_ray
+
+        require_ray()  # before any file is made
+    store = _BatchStore(checkpoint_dir, m, n, plan, minmax) if checkpoint_dir else None
     workers = int(min(workers, arr.shape[0]))
     results: list[GeodesicResult | None] = [None] * arr.shape[0]
     if store is not None:
@@ -391,7 +407,17 @@ def solve_batch(
     bar = tqdm(total=arr.shape[0], desc=f"solve {m.name}", disable=not progress, unit="pair",
                initial=arr.shape[0] - len(todo))
     try:
-        if workers == 1 or len(todo) <= 1:
+        if ray_address is not None and todo:
+            from solvers.distributed import solve_chunks_ray
+
+            local_cpus = int(min(workers, len(todo)))
+            for k, res in solve_chunks_ray(ray_address, _metric_spec(m), arr, todo, n, plan,
+                                           minmax, chunk_size, num_cpus=local_cpus):
+                results[k] = res
+                if store is not None:
+                    store.save(k, arr[k], res)
+                bar.update(1)
+        elif workers == 1 or len(todo) <= 1:
             for k in todo:
                 results[k] = solve_geodesic(m, arr[k, 0], arr[k, 1], n, seeds=plan,
                                             minmax=minmax)

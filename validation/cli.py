@@ -117,9 +117,9 @@ def cost_command(
 
 def _register_optional_commands() -> None:
     """Commands of the other layers, registered here so the CLI stays one entry point."""
-    from validation import cli_learn, cli_plot, cli_report, cli_solve
+    from validation import cli_learn, cli_plot, cli_report, cli_solve, cli_sweep
 
-    for module in (cli_solve, cli_learn, cli_report, cli_plot):
+    for module in (cli_solve, cli_learn, cli_report, cli_plot, cli_sweep):
         module.register(app)
 
 

@@ -74,8 +74,20 @@ def solve_command(
     as_json: Annotated[bool, typer.Option("--json", help="Print JSON.")] = False,
     workers: Annotated[int, typer.Option(help="Worker processes for --pairs.")] = 2,
     progress: Annotated[bool, typer.Option(help="Show a progress bar for --pairs.")] = True,
+    ray: Annotated[str | None, typer.Option(
+        "--ray", metavar="ADDRESS",
+        help="Solve --pairs as Ray tasks: HOST:6379 or auto (a running cluster), or local "
+             "(a local Ray instance of --workers CPUs). Needs Ray: the project's "
+             "'distributed' extra.")] = None,
+    chunk_size: Annotated[int | None, typer.Option(
+        help="Pairs per Ray task (default: about four tasks per CPU of the cluster, at most "
+             "64 pairs).")] = None,
 ) -> None:
-    """Exact discrete geodesics (globally seeded IPOPT) with min-max refinement."""
+    """Exact discrete geodesics (globally seeded IPOPT) with min-max refinement.
+
+    With --pairs and --out, finished pairs are kept in OUT.parts/ until the JSON is
+    written, so running the same command again after an interruption resumes it (also
+    across --workers and --ray)."""
     m = metric_or_fail(metric)
     if pairs is not None and (start is not None or goal is not None):
         fail("give either --start/--goal or --pairs, not both")
@@ -83,6 +95,10 @@ def solve_command(
         fail("give --start and --goal, or --pairs PAIRS.npy")
     if workers < 1:
         fail(f"--workers must be >= 1, got {workers}")
+    if (ray is not None or chunk_size is not None) and pairs is None:
+        fail("--ray and --chunk-size apply to --pairs")
+    if chunk_size is not None and chunk_size < 1:
+        fail(f"--chunk-size must be >= 1, got {chunk_size}")
     if pairs is not None:
         arr = _pairs_or_fail(pairs, m)
     else:
@@ -99,7 +115,7 @@ def solve_command(
         parts = out.with_name(out.name + ".parts") if out is not None and pairs else None
         results = solvers.solve_batch(
             m, arr, n, minmax=True, workers=workers, progress=progress and pairs is not None,
-            checkpoint_dir=parts,
+            checkpoint_dir=parts, ray_address=ray, chunk_size=chunk_size,
         )
     except InputError as err:
         fail(str(err))

@@ -1,0 +1,138 @@
+"""``geodesics sweep``: every (environment, variant, seed) as its own run directory, on a
+local process pool or on a Ray cluster; a thin CLI over :mod:`learn.sweep`."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Annotated, Any
+
+import typer
+
+from finsler.errors import InputError
+
+__all__ = ["format_table", "parse_overrides", "register", "sweep_command"]
+
+
+def _fail(message: str) -> None:
+    from validation.cli import fail
+
+    fail(message)
+
+
+def _split(text: str) -> list[str]:
+    return [t.strip() for t in text.split(",") if t.strip()]
+
+
+def parse_overrides(items: list[str]) -> dict[str, Any]:
+    """``["field=value", ...]`` -> ``{field: value}`` (values parsed as JSON, else kept as
+    strings; lists become tuples). Which variants take a field is decided by
+    :func:`learn.sweep.plan_sweep`."""
+    out: dict[str, Any] = {}
+    for item in items:
+        key, sep, raw = item.partition("=")
+        key = key.strip()
+        if not sep or not key:
+            raise InputError(f"--set expects FIELD=VALUE, got {item!r}")
+        try:
+            value = json.loads(raw)
+        except json.JSONDecodeError:
+            value = raw
+        out[key] = tuple(value) if isinstance(value, list) else value
+    return out
+
+
+def _cell(v: Any, key: str) -> str:
+    if v is None:
+        return "-"
+    if key == "success_rate":
+        return f"{v:.2%}"
+    if key == "wall_seconds":
+        return f"{v:.1f}"
+    return str(v)
+
+
+def format_table(rows: list[dict[str, Any]]) -> str:
+    """The sweep's final table: env, variant, seed, action, stopped_by, timesteps, wall
+    seconds (training, cumulative), final validation success."""
+    keys = ("env", "variant", "seed", "action", "stopped_by", "timesteps", "wall_seconds",
+            "success_rate")
+    head = ("env", "variant", "seed", "action", "stopped by", "timesteps", "wall s",
+            "val. success")
+    table = [head] + [tuple(_cell(r[k], k) for k in keys) for r in rows]
+    widths = [max(len(row[i]) for row in table) for i in range(len(head))]
+    lines = []
+    for k, row in enumerate(table):
+        lines.append("  ".join(c.ljust(w) for c, w in zip(row, widths)).rstrip())
+        if k == 0:
+            lines.append("  ".join("-" * w for w in widths))
+    return "\n".join(lines)
+
+
+def sweep_command(
+    envs: Annotated[str, typer.Option(help="Comma-separated environments, e.g. "
+                                           "matsumoto,carlike.")],
+    methods: Annotated[str, typer.Option(
+        help="Comma-separated variants: midpoint, midpoint-free, paper, inter, two-to-one, "
+             "seq, pg.")],
+    seeds: Annotated[int, typer.Option(help="Number of seeds N: runs use seeds 0..N-1.")],
+    out: Annotated[Path, typer.Option(
+        help="Sweep folder: runs go to OUT/<env>/<variant>/seed-<s>/, the plan and the "
+             "status of every run to OUT/sweep.json.")],
+    timesteps: Annotated[int | None, typer.Option(
+        help="Budget of every run: evaluations of C, all-inclusive (default: each "
+             "variant's default for the environment).")] = None,
+    minutes: Annotated[float | None, typer.Option(
+        help="Wall-clock limit of every run in minutes (cumulative across resumes); a run "
+             "stops at whichever limit comes first.")] = None,
+    workers: Annotated[int | None, typer.Option(
+        help="Local worker processes (default min(2, runs)); with --ray, the most tasks in "
+             "flight (default: all, the cluster schedules them).")] = None,
+    ray: Annotated[str | None, typer.Option(
+        "--ray", metavar="ADDRESS",
+        help="Run on Ray: HOST:6379 or auto (a running cluster), or local (start a local "
+             "Ray instance). Needs Ray: the project's 'distributed' extra.")] = None,
+    settings: Annotated[list[str] | None, typer.Option(
+        "--set", metavar="FIELD=VALUE",
+        help="Override a config field in every variant whose config has it (repeatable; "
+             "VALUE is JSON or a bare string), e.g. --set eval_every=10.")] = None,
+    quiet: Annotated[bool, typer.Option("--quiet", help="No progress bar.")] = False,
+    as_json: Annotated[bool, typer.Option("--json", help="Print the rows as JSON.")] = False,
+) -> None:
+    """Train every (environment, variant, seed) into its own run directory: finished runs
+    are skipped, unfinished ones resumed, absent ones started, so an interrupted sweep is
+    completed by running the same command again.
+
+    Locally the runs share a process pool (one torch thread each). With --ray each run is a
+    Ray task: it is sent its run directory's files, trains in a temporary folder on the
+    worker and sends the files back, so the cluster's machines need the project installed
+    but no shared filesystem. Exit status 1 if a run failed (the others still finish)."""
+    from learn import sweep as sw
+
+    try:
+        if workers is not None and workers < 1:
+            raise InputError(f"--workers must be a positive integer, got {workers}")
+        plan = sw.plan_sweep(_split(envs), _split(methods), seeds, timesteps=timesteps,
+                             minutes=minutes, overrides=parse_overrides(settings or []))
+        result = sw.run_sweep(plan, out, workers=workers, ray_address=ray,
+                              progress=not quiet)
+    except InputError as err:
+        _fail(str(err))
+        return
+    rows = result.rows()
+    if as_json:
+        typer.echo(json.dumps(rows, indent=2))
+    else:
+        typer.echo(format_table(rows))
+        typer.echo(f"{len(rows)} runs in {result.seconds:.1f} s ({result.backend}); "
+                   f"plan and status in {out / sw.SWEEP_FILE}")
+    if result.failed:
+        typer.echo(f"{len(result.failed)} run(s) failed:", err=True)
+        for o in result.failed:
+            typer.echo(f"  {o.spec.rel_dir}: {o.error}", err=True)
+        raise typer.Exit(code=1)
+
+
+def register(app: typer.Typer) -> None:
+    """Add ``sweep`` to the ``geodesics`` app."""
+    app.command("sweep")(sweep_command)
