@@ -292,6 +292,3 @@ def export_policy(run_dir: str | Path, dest: str | Path, checkpoint: str = "best
     if (src / METRICS_FILE).is_file():
         atomic_write_bytes(dest / METRICS_FILE, (src / METRICS_FILE).read_bytes())
     return dest
-
-
-_check_pairs = check_pairs  # old private name, still imported by learn.seq
