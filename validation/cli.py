@@ -10,11 +10,11 @@ import json
 import sys
 from typing import Annotated
 
-import numpy as np
 import typer
 
 import finsler
 from finsler.errors import InputError
+from validation.cli_common import fail, metric_or_fail, parse_point
 
 app = typer.Typer(
     name="geodesics",
@@ -23,34 +23,6 @@ app = typer.Typer(
     add_completion=False,
     pretty_exceptions_enable=False,
 )
-
-
-def fail(message: str) -> None:
-    """Print a clear error and exit with status 2 (bad input)."""
-    typer.echo(f"error: {message}", err=True)
-    raise typer.Exit(code=2)
-
-
-def parse_point(text: str, dim: int, what: str) -> np.ndarray:
-    """Parse ``"a,b,..."`` into a float64 vector of length ``dim``."""
-    try:
-        values = [float(t) for t in text.replace(" ", "").split(",") if t != ""]
-    except ValueError:
-        fail(f"{what} {text!r} is not a comma-separated list of numbers")
-    if len(values) != dim:
-        fail(f"{what} needs {dim} comma-separated coordinates, got {len(values)} in {text!r}")
-    arr = np.asarray(values, dtype=np.float64)
-    if not np.all(np.isfinite(arr)):
-        fail(f"{what} {text!r} contains NaN or inf")
-    return arr
-
-
-def metric_or_fail(name: str) -> finsler.Metric:
-    try:
-        return finsler.get_metric(name)
-    except InputError as err:
-        fail(str(err))
-        raise  # unreachable
 
 
 @app.command("metrics")

@@ -16,14 +16,9 @@ import typer
 
 import finsler
 from finsler.errors import InputError
+from validation.cli_common import fail
 
 __all__ = ["evaluate_command", "register", "train_command"]
-
-
-def _fail(message: str) -> None:
-    from validation.cli import fail
-
-    fail(message)
 
 
 def train_command(
@@ -101,7 +96,7 @@ def train_command(
                               device, settings or [])
         result = runs.train_run(cfg, out, resume=resume, progress=not quiet)
     except InputError as err:
-        _fail(str(err))
+        fail(str(err))
         return
     f = result.final
     typer.echo(
@@ -219,7 +214,7 @@ def evaluate_command(
         p = finsler.load_pairs(pairs, policy.metric) if pairs is not None else None
         res = policy.evaluate(p, eps=eps, depth=depth)
     except InputError as err:
-        _fail(str(err))
+        fail(str(err))
         return
     out = {"env": policy.metric.name, "source": policy.source,
            "checkpoint": policy.checkpoint, **res.to_dict()}

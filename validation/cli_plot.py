@@ -9,6 +9,7 @@ from typing import Annotated, Any
 import typer
 
 from finsler.errors import InputError
+from validation.cli_common import fail
 
 __all__ = ["FORMATS", "plot_curves", "plot_curves_command", "register"]
 
@@ -62,7 +63,6 @@ def plot_curves_command(
     Each seed counts as a step function (its last evaluation at or before x) between its
     first and last evaluation; the CSV (columns env, variant, x_kind, x, mean, stderr,
     n_seeds) says how many seeds every point averages."""
-    from validation.cli import fail
 
     try:
         _, fig_path, csv_path = plot_curves(sweep_dir, out, column)

@@ -9,6 +9,7 @@ from typing import Annotated
 import typer
 
 from finsler.errors import InputError
+from validation.cli_common import fail
 
 __all__ = ["register", "report_command"]
 
@@ -40,7 +41,6 @@ def report_command(
 ) -> None:
     """Benchmark a learned policy against exact geodesics and the straight-line baseline:
     success rates, length ratios, midpoint errors, timing, figures."""
-    from validation.cli import fail
     from validation.report import build_report
 
     try:

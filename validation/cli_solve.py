@@ -25,7 +25,7 @@ import typer
 import finsler
 import solvers
 from finsler.errors import InputError
-from validation.cli import fail, metric_or_fail, parse_point
+from validation.cli_common import fail, metric_or_fail, parse_point
 
 __all__ = ["register", "solve_command", "solve_payload"]
 

@@ -10,14 +10,9 @@ from typing import Annotated, Any
 import typer
 
 from finsler.errors import InputError
+from validation.cli_common import fail
 
 __all__ = ["format_table", "parse_overrides", "register", "sweep_command"]
-
-
-def _fail(message: str) -> None:
-    from validation.cli import fail
-
-    fail(message)
 
 
 def _split(text: str) -> list[str]:
@@ -117,7 +112,7 @@ def sweep_command(
         result = sw.run_sweep(plan, out, workers=workers, ray_address=ray,
                               progress=not quiet)
     except InputError as err:
-        _fail(str(err))
+        fail(str(err))
         return
     rows = result.rows()
     if as_json:
