@@ -14,7 +14,7 @@ from __future__ import annotations
 import logging
 import math
 import os
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from typing import Any
 
 import numpy as np
@@ -59,20 +59,21 @@ def connect_ray(address: str, num_cpus: int | None = None) -> bool:
     return True
 
 
-def _solve_chunk(spec: tuple, ks: list[int], pairs: np.ndarray, n: int, plan: Any,
-                 minmax: bool) -> list[tuple[int, Any]]:
+def _solve_chunk(worker: Callable[[tuple], tuple[int, Any]], spec: tuple, ks: list[int],
+                 pairs: np.ndarray, n: int, plan: Any, minmax: bool) -> list[tuple[int, Any]]:
     """Ray-task body: solve ``pairs`` ``(len(ks), 2, dim)``; returns ``[(k, result)]``."""
-    from solvers.geodesic import _batch_worker
-
-    return [_batch_worker((spec, k, p[0], p[1], n, plan, minmax)) for k, p in zip(ks, pairs)]
+    return [worker((spec, k, p[0], p[1], n, plan, minmax)) for k, p in zip(ks, pairs)]
 
 
-def solve_chunks_ray(address: str, spec: tuple, pairs: np.ndarray, todo: list[int], n: int,
-                     plan: Any, minmax: bool, chunk_size: int | None = None,
+def solve_chunks_ray(address: str, worker: Callable[[tuple], tuple[int, Any]], spec: tuple,
+                     pairs: np.ndarray, todo: list[int], n: int, plan: Any, minmax: bool,
+                     chunk_size: int | None = None,
                      num_cpus: int | None = None) -> Iterator[tuple[int, Any]]:
     """Solve ``pairs[todo]`` as Ray tasks of ``chunk_size`` pairs (default: about four
-    chunks per CPU of the cluster, at most 64 pairs each); yields ``(k, result)`` chunk by
-    chunk as chunks finish. ``num_cpus`` sizes a local instance (``address="local"``)."""
+    chunks per CPU of the cluster, at most 64 pairs each) with ``worker`` (the batch
+    solver's per-pair function, passed in so that this module needs nothing of it);
+    yields ``(k, result)`` chunk by chunk as chunks finish. ``num_cpus`` sizes a local
+    instance (``address="local"``)."""
     if chunk_size is not None and (isinstance(chunk_size, bool) or chunk_size < 1):
         raise InputError(f"chunk_size must be a positive integer, got {chunk_size!r}")
     ray = require_ray()
@@ -85,7 +86,7 @@ def solve_chunks_ray(address: str, spec: tuple, pairs: np.ndarray, todo: list[in
         task = ray.remote(num_cpus=1, max_retries=1)(_solve_chunk)
         for i in range(0, len(todo), chunk_size):
             ks = todo[i:i + chunk_size]
-            refs.append(task.remote(spec, ks, pairs[ks], n, plan, minmax))
+            refs.append(task.remote(worker, spec, ks, pairs[ks], n, plan, minmax))
         pending = list(refs)
         while pending:
             ready, pending = ray.wait(pending, num_returns=1)

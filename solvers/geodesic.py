@@ -411,8 +411,9 @@ def solve_batch(
             from solvers.distributed import solve_chunks_ray
 
             local_cpus = int(min(workers, len(todo)))
-            for k, res in solve_chunks_ray(ray_address, _metric_spec(m), arr, todo, n, plan,
-                                           minmax, chunk_size, num_cpus=local_cpus):
+            for k, res in solve_chunks_ray(ray_address, _batch_worker, _metric_spec(m), arr,
+                                           todo, n, plan, minmax, chunk_size,
+                                           num_cpus=local_cpus):
                 results[k] = res
                 if store is not None:
                     store.save(k, arr[k], res)
