@@ -8,6 +8,7 @@ The paper's baselines sit beside the midpoint learner (:mod:`learn.seq`, :mod:`l
 :mod:`learn.methods` holds the actor losses and extra terms.
 """
 
+from learn.base import TrainResult
 from learn.config import (
     METHODS,
     TrainConfig,
@@ -28,7 +29,7 @@ from learn.policy import (
 )
 from learn.runs import VARIANTS, load_any_policy, make_config, run_one, train_run
 from learn.storage import CorruptFileError
-from learn.train import Trainer, TrainResult, read_run_config, resolve_device, train
+from learn.train import Trainer, read_run_config, resolve_device, train
 from learn.tree import build_tree, level_pairs, mc_targets, td_lambda_targets
 
 __all__ = [

@@ -9,7 +9,6 @@ with the toolkit (chosen to reach the issue's bars on a 2-core CPU);
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import platform
 from dataclasses import dataclass
@@ -17,6 +16,7 @@ from typing import Any
 
 import finsler
 from finsler.errors import InputError
+from learn.base import RunConfig, check_choice
 from learn.methods import derivative_terms, describe
 
 __all__ = [
@@ -39,7 +39,7 @@ _ACTIVATIONS = ("relu", "tanh")
 
 
 @dataclass
-class TrainConfig:
+class TrainConfig(RunConfig):
     """Every setting of one training run of Algorithm 1 (saved as ``config.json``)."""
 
     env: str = "matsumoto"
@@ -143,39 +143,15 @@ class TrainConfig:
         self.hidden = tuple(int(h) for h in self.hidden)
         self.validate()
 
-    def _check_types(self) -> None:
-        """Raise :class:`finsler.InputError` naming the first field of the wrong type
-        (configs also come from JSON files and ``--set FIELD=VALUE``)."""
-        kinds = {"str": (str,), "int": (int,), "float": (int, float), "bool": (bool,)}
-        for f in dataclasses.fields(self):
-            v = getattr(self, f.name)
-            ann = str(f.type)
-            if ann.endswith(" | None"):
-                if v is None:
-                    continue
-                ann = ann[: -len(" | None")]
-            if ann == "tuple[int, ...]":
-                ok = isinstance(v, (tuple, list)) and all(
-                    isinstance(h, int) and not isinstance(h, bool) for h in v)
-            else:
-                ok = isinstance(v, kinds[ann]) and (ann == "bool" or not isinstance(v, bool))
-            if not ok:
-                raise InputError(f"config field {f.name} must be {ann}, got {v!r}")
-
     def validate(self) -> None:
         """Raise :class:`finsler.InputError` naming the first impossible option."""
-        if self.env not in finsler.list_metrics():
-            raise finsler.UnknownMetricError(
-                f"unknown environment {self.env!r}; known: {', '.join(finsler.list_metrics())}"
-            )
-        _choice("method", self.method, METHODS)
-        _choice("targets", self.targets, _TARGETS)
-        _choice("depth_schedule", self.depth_schedule, _SCHEDULES)
-        _choice("lr_schedule", self.lr_schedule, _LR_SCHEDULES)
-        _choice("critic_transform", self.critic_transform, _TRANSFORMS)
-        _choice("activation", self.activation, _ACTIVATIONS)
-        if self.device not in ("cpu", "cuda") and not self.device.startswith("cuda:"):
-            raise InputError(f"device must be 'cpu' or 'cuda', got {self.device!r}")
+        self._check_env_and_device()
+        check_choice("method", self.method, METHODS)
+        check_choice("targets", self.targets, _TARGETS)
+        check_choice("depth_schedule", self.depth_schedule, _SCHEDULES)
+        check_choice("lr_schedule", self.lr_schedule, _LR_SCHEDULES)
+        check_choice("critic_transform", self.critic_transform, _TRANSFORMS)
+        check_choice("activation", self.activation, _ACTIVATIONS)
         for name in ("timesteps", "minibatch_size", "collection_size", "epochs", "threads",
                      "eval_every", "eval_pairs", "path_energy_pairs", "route_pairs"):
             v = getattr(self, name)
@@ -213,44 +189,10 @@ class TrainConfig:
 
     # ------------------------------------------------------------------------------------
     @property
-    def metric(self) -> finsler.Metric:
-        return finsler.get_metric(self.env)
-
-    @property
     def model_free(self) -> bool:
         """True if training uses values of C only (like the paper); False if a term
         differentiates C (see :mod:`learn.methods`)."""
         return not derivative_terms(self)
-
-    @property
-    def max_depth(self) -> int:
-        return int(self.depth if self.depth is not None else self.metric.task.depth)
-
-    @property
-    def eval_eps(self) -> float:
-        return float(self.eps if self.eps is not None else self.metric.task.eps)
-
-    def to_dict(self) -> dict[str, Any]:
-        d = dataclasses.asdict(self)
-        d["hidden"] = list(self.hidden)
-        return d
-
-    @classmethod
-    def from_dict(cls, d: dict[str, Any]) -> TrainConfig:
-        """Build from a dict (unknown keys are an error naming them)."""
-        names = {f.name for f in dataclasses.fields(cls)}
-        unknown = sorted(set(d) - names)
-        if unknown:
-            raise InputError(f"unknown config field(s): {', '.join(unknown)}")
-        return cls(**d)
-
-    def replace(self, **changes: Any) -> TrainConfig:
-        return dataclasses.replace(self, **changes)
-
-
-def _choice(name: str, value: str, allowed: tuple[str, ...]) -> None:
-    if value not in allowed:
-        raise InputError(f"{name} must be one of {', '.join(allowed)}; got {value!r}")
 
 
 # ----------------------------------------------------------------------------------------

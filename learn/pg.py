@@ -44,7 +44,6 @@ curves compare with the other methods. ``checkpoint_best`` is chosen on the task
 from __future__ import annotations
 
 import copy
-import dataclasses
 import json
 import math
 import time
@@ -60,8 +59,9 @@ from torch import nn
 
 import finsler
 from finsler.errors import InputError
+from learn.base import RunConfig, TrainResult, check_choice, finish_run
 from learn.config import package_versions
-from learn.networks import mlp
+from learn.networks import mlp, resolve_device
 from learn.policy import EvalResult, check_pairs, evaluate_paths
 from learn.storage import (
     BEST_FILE,
@@ -76,9 +76,7 @@ from learn.storage import (
     read_metrics,
     save_checkpoint,
     write_metrics,
-    write_result,
 )
-from learn.train import TrainResult, resolve_device
 from learn.tree import build_tree
 
 __all__ = [
@@ -115,7 +113,7 @@ _WALL_COLUMNS = ("wall_seconds", "evaluations_per_second", "cycles_per_second")
 # Configuration
 # ----------------------------------------------------------------------------------------
 @dataclass
-class PGConfig:
+class PGConfig(RunConfig):
     """Every setting of one PG training run (saved as ``config.json``)."""
 
     env: str = "matsumoto"
@@ -198,35 +196,14 @@ class PGConfig:
         if self.timesteps is None:
             self.timesteps = schedule_total(self)
 
-    def _check_types(self) -> None:
-        kinds = {"str": (str,), "int": (int,), "float": (int, float), "bool": (bool,)}
-        for f in dataclasses.fields(self):
-            v = getattr(self, f.name)
-            ann = str(f.type)
-            if ann.endswith(" | None"):
-                if v is None:
-                    continue
-                ann = ann[: -len(" | None")]
-            if ann == "tuple[int, ...]":
-                ok = isinstance(v, (tuple, list)) and all(
-                    isinstance(h, int) and not isinstance(h, bool) for h in v)
-            else:
-                ok = isinstance(v, kinds[ann]) and (ann == "bool" or not isinstance(v, bool))
-            if not ok:
-                raise InputError(f"PG config field {f.name} must be {ann}, got {v!r}")
-
     def validate(self) -> None:
         """Raise :class:`InputError` naming the first impossible field."""
-        if self.env not in finsler.list_metrics():
-            raise finsler.UnknownMetricError(
-                f"unknown environment {self.env!r}; known: {', '.join(finsler.list_metrics())}")
+        self._check_env_and_device()
         if self.method != "pg":
             raise InputError(f"method must be 'pg' for a PGConfig, got {self.method!r}")
-        _choice("activation", self.activation, _ACTIVATIONS)
-        _choice("objective", self.objective, _OBJECTIVES)
-        _choice("surrogate", self.surrogate, _SURROGATES)
-        if self.device not in ("cpu", "cuda") and not self.device.startswith("cuda:"):
-            raise InputError(f"device must be 'cpu' or 'cuda', got {self.device!r}")
+        check_choice("activation", self.activation, _ACTIVATIONS)
+        check_choice("objective", self.objective, _OBJECTIVES)
+        check_choice("surrogate", self.surrogate, _SURROGATES)
         if self.seed < 0:
             raise InputError(f"seed must be a non-negative integer, got {self.seed!r}")
         for name in ("threads", "pairs_per_cycle", "epochs", "eval_every", "eval_pairs",
@@ -253,18 +230,6 @@ class PGConfig:
 
     # ------------------------------------------------------------------------------------
     @property
-    def metric(self) -> finsler.Metric:
-        return finsler.get_metric(self.env)
-
-    @property
-    def max_depth(self) -> int:
-        return int(self.depth if self.depth is not None else self.metric.task.depth)
-
-    @property
-    def eval_eps(self) -> float:
-        return float(self.eps if self.eps is not None else self.metric.task.eps)
-
-    @property
     def model_free(self) -> bool:
         """Always True: PG uses values of C only."""
         return True
@@ -272,28 +237,6 @@ class PGConfig:
     def cycle_evaluations(self, depth: int) -> int:
         """Evaluations of C in one cycle at ``depth``: pairs * samples * 2**depth."""
         return self.pairs_per_cycle * self.samples_per_pair * 2**depth
-
-    def to_dict(self) -> dict[str, Any]:
-        d = dataclasses.asdict(self)
-        d["hidden"] = list(self.hidden)
-        return d
-
-    @classmethod
-    def from_dict(cls, d: dict[str, Any]) -> PGConfig:
-        """Build from a dict; unknown keys are an :class:`InputError` naming them."""
-        names = {f.name for f in dataclasses.fields(cls)}
-        unknown = sorted(set(d) - names)
-        if unknown:
-            raise InputError(f"unknown PG config field(s): {', '.join(unknown)}")
-        return cls(**d)
-
-    def replace(self, **changes: Any) -> PGConfig:
-        return dataclasses.replace(self, **changes)
-
-
-def _choice(name: str, value: str, allowed: tuple[str, ...]) -> None:
-    if value not in allowed:
-        raise InputError(f"{name} must be one of {', '.join(allowed)}; got {value!r}")
 
 
 def _real(name: str, value: float, lo: float, hi: float) -> None:
@@ -796,20 +739,10 @@ class PGTrainer:
                 self._log_and_checkpoint()
         finally:
             bar.close()
-        final = self.history[-1]
-        write_result(self.run_dir, final, self.best, stopped_by)
-        return TrainResult(
-            run_dir=self.run_dir,
-            timesteps=self.timesteps,
-            iterations=self.iteration,
-            wall_seconds=float(final["wall_seconds"]),
-            final={k: final[k] for k in (
-                "success_rate", "mean_length", "mean_max_segment_cost",
-                "success_rate_task_depth", "mean_length_task_depth",
-                "mean_max_segment_cost_task_depth", "evaluations_per_second")},
-            best=dict(self.best),
-            history=list(self.history),
-        )
+        return finish_run(self.run_dir, self.history, self.best, stopped_by,
+                          self.timesteps, self.iteration,
+                          extra_final=("success_rate_task_depth", "mean_length_task_depth",
+                                       "mean_max_segment_cost_task_depth"))
 
 
 def train_pg(cfg: PGConfig, out: str | Path, resume: bool = False,

@@ -58,7 +58,9 @@ from stable_baselines3.common.vec_env.base_vec_env import VecEnv
 
 import finsler
 from finsler.errors import InputError
+from learn.base import RunConfig, TrainResult, finish_run
 from learn.config import package_versions
+from learn.networks import resolve_device
 from learn.policy import EvalResult, check_pairs
 from learn.storage import (
     BEST_FILE,
@@ -73,9 +75,7 @@ from learn.storage import (
     read_metrics,
     save_checkpoint,
     write_metrics,
-    write_result,
 )
-from learn.train import TrainResult, resolve_device
 
 __all__ = [
     "SEGMENT_RTOL",
@@ -449,7 +449,7 @@ _PAPER_ROLLOUT = 2048
 
 
 @dataclass
-class SeqConfig:
+class SeqConfig(RunConfig):
     """Every setting of one Seq run (saved as ``config.json``). PPO settings not listed are
     stable-baselines3's defaults (normalised advantages, orthogonal initialisation, log-std
     initialised at 0, no target KL, no value clipping)."""
@@ -514,32 +514,11 @@ class SeqConfig:
         self.hidden = tuple(int(h) for h in self.hidden)
         self.validate()
 
-    def _check_types(self) -> None:
-        kinds = {"str": (str,), "int": (int,), "float": (int, float), "bool": (bool,)}
-        for f in dataclasses.fields(self):
-            v = getattr(self, f.name)
-            ann = str(f.type)
-            if ann.endswith(" | None"):
-                if v is None:
-                    continue
-                ann = ann[: -len(" | None")]
-            if ann == "tuple[int, ...]":
-                ok = isinstance(v, (tuple, list)) and all(
-                    isinstance(h, int) and not isinstance(h, bool) for h in v)
-            else:
-                ok = isinstance(v, kinds[ann]) and (ann == "bool" or not isinstance(v, bool))
-            if not ok:
-                raise InputError(f"config field {f.name} must be {ann}, got {v!r}")
-
     def validate(self) -> None:
         """Raise :class:`finsler.InputError` naming the first impossible field."""
-        if self.env not in finsler.list_metrics():
-            raise finsler.UnknownMetricError(
-                f"unknown environment {self.env!r}; known: {', '.join(finsler.list_metrics())}")
+        self._check_env_and_device()
         if self.method != "seq":
             raise InputError(f"method must be 'seq' for a SeqConfig, got {self.method!r}")
-        if self.device not in ("cpu", "cuda") and not self.device.startswith("cuda:"):
-            raise InputError(f"device must be 'cpu' or 'cuda', got {self.device!r}")
         for name in ("timesteps", "threads", "batch_size", "n_envs", "n_steps", "n_epochs",
                      "eval_every", "eval_pairs"):
             v = getattr(self, name)
@@ -579,44 +558,9 @@ class SeqConfig:
                              f"n_envs * n_steps ({self.n_envs * self.n_steps})")
 
     @property
-    def metric(self) -> finsler.Metric:
-        return finsler.get_metric(self.env)
-
-    @property
-    def max_depth(self) -> int:
-        return int(self.depth if self.depth is not None else self.metric.task.depth)
-
-    @property
-    def eval_eps(self) -> float:
-        return float(self.eps if self.eps is not None else self.metric.task.eps)
-
-    @property
     def model_free(self) -> bool:
         """Seq uses values of F and C only (rewards, steps, termination)."""
         return True
-
-    def to_dict(self) -> dict[str, Any]:
-        d = dataclasses.asdict(self)
-        d["hidden"] = list(self.hidden)
-        return d
-
-    @classmethod
-    def from_dict(cls, d: dict[str, Any]) -> SeqConfig:
-        """Build from a dict (unknown keys are an :class:`InputError` naming them)."""
-        if not isinstance(d, dict):
-            raise InputError(f"a SeqConfig needs a dict, got {type(d).__name__}")
-        names = {f.name for f in dataclasses.fields(cls)}
-        unknown = sorted(set(d) - names)
-        if unknown:
-            raise InputError(f"unknown config field(s): {', '.join(unknown)}")
-        return cls(**d)
-
-    def replace(self, **changes: Any) -> SeqConfig:
-        names = {f.name for f in dataclasses.fields(self)}
-        unknown = sorted(set(changes) - names)
-        if unknown:
-            raise InputError(f"unknown config field(s): {', '.join(unknown)}")
-        return dataclasses.replace(self, **changes)
 
 
 def default_seq_config(env: str, **overrides: Any) -> SeqConfig:
@@ -1190,18 +1134,8 @@ class SeqTrainer:
                 self._log_and_checkpoint()
         finally:
             bar.close()
-        final = self.history[-1]
-        write_result(self.run_dir, final, self.best, stopped_by)
-        return TrainResult(
-            run_dir=self.run_dir,
-            timesteps=self.timesteps,
-            iterations=self.iteration,
-            wall_seconds=float(final["wall_seconds"]),
-            final={k: final[k] for k in ("success_rate", "mean_length",
-                                         "mean_max_segment_cost", "evaluations_per_second")},
-            best=dict(self.best),
-            history=list(self.history),
-        )
+        return finish_run(self.run_dir, self.history, self.best, stopped_by,
+                          self.timesteps, self.iteration)
 
 
 def train_seq(cfg: SeqConfig, out: str | Path, resume: bool = False,

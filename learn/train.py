@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -34,6 +33,7 @@ import torch
 
 import finsler
 from finsler.errors import InputError
+from learn.base import TrainResult, finish_run
 from learn.config import TrainConfig, config_json
 from learn.methods import actor_loss_of, actor_terms
 from learn.networks import Critic, resolve_device
@@ -51,7 +51,6 @@ from learn.storage import (
     read_metrics,
     save_checkpoint,
     write_metrics,
-    write_result,
 )
 from learn.tree import build_tree, level_pairs, mc_targets, td_lambda_targets
 
@@ -69,20 +68,6 @@ def paper_depth(trees_before: int, total_timesteps: int, max_depth: int) -> int:
     ``c_d = floor(T / (2**(max_depth + 1) - 1)) + 1``."""
     c_d = total_timesteps // (2 ** (max_depth + 1) - 1) + 1
     return min(trees_before // c_d, max_depth)
-
-
-@dataclass
-class TrainResult:
-    """Summary of a finished (or time-limited) run."""
-
-    run_dir: Path
-    timesteps: int
-    """All-inclusive evaluations of C made during training."""
-    iterations: int
-    wall_seconds: float
-    final: dict[str, float]
-    best: dict[str, float]
-    history: list[dict[str, Any]] = field(repr=False, default_factory=list)
 
 
 class Trainer:
@@ -400,18 +385,8 @@ class Trainer:
                 self._log_and_checkpoint(lr)
         finally:
             bar.close()
-        final = self.history[-1]
-        write_result(self.run_dir, final, self.best, stopped_by)
-        return TrainResult(
-            run_dir=self.run_dir,
-            timesteps=self.timesteps,
-            iterations=self.iteration,
-            wall_seconds=float(final["wall_seconds"]),
-            final={k: final[k] for k in ("success_rate", "mean_length",
-                                         "mean_max_segment_cost", "evaluations_per_second")},
-            best=dict(self.best),
-            history=list(self.history),
-        )
+        return finish_run(self.run_dir, self.history, self.best, stopped_by,
+                          self.timesteps, self.iteration)
 
 
 def train(cfg: TrainConfig, out: str | Path, resume: bool = False,

@@ -1,0 +1,141 @@
+"""What every learning method shares: the config mixin and the end of a run.
+
+:class:`RunConfig` gives the config dataclasses of the midpoint learner
+(:class:`learn.TrainConfig`) and of the baselines (:class:`learn.seq.SeqConfig`,
+:class:`learn.pg.PGConfig`) one implementation of the type checks of their fields (configs
+also come from JSON files and ``--set FIELD=VALUE``), the dict round trip of
+``config.json`` and the task's depth and threshold. :func:`finish_run` marks a run finished
+(``result.json``) and builds its :class:`TrainResult`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, TypeVar
+
+import finsler
+from finsler.errors import InputError
+from learn.storage import write_result
+
+__all__ = ["RunConfig", "TrainResult", "check_choice", "finish_run"]
+
+_C = TypeVar("_C", bound="RunConfig")
+_KINDS = {"str": (str,), "int": (int,), "float": (int, float), "bool": (bool,)}
+
+
+def check_choice(name: str, value: str, allowed: tuple[str, ...]) -> None:
+    """Raise :class:`InputError` unless ``value`` is one of ``allowed``."""
+    if value not in allowed:
+        raise InputError(f"{name} must be one of {', '.join(allowed)}; got {value!r}")
+
+
+class RunConfig:
+    """Mixin for a method's config dataclass with fields ``env``, ``device``, ``depth``
+    (``None`` = the task's) and ``eps`` (``None`` = the task's)."""
+
+    env: str
+    device: str
+    depth: int | None
+    eps: float | None
+
+    def _check_types(self) -> None:
+        """Raise :class:`InputError` naming the first field of the wrong type."""
+        for f in dataclasses.fields(self):  # type: ignore[arg-type]
+            v = getattr(self, f.name)
+            ann = str(f.type)
+            if ann.endswith(" | None"):
+                if v is None:
+                    continue
+                ann = ann[: -len(" | None")]
+            if ann == "tuple[int, ...]":
+                ok = isinstance(v, (tuple, list)) and all(
+                    isinstance(h, int) and not isinstance(h, bool) for h in v)
+            else:
+                ok = isinstance(v, _KINDS[ann]) and (ann == "bool" or not isinstance(v, bool))
+            if not ok:
+                raise InputError(f"config field {f.name} must be {ann}, got {v!r}")
+
+    def _check_env_and_device(self) -> None:
+        if self.env not in finsler.list_metrics():
+            raise finsler.UnknownMetricError(
+                f"unknown environment {self.env!r}; known: {', '.join(finsler.list_metrics())}")
+        if self.device not in ("cpu", "cuda") and not self.device.startswith("cuda:"):
+            raise InputError(f"device must be 'cpu' or 'cuda', got {self.device!r}")
+
+    @property
+    def metric(self) -> finsler.Metric:
+        return finsler.get_metric(self.env)
+
+    @property
+    def max_depth(self) -> int:
+        """The tree depth D of evaluation (``depth`` or the task's)."""
+        return int(self.depth if self.depth is not None else self.metric.task.depth)
+
+    @property
+    def eval_eps(self) -> float:
+        """The success threshold of evaluation (``eps`` or the task's)."""
+        return float(self.eps if self.eps is not None else self.metric.task.eps)
+
+    def to_dict(self) -> dict[str, Any]:
+        d = dataclasses.asdict(self)  # type: ignore[call-overload]
+        for k, v in d.items():
+            if isinstance(v, tuple):
+                d[k] = list(v)
+        return d
+
+    @classmethod
+    def from_dict(cls: type[_C], d: dict[str, Any]) -> _C:
+        """Build from a dict (unknown keys are an error naming them)."""
+        if not isinstance(d, dict):
+            raise InputError(f"a {cls.__name__} needs a dict, got {type(d).__name__}")
+        names = {f.name for f in dataclasses.fields(cls)}  # type: ignore[arg-type]
+        unknown = sorted(set(d) - names)
+        if unknown:
+            raise InputError(f"unknown config field(s) of {cls.__name__}: "
+                             f"{', '.join(unknown)}")
+        return cls(**d)
+
+    def replace(self: _C, **changes: Any) -> _C:
+        """A copy with ``changes`` (unknown fields are an error naming them)."""
+        names = {f.name for f in dataclasses.fields(self)}  # type: ignore[arg-type]
+        unknown = sorted(set(changes) - names)
+        if unknown:
+            raise InputError(f"unknown config field(s) of {type(self).__name__}: "
+                             f"{', '.join(unknown)}")
+        return dataclasses.replace(self, **changes)  # type: ignore[type-var]
+
+
+@dataclass
+class TrainResult:
+    """Summary of a finished (or time-limited) run of any method."""
+
+    run_dir: Path
+    timesteps: int
+    """All-inclusive evaluations of C made during training."""
+    iterations: int
+    wall_seconds: float
+    final: dict[str, float]
+    best: dict[str, float]
+    history: list[dict[str, Any]] = field(repr=False, default_factory=list)
+
+
+def finish_run(run_dir: Path, history: list[dict[str, Any]], best: dict[str, Any],
+               stopped_by: str, timesteps: int, iterations: int,
+               extra_final: tuple[str, ...] = ()) -> TrainResult:
+    """Write ``result.json`` (the run is finished) and return its :class:`TrainResult`
+    (``final``: the last metrics row's success, lengths, throughput and ``extra_final``)."""
+    final = history[-1]
+    write_result(run_dir, final, best, stopped_by)
+    return TrainResult(
+        run_dir=Path(run_dir),
+        timesteps=timesteps,
+        iterations=iterations,
+        wall_seconds=float(final["wall_seconds"]),
+        final={k: final[k] for k in ("success_rate", "mean_length",
+                                     "mean_max_segment_cost", "evaluations_per_second",
+                                     *extra_final)},
+        best=dict(best),
+        history=list(history),
+    )
