@@ -5,12 +5,16 @@
 :class:`learn.pg.PGConfig`) one implementation of the type checks of their fields (configs
 also come from JSON files and ``--set FIELD=VALUE``), the dict round trip of
 ``config.json`` and the task's depth and threshold. :func:`finish_run` marks a run finished
-(``result.json``) and builds its :class:`TrainResult`.
+(``result.json``) and builds its :class:`TrainResult`. :class:`StopOnSignal` lets every
+training loop end cleanly on SIGINT / SIGTERM: it finishes the iteration it is in, saves a
+resumable checkpoint and raises :class:`TrainingInterrupted`.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import signal
+import threading
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TypeVar
@@ -19,7 +23,14 @@ import finsler
 from finsler.errors import InputError
 from learn.storage import write_result
 
-__all__ = ["RunConfig", "TrainResult", "check_choice", "finish_run"]
+__all__ = [
+    "RunConfig",
+    "StopOnSignal",
+    "TrainResult",
+    "TrainingInterrupted",
+    "check_choice",
+    "finish_run",
+]
 
 _C = TypeVar("_C", bound="RunConfig")
 _KINDS = {"str": (str,), "int": (int,), "float": (int, float), "bool": (bool,)}
@@ -125,7 +136,11 @@ def finish_run(run_dir: Path, history: list[dict[str, Any]], best: dict[str, Any
                stopped_by: str, timesteps: int, iterations: int,
                extra_final: tuple[str, ...] = ()) -> TrainResult:
     """Write ``result.json`` (the run is finished) and return its :class:`TrainResult`
-    (``final``: the last metrics row's success, lengths, throughput and ``extra_final``)."""
+    (``final``: the last metrics row's success, lengths, throughput and ``extra_final``).
+    ``stopped_by`` a signal name: the run is NOT finished; raise
+    :class:`TrainingInterrupted` instead (the caller saved its checkpoint)."""
+    if stopped_by not in ("timesteps", "minutes"):
+        raise TrainingInterrupted(run_dir, stopped_by, timesteps, iterations)
     final = history[-1]
     write_result(run_dir, final, best, stopped_by)
     return TrainResult(
@@ -139,3 +154,47 @@ def finish_run(run_dir: Path, history: list[dict[str, Any]], best: dict[str, Any
         best=dict(best),
         history=list(history),
     )
+
+
+class TrainingInterrupted(Exception):
+    """Training stopped on a signal after saving a resumable checkpoint (no result.json:
+    the run is unfinished and ``--resume`` continues it exactly)."""
+
+    def __init__(self, run_dir: Path, signal_name: str, timesteps: int, iterations: int):
+        self.run_dir, self.signal_name = Path(run_dir), signal_name
+        self.timesteps, self.iterations = timesteps, iterations
+        super().__init__(f"{signal_name}: run {self.run_dir} saved at {timesteps} evaluations "
+                         f"of C (iteration {iterations}); resume it to continue")
+
+
+class StopOnSignal:
+    """While active (in the main thread), the first SIGINT or SIGTERM sets ``requested``
+    to the signal's name, so that the training loop stops at the end of its iteration; a
+    second one restores the previous handlers and interrupts at once."""
+
+    _SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+    def __init__(self) -> None:
+        self.requested: str | None = None
+        self._old: dict[int, Any] = {}
+
+    def __enter__(self) -> StopOnSignal:
+        if threading.current_thread() is threading.main_thread():
+            for sig in self._SIGNALS:
+                self._old[sig] = signal.getsignal(sig)
+                signal.signal(sig, self._handle)
+        return self
+
+    def _handle(self, signum: int, frame: Any) -> None:
+        if self.requested is not None:
+            self._restore()
+            raise KeyboardInterrupt
+        self.requested = signal.Signals(signum).name
+
+    def _restore(self) -> None:
+        for sig, old in self._old.items():
+            signal.signal(sig, old)
+        self._old = {}
+
+    def __exit__(self, *exc: Any) -> None:
+        self._restore()

@@ -59,7 +59,7 @@ from torch import nn
 
 import finsler
 from finsler.errors import InputError
-from learn.base import RunConfig, TrainResult, check_choice, finish_run
+from learn.base import RunConfig, StopOnSignal, TrainResult, check_choice, finish_run
 from learn.config import package_versions
 from learn.networks import mlp, resolve_device
 from learn.policy import EvalResult, check_pairs, evaluate_paths
@@ -716,29 +716,33 @@ class PGTrainer:
             self._log_and_checkpoint()
         last_logged = self.iteration
         stopped_by = "timesteps"
-        try:
-            while True:
-                d = cycle_depth(cfg, self.iteration)
-                if self.timesteps + cfg.cycle_evaluations(d) > cfg.timesteps:
-                    break
-                if cfg.minutes is not None and self._wall() >= 60.0 * cfg.minutes:
-                    stopped_by = "minutes"
-                    break
-                if d != self.level:
-                    self._enter_level(d)
-                before = self.timesteps
-                self._stats.append(self.cycle())
-                bar.update(self.timesteps - before)
-                level_ends = cycle_depth(cfg, self.iteration) != d
-                if self.iteration % cfg.eval_every == 0 or level_ends:
-                    row = self._log_and_checkpoint()
-                    last_logged = self.iteration
-                    bar.set_postfix(depth=d, success=f"{row['success_rate']:.2f}",
-                                    task=f"{row['success_rate_task_depth']:.2f}")
-            if self.iteration != last_logged:
-                self._log_and_checkpoint()
-        finally:
-            bar.close()
+        with StopOnSignal() as stop:
+            try:
+                while True:
+                    if stop.requested:
+                        stopped_by = stop.requested
+                        break
+                    d = cycle_depth(cfg, self.iteration)
+                    if self.timesteps + cfg.cycle_evaluations(d) > cfg.timesteps:
+                        break
+                    if cfg.minutes is not None and self._wall() >= 60.0 * cfg.minutes:
+                        stopped_by = "minutes"
+                        break
+                    if d != self.level:
+                        self._enter_level(d)
+                    before = self.timesteps
+                    self._stats.append(self.cycle())
+                    bar.update(self.timesteps - before)
+                    level_ends = cycle_depth(cfg, self.iteration) != d
+                    if self.iteration % cfg.eval_every == 0 or level_ends:
+                        row = self._log_and_checkpoint()
+                        last_logged = self.iteration
+                        bar.set_postfix(depth=d, success=f"{row['success_rate']:.2f}",
+                                        task=f"{row['success_rate_task_depth']:.2f}")
+                if self.iteration != last_logged:
+                    self._log_and_checkpoint()
+            finally:
+                bar.close()
         return finish_run(self.run_dir, self.history, self.best, stopped_by,
                           self.timesteps, self.iteration,
                           extra_final=("success_rate_task_depth", "mean_length_task_depth",

@@ -58,7 +58,7 @@ from stable_baselines3.common.vec_env.base_vec_env import VecEnv
 
 import finsler
 from finsler.errors import InputError
-from learn.base import RunConfig, TrainResult, finish_run
+from learn.base import RunConfig, StopOnSignal, TrainResult, finish_run
 from learn.config import package_versions
 from learn.networks import resolve_device
 from learn.policy import EvalResult, check_pairs
@@ -1115,25 +1115,29 @@ class SeqTrainer:
             self.next_eval = cfg.eval_every
         last_logged = self.iteration
         stopped_by = "timesteps"
-        try:
-            while self.timesteps < cfg.timesteps:
-                if cfg.minutes is not None and self._wall() >= 60.0 * cfg.minutes:
-                    stopped_by = "minutes"
-                    break
-                before = self.timesteps
-                self.train_rollout()
-                bar.update(min(self.timesteps, cfg.timesteps) - min(before, cfg.timesteps))
-                if self.timesteps >= self.next_eval:
-                    while self.next_eval <= self.timesteps:
-                        self.next_eval += cfg.eval_every
-                    row = self._log_and_checkpoint()
-                    last_logged = self.iteration
-                    bar.set_postfix(success=f"{row['success_rate']:.2f}",
-                                    steps_s=f"{row['steps_per_second']:.0f}")
-            if self.iteration != last_logged:
-                self._log_and_checkpoint()
-        finally:
-            bar.close()
+        with StopOnSignal() as stop:
+            try:
+                while self.timesteps < cfg.timesteps:
+                    if stop.requested:
+                        stopped_by = stop.requested
+                        break
+                    if cfg.minutes is not None and self._wall() >= 60.0 * cfg.minutes:
+                        stopped_by = "minutes"
+                        break
+                    before = self.timesteps
+                    self.train_rollout()
+                    bar.update(min(self.timesteps, cfg.timesteps) - min(before, cfg.timesteps))
+                    if self.timesteps >= self.next_eval:
+                        while self.next_eval <= self.timesteps:
+                            self.next_eval += cfg.eval_every
+                        row = self._log_and_checkpoint()
+                        last_logged = self.iteration
+                        bar.set_postfix(success=f"{row['success_rate']:.2f}",
+                                        steps_s=f"{row['steps_per_second']:.0f}")
+                if self.iteration != last_logged:
+                    self._log_and_checkpoint()
+            finally:
+                bar.close()
         return finish_run(self.run_dir, self.history, self.best, stopped_by,
                           self.timesteps, self.iteration)
 

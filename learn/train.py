@@ -33,7 +33,7 @@ import torch
 
 import finsler
 from finsler.errors import InputError
-from learn.base import TrainResult, finish_run
+from learn.base import StopOnSignal, TrainResult, finish_run
 from learn.config import TrainConfig, config_json
 from learn.methods import actor_loss_of, actor_terms
 from learn.networks import Critic, resolve_device
@@ -363,28 +363,32 @@ class Trainer:
             self._log_and_checkpoint(lr)
         last_logged = self.iteration
         stopped_by = "timesteps"
-        try:
-            while self.timesteps < cfg.timesteps:
-                if cfg.minutes is not None and self._wall() >= 60.0 * cfg.minutes:
-                    stopped_by = "minutes"
-                    break
-                lr = self._set_lr()
-                before = self.timesteps
-                s, g, c, ts = self.collect()
-                self.timesteps += ts
-                self.timesteps_paper += ts
-                self._losses.append(self.update(s, g, c))
-                self.iteration += 1
-                bar.update(self.timesteps - before)
-                if self.iteration % cfg.eval_every == 0:
-                    row = self._log_and_checkpoint(lr)
-                    last_logged = self.iteration
-                    bar.set_postfix(success=f"{row['success_rate']:.2f}",
-                                    C_s=f"{row['evaluations_per_second']:.0f}")
-            if self.iteration != last_logged:
-                self._log_and_checkpoint(lr)
-        finally:
-            bar.close()
+        with StopOnSignal() as stop:
+            try:
+                while self.timesteps < cfg.timesteps:
+                    if stop.requested:
+                        stopped_by = stop.requested
+                        break
+                    if cfg.minutes is not None and self._wall() >= 60.0 * cfg.minutes:
+                        stopped_by = "minutes"
+                        break
+                    lr = self._set_lr()
+                    before = self.timesteps
+                    s, g, c, ts = self.collect()
+                    self.timesteps += ts
+                    self.timesteps_paper += ts
+                    self._losses.append(self.update(s, g, c))
+                    self.iteration += 1
+                    bar.update(self.timesteps - before)
+                    if self.iteration % cfg.eval_every == 0:
+                        row = self._log_and_checkpoint(lr)
+                        last_logged = self.iteration
+                        bar.set_postfix(success=f"{row['success_rate']:.2f}",
+                                        C_s=f"{row['evaluations_per_second']:.0f}")
+                if self.iteration != last_logged:
+                    self._log_and_checkpoint(lr)
+            finally:
+                bar.close()
         return finish_run(self.run_dir, self.history, self.best, stopped_by,
                           self.timesteps, self.iteration)
 

@@ -85,3 +85,96 @@ def test_a_run_in_use_is_refused_and_a_stale_lock_taken_over(tmp_path) -> None:
     assert runs.run_one("euclidean", "midpoint", 0, out, timesteps=3000,
                         **_TINY)["action"] == "started"
     assert not lock.exists() and os.path.isdir(out)
+
+
+def _signal_at(monkeypatch, iteration: int, sig: int) -> None:
+    """Send ``sig`` to this process during the ``iteration``-th update of the trainer."""
+    import signal as _signal  # noqa: F401  (documents the kind of ``sig``)
+
+    from learn.train import Trainer
+
+    real = Trainer.update
+    calls = [0]
+
+    def update(self, *a):
+        calls[0] += 1
+        if calls[0] == iteration:
+            os.kill(os.getpid(), sig)
+        return real(self, *a)
+
+    monkeypatch.setattr(Trainer, "update", update)
+
+
+@pytest.mark.parametrize("sig_name", ["SIGTERM", "SIGINT"])
+def test_a_signal_saves_a_resumable_checkpoint_and_resume_is_exact(
+        tmp_path, monkeypatch, sig_name) -> None:
+    import signal
+
+    import torch
+
+    cfg = runs.make_config("euclidean", "midpoint", timesteps=30_000, **_TINY)
+    full = learn.train(cfg, tmp_path / "full", progress=False)
+    _signal_at(monkeypatch, 5, getattr(signal, sig_name))
+    with pytest.raises(learn.base.TrainingInterrupted, match=sig_name) as err:
+        learn.train(cfg, tmp_path / "cut", progress=False)
+    monkeypatch.undo()
+    assert err.value.iterations == 5 and err.value.timesteps < full.timesteps
+    assert runs.run_status(tmp_path / "cut") == "unfinished"  # no result.json
+    # the handlers are back: the next signal is not swallowed
+    assert signal.getsignal(signal.SIGTERM) is signal.SIG_DFL
+    resumed = learn.train(cfg, tmp_path / "cut", resume=True, progress=False)
+    assert resumed.timesteps == full.timesteps
+    a = learn.storage.load_checkpoint(tmp_path / "full" / "checkpoint_latest.pt")
+    b = learn.storage.load_checkpoint(tmp_path / "cut" / "checkpoint_latest.pt")
+    for k in a["actor"]:
+        assert torch.equal(a["actor"][k], b["actor"][k]), k
+
+
+def test_train_cli_prints_how_to_resume_after_sigterm(tmp_path, monkeypatch) -> None:
+    import signal
+
+    from typer.testing import CliRunner
+
+    from validation.cli import app
+
+    _signal_at(monkeypatch, 3, signal.SIGTERM)
+    out = tmp_path / "run"
+    res = CliRunner().invoke(app, ["train", "--env", "euclidean", "--out", str(out),
+                                   "--timesteps", "30000", "--quiet", "--set",
+                                   "collection_size=1024", "--set", "eval_every=2"])
+    assert res.exit_code == 130, res.output
+    assert "interrupted (SIGTERM)" in res.output
+    assert f"geodesics train --env euclidean --out {out} --resume" in res.output
+    assert (out / "checkpoint_latest.pt").is_file() and not (out / "result.json").exists()
+
+
+@pytest.mark.parametrize(("variant", "module", "step"), [
+    ("pg", "learn.pg", ("PGTrainer", "cycle")),
+    ("seq", "learn.seq", ("SeqTrainer", "train_rollout")),
+])
+def test_baselines_stop_cleanly_on_a_signal_and_resume(tmp_path, monkeypatch, variant,
+                                                       module, step) -> None:
+    import importlib
+    import signal
+
+    cls = getattr(importlib.import_module(module), step[0])
+    real = getattr(cls, step[1])
+    calls = [0]
+
+    def stepped(self, *a):
+        calls[0] += 1
+        if calls[0] == 3:
+            os.kill(os.getpid(), signal.SIGTERM)
+        return real(self, *a)
+
+    monkeypatch.setattr(cls, step[1], stepped)
+    over = {"eval_pairs": 10, "timesteps": 60_000}
+    cfg = runs.make_config("euclidean", variant, **over)
+    with pytest.raises(learn.base.TrainingInterrupted, match="SIGTERM"):
+        runs.train_run(cfg, tmp_path / "r", progress=False)
+    monkeypatch.undo()
+    assert runs.run_status(tmp_path / "r") == "unfinished"
+    res = runs.train_run(cfg, tmp_path / "r", resume=True, progress=False)
+    assert runs.run_status(tmp_path / "r") == "finished"
+    # the budget binds at the first step boundary on or after it (PG: before it)
+    assert res.timesteps >= 60_000 if variant == "seq" else res.timesteps <= 60_000

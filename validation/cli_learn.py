@@ -72,6 +72,7 @@ def train_command(
     """
     import learn
     from learn import runs
+    from learn.base import TrainingInterrupted
 
     try:
         if env not in finsler.list_metrics():
@@ -98,6 +99,11 @@ def train_command(
     except InputError as err:
         fail(str(err))
         return
+    except TrainingInterrupted as stop:
+        typer.echo(f"interrupted ({stop.signal_name}): the run is saved in {stop.run_dir} at "
+                   f"{stop.timesteps} evaluations of C (iteration {stop.iterations}); resume "
+                   f"with: geodesics train --env {env} --out {stop.run_dir} --resume", err=True)
+        raise typer.Exit(code=130) from None
     f = result.final
     typer.echo(
         f"{env}: {result.timesteps} evaluations of C (all-inclusive) in "
