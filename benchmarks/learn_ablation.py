@@ -2,7 +2,8 @@
 paper's settings (appendix B.1), with the toolkit's defaults, and with the defaults minus
 one choice at a time; prints success on the default evaluation set, the mean length
 ratio learned/exact on it (exact: ``solvers.solve_batch`` at the same 2**D segments),
-timesteps/s and wall time at the same timestep budget (same seed).
+evaluations of C per second and wall time at the same budget of evaluations of C, counted
+all-inclusive (same seed).
 
 Run:  python benchmarks/learn_ablation.py --env matsumoto --timesteps 2000000
       [--variants ours,paper,no-log1p,...] [--minutes 3]
@@ -61,7 +62,7 @@ def run(env: str, name: str, timesteps: int, minutes: float | None, seed: int,
     ratio = policy.metric.path_costs(paths).sum(1) / exact
     return {"variant": name, "timesteps": res.timesteps, "wall_s": res.wall_seconds,
             "ratio": float(np.mean(ratio)),
-            "ts_per_s": res.final["evaluations_per_second"],
+            "C_per_s": res.final["evaluations_per_second"],
             "success": res.final["success_rate"],
             "mean_max_cost": res.final["mean_max_segment_cost"]}
 
@@ -90,12 +91,13 @@ def main() -> None:
         r = run(args.env, name, args.timesteps, args.minutes, args.seed, exact)
         rows.append(r)
         print(r, flush=True)
-    print(f"\n{args.env}, budget {args.timesteps} timesteps, seed {args.seed}")
-    print(f"{'variant':<22} {'timesteps':>10} {'wall s':>8} {'ts/s':>8} {'success':>8} "
+    print(f"\n{args.env}, budget {args.timesteps} evaluations of C (all-inclusive), seed "
+          f"{args.seed}; success and lengths of the last checkpoint on the default set")
+    print(f"{'variant':<22} {'C evals':>10} {'wall s':>8} {'C/s':>8} {'success':>8} "
           f"{'mean max C':>10} {'length/exact':>12}")
     for r in rows:
         print(f"{r['variant']:<22} {r['timesteps']:>10} {r['wall_s']:>8.1f} "
-              f"{r['ts_per_s']:>8.0f} {r['success']:>8.2f} {r['mean_max_cost']:>10.4f} "
+              f"{r['C_per_s']:>8.0f} {r['success']:>8.2f} {r['mean_max_cost']:>10.4f} "
               f"{r['ratio']:>12.4f}")
 
 
