@@ -3,6 +3,7 @@ evaluator (numpy, torch, IPOPT) derived from that single expression."""
 
 from finsler.domains import Box, Disk, Domain, JointBox, Product
 from finsler.errors import DomainError, InputError, UnknownMetricError
+from finsler.files import OutputError, atomic_write_bytes, atomic_write_text, check_output_path
 from finsler.metric import Metric, Task
 from finsler.metrics import (
     MATSUMOTO_CONVEX_RADIUS,
@@ -42,6 +43,7 @@ __all__ = [
     "Matsumoto",
     "Metric",
     "Minkowski",
+    "OutputError",
     "PandaPole",
     "Poincare",
     "Product",
@@ -49,6 +51,9 @@ __all__ = [
     "Sphere",
     "Task",
     "UnknownMetricError",
+    "atomic_write_bytes",
+    "atomic_write_text",
+    "check_output_path",
     "default_pairs",
     "get_metric",
     "list_metrics",

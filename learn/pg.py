@@ -71,6 +71,7 @@ from learn.storage import (
     RESULT_FILE,
     CorruptFileError,
     atomic_write_text,
+    check_run_dir,
     load_checkpoint,
     read_json,
     read_metrics,
@@ -483,14 +484,10 @@ class PGTrainer:
 
     def __init__(self, cfg: PGConfig, run_dir: str | Path, resume: bool = False,
                  progress: bool = True) -> None:
-        self.run_dir = Path(run_dir)
+        self.run_dir = check_run_dir(Path(run_dir), resume)
         self.progress = progress
         if resume:
             cfg = self._resume_config(cfg)
-        elif self.run_dir.exists() and any(self.run_dir.iterdir()):
-            raise InputError(
-                f"run directory {self.run_dir} exists and is not empty; pass --resume to "
-                "continue it or choose a new --out")
         self.cfg = cfg
         self.device = resolve_device(cfg.device)
         torch.set_num_threads(cfg.threads)
@@ -529,8 +526,6 @@ class PGTrainer:
 
     # -- resume ---------------------------------------------------------------------------
     def _resume_config(self, cfg: PGConfig) -> PGConfig:
-        if not self.run_dir.is_dir():
-            raise InputError(f"cannot resume: run directory {self.run_dir} does not exist")
         doc = read_json(self.run_dir / CONFIG_FILE)
         if not isinstance(doc.get("config"), dict):
             raise CorruptFileError(f"{self.run_dir / CONFIG_FILE} has no 'config' section")

@@ -4,15 +4,15 @@
 from __future__ import annotations
 
 import csv
+import hashlib
 import io
 import json
-import os
-import tempfile
 from pathlib import Path
 from typing import Any
 
 import torch
 
+from finsler import files
 from finsler.errors import InputError
 
 __all__ = [
@@ -25,6 +25,7 @@ __all__ = [
     "CorruptFileError",
     "atomic_write_bytes",
     "atomic_write_text",
+    "check_run_dir",
     "load_checkpoint",
     "read_json",
     "read_metrics",
@@ -38,6 +39,7 @@ LATEST_FILE = "checkpoint_latest.pt"
 BEST_FILE = "checkpoint_best.pt"
 POLICY_FILE = "policy.pt"
 METRICS_FILE = "metrics.csv"
+_SEALED = "learn-checkpoint-sealed-v1"  # outer format: payload + SHA-256
 #: Written when a run ends normally (budget or time limit reached); absent = unfinished.
 RESULT_FILE = "result.json"
 
@@ -46,22 +48,29 @@ class CorruptFileError(InputError):
     """A run-directory file exists but cannot be read (truncated, wrong format)."""
 
 
+def check_run_dir(run_dir: Path, resume: bool) -> Path:
+    """The run directory of a training, checked before any work: to start a run it must be
+    absent or an empty folder (its parent a folder); to resume, a folder. Raises
+    :class:`InputError` naming the problem."""
+    p = Path(run_dir)
+    if p.exists() and not p.is_dir():
+        raise InputError(f"run directory {p} exists and is not a folder; choose another --out")
+    if resume:
+        if not p.is_dir():
+            raise InputError(f"cannot resume: run directory {p} does not exist")
+        return p
+    if p.exists() and any(p.iterdir()):
+        raise InputError(f"run directory {p} exists and is not empty; pass --resume to "
+                         "continue it or choose a new --out")
+    files.check_output_path(p / CONFIG_FILE, "run directory")
+    return p
+
+
 def atomic_write_bytes(path: Path, data: bytes) -> None:
-    """Write ``data`` to ``path`` so that readers see either the old or the new file."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-            f.flush()
-            os.fsync(f.fileno())
-        os.chmod(tmp, 0o644)  # mkstemp creates 0600; run files and policies are shared
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    """Write ``data`` to ``path`` so that readers see either the old or the new file
+    (:func:`finsler.files.atomic_write_bytes`: symlinks written through, special files
+    refused, failed writes leave the old file)."""
+    files.atomic_write_bytes(path, data)
 
 
 def atomic_write_text(path: Path, text: str) -> None:
@@ -69,22 +78,39 @@ def atomic_write_text(path: Path, text: str) -> None:
 
 
 def save_checkpoint(path: Path, obj: dict[str, Any]) -> None:
-    """``torch.save`` to memory, then atomic write."""
+    """``torch.save`` to memory, then atomic write. The file holds the serialised ``obj``
+    and its SHA-256, so that :func:`load_checkpoint` detects any damaged byte (a torch
+    archive alone loads bit-flipped tensors without complaint)."""
     buf = io.BytesIO()
     torch.save(obj, buf)
-    atomic_write_bytes(path, buf.getvalue())
+    payload = buf.getvalue()
+    outer = io.BytesIO()
+    torch.save({"format": _SEALED, "sha256": hashlib.sha256(payload).hexdigest(),
+                "payload": payload}, outer)
+    atomic_write_bytes(path, outer.getvalue())
 
 
 def load_checkpoint(path: Path) -> dict[str, Any]:
-    """Load a checkpoint written by :func:`save_checkpoint` (tensors and plain data only).
+    """Load a checkpoint written by :func:`save_checkpoint` (tensors and plain data only;
+    files of the earlier unsealed format, such as shipped policies, load too).
 
-    Raises :class:`InputError` if missing and :class:`CorruptFileError` if unreadable.
+    Raises :class:`InputError` if missing and :class:`CorruptFileError` if unreadable,
+    truncated or damaged (checksum mismatch).
     """
     path = Path(path)
     if not path.is_file():
         raise InputError(f"checkpoint {path} does not exist")
     try:
         obj = torch.load(path, map_location="cpu", weights_only=True)
+        if isinstance(obj, dict) and obj.get("format") == _SEALED:
+            payload = obj.get("payload")
+            if not isinstance(payload, bytes) or \
+                    hashlib.sha256(payload).hexdigest() != obj.get("sha256"):
+                raise CorruptFileError(f"checkpoint {path} is corrupt: its checksum does not "
+                                       "match its content")
+            obj = torch.load(io.BytesIO(payload), map_location="cpu", weights_only=True)
+    except CorruptFileError:
+        raise
     except Exception as err:  # torch raises many types for truncated / foreign files
         raise CorruptFileError(f"checkpoint {path} is corrupt or unreadable: {err}") from err
     if not isinstance(obj, dict) or obj.get("format") != "learn-checkpoint-v1":

@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from finsler.errors import InputError
+from finsler.files import OutputError, atomic_write_bytes
 from finsler.metric import Metric
 from finsler.registry import get_metric
 from solvers.result import (
@@ -318,7 +319,11 @@ class _BatchStore:
         import pathlib
 
         self.folder = pathlib.Path(folder)
-        self.folder.mkdir(parents=True, exist_ok=True)
+        try:
+            self.folder.mkdir(parents=True, exist_ok=True)
+        except OSError as err:
+            raise OutputError(f"cannot create the folder of resumable parts {self.folder}: "
+                              f"{err.strerror}") from err
         self.key = (repr(metric), int(n), repr(plan), bool(minmax))
 
     def _path(self, k: int) -> Any:
@@ -342,11 +347,8 @@ class _BatchStore:
     def save(self, k: int, pair: np.ndarray, result: GeodesicResult) -> None:
         import pickle
 
-        path = self._path(k)
-        tmp = path.with_suffix(".tmp")
-        with tmp.open("wb") as fh:
-            pickle.dump((self.key, np.array(pair), result), fh)
-        os.replace(tmp, path)
+        atomic_write_bytes(self._path(k), pickle.dumps((self.key, np.array(pair), result)),
+                           "resumable part")
 
 
 def solve_batch(

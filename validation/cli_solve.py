@@ -14,7 +14,6 @@ segment cost ``<= eps``: the exact ceiling of the paper's task.
 from __future__ import annotations
 
 import json
-import os
 import shutil
 from pathlib import Path
 from typing import Annotated, Any
@@ -99,6 +98,18 @@ def solve_command(
         fail("--ray and --chunk-size apply to --pairs")
     if chunk_size is not None and chunk_size < 1:
         fail(f"--chunk-size must be >= 1, got {chunk_size}")
+    parts = None
+    if out is not None:
+        # checked before any work: a bad --out must not cost a batch of solves
+        try:
+            out = finsler.check_output_path(out, "--out")
+            if pairs is not None:
+                parts = out.with_name(out.name + ".parts")
+                if parts.exists() and not parts.is_dir():
+                    raise finsler.OutputError(f"{parts} (the resumable parts of --out) "
+                                              "exists and is not a folder")
+        except InputError as err:
+            fail(str(err))
     if pairs is not None:
         arr = _pairs_or_fail(pairs, m)
     else:
@@ -110,9 +121,8 @@ def solve_command(
             m.domain.check(arr[0, 0], "--start")
             m.domain.check(arr[0, 1], "--goal")
         n = solvers.check_segments(m, segments)
-        # With --out, finished pairs are kept beside it until the JSON is written, so an
-        # interrupted run resumes where it stopped when the same command is run again.
-        parts = out.with_name(out.name + ".parts") if out is not None and pairs else None
+        # With --out, finished pairs are kept beside it (parts) until the JSON is written,
+        # so an interrupted run resumes where it stopped when the same command is run again.
         results = solvers.solve_batch(
             m, arr, n, minmax=True, workers=workers, progress=progress and pairs is not None,
             checkpoint_dir=parts, ray_address=ray, chunk_size=chunk_size,
@@ -123,14 +133,12 @@ def solve_command(
     text = json.dumps(payload, indent=None if pairs is not None else 2)
     if out is not None:
         try:
-            out.parent.mkdir(parents=True, exist_ok=True)
-            tmp = out.with_name(out.name + ".tmp")
-            tmp.write_text(text)
-            os.replace(tmp, out)
-            if parts is not None:
-                shutil.rmtree(parts, ignore_errors=True)
-        except OSError as err:
-            fail(f"cannot write --out {str(out)!r}: {err}")
+            finsler.atomic_write_text(out, text, "--out")
+        except InputError as err:
+            kept = f"; the finished pairs are kept in {parts}" if parts is not None else ""
+            fail(f"{err}{kept}")
+        if parts is not None:
+            shutil.rmtree(parts, ignore_errors=True)
     if as_json:
         typer.echo(text)
     elif pairs is None:
