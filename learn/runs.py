@@ -10,8 +10,9 @@ Variants (:data:`VARIANTS`) are the configurations compared in the paper's exper
 
 * ``midpoint``: the toolkit's defaults (:func:`learn.default_config`); for some
   environments they differentiate C (the path-energy term): not model-free;
-* ``midpoint-free``: the same with every term that uses the derivative of C switched off
-  (values of C only, like the paper's method);
+* ``midpoint-free``: the model-free defaults: every term that uses the derivative of C
+  switched off (values of C only, like the paper's method), with the passes per collection
+  Algorithm 1 alone was measured best with (``learn.config.model_free_overrides``);
 * ``paper``: appendix B.1's settings (:func:`learn.paper_config`);
 * ``inter`` / ``two-to-one``: ``midpoint-free`` with the actor loss of eq. (17) / (18);
 * ``seq``: goal-conditioned PPO (section 5.2, appendix B.2);
@@ -52,7 +53,8 @@ __all__ = [
 
 VARIANTS: dict[str, str] = {
     "midpoint": "the toolkit's defaults (may differentiate C: see config.json model_free)",
-    "midpoint-free": "the defaults with every term that differentiates C off (values only)",
+    "midpoint-free": "the model-free defaults: every term that differentiates C off (values "
+                     "only), with the passes per collection measured best without them",
     "paper": "appendix B.1's settings (values of C only)",
     "inter": "midpoint-free with the actor loss of eq. (17)",
     "two-to-one": "midpoint-free with the actor loss of eq. (18)",
@@ -105,7 +107,8 @@ def make_config(env: str, variant: str, seed: int = 0, timesteps: int | None = N
         return paper_config(env, **common)
     if variant in ("midpoint-free", "inter", "two-to-one"):
         method = "midpoint" if variant == "midpoint-free" else variant
-        return default_config(env, **{**model_free_overrides(), "method": method, **common})
+        return default_config(env, **{**model_free_overrides(env), "method": method,
+                                      **common})
     return _baseline(variant, 2)(env, **common)
 
 

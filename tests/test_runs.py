@@ -21,9 +21,11 @@ def test_variants_are_the_papers_comparisons() -> None:
     assert d.seed == 3 and not d.model_free and d.path_energy_weight > 0
     free = runs.make_config("matsumoto", "midpoint-free")
     assert free.model_free and free.path_energy_weight == 0
-    # the model-free variant differs from the defaults only in the derivative terms
+    # the model-free variant differs from the defaults in the derivative terms and in the
+    # passes per collection (recorded in its config)
     assert {k for k, v in free.to_dict().items() if d.to_dict()[k] != v} == {
-        "path_energy_weight", "seed"}
+        "path_energy_weight", "epochs", "seed"}
+    assert free.epochs == 3
     assert runs.make_config("matsumoto", "inter").method == "inter"
     assert runs.make_config("matsumoto", "inter").model_free
     assert runs.make_config("matsumoto", "two-to-one").method == "two-to-one"

@@ -41,8 +41,9 @@ def train_command(
         "--paper", help="Use the paper's appendix B.1 settings instead of the defaults.")
     ] = False,
     model_free: Annotated[bool, typer.Option(
-        "--model-free", help="Switch off every term that differentiates C (values of C "
-                             "only, like the paper).")] = False,
+        "--model-free", help="The model-free defaults: every term that differentiates C off "
+                             "(values of C only, like the paper), Matsumoto 3 and car-like 2 "
+                             "passes per collection.")] = False,
     quiet: Annotated[bool, typer.Option("--quiet", help="No progress bar.")] = False,
     settings: Annotated[list[str] | None, typer.Option(
         "--set", metavar="FIELD=VALUE",
