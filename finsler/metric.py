@@ -24,6 +24,7 @@ import numpy as np
 
 from finsler.domains import Domain, _as_batch, is_torch
 from finsler.errors import InputError
+from finsler.limits import check_memory
 from finsler.lowering import LoweredFunction, lower
 
 __all__ = ["Metric", "Task"]
@@ -46,6 +47,10 @@ class Task:
     @property
     def segments(self) -> int:
         return 2**self.depth
+
+
+#: Highest Gauss-Legendre order accepted by :meth:`Metric.segment_length`.
+MAX_QUADRATURE_ORDER = 2048
 
 
 @functools.lru_cache(maxsize=16)
@@ -158,7 +163,15 @@ class Metric(ABC):
         quadrature of the given order; an upper bound of the distance ``d(x, y)``."""
         if not isinstance(order, (int, np.integer)) or order < 1:
             raise InputError(f"quadrature order must be a positive integer, got {order!r}")
+        if order > MAX_QUADRATURE_ORDER:
+            raise InputError(f"quadrature order {order} is above {MAX_QUADRATURE_ORDER}: its "
+                             "nodes cost O(order^2) memory and O(order^3) time, and a "
+                             f"Gauss-Legendre rule of order {MAX_QUADRATURE_ORDER} is already "
+                             f"exact for polynomials of degree {2 * MAX_QUADRATURE_ORDER - 1}")
         xb, yb, single = self._pair(x, y)
+        # points, directions and the lowered program's intermediate values per node
+        check_memory((int(order), xb.shape[0], self.dim), f"quadrature of order {order}",
+                     hint="use a lower order", copies=16)
         t, w = _gauss_legendre01(int(order))
         d = yb - xb
         n = xb.shape[0]

@@ -12,6 +12,8 @@ from collections.abc import Callable
 
 import torch
 
+from finsler.limits import check_memory
+
 __all__ = [
     "build_tree",
     "level_pairs",
@@ -35,6 +37,8 @@ def build_tree(
         raise ValueError(f"starts and goals must both be (B, dim), got {starts.shape}, "
                          f"{goals.shape}")
     b, dim = starts.shape
+    check_memory((b, 2**depth + 1, dim), f"a midpoint tree of depth {depth} for {b} pairs",
+                 hint="use a smaller depth or fewer pairs", copies=3)
     pts = torch.stack([starts, goals], 1)
     for _ in range(depth):
         n = pts.shape[1] - 1

@@ -52,6 +52,13 @@ CASES = [
     (["train", "--env", "euclidean", "--out", "p3.npy", "--timesteps", "100"], 2,
      ["p3.npy"]),
     (["train", "--env", "euclidean", "--out", "missing", "--resume"], 2, ["does not exist"]),
+    (["train", "--env", "euclidean", "--out", "p3.npy/run", "--timesteps", "100"], 2,
+     ["'p3.npy' is a file, not a folder"]),
+    # sizes that cannot fit are refused before allocating, with the figure
+    (["cost", "--metric", "panda-pole", "--start", "0,0,0,-1,0,1,0", "--goal",
+      "1,1,1,-2,1,2,1", "--order", "100000"], 2, ["order 100000 is above 2048"]),
+    (["evaluate", "--env", "matsumoto", "--depth", "30"], 2,
+     ["depth 30", "GiB", "over the limit", "smaller depth"]),
 ]
 
 

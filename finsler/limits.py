@@ -1,0 +1,27 @@
+"""One place that bounds memory before allocating: every array whose size a user chooses
+(quadrature order, tree depth, number of pairs) is checked here first, so that an
+impossible request is a clear error with the figure, not a machine out of memory."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+from finsler.errors import InputError
+
+__all__ = ["MAX_BYTES", "check_memory"]
+
+#: Largest working set (bytes) a single request may need: 4 GiB.
+MAX_BYTES = 4 * 1024**3
+
+
+def check_memory(shape: Sequence[int], what: str, hint: str = "", itemsize: int = 8,
+                 copies: int = 1) -> int:
+    """Raise :class:`InputError` if ``copies`` arrays of ``shape`` and ``itemsize`` bytes
+    per element would exceed :data:`MAX_BYTES`; returns the bytes needed otherwise."""
+    need = math.prod(int(s) for s in shape) * itemsize * copies
+    if need > MAX_BYTES:
+        raise InputError(f"{what} would need about {need / 1024**3:.3g} GiB (arrays of shape "
+                         f"{tuple(int(s) for s in shape)}), over the limit of "
+                         f"{MAX_BYTES / 1024**3:g} GiB" + (f"; {hint}" if hint else ""))
+    return need
