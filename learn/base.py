@@ -170,7 +170,8 @@ class TrainingInterrupted(Exception):
 class StopOnSignal:
     """While active (in the main thread), the first SIGINT or SIGTERM sets ``requested``
     to the signal's name, so that the training loop stops at the end of its iteration; a
-    second one restores the previous handlers and interrupts at once."""
+    second SIGINT (Ctrl-C twice) restores the previous handlers and interrupts at once.
+    A repeated SIGTERM changes nothing (a pool that is stopping may send one more)."""
 
     _SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
@@ -187,8 +188,10 @@ class StopOnSignal:
 
     def _handle(self, signum: int, frame: Any) -> None:
         if self.requested is not None:
-            self._restore()
-            raise KeyboardInterrupt
+            if signum == signal.SIGINT:
+                self._restore()
+                raise KeyboardInterrupt
+            return
         self.requested = signal.Signals(signum).name
 
     def _restore(self) -> None:

@@ -469,30 +469,22 @@ def run_sweep(plan: SweepPlan, out: str | os.PathLike[str], workers: int | None 
     return SweepResult(plan, root, backend["backend"], outcomes, time.perf_counter() - t0)
 
 
+def _run_local_job(job: tuple) -> tuple[int, dict[str, Any]]:
+    k, *args = job
+    return k, _run_local(*args)
+
+
 def _sweep_local(plan: SweepPlan, root: Path, todo: list[RunOutcome], workers: int,
                  done: Callable[[RunOutcome, dict[str, Any]], None]) -> None:
-    import multiprocessing as mp
-    from concurrent.futures import ProcessPoolExecutor, as_completed
-    from concurrent.futures.process import BrokenProcessPool
+    from finsler.pool import ProcessPool
 
-    ctx = mp.get_context("spawn")
-    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx,
-                             initializer=_set_threads) as ex:
-        futures = {
-            ex.submit(_run_local, o.spec, str(o.spec.path(root)), plan.timesteps,
-                      plan.minutes, dict(plan.overrides.get(o.spec.variant, {}))): o
-            for o in todo
-        }
-        try:
-            for fut in as_completed(futures):
-                try:
-                    res = fut.result()
-                except BrokenProcessPool as err:  # a worker died (killed, out of memory)
-                    res = {"action": "failed", "error": f"worker process died: {err}"}
-                done(futures[fut], res)
-        except BaseException:
-            ex.shutdown(wait=False, cancel_futures=True)
-            raise
+    jobs = [(k, o.spec, str(o.spec.path(root)), plan.timesteps, plan.minutes,
+             dict(plan.overrides.get(o.spec.variant, {}))) for k, o in enumerate(todo)]
+    # SIGINT / SIGTERM: every worker gets SIGTERM, saves a resumable checkpoint and exits;
+    # finsler.pool.PoolInterrupted is raised once they are gone
+    with ProcessPool(workers, initializer=_set_threads, graceful=True) as pool:
+        for k, res in pool.map_unordered(_run_local_job, jobs):
+            done(todo[k], res)
 
 
 def _sweep_ray(plan: SweepPlan, root: Path, todo: list[RunOutcome], workers: int | None,

@@ -137,3 +137,106 @@ def test_damaged_checkpoints_and_metrics_are_named_errors(tmp_path, damage) -> N
     ck.write_bytes(bytes(data))
     with pytest.raises(learn.CorruptFileError, match=r"checkpoint_best\.pt"):
         load_checkpoint(ck)
+
+
+# ----------------------------------------------------------------------------------------
+# SIGTERM during long commands: no process outlives the command, the work done is kept
+# ----------------------------------------------------------------------------------------
+def _children(pid: int) -> set[int]:
+    import subprocess
+
+    out = subprocess.run(["ps", "-o", "pid=", "--ppid", str(pid)], capture_output=True,
+                         text=True).stdout
+    return {int(x) for x in out.split()}
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    # a zombie is dead: read its state
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().split()[2] != "Z"
+    except OSError:
+        return False
+
+
+def _geodesics(*args: str, cwd: Path):
+    import subprocess
+    import sys
+
+    exe = Path(sys.executable).with_name("geodesics")
+    return subprocess.Popen([str(exe), *args], cwd=cwd, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+
+
+def _wait_for(cond, timeout: float = 120.0) -> None:
+    import time
+
+    t0 = time.time()
+    while not cond():
+        if time.time() - t0 > timeout:
+            raise AssertionError("timed out")
+        time.sleep(0.2)
+
+
+def test_sigterm_during_a_batch_solve_stops_every_worker_and_resume_is_equal(tmp_path):
+    import signal
+    import time
+
+    import solvers
+
+    m = finsler.get_metric("matsumoto")
+    pairs = finsler.sample_pairs(m, 24, 3)
+    np.save(tmp_path / "p.npy", pairs)
+    proc = _geodesics("solve", "--metric", "matsumoto", "--pairs", "p.npy", "--out", "r.json",
+                      "--workers", "2", "--no-progress", cwd=tmp_path)
+    parts = tmp_path / "r.json.parts"
+    _wait_for(lambda: parts.is_dir() and len(list(parts.glob("*.pkl"))) >= 2)
+    kids = _children(proc.pid)
+    assert len(kids) >= 2  # the pool's workers (and the resource tracker)
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130, err
+    assert "interrupted (SIGTERM)" in err and "run the same command to resume" in err
+    time.sleep(0.5)
+    assert not [k for k in kids if _alive(k)], "a worker outlived the command"
+    kept = len(list(parts.glob("*.pkl")))
+    assert 2 <= kept < 24 and not (tmp_path / "r.json").exists()
+    # the same command resumes and gives what an uninterrupted solve gives
+    proc = _geodesics("solve", "--metric", "matsumoto", "--pairs", "p.npy", "--out", "r.json",
+                      "--workers", "2", "--no-progress", cwd=tmp_path)
+    _, err = proc.communicate(timeout=300)
+    assert proc.returncode == 0, err
+    import json
+
+    doc = json.loads((tmp_path / "r.json").read_text())
+    ref = solvers.solve_batch(m, pairs, workers=1, minmax=True, progress=False)
+    got = [r["length"] for r in doc["results"]]
+    np.testing.assert_allclose(got, [r.length for r in ref], rtol=1e-12)
+    assert not parts.exists()
+
+
+def test_sigterm_during_a_sweep_keeps_every_run_resumable(tmp_path):
+    import signal
+    import time
+
+    proc = _geodesics("sweep", "--envs", "euclidean", "--methods", "midpoint", "--seeds", "2",
+                      "--timesteps", "3000000", "--out", "sw", "--quiet", "--set",
+                      "eval_every=2", cwd=tmp_path)
+    runs = [tmp_path / "sw" / "euclidean" / "midpoint" / f"seed-{s}" for s in (0, 1)]
+    _wait_for(lambda: all((r / "checkpoint_latest.pt").is_file() for r in runs))
+    time.sleep(1.0)
+    kids = _children(proc.pid)
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130, err
+    assert "interrupted (SIGTERM)" in err and "run the same command to resume" in err
+    time.sleep(0.5)
+    assert not [k for k in kids if _alive(k)], "a worker outlived the command"
+    import learn
+
+    for r in runs:
+        assert learn.runs.run_status(r) == "unfinished"
+        learn.storage.load_checkpoint(r / "checkpoint_latest.pt")  # intact

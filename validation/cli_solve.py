@@ -24,6 +24,7 @@ import typer
 import finsler
 import solvers
 from finsler.errors import InputError
+from finsler.pool import PoolInterrupted
 from validation.cli_common import fail, metric_or_fail, parse_point
 
 __all__ = ["register", "solve_command", "solve_payload"]
@@ -129,6 +130,12 @@ def solve_command(
         )
     except InputError as err:
         fail(str(err))
+    except PoolInterrupted as stop:
+        kept = (f"the pairs solved so far are kept in {parts}; run the same command to "
+                "resume" if parts is not None else "nothing was kept (give --out to keep "
+                "finished pairs)")
+        typer.echo(f"interrupted ({stop.signal_name}), all workers stopped: {kept}", err=True)
+        raise typer.Exit(code=130) from None
     payload = solve_payload(m, results, n)
     text = json.dumps(payload, indent=None if pairs is not None else 2)
     if out is not None:

@@ -10,6 +10,7 @@ from typing import Annotated, Any
 import typer
 
 from finsler.errors import InputError
+from finsler.pool import PoolInterrupted
 from validation.cli_common import fail
 
 __all__ = ["format_table", "parse_overrides", "register", "sweep_command"]
@@ -114,6 +115,11 @@ def sweep_command(
     except InputError as err:
         fail(str(err))
         return
+    except PoolInterrupted as stop:
+        typer.echo(f"interrupted ({stop.signal_name}): every worker saved its run and stopped;"
+                   f" finished runs are kept in {out} (status in {out / sw.SWEEP_FILE}); run "
+                   "the same command to resume", err=True)
+        raise typer.Exit(code=130) from None
     rows = result.rows()
     if as_json:
         typer.echo(json.dumps(rows, indent=2))
