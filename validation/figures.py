@@ -406,7 +406,7 @@ def sweep_curves(curves: Mapping[str, Mapping[tuple[str, str], Curve]],
     variants = sorted({v for _, v in keys})
     cmap = matplotlib.colormaps["tab10"]
     color = {v: cmap(i % 10) for i, v in enumerate(variants)}
-    fig = new_figure((5.0 * len(envs) + 0.5, 3.8 * len(kinds) + 0.6))
+    fig = new_figure((max(6.5, 5.0 * len(envs) + 0.5), 3.8 * len(kinds) + 0.8))
     axes = fig.subplots(len(kinds), len(envs), squeeze=False)
     for row, kind in enumerate(kinds):
         for col, env in enumerate(envs):
@@ -428,7 +428,7 @@ def sweep_curves(curves: Mapping[str, Mapping[tuple[str, str], Curve]],
             ax.grid(alpha=0.3)
             ax.set_title(env, fontsize=10)
             ax.legend(fontsize=7, loc="best")
-    fig.suptitle(f"{_column_label(column)}: mean over seeds, band = +- standard error",
+    fig.suptitle(f"{_column_label(column)}\nmean over seeds, band = +- standard error",
                  fontsize=10)
     fig.tight_layout()
     return fig
