@@ -14,7 +14,6 @@ import dataclasses
 import os
 import time
 from collections.abc import Sequence
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from typing import Any
 
 import numpy as np
@@ -22,6 +21,7 @@ import numpy as np
 from finsler.errors import InputError
 from finsler.files import OutputError, atomic_write_bytes
 from finsler.metric import Metric
+from finsler.pool import ProcessPool
 from finsler.registry import get_metric
 from solvers.result import (
     GeodesicResult,
@@ -428,15 +428,10 @@ def solve_batch(
                     store.save(k, arr[k], results[k])
                 bar.update(1)
         else:
-            import multiprocessing as mp
-
             spec = _metric_spec(m)
             jobs = [(spec, k, arr[k, 0], arr[k, 1], n, plan, minmax) for k in todo]
-            ctx = mp.get_context("spawn")
-            with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as ex:
-                futures = [ex.submit(_batch_worker, j) for j in jobs]
-                for fut in as_completed(futures):
-                    k, res = fut.result()
+            with ProcessPool(workers) as pool:
+                for k, res in pool.map_unordered(_batch_worker, jobs):
                     results[k] = res
                     if store is not None:
                         store.save(k, arr[k], res)
