@@ -81,10 +81,9 @@ class Domain(ABC):
         inside = self.contains(xn, tol=tol)
         if not np.all(inside):
             bad = int(np.flatnonzero(~inside)[0])
-            raise DomainError(
-                f"{name} row {bad} = {np.array2string(xn[bad], precision=6)} lies outside "
-                f"the domain {self.describe()}"
-            )
+            point = "(" + ", ".join(repr(float(v)) for v in xn[bad]) + ")"  # full precision
+            where = f"{name} row {bad}" if xn.shape[0] > 1 else name
+            raise DomainError(f"{where} = {point} lies outside the domain {self.describe()}")
         return xn
 
     def _sample_check(self, n: int) -> None:

@@ -64,13 +64,16 @@ def load_pairs(path: str | os.PathLike[str], metric: Metric) -> np.ndarray:
     try:
         arr = np.load(p, allow_pickle=False)
     except (ValueError, OSError, EOFError) as err:
-        raise InputError(f"pairs file {str(p)!r} is not a readable .npy array ({err})") from err
+        why = ("it holds pickled Python objects or is not a .npy file at all (a text file "
+               "renamed .npy?); write it with numpy.save(path, array)"
+               if "pickle" in str(err) else str(err))
+        raise InputError(f"pairs file {str(p)!r} is not a readable .npy array: {why}") from err
     if not isinstance(arr, np.ndarray) or arr.dtype.kind not in "fiu":
         raise InputError(f"pairs file {str(p)!r} must hold a numeric array")
     if arr.ndim != 3 or arr.shape[1] != 2 or arr.shape[2] != metric.dim or arr.shape[0] < 1:
         raise InputError(
-            f"pairs file {str(p)!r} must hold an array of shape (K, 2, {metric.dim}) for "
-            f"{metric.name}, got {arr.shape}"
+            f"pairs file {str(p)!r} must hold an array of shape (K, 2, {metric.dim}) with "
+            f"K >= 1 pairs for {metric.name}, got {arr.shape}"
         )
     arr = arr.astype(np.float64)
     if not np.all(np.isfinite(arr)):

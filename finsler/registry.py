@@ -41,6 +41,20 @@ def list_metrics() -> list[str]:
     return list(_REGISTRY)
 
 
+def check_name(name: str, what: str = "metric") -> str:
+    """``name`` if a metric is registered under it; otherwise :class:`UnknownMetricError`
+    naming the closest registered name (``what``: how the caller calls it, e.g.
+    ``environment``)."""
+    if name in _REGISTRY:
+        return name
+    lower = {k.lower(): k for k in _REGISTRY}
+    close = ([lower[str(name).lower()]] if str(name).lower() in lower
+             else difflib.get_close_matches(str(name), _REGISTRY, n=1))
+    hint = f" (did you mean {close[0]!r}?)" if close else ""
+    raise UnknownMetricError(f"unknown {what} {name!r}{hint}; registered: "
+                             f"{', '.join(_REGISTRY)}")
+
+
 def get_metric(name: str, **params: float) -> Metric:
     """The metric registered as ``name`` with its parameters overridden by ``params``.
 
@@ -50,13 +64,8 @@ def get_metric(name: str, **params: float) -> Metric:
         if params:
             raise InputError("parameters can only be given with a metric name")
         return name
-    cls = _REGISTRY.get(name)
-    if cls is None:
-        close = difflib.get_close_matches(str(name), _REGISTRY, n=1)
-        hint = f" (did you mean {close[0]!r}?)" if close else ""
-        raise UnknownMetricError(
-            f"unknown metric {name!r}{hint}; registered: {', '.join(_REGISTRY)}"
-        )
+    check_name(name)
+    cls = _REGISTRY[name]
     fields = {f.name for f in dataclasses.fields(cls)}
     unknown = sorted(set(params) - fields)
     if unknown:

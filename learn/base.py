@@ -69,9 +69,7 @@ class RunConfig:
                 raise InputError(f"config field {f.name} must be {ann}, got {v!r}")
 
     def _check_env_and_device(self) -> None:
-        if self.env not in finsler.list_metrics():
-            raise finsler.UnknownMetricError(
-                f"unknown environment {self.env!r}; known: {', '.join(finsler.list_metrics())}")
+        finsler.registry.check_name(self.env, "environment")
         if self.device not in ("cpu", "cuda") and not self.device.startswith("cuda:"):
             raise InputError(f"device must be 'cpu' or 'cuda', got {self.device!r}")
 

@@ -254,10 +254,7 @@ _OURS: dict[str, dict[str, Any]] = {
 def default_config(env: str, **overrides: Any) -> TrainConfig:
     """The toolkit's documented defaults for ``env`` (the settings of the shipped policies);
     ``overrides`` replace fields. Unknown environments get the common settings."""
-    if env not in finsler.list_metrics():
-        raise finsler.UnknownMetricError(
-            f"unknown environment {env!r}; known: {', '.join(finsler.list_metrics())}"
-        )
+    finsler.registry.check_name(env, "environment")
     settings = {**_OURS_COMMON, **_OURS.get(env, dict(timesteps=20_000_000))}
     settings.update(overrides)
     return TrainConfig(env=env, **settings)

@@ -248,9 +248,7 @@ def _real(name: str, value: float, lo: float, hi: float) -> None:
 
 def default_pg_config(env: str, **overrides: Any) -> PGConfig:
     """The paper's PG settings (appendix B.3) for ``env``; ``overrides`` replace fields."""
-    if env not in finsler.list_metrics():
-        raise finsler.UnknownMetricError(
-            f"unknown environment {env!r}; known: {', '.join(finsler.list_metrics())}")
+    finsler.registry.check_name(env, "environment")
     return PGConfig(env=env, **overrides)
 
 

@@ -114,6 +114,8 @@ def make_config(env: str, variant: str, seed: int = 0, timesteps: int | None = N
 
 def load_run_config(run_dir: str | Path) -> Any:
     """The config saved in a run directory, as the method's config class."""
+    if not Path(run_dir).is_dir():
+        raise InputError(f"run directory {run_dir} does not exist")
     doc = read_json(Path(run_dir) / CONFIG_FILE)
     cfg = doc.get("config")
     if not isinstance(cfg, dict):

@@ -568,9 +568,7 @@ def default_seq_config(env: str, **overrides: Any) -> SeqConfig:
     """The paper's Seq settings for ``env`` (appendix B.2; budget 2e7, car-like 8e7) with
     this toolkit's batched environments (``n_envs`` x ``n_steps`` = SB3's 2048-step
     rollout); ``overrides`` replace fields (unknown ones raise :class:`InputError`)."""
-    if env not in finsler.list_metrics():
-        raise finsler.UnknownMetricError(
-            f"unknown environment {env!r}; known: {', '.join(finsler.list_metrics())}")
+    finsler.registry.check_name(env, "environment")
     settings: dict[str, Any] = {"env": env, "timesteps": _PAPER_T.get(env, 20_000_000)}
     if "n_envs" in overrides and "n_steps" not in overrides:
         n = overrides["n_envs"]

@@ -35,6 +35,8 @@ def _digest(root: Path) -> dict[str, str]:
 def work(tmp_path, monkeypatch) -> Path:
     monkeypatch.chdir(tmp_path)
     np.save(tmp_path / "p3.npy", finsler.sample_pairs(finsler.get_metric("euclidean"), 3, 1))
+    np.save(tmp_path / "empty.npy", np.zeros((0, 2, 2)))
+    (tmp_path / "text.npy").write_text("0.1, 0.2\n0.3, 0.4\n")
     (tmp_path / "adir").mkdir()
     (tmp_path / "target.json").write_text("{}")
     return tmp_path
@@ -59,6 +61,16 @@ CASES = [
       "1,1,1,-2,1,2,1", "--order", "100000"], 2, ["order 100000 is above 2048"]),
     (["evaluate", "--env", "matsumoto", "--depth", "30"], 2,
      ["depth 30", "GiB", "over the limit", "smaller depth"]),
+    # messages that say what is wrong
+    (["solve", "--metric", "euclidean", "--pairs", "text.npy"], 2,
+     ["not a readable .npy array", "numpy.save"]),
+    (["solve", "--metric", "euclidean", "--pairs", "empty.npy"], 2, ["K >= 1", "(0, 2, 2)"]),
+    (["cost", "--metric", "matsumoto", "--start", "1.0000001,0", "--goal", "0,0"], 2,
+     ["--start = (1.0000001, 0.0) lies outside"]),
+    (["train", "--env", "Matsumoto", "--out", "x"], 2, ["did you mean 'matsumoto'"]),
+    (["train", "--env", "matsumoto", "--out", "nothere", "--resume"], 2,
+     ["run directory nothere does not exist"]),
+    (["report", "--env", "poincare", "--out", "rep"], 2, ["no shipped policy"]),
 ]
 
 
@@ -72,6 +84,14 @@ def test_bad_output_paths_are_refused_before_any_work(work, args, code, words) -
     for w in words:
         assert w in res.output, (w, res.output)
     assert _digest(work) == before  # nothing created, nothing changed
+
+
+def test_an_odd_segment_count_does_not_call_a_node_the_midpoint(work) -> None:
+    res = CliRunner().invoke(app, ["solve", "--metric", "euclidean", "--start", "0,0",
+                                   "--goal", "0.5,0", "--segments", "3"])
+    assert res.exit_code == 0, res.output
+    assert "p_1 (n = 3 is odd: no midpoint node)" in res.output
+    assert "midpoint" not in res.output.split("p_1")[0].splitlines()[-1]
 
 
 def test_a_symlinked_output_is_written_through(work) -> None:

@@ -76,9 +76,7 @@ def train_command(
     from learn.base import TrainingInterrupted
 
     try:
-        if env not in finsler.list_metrics():
-            raise finsler.UnknownMetricError(
-                f"unknown environment {env!r}; known: {', '.join(finsler.list_metrics())}")
+        finsler.registry.check_name(env, "environment")
         if timesteps is not None and timesteps < 1:
             raise InputError(f"--timesteps must be a positive integer, got {timesteps}")
         if minutes is not None and not minutes > 0:
@@ -206,9 +204,7 @@ def evaluate_command(
                 raise InputError(f"run directory {run} does not exist")
             policy = load_any_policy(run, checkpoint=checkpoint, env=env)
         else:
-            if env not in finsler.list_metrics():
-                raise finsler.UnknownMetricError(
-                    f"unknown environment {env!r}; known: {', '.join(finsler.list_metrics())}")
+            finsler.registry.check_name(env, "environment")
             if env not in learn.shipped_policies():
                 raise InputError(f"no shipped policy for {env!r}; shipped: "
                                  f"{', '.join(learn.shipped_policies())}; train one with "

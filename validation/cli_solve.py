@@ -160,7 +160,9 @@ def solve_command(
         typer.echo(f"min-max max segment cost  {row['minmax_max_segment_cost']:.6g}"
                    f"  (eps {payload['eps']:g}: {'success' if row['success'] else 'fail'})")
         typer.echo(f"seeds agreeing / tried    {r.seeds_agreeing} / {r.seeds_tried}")
-        typer.echo(f"midpoint p_(n/2)          {np.array2string(r.points[n // 2], precision=8)}")
+        mid = (f"midpoint p_{n // 2}          " if n % 2 == 0 else
+               f"p_{n // 2} (n = {n} is odd: no midpoint node) ")
+        typer.echo(f"{mid:<26}{np.array2string(r.points[n // 2], precision=8)}")
         typer.echo(f"wall time                 {r.wall_time:.3f} s")
     else:
         typer.echo(

@@ -55,9 +55,7 @@ def load_report_policy(
         return pol, run, f"run directory {run}, {pol.checkpoint}"
     if env is None:
         raise InputError("give --env NAME or --run DIR")
-    if env not in finsler.list_metrics():
-        raise finsler.UnknownMetricError(
-            f"unknown environment {env!r}; known: {', '.join(finsler.list_metrics())}")
+    finsler.registry.check_name(env, "environment")
     if env in learn.shipped_policies():
         pol = learn.load_policy(env, checkpoint=checkpoint)
         src = Path(pol.source)
@@ -321,6 +319,21 @@ def build_report(
     :func:`solvers.distance` converges (the metric is Finsler along the path).
     ``checkpoint``: ``best`` (selected on the validation set) or ``latest``."""
     out = Path(out)
+    created = not out.exists()
+    try:
+        return _build_report(env, out, run=run, pairs=pairs, quick=quick, continuum=continuum,
+                             workers=workers, progress=progress, policy=policy,
+                             checkpoint=checkpoint)
+    except BaseException:
+        if created and out.is_dir() and not any(out.iterdir()):
+            out.rmdir()  # a failed report leaves nothing behind
+        raise
+
+
+def _build_report(env: str | None, out: Path, *, run: str | Path | None,
+                  pairs: str | Path | np.ndarray | None, quick: bool, continuum: bool | None,
+                  workers: int | None, progress: bool, policy: Any,
+                  checkpoint: str) -> dict[str, Any]:
     out.mkdir(parents=True, exist_ok=True)
     if policy is None:
         pol, run_dir, note = load_report_policy(env, run, quick, out, progress, checkpoint)
