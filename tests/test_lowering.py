@@ -120,7 +120,26 @@ def test_lowered_torch_runs_in_float32_and_keeps_dtype() -> None:
     assert np.allclose(c.numpy(), ref, rtol=1e-4)
 
 
-def test_lowered_program_is_cached_per_metric() -> None:
+def test_lowered_program_is_cached_per_metric(monkeypatch) -> None:
+    """Lowering runs once per metric instance, however often the metric is evaluated, and
+    again for an instance with other parameters (whose program differs)."""
+    import finsler.metric as fm
+
+    calls = []
+    real = fm.lower
+
+    def counting(fn):
+        calls.append(fn.name())
+        return real(fn)
+
+    monkeypatch.setattr(fm, "lower", counting)
     m = finsler.get_metric("matsumoto")
-    assert m.lowered_F is m.lowered_F
+    x = np.array([[0.1, 0.2], [0.3, -0.1]])
+    for _ in range(3):
+        m.cost(x, x[::-1])
+    assert len(calls) == 1
     assert "B.sqrt" in m.lowered_F.source
+    w = finsler.get_metric("randers", wind_x=0.1)
+    w.cost(x, x[::-1])
+    w.cost(x, x[::-1])
+    assert len(calls) == 2 and calls[0] != calls[1]

@@ -95,6 +95,21 @@ def test_prop1_cost_is_the_distance_for_constant_norms(mp) -> None:
     assert float(m.cost(x, y)) == pytest.approx(float(m.distance(x[None], y[None])[0]), rel=1e-12)
 
 
+@pytest.mark.parametrize("name", CONSTANT)
+def test_for_constant_norms_no_curve_beats_the_straight_segment(name: str) -> None:
+    """The closed-form ``distance`` of a constant norm is F(y - x), the same formula as C, so
+    comparing the two proves nothing about the geometry. The independent check: the exact
+    solver, free to bend the curve, finds no curve shorter than C(x, y)."""
+    import solvers
+
+    m = finsler.get_metric(name)
+    pairs = finsler.sample_pairs(m, 5, seed=31)
+    for x, y in pairs:
+        d = solvers.distance(m, x, y, rtol=1e-10)
+        assert d.converged, d.status
+        assert float(m.cost(x, y)) == pytest.approx(d.distance, rel=1e-8)
+
+
 def test_polygon_reference_distance_matches_closed_form() -> None:
     m = finsler.get_metric("poincare")
     x, y = np.array([-0.5, 0.3]), np.array([0.4, 0.5])

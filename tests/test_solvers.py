@@ -115,7 +115,7 @@ def test_matsumoto_task_set() -> None:
     assert np.all(e_adam >= np.asarray(energies) * (1 - 1e-12))
     # measured: median 1.0026, max 1.026 (C evaluates F at the left point; bounds active)
     assert np.median(ratios) < 1.01
-    assert ratios.max() < 1.1
+    assert ratios.max() < 1.04
 
 
 def test_energy_optimum_is_a_local_minimum() -> None:
@@ -299,11 +299,22 @@ def test_bad_input_other_entry_points() -> None:
 
 
 def test_learned_or_custom_initial_path_is_used() -> None:
+    """An initial path that passes BELOW the mountain leads IPOPT to the other local optimum
+    than the straight seed (which goes round above it): the solver must really start from
+    it, and still keep the better of the two."""
     m = finsler.get_metric("matsumoto")
     s, g = np.array([0.6, 0.05]), np.array([-0.6, 0.0])
+    t = np.linspace(0, 1, 17)[:, None]
+    below = (1 - t) * s + t * g - np.sin(np.pi * t) * np.array([0.0, 0.7])
     r = solvers.solve_geodesic(m, s, g, 16, seeds=SeedPlan(bulges=(), graph=False),
-                               initial=[np.linspace(s, g, 17)])
+                               initial=[below])
     assert r.seeds_tried == 2 and r.status is Status.SUCCESS
+    e_straight, e_below = r.seed_energies["straight"], r.seed_energies["initial0"]
+    assert e_below > e_straight * (1 + 1e-3)  # a different, worse local optimum ...
+    # (had the given path been ignored or replaced by a straight line, the energies would be
+    # equal); the better one is kept: the straight seed's route above the mountain
+    assert r.best_seed == "straight" and r.energy == pytest.approx(e_straight, rel=1e-12)
+    assert r.points[8, 1] > 0.3
 
 
 # ----------------------------------------------------------------------------------------
