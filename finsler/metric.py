@@ -49,6 +49,10 @@ class Task:
         return 2**self.depth
 
 
+#: Tolerance of the domain check of the numeric API (solver paths satisfy the domain
+#: constraints to IPOPT's tolerance, not exactly).
+DOMAIN_TOL = 1e-6
+
 #: Highest Gauss-Legendre order accepted by :meth:`Metric.segment_length`.
 MAX_QUADRATURE_ORDER = 2048
 
@@ -133,32 +137,49 @@ class Metric(ABC):
         return lower(self.casadi_hessian)
 
     # -- numeric batch methods ------------------------------------------------------------
-    def F(self, x: Any, v: Any) -> Any:
+    # Points given to the numeric methods below are checked (finite, inside the domain up
+    # to DOMAIN_TOL) when they are numpy arrays or lists: the user-facing API refuses what
+    # the CLI refuses. torch tensors are the training loop's fast path (on any device,
+    # differentiable, already projected into the domain) and are not checked; ``check``
+    # forces either behaviour.
+    def _check_points(self, check: bool | None, **arrays: Any) -> None:
+        for name, a in arrays.items():
+            if check or (check is None and not is_torch(a)):
+                self.domain.check(a, name, tol=DOMAIN_TOL)
+
+    def F(self, x: Any, v: Any, check: bool | None = None) -> Any:
         """``F(x, v)`` for ``x, v`` of shape ``(N, dim)`` (or ``(dim,)``) -> ``(N,)`` (or ``()``).
 
         numpy in, numpy (float64) out; torch in, torch out (same device, differentiable).
+        ``x`` is checked (inside the domain, finite) unless it is a torch tensor or
+        ``check=False``.
         """
         single = _ndim(x) == 1 and _ndim(v) == 1
         xb = _as_batch(x, self.dim, "x", check_finite=False)
         vb = _as_batch(v, self.dim, "v", check_finite=False)
         _same_kind(xb, vb)
+        self._check_points(check, x=xb)
         out = self._eval_F(xb, vb)
         return out[0] if single else out
 
-    def cost(self, x: Any, y: Any) -> Any:
-        """Local cost ``C(x, y) = F(x, y - x)`` of eq. (4), batch ``(N, dim)`` -> ``(N,)``."""
+    def cost(self, x: Any, y: Any, check: bool | None = None) -> Any:
+        """Local cost ``C(x, y) = F(x, y - x)`` of eq. (4), batch ``(N, dim)`` -> ``(N,)``.
+        Points are checked unless they are torch tensors or ``check=False``."""
         xb, yb, single = self._pair(x, y)
+        self._check_points(check, x=xb, y=yb)
         out = self._eval_F(xb, yb - xb)
         return out[0] if single else out
 
-    def cost_symmetric(self, x: Any, y: Any) -> Any:
+    def cost_symmetric(self, x: Any, y: Any, check: bool | None = None) -> Any:
         """Symmetrised cost of eq. (59): ``(F(x, y - x) + F(y, y - x)) / 2``."""
         xb, yb, single = self._pair(x, y)
+        self._check_points(check, x=xb, y=yb)
         d = yb - xb
         out = 0.5 * (self._eval_F(xb, d) + self._eval_F(yb, d))
         return out[0] if single else out
 
-    def segment_length(self, x: Any, y: Any, order: int = 8) -> Any:
+    def segment_length(self, x: Any, y: Any, order: int = 8,
+                       check: bool | None = None) -> Any:
         """Length (eq. 58) of the coordinate segment from ``x`` to ``y`` by Gauss-Legendre
         quadrature of the given order; an upper bound of the distance ``d(x, y)``."""
         if not isinstance(order, (int, np.integer)) or order < 1:
@@ -169,6 +190,7 @@ class Metric(ABC):
                              f"Gauss-Legendre rule of order {MAX_QUADRATURE_ORDER} is already "
                              f"exact for polynomials of degree {2 * MAX_QUADRATURE_ORDER - 1}")
         xb, yb, single = self._pair(x, y)
+        self._check_points(check, x=xb, y=yb)
         # points, directions and the lowered program's intermediate values per node
         check_memory((int(order), xb.shape[0], self.dim), f"quadrature of order {order}",
                      hint="use a lower order", copies=16)
@@ -191,8 +213,9 @@ class Metric(ABC):
             out = w @ f.reshape(len(t), n)
         return out[0] if single else out
 
-    def path_costs(self, points: Any) -> Any:
-        """Segment costs ``C(p_i, p_{i+1})`` of paths ``(K, n+1, dim)`` -> ``(K, n)``."""
+    def path_costs(self, points: Any, check: bool | None = None) -> Any:
+        """Segment costs ``C(p_i, p_{i+1})`` of paths ``(K, n+1, dim)`` -> ``(K, n)``
+        (points checked unless torch or ``check=False``)."""
         if _ndim(points) != 3 or points.shape[-1] != self.dim or points.shape[1] < 2:
             raise InputError(
                 f"paths must have shape (K, n+1, {self.dim}) with n >= 1, got "
@@ -201,7 +224,7 @@ class Metric(ABC):
         k, m, _ = points.shape
         a = points[:, :-1].reshape(-1, self.dim)
         b = points[:, 1:].reshape(-1, self.dim)
-        return self.cost(a, b).reshape(k, m - 1)
+        return self.cost(a, b, check=check).reshape(k, m - 1)
 
     # -- convexity (the Finsler condition) ------------------------------------------------
     def convexity(self, x: Any, n_directions: int = 64, seed: int = 0) -> np.ndarray:

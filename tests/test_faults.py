@@ -260,3 +260,27 @@ def test_sigterm_during_a_sweep_keeps_every_run_resumable(tmp_path):
     for r in runs:
         assert learn.runs.run_status(r) == "unfinished"
         learn.storage.load_checkpoint(r / "checkpoint_latest.pt")  # intact
+
+
+def test_the_numeric_api_refuses_points_outside_the_domain_like_the_cli() -> None:
+    """One documented behaviour: numpy / list input is checked (finite, inside the domain);
+    torch tensors are the training loop's unchecked fast path; ``check`` forces either."""
+    import torch
+
+    m = finsler.get_metric("matsumoto")
+    with pytest.raises(finsler.DomainError, match=r"x = \(1\.5, 0\.0\) lies outside"):
+        m.cost([[1.5, 0.0]], [[0.0, 0.0]])
+    with pytest.raises(finsler.DomainError, match="y row 1"):
+        m.cost([[0.0, 0.0], [0.1, 0.0]], [[0.2, 0.0], [2.0, 0.0]])
+    with pytest.raises(finsler.InputError, match=r"NaN|finite"):
+        m.F([[np.nan, 0.0]], [[1.0, 0.0]])
+    with pytest.raises(finsler.DomainError):
+        m.path_costs(np.array([[[0.0, 0.0], [0.5, 0.0], [1.2, 0.0]]]))
+    with pytest.raises(finsler.DomainError):
+        m.segment_length([1.5, 0.0], [0.0, 0.0])
+    # the explicit fast paths give the formula's value
+    unchecked = float(m.cost([[1.5, 0.0]], [[0.0, 0.0]], check=False)[0])
+    fast = float(m.cost(torch.tensor([[1.5, 0.0]]), torch.tensor([[0.0, 0.0]]))[0])
+    assert unchecked == pytest.approx(fast, rel=1e-6) and unchecked > 90
+    with pytest.raises(finsler.DomainError):
+        m.cost(torch.tensor([[1.5, 0.0]]), torch.tensor([[0.0, 0.0]]), check=True)
