@@ -284,3 +284,34 @@ def test_the_numeric_api_refuses_points_outside_the_domain_like_the_cli() -> Non
     assert unchecked == pytest.approx(fast, rel=1e-6) and unchecked > 90
     with pytest.raises(finsler.DomainError):
         m.cost(torch.tensor([[1.5, 0.0]]), torch.tensor([[0.0, 0.0]]), check=True)
+
+
+def test_kill_9_during_checkpoint_writes_leaves_the_previous_checkpoint(tmp_path) -> None:
+    """A process writing (large) checkpoints in a loop is killed with SIGKILL at an
+    arbitrary moment: the file on disk is always a whole checkpoint that loads."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    from learn.storage import load_checkpoint
+
+    path = tmp_path / "checkpoint_latest.pt"
+    code = (
+        "import sys, torch\n"
+        "from learn.storage import save_checkpoint\n"
+        "step = 0\n"
+        "while True:\n"
+        "    step += 1\n"
+        "    save_checkpoint(sys.argv[1], {'format': 'learn-checkpoint-v1', 'step': step,\n"
+        "                    'w': torch.full((1_000_000,), float(step))})\n"
+    )
+    for delay in (0.8, 1.3, 1.7):
+        proc = subprocess.Popen([sys.executable, "-c", code, str(path)])
+        _wait_for(path.is_file, timeout=60)
+        time.sleep(delay)
+        proc.send_signal(signal.SIGKILL)
+        proc.wait()
+        ck = load_checkpoint(path)
+        assert ck["step"] >= 1 and float(ck["w"][0]) == ck["step"] == float(ck["w"][-1])
+        path.unlink()
