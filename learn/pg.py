@@ -74,7 +74,7 @@ from learn.storage import (
     check_run_dir,
     load_checkpoint,
     read_json,
-    read_metrics,
+    restore_history,
     save_checkpoint,
     write_metrics,
 )
@@ -555,6 +555,7 @@ class PGTrainer:
             },
             "level_best": self.level_best,
             "best": dict(self.best),
+            "history": [dict(r) for r in self.history],
         }
 
     def _load_state(self, st: dict[str, Any]) -> None:
@@ -576,8 +577,7 @@ class PGTrainer:
             raise CorruptFileError(
                 f"checkpoint {self.run_dir / LATEST_FILE} does not match the run: {err}"
             ) from err
-        rows = read_metrics(self.run_dir / METRICS_FILE)
-        self.history = [r for r in rows if int(r["iteration"]) <= self.iteration]
+        self.history = restore_history(self.run_dir, st, self.iteration)
 
     # -- the algorithm --------------------------------------------------------------------
     def _enter_level(self, depth: int) -> None:

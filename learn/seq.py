@@ -73,7 +73,7 @@ from learn.storage import (
     check_run_dir,
     load_checkpoint,
     read_json,
-    read_metrics,
+    restore_history,
     save_checkpoint,
     write_metrics,
 )
@@ -988,6 +988,7 @@ class SeqTrainer:
                 "episodes_mark": list(self._ep_mark),
             },
             "best": dict(self.best),
+            "history": [dict(r) for r in self.history],
         }
 
     def _load_state(self, st: dict[str, Any]) -> None:
@@ -1021,8 +1022,7 @@ class SeqTrainer:
             raise CorruptFileError(
                 f"checkpoint {self.run_dir / LATEST_FILE} does not match the run: {err}"
             ) from err
-        rows = read_metrics(self.run_dir / METRICS_FILE)
-        self.history = [r for r in rows if int(r["iteration"]) <= self.iteration]
+        self.history = restore_history(self.run_dir, st, self.iteration)
 
     # -- one rollout + update -------------------------------------------------------------
     def train_rollout(self) -> None:

@@ -29,6 +29,7 @@ __all__ = [
     "load_checkpoint",
     "read_json",
     "read_metrics",
+    "restore_history",
     "save_checkpoint",
     "write_metrics",
     "write_result",
@@ -180,3 +181,13 @@ def write_result(run_dir: Path, final: dict[str, Any], best: dict[str, Any],
         "best": dict(best),
     }
     atomic_write_text(Path(run_dir) / RESULT_FILE, json.dumps(doc, indent=2))
+
+
+def restore_history(run_dir: Path, state: dict[str, Any], iteration: int) -> list[dict[str, Any]]:
+    """The metrics rows of a run being resumed at ``iteration``: the copy kept inside the
+    checkpoint (authoritative: a truncated or damaged ``metrics.csv`` loses nothing), or,
+    for checkpoints written before that copy existed, the rows of ``metrics.csv``."""
+    rows = state.get("history")
+    if rows is None:
+        rows = read_metrics(Path(run_dir) / METRICS_FILE)
+    return [dict(r) for r in rows if int(r["iteration"]) <= iteration]

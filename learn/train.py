@@ -49,7 +49,7 @@ from learn.storage import (
     check_run_dir,
     load_checkpoint,
     read_json,
-    read_metrics,
+    restore_history,
     save_checkpoint,
     write_metrics,
 )
@@ -165,6 +165,7 @@ class Trainer:
                 "wall_seconds": self._wall(),
             },
             "best": dict(self.best),
+            "history": [dict(r) for r in self.history],
         }
 
     def _load_state(self, st: dict[str, Any]) -> None:
@@ -186,8 +187,7 @@ class Trainer:
             raise CorruptFileError(
                 f"checkpoint {self.run_dir / LATEST_FILE} does not match the run: {err}"
             ) from err
-        rows = read_metrics(self.run_dir / METRICS_FILE)
-        self.history = [r for r in rows if int(r["iteration"]) <= self.iteration]
+        self.history = restore_history(self.run_dir, st, self.iteration)
 
     # -- the algorithm --------------------------------------------------------------------
     def depth_for(self, trees_before: int) -> int:
