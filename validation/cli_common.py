@@ -3,13 +3,16 @@ point parsing and metric look-up. The command modules import this, never ``cli``
 
 from __future__ import annotations
 
+import json
+from typing import Any
+
 import numpy as np
 import typer
 
 import finsler
 from finsler.errors import InputError
 
-__all__ = ["fail", "metric_or_fail", "parse_point"]
+__all__ = ["fail", "metric_or_fail", "parse_overrides", "parse_point"]
 
 
 def fail(message: str) -> None:
@@ -38,3 +41,21 @@ def metric_or_fail(name: str) -> finsler.Metric:
     except InputError as err:
         fail(str(err))
         raise  # unreachable
+
+
+def parse_overrides(items: list[str]) -> dict[str, Any]:
+    """``["field=value", ...]`` -> ``{field: value}`` (values parsed as JSON, else kept as
+    strings; lists become tuples). Which fields exist is
+    checked by the command (``--set`` of ``train`` and ``sweep``)."""
+    out: dict[str, Any] = {}
+    for item in items:
+        key, sep, raw = item.partition("=")
+        key = key.strip()
+        if not sep or not key:
+            raise InputError(f"--set expects FIELD=VALUE, got {item!r}")
+        try:
+            value = json.loads(raw)
+        except json.JSONDecodeError:
+            value = raw
+        out[key] = tuple(value) if isinstance(value, list) else value
+    return out

@@ -16,7 +16,7 @@ import typer
 
 import finsler
 from finsler.errors import InputError
-from validation.cli_common import fail
+from validation.cli_common import fail, parse_overrides
 
 __all__ = ["evaluate_command", "register", "train_command"]
 
@@ -149,25 +149,16 @@ def parse_settings(items: list[str], cls: type | None = None) -> dict[str, objec
 
     names = [f.name for f in dataclasses.fields(cls or learn.TrainConfig)]
     reserved = {"env": "--env", "device": "--device", "minutes": "--minutes"}
-    out: dict[str, object] = {}
-    for item in items:
-        key, sep, raw = item.partition("=")
-        key = key.strip()
-        if not sep or not key:
-            raise InputError(f"--set expects FIELD=VALUE, got {item!r}")
+    for item in items:  # the run-control fields have options of their own
+        key = item.partition("=")[0].strip()
         if key in reserved:
             raise InputError(f"--set {key}=... is not allowed; use {reserved[key]}")
+    out = parse_overrides(items)
+    for key in out:
         if key not in names:
             close = difflib.get_close_matches(key, names, n=3)
             hint = f" (did you mean {', '.join(close)}?)" if close else ""
             raise InputError(f"--set: unknown config field {key!r}{hint}")
-        try:
-            value = json.loads(raw)
-        except json.JSONDecodeError:
-            value = raw
-        if isinstance(value, list):
-            value = tuple(value)
-        out[key] = value
     return out
 
 

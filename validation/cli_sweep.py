@@ -11,31 +11,13 @@ import typer
 
 from finsler.errors import InputError
 from finsler.pool import PoolInterrupted
-from validation.cli_common import fail
+from validation.cli_common import fail, parse_overrides
 
-__all__ = ["format_table", "parse_overrides", "register", "sweep_command"]
+__all__ = ["format_table", "register", "sweep_command"]
 
 
 def _split(text: str) -> list[str]:
     return [t.strip() for t in text.split(",") if t.strip()]
-
-
-def parse_overrides(items: list[str]) -> dict[str, Any]:
-    """``["field=value", ...]`` -> ``{field: value}`` (values parsed as JSON, else kept as
-    strings; lists become tuples). Which variants take a field is decided by
-    :func:`learn.sweep.plan_sweep`."""
-    out: dict[str, Any] = {}
-    for item in items:
-        key, sep, raw = item.partition("=")
-        key = key.strip()
-        if not sep or not key:
-            raise InputError(f"--set expects FIELD=VALUE, got {item!r}")
-        try:
-            value = json.loads(raw)
-        except json.JSONDecodeError:
-            value = raw
-        out[key] = tuple(value) if isinstance(value, list) else value
-    return out
 
 
 def _cell(v: Any, key: str) -> str:
