@@ -10,8 +10,11 @@ Public API::
     distance(metric, start, goal, rtol=None, *, strict=False) -> DistanceResult
     solve_batch(metric, pairs (K, 2, dim), segments=None, *, minmax=False, workers=None,
                 progress=True) -> list[GeodesicResult]
+    exp_map(metric, x, v, t=1.0, return_curve=False) -> ExpResult
+    log_map(metric, x, y) -> LogResult
 """
 
+from solvers.expmap import ExpResult, ExpStatus, LogResult, LogStatus, exp_map, log_map
 from solvers.geodesic import (
     check_pairs,
     check_segments,
@@ -35,7 +38,11 @@ from solvers.spectral import distance
 __all__ = [
     "DistanceResult",
     "DistanceStatus",
+    "ExpResult",
+    "ExpStatus",
     "GeodesicResult",
+    "LogResult",
+    "LogStatus",
     "MidpointResult",
     "MinMaxResult",
     "SeedPlan",
@@ -44,6 +51,8 @@ __all__ = [
     "check_pairs",
     "check_segments",
     "distance",
+    "exp_map",
+    "log_map",
     "midpoint",
     "refine_minmax",
     "solve_batch",
