@@ -8,7 +8,9 @@ From that single expression the class derives
 * vectorised numpy / torch evaluators obtained by *lowering* the SX
   instruction list (:mod:`finsler.lowering`), compiled once and cached,
 * the local costs of the paper: ``cost`` (eq. 4), ``cost_symmetric`` (eq. 59)
-  and ``segment_length`` (eq. 58, Gauss-Legendre quadrature),
+  and ``segment_length`` (eq. 58, Gauss-Legendre quadrature of a fixed order), and
+  lengths with an error estimate: ``segment_length_error`` / ``path_length_error``
+  (adaptive Gauss-Kronrod to a tolerance),
 * a numerical convexity check of ``F(x, .)`` (the Finsler condition).
 """
 
@@ -27,7 +29,7 @@ from finsler.errors import InputError
 from finsler.limits import check_memory
 from finsler.lowering import LoweredFunction, lower
 
-__all__ = ["Metric", "Task"]
+__all__ = ["LengthEstimate", "Metric", "Task"]
 
 
 @dataclass(frozen=True)
@@ -55,6 +57,75 @@ DOMAIN_TOL = 1e-6
 
 #: Highest Gauss-Legendre order accepted by :meth:`Metric.segment_length`.
 MAX_QUADRATURE_ORDER = 2048
+
+
+#: Gauss-Kronrod 7-15 rule on [-1, 1] (QUADPACK's qk15): Kronrod nodes from the end to the
+#: centre, their weights, and the Gauss weights of the odd-indexed nodes (1, 3, 5, 7).
+_GK15_X = np.array([
+    0.991455371120812639206854697526329, 0.949107912342758524526189684047851,
+    0.864864423359769072789712788640926, 0.741531185599394439863864773280788,
+    0.586087235467691130294144845693013, 0.405845151377397166906606412076961,
+    0.207784955007898467600689403773245, 0.0])
+_GK15_WK = np.array([
+    0.022935322010529224963732008058970, 0.063092092629978553290700663189204,
+    0.104790010322250183839876322541518, 0.140653259715525918745189590510238,
+    0.169004726639267902826583426598550, 0.190350578064785409913256402421014,
+    0.204432940075298892414161999234649, 0.209482141084727828012999174891714])
+_G7_W = np.array([
+    0.129484966168869693270611432679082, 0.279705391489276667901467771423780,
+    0.381830050505118944950369775488975, 0.417959183673469387755102040816327])
+
+
+def _gk15_01() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The G7-K15 pair on ``[0, 1]``: nodes ``(15,)``, Kronrod weights ``(15,)`` and Gauss
+    weights ``(15,)`` (zero at the Kronrod-only nodes)."""
+    x = np.concatenate([-_GK15_X[:-1], _GK15_X[::-1]])
+    wk = np.concatenate([_GK15_WK[:-1], _GK15_WK[::-1]])
+    wg_half = np.zeros(8)
+    wg_half[1::2] = _G7_W
+    wg = np.concatenate([wg_half[:-1], wg_half[::-1]])
+    return 0.5 * (x + 1.0), 0.5 * wk, 0.5 * wg
+
+
+_GK_T, _GK_WK, _GK_WG = _gk15_01()
+
+#: Default relative tolerance of :meth:`Metric.segment_length_error`.
+LENGTH_RTOL = 1e-10
+#: Default cap on the subintervals per segment of :meth:`Metric.segment_length_error`.
+MAX_LENGTH_INTERVALS = 1024
+
+
+@dataclass(frozen=True)
+class LengthEstimate:
+    """Curve or segment lengths with an error estimate, from adaptive Gauss-Kronrod.
+
+    ``value`` and ``error`` have the shape of the batch (``(N,)`` for segments, ``(K,)`` for
+    paths, ``()`` for one); ``converged`` is True where ``error <= max(atol, rtol * value)``
+    was reached within the cap on subintervals; ``intervals`` counts the subintervals used.
+    ``lower`` / ``upper`` are ``value -/+ error``: ``upper`` bounds the curve's length,
+    hence the distance, from above (under the estimate's assumption, see
+    :meth:`Metric.segment_length_error`).
+    """
+
+    value: Any
+    error: Any
+    converged: Any
+    intervals: Any
+
+    @property
+    def lower(self) -> Any:
+        return self.value - self.error
+
+    @property
+    def upper(self) -> Any:
+        return self.value + self.error
+
+    def to_dict(self) -> dict[str, Any]:
+        def py(a: Any) -> Any:
+            return np.asarray(a).tolist()
+
+        return {"value": py(self.value), "error": py(self.error),
+                "converged": py(self.converged), "intervals": py(self.intervals)}
 
 
 @functools.lru_cache(maxsize=16)
@@ -213,6 +284,81 @@ class Metric(ABC):
             out = w @ f.reshape(len(t), n)
         return out[0] if single else out
 
+    def segment_length_error(self, x: Any, y: Any, rtol: float = LENGTH_RTOL,
+                             atol: float = 0.0, max_intervals: int = MAX_LENGTH_INTERVALS,
+                             check: bool | None = None) -> LengthEstimate:
+        """Length (eq. 58) of the coordinate segments from ``x`` to ``y`` (``(N, dim)`` or
+        ``(dim,)``, numpy) with an error estimate, by adaptive Gauss-Kronrod (G7-K15).
+
+        Every segment's parameter interval ``[0, 1]`` is bisected where the local error
+        estimate ``|K15 - G7|`` of a subinterval exceeds its share ``tol * width`` of the
+        tolerance ``tol = max(atol, rtol * |length|)``, until no subinterval does or the
+        segment has ``max_intervals`` subintervals. ``error`` is the sum of ``|K15 - G7|``
+        over the final subintervals plus a rounding term (``1e2 * machine eps * length``):
+        the error of the 7-point Gauss rule, which over-estimates the error of the returned
+        15-point Kronrod value wherever the integrand is smooth on the subinterval (the
+        classical assumption of QUADPACK, without its down-scaling of the estimate). Kinks
+        of ``F`` (non-smooth metrics) are resolved by bisection, the estimate stays
+        honest there because the kink makes ``|K15 - G7|`` large.
+
+        Returns a :class:`LengthEstimate` (``value``, ``error``, ``converged``,
+        ``intervals``), float64 numpy. Torch input is refused (not a training-loop path).
+        """
+        for name, val in (("rtol", rtol), ("atol", atol)):
+            if isinstance(val, bool) or not isinstance(val, (int, float, np.floating)) or not (
+                    np.isfinite(val) and val >= 0):
+                raise InputError(f"{name} must be a finite number >= 0, got {val!r}")
+        if rtol == 0 and atol == 0:
+            raise InputError("rtol and atol are both 0: no tolerance can be reached")
+        if (isinstance(max_intervals, bool) or not isinstance(max_intervals, (int, np.integer))
+                or max_intervals < 1):
+            raise InputError(f"max_intervals must be a positive integer, got {max_intervals!r}")
+        if is_torch(x) or is_torch(y):
+            raise InputError("segment_length_error takes numpy arrays (float64), not torch")
+        xb, yb, single = self._pair(x, y)
+        self._check_points(check, x=xb, y=yb)
+        n = max(xb.shape[0], yb.shape[0])
+        xb = np.broadcast_to(xb, (n, self.dim))
+        d = np.broadcast_to(yb, (n, self.dim)) - xb
+        check_memory((n, int(max_intervals), 15, self.dim), "adaptive quadrature",
+                     hint="use fewer segments or a smaller max_intervals", copies=2)
+        value, error, intervals = _adaptive_gk(self._eval_F, xb, d, float(rtol), float(atol),
+                                               int(max_intervals))
+        tol = np.maximum(atol, rtol * np.abs(value))
+        converged = error <= tol
+        if single:
+            return LengthEstimate(float(value[0]), float(error[0]), bool(converged[0]),
+                                  int(intervals[0]))
+        return LengthEstimate(value, error, converged, intervals)
+
+    def path_length_error(self, points: Any, rtol: float = LENGTH_RTOL, atol: float = 0.0,
+                          max_intervals: int = MAX_LENGTH_INTERVALS,
+                          check: bool | None = None) -> LengthEstimate:
+        """Length of polylines ``(n+1, dim)`` (or a batch ``(K, n+1, dim)``) with an error
+        estimate: :meth:`segment_length_error` of every segment (relative tolerance ``rtol``
+        of the whole path's length, shared by its segments in proportion to their
+        lengths), summed. Returns a :class:`LengthEstimate` of shape ``()`` (or ``(K,)``).
+        """
+        p = np.asarray(points, dtype=np.float64)
+        single = p.ndim == 2
+        if single:
+            p = p[None]
+        if p.ndim != 3 or p.shape[-1] != self.dim or p.shape[1] < 2:
+            raise InputError(f"points must have shape (n+1, {self.dim}) or (K, n+1, "
+                             f"{self.dim}) with n >= 1, got {np.shape(points)}")
+        k, m, _ = p.shape
+        seg = self.segment_length_error(p[:, :-1].reshape(-1, self.dim),
+                                        p[:, 1:].reshape(-1, self.dim), rtol=rtol, atol=atol,
+                                        max_intervals=max_intervals, check=check)
+        value = np.asarray(seg.value).reshape(k, m - 1).sum(1)
+        error = np.asarray(seg.error).reshape(k, m - 1).sum(1)
+        intervals = np.asarray(seg.intervals).reshape(k, m - 1).sum(1)
+        converged = error <= np.maximum(atol, rtol * np.abs(value))
+        if single:
+            return LengthEstimate(float(value[0]), float(error[0]), bool(converged[0]),
+                                  int(intervals[0]))
+        return LengthEstimate(value, error, converged, intervals)
+
     def path_costs(self, points: Any, check: bool | None = None) -> Any:
         """Segment costs ``C(p_i, p_{i+1})`` of paths ``(K, n+1, dim)`` -> ``(K, n)``
         (points checked unless torch or ``check=False``)."""
@@ -305,6 +451,50 @@ class Metric(ABC):
             "reversible": self.reversible,
             "convexity": self.convexity_note,
         }
+
+
+def _adaptive_gk(f: Any, x: np.ndarray, d: np.ndarray, rtol: float, atol: float,
+                 max_intervals: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Adaptive G7-K15 quadrature of ``t -> f(x + t d, d)`` over ``[0, 1]`` for every row of
+    ``x``, ``d`` ``(N, dim)`` -> ``(value, error, intervals)`` each ``(N,)``.
+
+    Subintervals are kept as flat arrays (owner row, left end, width). Each round evaluates
+    every pending subinterval at once, accepts those whose ``|K15 - G7|`` is within
+    ``tol * width`` (``tol`` from the row's current length), and bisects the others, until
+    none is pending or a row reaches ``max_intervals`` (its pending subintervals are then
+    accepted as they are, and the row is reported unconverged by its error)."""
+    n, dim = x.shape
+    value = np.zeros(n)
+    error = np.zeros(n)
+    count = np.ones(n, dtype=np.int64)
+    owner = np.arange(n)
+    left = np.zeros(n)
+    width = np.ones(n)
+    while owner.size:
+        t = left[:, None] + width[:, None] * _GK_T[None, :]  # (M, 15)
+        pts = x[owner][:, None, :] + t[:, :, None] * d[owner][:, None, :]
+        dirs = np.broadcast_to(d[owner][:, None, :], pts.shape)
+        fv = f(pts.reshape(-1, dim), dirs.reshape(-1, dim)).reshape(-1, 15)
+        k = width * (fv @ _GK_WK)
+        g = width * (fv @ _GK_WG)
+        err = np.abs(k - g)
+        # each row's current length (accepted parts plus pending estimates) sets its tolerance
+        current = value + np.bincount(owner, weights=k, minlength=n)
+        tol = np.maximum(atol, rtol * np.abs(current))
+        ok = err <= tol[owner] * width
+        full = count[owner] >= max_intervals  # rows at the cap accept what they have
+        accept = ok | full
+        np.add.at(value, owner[accept], k[accept])
+        np.add.at(error, owner[accept], err[accept])
+        split = ~accept
+        # each bisection replaces one subinterval by two
+        np.add.at(count, owner[split], 1)
+        half = 0.5 * width[split]
+        owner = np.repeat(owner[split], 2)
+        left = np.stack([left[split], left[split] + half], 1).reshape(-1)
+        width = np.repeat(half, 2)
+    error = error + 1e2 * np.finfo(float).eps * np.abs(value)
+    return value, error, count
 
 
 def _raise_non_finite(x: Any, v: Any) -> None:

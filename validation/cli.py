@@ -59,32 +59,64 @@ def cost_command(
     metric: Annotated[str, typer.Option(help="Registered metric name (see `geodesics metrics`).")],
     start: Annotated[str, typer.Option(help='Start point, e.g. "0.1,-0.2".')],
     goal: Annotated[str, typer.Option(help='Goal point, e.g. "0.5,0.3".')],
-    order: Annotated[int, typer.Option(help="Gauss-Legendre order for the segment length.")] = 8,
+    order: Annotated[int | None, typer.Option(
+        help="Also give the fixed-order Gauss-Legendre length of this order, with its "
+             "difference to the accurate length (a warning if it is off).")] = None,
+    rtol: Annotated[float, typer.Option(
+        help="Relative tolerance of the segment length (adaptive Gauss-Kronrod).")] = 1e-10,
     as_json: Annotated[bool, typer.Option("--json", help="Print JSON.")] = False,
 ) -> None:
-    """Local costs between two points: C (eq. 4), symmetric C (eq. 59), segment length (eq. 58)."""
+    """Local costs between two points: C (eq. 4), symmetric C (eq. 59), segment length (eq. 58)
+    with an error estimate (adaptive quadrature to --rtol; a warning if not reached)."""
     m = metric_or_fail(metric)
     s = parse_point(start, m.dim, "--start")
     g = parse_point(goal, m.dim, "--goal")
+    warnings = []
     try:
         m.domain.check(s, "--start")
         m.domain.check(g, "--goal")
-        if order < 1:
+        if order is not None and order < 1:
             raise InputError(f"--order must be >= 1, got {order}")
+        if not (rtol > 0 and rtol < 1):
+            raise InputError(f"--rtol must be in (0, 1), got {rtol!r}")
+        est = m.segment_length_error(s, g, rtol=rtol)
         out = {
             "metric": m.name,
             "cost": float(m.cost(s, g)),
             "cost_symmetric": float(m.cost_symmetric(s, g)),
-            "segment_length": float(m.segment_length(s, g, order=order)),
+            "segment_length": est.value,
+            "segment_length_error": est.error,
+            "segment_length_converged": est.converged,
+            "quadrature_intervals": est.intervals,
         }
+        if not est.converged:
+            warnings.append(f"the segment length reached an error of {est.error:.3g} "
+                            f"(relative {est.error / max(est.value, 1e-300):.3g}), above "
+                            f"--rtol {rtol:g}: the segment is too long or F too rough")
+        if order is not None:
+            fixed = float(m.segment_length(s, g, order=order))
+            diff = fixed - est.value
+            out["segment_length_order"] = {"order": order, "value": fixed, "difference": diff}
+            if abs(diff) > max(10 * est.error, 1e-9 * abs(est.value)):
+                warnings.append(f"Gauss-Legendre order {order} gives {fixed:.12g}, off by "
+                                f"{diff:+.3g} ({diff / est.value:+.2%}) from the accurate "
+                                f"length {est.value:.12g}: use a higher --order")
     except InputError as err:
         fail(str(err))
+    out["warnings"] = warnings
+    for w in warnings:
+        typer.echo(f"warning: {w}", err=True)
     if as_json:
         typer.echo(json.dumps(out, indent=2))
     else:
         typer.echo(f"C(start, goal)           = {out['cost']:.12g}")
         typer.echo(f"symmetric C (eq. 59)     = {out['cost_symmetric']:.12g}")
-        typer.echo(f"segment length (eq. 58)  = {out['segment_length']:.12g}")
+        typer.echo(f"segment length (eq. 58)  = {out['segment_length']:.12g} "
+                   f"+- {out['segment_length_error']:.2g}")
+        if order is not None:
+            fo = out["segment_length_order"]
+            typer.echo(f"Gauss-Legendre order {order:<4d} = {fo['value']:.12g} "
+                       f"(difference {fo['difference']:+.3g})")
 
 
 def _register_optional_commands() -> None:
