@@ -195,3 +195,29 @@ def test_zero_velocity_and_zero_time():
 
 def test_exports():
     assert solvers.exp_map is exp_map and solvers.log_map is log_map
+
+
+def test_cli_exp_and_log():
+    import json
+
+    from typer.testing import CliRunner
+
+    from validation.cli import app
+
+    run = CliRunner()
+    out = run.invoke(app, ["log", "--metric", "poincare", "--start", "0.1,0.2", "--goal",
+                           "-0.3,-0.4", "--json"])
+    assert out.exit_code == 0, out.output
+    v = json.loads(out.output)["velocity"]
+    np.testing.assert_allclose(v, poincare_velocity(np.array([0.1, 0.2]),
+                                                    np.array([-0.3, -0.4])), atol=1e-8)
+    out = run.invoke(app, ["exp", "--metric", "poincare", "--start", "0.1,0.2", "--velocity",
+                           ",".join(repr(c) for c in v), "--json"])
+    assert out.exit_code == 0, out.output
+    np.testing.assert_allclose(json.loads(out.output)["point"], [-0.3, -0.4], atol=1e-8)
+    out = run.invoke(app, ["exp", "--metric", "poincare", "--start", "0,0", "--velocity",
+                           "1,0", "--t", "5"])
+    assert out.exit_code == 1 and "left_domain" in out.output
+    out = run.invoke(app, ["log", "--metric", "matsumoto", "--start", "0.5,0", "--goal",
+                           "-0.5,0.1"])
+    assert out.exit_code == 2 and "not strongly convex" in out.output

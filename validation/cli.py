@@ -6,6 +6,7 @@ Every command calls public functions of ``finsler``, ``solvers``, ``learn`` or
 
 from __future__ import annotations
 
+import importlib
 import json
 import sys
 from typing import Annotated
@@ -125,6 +126,7 @@ def _register_optional_commands() -> None:
 
     for module in (cli_solve, cli_learn, cli_report, cli_plot, cli_sweep):
         module.register(app)
+    importlib.import_module("validation.cli_expmap").register(app)
 
 
 _register_optional_commands()
