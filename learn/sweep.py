@@ -30,7 +30,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import logging
 import os
 import tempfile
 import time
@@ -40,6 +39,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from finsler.cluster import connect_ray
 from finsler.errors import InputError
 from learn.runs import VARIANTS, load_run_config, make_config, run_one, run_status
 from learn.storage import (
@@ -71,8 +71,6 @@ _FREE_FIELDS = frozenset({"minutes", "device", "eval_pairs"})
 #: Fields a sweep sets itself (``--seeds``, ``--timesteps``, ``--minutes``, the variant).
 _SWEEP_FIELDS = frozenset({"env", "method", "seed", "timesteps", "minutes", "device"})
 
-RAY_MISSING = ("--ray needs Ray, which is not installed: pip install -e '.[distributed]' "
-               "(or pip install 'ray>=2.9')")
 
 
 # ----------------------------------------------------------------------------------------
@@ -364,32 +362,6 @@ def _run_remote(spec: RunSpec, files: dict[str, bytes], timesteps: int | None,
 # ----------------------------------------------------------------------------------------
 # Ray
 # ----------------------------------------------------------------------------------------
-def connect_ray(address: str, num_cpus: int | None = None) -> bool:
-    """Join the Ray cluster at ``address`` (``"auto"``, ``"HOST:PORT"``, ``"ray://..."``)
-    or start a local instance (``"local"``, ``num_cpus`` CPUs), quietly (no worker logs
-    on the driver, no dashboard for a local instance). Returns False if Ray was already
-    initialised in this process (then it is used as it is and left running), True if this
-    call connected (the caller shuts it down)."""
-    try:
-        import ray
-    except ImportError as err:
-        raise InputError(RAY_MISSING) from err
-    if not isinstance(address, str) or not address.strip():
-        raise InputError("--ray needs an address: HOST:PORT, auto, or local")
-    if ray.is_initialized():
-        return False
-    quiet = dict(log_to_driver=False, logging_level=logging.ERROR)
-    try:
-        if address == "local":
-            os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
-            ray.init(num_cpus=num_cpus, include_dashboard=False, **quiet)
-        else:
-            ray.init(address=address, **quiet)
-    except (ConnectionError, RuntimeError, ValueError) as err:
-        raise InputError(f"cannot connect to Ray at {address!r}: {err}") from err
-    return True
-
-
 def _prepare(spec: RunSpec, out: Path) -> None:
     """A run stopped before its first checkpoint cannot be resumed: clear it so it starts
     afresh (it holds only its config and at most a metrics header)."""

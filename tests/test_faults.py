@@ -357,3 +357,22 @@ def test_a_damaged_metrics_log_loses_no_rows_on_resume(tmp_path, monkeypatch, da
     # interrupted run has at most one extra row (the checkpoint taken on the signal)
     assert [r for r in got if r in want] == want
     assert len(got) <= len(want) + 1
+
+
+@pytest.mark.parametrize("address", ["127.0.0.1:1", "ray://127.0.0.1:1", "nohost", "h:99999"])
+@pytest.mark.parametrize("command", ["sweep", "solve"])
+def test_a_wrong_ray_address_fails_in_seconds_naming_it(work, command, address) -> None:
+    """Ray's own client retries an unreachable cluster for minutes: the address is probed
+    first, and nothing is written."""
+    import time
+
+    pytest.importorskip("ray")
+    args = (["sweep", "--envs", "euclidean", "--methods", "midpoint", "--seeds", "1",
+             "--out", "sw"] if command == "sweep" else [*_SOLVE, "r.json"])
+    before = _digest(work)
+    t0 = time.perf_counter()
+    res = CliRunner().invoke(app, [*args, "--ray", address])
+    assert time.perf_counter() - t0 < 30
+    assert res.exit_code == 2, res.output
+    assert f"Ray at {address!r}" in res.output or f"--ray address {address!r}" in res.output
+    assert _digest(work) == before
