@@ -9,7 +9,10 @@ with the toolkit (chosen to reach the issue's bars on a 2-core CPU);
 
 from __future__ import annotations
 
+import dataclasses
+import importlib
 import json
+import math
 import platform
 from dataclasses import dataclass
 from typing import Any
@@ -21,12 +24,19 @@ from learn.methods import derivative_terms, describe
 
 __all__ = [
     "METHODS",
+    "MetricConfig",
     "TrainConfig",
     "beyond_paper",
+    "build_metric",
+    "check_run_metric",
     "default_config",
+    "ensure_registered",
+    "metric_class_path",
+    "metric_info",
     "model_free_overrides",
     "package_versions",
     "paper_config",
+    "resolve_metric",
 ]
 
 #: Actor-loss variants: eq. (6), eq. (17), eq. (18).
@@ -38,12 +48,202 @@ _TRANSFORMS = ("none", "log1p")
 _ACTIVATIONS = ("relu", "tanh")
 
 
+# ----------------------------------------------------------------------------------------
+# The run's metric: registered name + parameters (+ the class of a user metric)
+# ----------------------------------------------------------------------------------------
+_PARAM_KINDS: dict[str, tuple[type, ...]] = {
+    "float": (int, float), "int": (int,), "bool": (bool,), "str": (str,)}
+
+
+def metric_class_path(cls: type) -> str | None:
+    """``module:qualname`` of a metric class defined outside :mod:`finsler` (None for the
+    toolkit's own metrics)."""
+    if cls.__module__ == "finsler" or cls.__module__.startswith("finsler."):
+        return None
+    return f"{cls.__module__}:{cls.__qualname__}"
+
+
+def _import_metric_class(env: str, path: str) -> None:
+    """Import the module of ``path`` (``module:qualname``) so that metric ``env`` is
+    registered (its ``@register_metric`` runs on import; a class found but not registered
+    is registered here)."""
+    module, sep, qualname = path.partition(":")
+    advice = (f"make module {module!r} importable (PYTHONPATH, or `--metric-module "
+              f"FILE.py` on the command line) or import it before loading the run")
+    if not sep or not module or not qualname:
+        raise InputError(f"metric_class must be 'module:qualname', got {path!r}")
+    if module == "__main__":
+        raise InputError(
+            f"metric {env!r} was defined by class {qualname} in a script (__main__), which "
+            "cannot be re-imported: register it (run the code defining it) before loading "
+            "the run, or move the class into a module")
+    try:
+        mod = importlib.import_module(module)
+    except ImportError as err:
+        raise InputError(f"metric {env!r} is class {path}, whose module cannot be imported "
+                         f"({err}); {advice}") from err
+    obj: Any = mod
+    for part in qualname.split("."):
+        obj = getattr(obj, part, None)
+    if not (isinstance(obj, type) and issubclass(obj, finsler.Metric)):
+        raise InputError(f"metric {env!r}: {path} is not a finsler.Metric class; {advice}")
+    if obj.name != env:
+        raise InputError(f"metric class {path} is registered as {obj.name!r}, not {env!r}")
+    if env not in finsler.list_metrics():
+        finsler.register_metric(obj)
+
+
+def ensure_registered(env: str, metric_class: str | None = None) -> None:
+    """Make sure metric ``env`` is registered: import ``metric_class`` (``module:qualname``)
+    if it is not; :class:`InputError` (with a did-you-mean) if it still is not."""
+    if metric_class is not None and isinstance(env, str) and \
+            env not in finsler.list_metrics():
+        _import_metric_class(env, metric_class)
+    finsler.registry.check_name(env, "environment")
+
+
+def _json_safe(value: Any) -> Any:
+    """Tuples to lists, numpy scalars to Python: the value as it reads back from JSON."""
+    if isinstance(value, (list, tuple)):
+        return [_json_safe(v) for v in value]
+    if hasattr(value, "item") and not isinstance(value, (str, bytes)):
+        return value.item()
+    return value
+
+
+def _check_param(env: str, name: str, kind: str, value: Any) -> Any:
+    """``value`` checked against the field annotation ``kind`` of the metric's class."""
+    ok_types = _PARAM_KINDS.get(kind.replace(" ", ""))
+    if ok_types is not None:
+        ok = isinstance(value, ok_types) and (kind == "bool" or not isinstance(value, bool))
+        if ok and kind == "float":
+            ok = math.isfinite(value)
+            value = float(value)
+        if not ok:
+            raise InputError(f"metric parameter {name} of {env!r} must be {kind}"
+                             f"{' (finite)' if kind == 'float' else ''}, got {value!r}")
+        return value
+    try:  # another annotation: anything JSON can hold, checked by the metric itself
+        json.dumps(value, allow_nan=False)
+    except (TypeError, ValueError) as err:
+        raise InputError(f"metric parameter {name} of {env!r} must be a JSON value, got "
+                         f"{value!r}") from err
+    return value
+
+
+def resolve_metric(env: str, params: Any = None,
+                   metric_class: str | None = None) -> tuple[dict[str, Any], str | None]:
+    """Check a run's metric and return ``(full parameters, class path)``.
+
+    ``env`` is a registered name; if it is not registered and ``metric_class``
+    (``module:qualname``) is given, that module is imported first (user metrics).
+    ``params`` (a dict, None = the defaults) are checked against the fields of the metric's
+    dataclass: unknown names and ill-typed values raise :class:`InputError` naming the
+    allowed parameters. The metric is then built (its own checks run) and the FULL set of
+    its parameters is returned, JSON-safe, so that a run's config pins its metric even if a
+    default changes later. The class path is ``module:qualname`` for a metric defined
+    outside :mod:`finsler`, else None.
+    """
+    if not isinstance(env, str):
+        raise InputError(f"env must be a registered metric name, got {env!r}")
+    if metric_class is not None and not isinstance(metric_class, str):
+        raise InputError(f"metric_class must be 'module:qualname', got {metric_class!r}")
+    ensure_registered(env, metric_class)
+    cls = finsler.registry._REGISTRY[env]
+    path = metric_class_path(cls)
+    if metric_class is not None and metric_class != path:
+        raise InputError(f"metric {env!r} of this run is class {metric_class}, but {env!r} "
+                         f"is registered as {path or cls.__qualname__ + ' (finsler)'} here")
+    if params is None:
+        params = {}
+    if not isinstance(params, dict):
+        raise InputError(f"metric_params must be a dict of parameter values, got {params!r}")
+    fields = {f.name: f.type.__name__ if isinstance(f.type, type) else str(f.type)
+              for f in dataclasses.fields(cls) if f.init}
+    unknown = sorted(set(params) - set(fields))
+    if unknown:
+        raise InputError(
+            f"metric {env!r} has no parameter {', '.join(map(repr, unknown))}; its "
+            f"parameters are: {', '.join(f'{k} ({t})' for k, t in fields.items()) or '(none)'}")
+    checked = {k: _check_param(env, k, fields[k], v) for k, v in params.items()}
+    metric = build_metric(env, checked)
+    full = {k: _json_safe(getattr(metric, k)) for k in fields}
+    return full, path
+
+
+def build_metric(env: str, params: dict[str, Any] | None = None) -> finsler.Metric:
+    """The registered metric ``env`` with ``params`` (JSON lists become tuples)."""
+    args = {k: tuple(v) if isinstance(v, list) else v for k, v in (params or {}).items()}
+    try:
+        return finsler.get_metric(env, **args)
+    except InputError:
+        raise
+    except (TypeError, ValueError) as err:  # a metric's own check that is not an InputError
+        raise InputError(f"metric {env!r} refuses parameters {params}: {err}") from err
+
+
+def metric_info(cfg: Any) -> dict[str, Any]:
+    """``config.json``'s ``metric`` section: :meth:`finsler.Metric.info` plus the full
+    parameters and, for a user metric, its class (``module:qualname``)."""
+    return {**cfg.metric.info(), "params": dict(cfg.metric_params or {}),
+            "class": cfg.metric_class}
+
+
+def check_run_metric(cfg: Any, source: str, env: str | None = None,
+                     metric_params: dict[str, Any] | None = None) -> None:
+    """Raise :class:`InputError` unless the run ``cfg`` (loaded from ``source``) is on
+    metric ``env`` (if given) with ``metric_params`` (if given; compared after completing
+    them to the full set, so ``{"a": 0.2}`` equals the run's ``{"a": 0.2}`` and unnamed
+    parameters must have their defaults)."""
+    if env is not None and env != cfg.env:
+        raise InputError(f"--env {env} does not match the run's environment {cfg.env}")
+    if metric_params is None:
+        return
+    full, _ = resolve_metric(cfg.env, metric_params, cfg.metric_class)
+    if full != cfg.metric_params:
+        diff = ", ".join(f"{k}={cfg.metric_params.get(k)!r} (given {full.get(k)!r})"
+                         for k in full if full.get(k) != cfg.metric_params.get(k))
+        raise InputError(f"{source} was trained on {cfg.env} with other metric parameters: "
+                         f"{diff}; a policy is only loaded for the metric it learned")
+
+
+class MetricConfig(RunConfig):
+    """Mixin of the method configs: the run's metric is ``env`` with ``metric_params``
+    (validated and completed to the full parameter set when the config is built; old
+    configs without the field get the defaults), and ``metric_class`` locates a user
+    metric's class so that loading a run re-imports it."""
+
+    metric_params: dict[str, Any] | None
+    metric_class: str | None
+
+    def _check_types(self) -> None:
+        params = self.metric_params
+        self.metric_params = None  # RunConfig's check knows scalar fields only
+        try:
+            super()._check_types()
+        finally:
+            self.metric_params = params
+        self.metric_params, self.metric_class = resolve_metric(
+            self.env, params, self.metric_class)
+
+    @property
+    def metric(self) -> finsler.Metric:
+        """The run's metric: ``env`` with ``metric_params``."""
+        return build_metric(self.env, self.metric_params)
+
+
 @dataclass
-class TrainConfig(RunConfig):
+class TrainConfig(MetricConfig):
     """Every setting of one training run of Algorithm 1 (saved as ``config.json``)."""
 
     env: str = "matsumoto"
     """Registered metric name (``finsler.list_metrics()``)."""
+    metric_params: dict[str, Any] | None = None
+    """Parameters of the metric (``finsler.get_metric(env, **metric_params)``); None or {}
+    = its defaults. Completed to the full parameter set when the config is built."""
+    metric_class: str | None = None
+    """``module:qualname`` of a metric class registered outside the toolkit (filled in
+    automatically; re-imported when the run is loaded in another process)."""
     method: str = "midpoint"
     """Actor loss: ``midpoint`` (eq. 6), ``inter`` (eq. 17) or ``two-to-one`` (eq. 18)."""
     timesteps: int = 20_000_000
@@ -182,7 +382,7 @@ class TrainConfig(RunConfig):
             raise InputError(f"td_lambda must be in [0, 1], got {self.td_lambda!r}")
         if not self.log_std_min < self.log_std_max:
             raise InputError("log_std_min must be below log_std_max")
-        if self.symmetric_critic and not finsler.get_metric(self.env).reversible:
+        if self.symmetric_critic and not self.metric.reversible:
             raise InputError(
                 f"symmetric_critic needs a reversible metric; {self.env!r} is not reversible"
             )
@@ -254,7 +454,7 @@ _OURS: dict[str, dict[str, Any]] = {
 def default_config(env: str, **overrides: Any) -> TrainConfig:
     """The toolkit's documented defaults for ``env`` (the settings of the shipped policies);
     ``overrides`` replace fields. Unknown environments get the common settings."""
-    finsler.registry.check_name(env, "environment")
+    ensure_registered(env, overrides.get("metric_class"))
     settings = {**_OURS_COMMON, **_OURS.get(env, dict(timesteps=20_000_000))}
     settings.update(overrides)
     return TrainConfig(env=env, **settings)
@@ -282,7 +482,7 @@ def beyond_paper(cfg: TrainConfig) -> dict[str, dict[str, Any]]:
     (run-control fields such as seed, device, minutes and evaluation cadence excluded)."""
     ref = paper_config(cfg.env).to_dict()
     skip = {"seed", "device", "threads", "minutes", "eval_every", "eval_pairs", "env",
-            "method", "depth", "eps", "timesteps"}
+            "metric_params", "metric_class", "method", "depth", "eps", "timesteps"}
     out = {}
     for k, v in cfg.to_dict().items():
         if k not in skip and ref[k] != v:
@@ -307,10 +507,9 @@ def package_versions() -> dict[str, str]:
 def config_json(cfg: TrainConfig) -> str:
     """The ``config.json`` text of a run: the config, metric, task, versions and the list of
     choices beyond the paper."""
-    m = cfg.metric
     doc = {
         "config": cfg.to_dict(),
-        "metric": m.info(),
+        "metric": metric_info(cfg),
         "task": {"depth": cfg.max_depth, "eps": cfg.eval_eps, "segments": 2**cfg.max_depth},
         **describe(cfg),
         "counts": "timesteps = every evaluation of C made in training (all-inclusive); "

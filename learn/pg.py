@@ -59,8 +59,14 @@ from torch import nn
 
 import finsler
 from finsler.errors import InputError
-from learn.base import RunConfig, StopOnSignal, TrainResult, check_choice, finish_run
-from learn.config import package_versions
+from learn.base import StopOnSignal, TrainResult, check_choice, finish_run
+from learn.config import (
+    MetricConfig,
+    check_run_metric,
+    ensure_registered,
+    metric_info,
+    package_versions,
+)
 from learn.networks import mlp, resolve_device
 from learn.policy import EvalResult, check_pairs, evaluate_paths
 from learn.storage import (
@@ -114,11 +120,17 @@ _WALL_COLUMNS = ("wall_seconds", "evaluations_per_second", "cycles_per_second")
 # Configuration
 # ----------------------------------------------------------------------------------------
 @dataclass
-class PGConfig(RunConfig):
+class PGConfig(MetricConfig):
     """Every setting of one PG training run (saved as ``config.json``)."""
 
     env: str = "matsumoto"
     """Registered metric name (``finsler.list_metrics()``)."""
+    metric_params: dict[str, Any] | None = None
+    """Parameters of the metric (``finsler.get_metric(env, **metric_params)``); None or {}
+    = its defaults. Completed to the full parameter set when the config is built."""
+    metric_class: str | None = None
+    """``module:qualname`` of a metric class registered outside the toolkit (filled in
+    automatically; re-imported when the run is loaded in another process)."""
     method: str = "pg"
     """Always ``pg``."""
     seed: int = 0
@@ -248,7 +260,7 @@ def _real(name: str, value: float, lo: float, hi: float) -> None:
 
 def default_pg_config(env: str, **overrides: Any) -> PGConfig:
     """The paper's PG settings (appendix B.3) for ``env``; ``overrides`` replace fields."""
-    finsler.registry.check_name(env, "environment")
+    ensure_registered(env, overrides.get("metric_class"))
     return PGConfig(env=env, **overrides)
 
 
@@ -448,10 +460,9 @@ def _eval_key(ev: EvalResult) -> tuple[float, float]:
 
 
 def _config_json(cfg: PGConfig) -> str:
-    m = cfg.metric
     doc = {
         "config": cfg.to_dict(),
-        "metric": m.info(),
+        "metric": metric_info(cfg),
         "task": {"depth": cfg.max_depth, "eps": cfg.eval_eps, "segments": 2**cfg.max_depth},
         "objective": "c_tau of eq. (15)" if cfg.objective == "halves-squared"
         else "path length (sum of C)",
@@ -808,9 +819,12 @@ class PGPolicy:
 
 
 def load_pg_policy(run_dir: str | Path, checkpoint: str = "best",
-                   device: str = "cpu") -> PGPolicy:
+                   device: str = "cpu", env: str | None = None,
+                   metric_params: dict[str, Any] | None = None) -> PGPolicy:
     """Load the PG policies of a run directory. ``checkpoint``: ``best`` (best success at
-    the task's depth on the validation set; falls back to the latest) or ``latest``."""
+    the task's depth on the validation set; falls back to the latest) or ``latest``;
+    ``env`` / ``metric_params``, if given, must be the run's
+    (:func:`learn.config.check_run_metric`)."""
     path = Path(run_dir)
     if not path.is_dir():
         raise InputError(f"run directory {str(run_dir)!r} does not exist")
@@ -822,6 +836,7 @@ def load_pg_policy(run_dir: str | Path, checkpoint: str = "best",
     if doc["config"].get("method") != "pg":
         raise InputError(f"{path} is not a PG run (method {doc['config'].get('method')!r})")
     cfg = PGConfig.from_dict(doc["config"])
+    check_run_metric(cfg, f"policy {path}", env, metric_params)
     order = (BEST_FILE, LATEST_FILE) if checkpoint == "best" else (LATEST_FILE,)
     for name in order:
         if (path / name).is_file():

@@ -17,7 +17,7 @@ import torch
 
 import finsler
 from finsler.errors import InputError
-from learn.config import TrainConfig
+from learn.config import TrainConfig, check_run_metric
 from learn.networks import Actor, resolve_device
 from learn.storage import (
     BEST_FILE,
@@ -221,15 +221,19 @@ def _shipped_dir(name: str) -> Path:
 
 
 def load_policy(run: str | Path, device: str = "cpu", checkpoint: str = "best",
-                env: str | None = None) -> Policy:
+                env: str | None = None,
+                metric_params: dict[str, Any] | None = None) -> Policy:
     """Load a policy from a run directory or, given an environment name, the policy
     shipped with the package. ``checkpoint``: ``best`` (best success on the validation
     set during training; falls back to the latest) or ``latest``; the policy's
     ``checkpoint`` attribute names the file actually loaded. With
-    ``env``, the policy must belong to that environment.
+    ``env``, the policy must belong to that environment; with ``metric_params``, to the
+    metric with those parameters (the run's config records them; runs written before the
+    field existed are on the defaults). A user metric's class is re-imported from the
+    config's ``metric_class`` if it is not registered.
 
-    Raises :class:`InputError` for a missing directory, an unknown name or an ``env``
-    mismatch, and :class:`CorruptFileError` for unreadable files.
+    Raises :class:`InputError` for a missing directory, an unknown name, an ``env`` or
+    parameter mismatch, and :class:`CorruptFileError` for unreadable files.
     """
     path = Path(run)
     if not path.is_dir():
@@ -246,8 +250,7 @@ def load_policy(run: str | Path, device: str = "cpu", checkpoint: str = "best",
         cfg = TrainConfig.from_dict(doc["config"])
     except KeyError as err:
         raise CorruptFileError(f"{path / CONFIG_FILE} has no 'config' section") from err
-    if env is not None and env != cfg.env:
-        raise InputError(f"--env {env} does not match the run's environment {cfg.env}")
+    check_run_metric(cfg, f"policy {path}", env, metric_params)
     if checkpoint not in ("best", "latest"):
         raise InputError(f"checkpoint must be 'best' or 'latest', got {checkpoint!r}")
     order = (BEST_FILE, POLICY_FILE, LATEST_FILE) if checkpoint == "best" else (

@@ -131,20 +131,20 @@ def train_run(cfg: Any, out: str | Path, resume: bool = False, progress: bool = 
 
 
 def load_any_policy(run: str | Path, checkpoint: str = "best", device: str = "cpu",
-                    env: str | None = None) -> Any:
-    """Load the policy of any method from a run directory (or a shipped policy's name)."""
+                    env: str | None = None,
+                    metric_params: dict[str, Any] | None = None) -> Any:
+    """Load the policy of any method from a run directory (or a shipped policy's name).
+    ``env`` and ``metric_params``, if given, must be the run's metric and parameters (the
+    run's own parameters are always used: a policy is loaded for the metric it learned)."""
     path = Path(run)
     method = "midpoint"
     if path.is_dir() and (path / CONFIG_FILE).is_file():
-        method = str(read_json(path / CONFIG_FILE).get("config", {}).get("method", "midpoint"))
+        section = read_json(path / CONFIG_FILE).get("config", {})
+        method = str(section.get("method", "midpoint") if isinstance(section, dict)
+                     else "midpoint")
     _, _, loader = _backend(method)
-    if method in _BASELINES:
-        pol = loader(path, checkpoint=checkpoint, device=device)
-        if env is not None and env != pol.metric.name:
-            raise InputError(f"--env {env} does not match the run's environment "
-                             f"{pol.metric.name}")
-        return pol
-    return loader(run, device=device, checkpoint=checkpoint, env=env)
+    return loader(run, device=device, checkpoint=checkpoint, env=env,
+                  metric_params=metric_params)
 
 
 def run_status(out: str | Path) -> str:

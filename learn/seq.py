@@ -58,8 +58,14 @@ from stable_baselines3.common.vec_env.base_vec_env import VecEnv
 
 import finsler
 from finsler.errors import InputError
-from learn.base import RunConfig, StopOnSignal, TrainResult, finish_run
-from learn.config import package_versions
+from learn.base import StopOnSignal, TrainResult, finish_run
+from learn.config import (
+    MetricConfig,
+    check_run_metric,
+    ensure_registered,
+    metric_info,
+    package_versions,
+)
 from learn.networks import resolve_device
 from learn.policy import EvalResult, check_pairs
 from learn.storage import (
@@ -450,13 +456,19 @@ _PAPER_ROLLOUT = 2048
 
 
 @dataclass
-class SeqConfig(RunConfig):
+class SeqConfig(MetricConfig):
     """Every setting of one Seq run (saved as ``config.json``). PPO settings not listed are
     stable-baselines3's defaults (normalised advantages, orthogonal initialisation, log-std
     initialised at 0, no target KL, no value clipping)."""
 
     env: str = "matsumoto"
     """Registered metric name (``finsler.list_metrics()``)."""
+    metric_params: dict[str, Any] | None = None
+    """Parameters of the metric (``finsler.get_metric(env, **metric_params)``); None or {}
+    = its defaults. Completed to the full parameter set when the config is built."""
+    metric_class: str | None = None
+    """``module:qualname`` of a metric class registered outside the toolkit (filled in
+    automatically; re-imported when the run is loaded in another process)."""
     method: str = "seq"
     """Always ``seq``."""
     seed: int = 0
@@ -568,7 +580,7 @@ def default_seq_config(env: str, **overrides: Any) -> SeqConfig:
     """The paper's Seq settings for ``env`` (appendix B.2; budget 2e7, car-like 8e7) with
     this toolkit's batched environments (``n_envs`` x ``n_steps`` = SB3's 2048-step
     rollout); ``overrides`` replace fields (unknown ones raise :class:`InputError`)."""
-    finsler.registry.check_name(env, "environment")
+    ensure_registered(env, overrides.get("metric_class"))
     settings: dict[str, Any] = {"env": env, "timesteps": _PAPER_T.get(env, 20_000_000)}
     if "n_envs" in overrides and "n_steps" not in overrides:
         n = overrides["n_envs"]
@@ -596,7 +608,7 @@ def _config_json(cfg: SeqConfig) -> str:
 
     doc = {
         "config": cfg.to_dict(),
-        "metric": cfg.metric.info(),
+        "metric": metric_info(cfg),
         "task": {"depth": cfg.max_depth, "eps": cfg.eval_eps, "segments": 2**cfg.max_depth},
         "model_free": True,
         "uses_derivative_of_C": [],
@@ -824,9 +836,11 @@ class SeqPolicy:
 
 
 def load_seq_policy(run_dir: str | Path, checkpoint: str = "best",
-                    device: str = "cpu") -> SeqPolicy:
+                    device: str = "cpu", env: str | None = None,
+                    metric_params: dict[str, Any] | None = None) -> SeqPolicy:
     """Load the Seq policy of a run directory: ``checkpoint`` ``best`` (best validation
-    success; falls back to the latest) or ``latest``."""
+    success; falls back to the latest) or ``latest``; ``env`` / ``metric_params``, if
+    given, must be the run's (:func:`learn.config.check_run_metric`)."""
     path = Path(run_dir)
     if not path.is_dir():
         raise InputError(f"run directory {str(run_dir)!r} does not exist")
@@ -838,6 +852,7 @@ def load_seq_policy(run_dir: str | Path, checkpoint: str = "best",
     if doc["config"].get("method") != "seq":
         raise InputError(f"{path} is not a Seq run (method {doc['config'].get('method')!r})")
     cfg = SeqConfig.from_dict(doc["config"])
+    check_run_metric(cfg, f"policy {path}", env, metric_params)
     order = (BEST_FILE, LATEST_FILE) if checkpoint == "best" else (LATEST_FILE,)
     for name in order:
         if (path / name).is_file():

@@ -3,7 +3,10 @@ point parsing and metric look-up. The command modules import this, never ``cli``
 
 from __future__ import annotations
 
+import importlib
 import json
+import sys
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -12,7 +15,24 @@ import typer
 import finsler
 from finsler.errors import InputError
 
-__all__ = ["fail", "metric_or_fail", "parse_overrides", "parse_point"]
+__all__ = [
+    "METRIC_MODULE_HELP",
+    "METRIC_PARAM_HELP",
+    "fail",
+    "import_metric_modules",
+    "metric_or_fail",
+    "parse_metric_params",
+    "parse_overrides",
+    "parse_point",
+]
+
+#: Help of the ``--metric-param`` option shared by the commands.
+METRIC_PARAM_HELP = ("Metric parameter NAME=VALUE (repeatable; numbers parsed), e.g. "
+                     "--metric-param a=0.2 for finsler.get_metric(env, a=0.2).")
+#: Help of the ``--metric-module`` option shared by the commands.
+METRIC_MODULE_HELP = ("Module (dotted name) or FILE.py to import first, so that the "
+                      "metrics it registers (@finsler.register_metric) can be used "
+                      "(repeatable; a file's folder is put on sys.path).")
 
 
 def fail(message: str) -> None:
@@ -35,12 +55,69 @@ def parse_point(text: str, dim: int, what: str) -> np.ndarray:
     return arr
 
 
-def metric_or_fail(name: str) -> finsler.Metric:
+def metric_or_fail(name: str, params: dict[str, Any] | None = None) -> finsler.Metric:
+    """The metric ``name`` with ``params`` (checked: unknown or ill-typed parameters name
+    the allowed ones), or a clear error and exit status 2."""
     try:
-        return finsler.get_metric(name)
+        if params is None:
+            return finsler.get_metric(name)
+        from learn.config import build_metric, resolve_metric  # torch: only when needed
+
+        full, _ = resolve_metric(name, params)
+        return build_metric(name, full)
     except InputError as err:
         fail(str(err))
         raise  # unreachable
+
+
+def parse_metric_params(items: list[str] | None) -> dict[str, Any] | None:
+    """``["name=value", ...]`` (``--metric-param``) -> ``{name: value}``; values are
+    parsed as JSON (numbers, true/false, lists), else kept as strings. None if no item.
+    Which names exist is checked against the metric (``learn.config.resolve_metric``)."""
+    if not items:
+        return None
+    out: dict[str, Any] = {}
+    for item in items:
+        key, sep, raw = item.partition("=")
+        key = key.strip()
+        if not sep or not key or not raw.strip():
+            raise InputError(f"--metric-param expects NAME=VALUE, got {item!r}")
+        if key in out:
+            raise InputError(f"--metric-param {key} is given twice")
+        try:
+            value = json.loads(raw)
+        except json.JSONDecodeError:
+            value = raw.strip()
+        out[key] = value
+    return out
+
+
+def import_metric_modules(items: list[str] | None) -> None:
+    """Import every ``--metric-module``: a dotted module name, or a ``.py`` file (its
+    folder is put first on ``sys.path`` and it is imported by its stem, so that the
+    recorded ``module:qualname`` of its metrics imports again, also in worker processes)."""
+    for item in items or []:
+        name = item
+        if item.endswith(".py") or "/" in item:
+            path = Path(item).expanduser().resolve()
+            if not path.is_file():
+                raise InputError(f"--metric-module: file {item} does not exist")
+            if not path.stem.isidentifier():
+                raise InputError(f"--metric-module: {path.name} is not a valid module name")
+            folder = str(path.parent)
+            if folder not in sys.path:
+                sys.path.insert(0, folder)
+            name = path.stem
+            loaded = sys.modules.get(name)
+            if loaded is not None and Path(getattr(loaded, "__file__", "") or "").resolve() \
+                    != path:
+                raise InputError(f"--metric-module: a different module {name!r} is already "
+                                 f"imported ({getattr(loaded, '__file__', None)}); rename "
+                                 f"{path.name}")
+        try:
+            importlib.import_module(name)
+        except ImportError as err:
+            raise InputError(f"--metric-module: cannot import {item!r}: {err}") from err
 
 
 def parse_overrides(items: list[str]) -> dict[str, Any]:

@@ -16,7 +16,14 @@ import typer
 
 import finsler
 from finsler.errors import InputError
-from validation.cli_common import fail, parse_overrides
+from validation.cli_common import (
+    METRIC_MODULE_HELP,
+    METRIC_PARAM_HELP,
+    fail,
+    import_metric_modules,
+    parse_metric_params,
+    parse_overrides,
+)
 
 __all__ = ["evaluate_command", "register", "train_command"]
 
@@ -24,6 +31,10 @@ __all__ = ["evaluate_command", "register", "train_command"]
 def train_command(
     env: Annotated[str, typer.Option(help="Environment (metric) name, e.g. matsumoto.")],
     out: Annotated[Path, typer.Option(help="Run directory to create (or resume).")],
+    metric_param: Annotated[list[str] | None, typer.Option(
+        "--metric-param", metavar="NAME=VALUE", help=METRIC_PARAM_HELP)] = None,
+    metric_module: Annotated[list[str] | None, typer.Option(
+        "--metric-module", metavar="MODULE", help=METRIC_MODULE_HELP)] = None,
     method: Annotated[str | None, typer.Option(
         help="midpoint (eq. 6, default), inter (eq. 17), two-to-one (eq. 18), or the "
              "paper's baselines seq (PPO, eqs. 14/57) and pg (policy gradient, eqs. 15/16).")
@@ -70,13 +81,20 @@ def train_command(
     collection, fused Adam, path energy (weight 1, 16 pairs per actor step; 4.2x the
     trees' evaluations); carlike: the same with MLPs 128-128 and 4e8 (13.4x); panda-pole:
     1e7, MLPs 128-128, symmetric critic, 3 epochs, model-free.
+
+    ANY METRIC: --metric-param NAME=VALUE sets the metric's parameters (recorded in
+    config.json, used to evaluate, report and resume); --metric-module imports a user's
+    module (or FILE.py) whose @finsler.register_metric classes are then trainable.
     """
     import learn
     from learn import runs
     from learn.base import TrainingInterrupted
 
     try:
-        finsler.registry.check_name(env, "environment")
+        import_metric_modules(metric_module)
+        params = parse_metric_params(metric_param)
+        if not resume:  # a resumed run's config names (and re-imports) its metric
+            finsler.registry.check_name(env, "environment")
         if timesteps is not None and timesteps < 1:
             raise InputError(f"--timesteps must be a positive integer, got {timesteps}")
         if minutes is not None and not minutes > 0:
@@ -90,10 +108,12 @@ def train_command(
             given = {"method": method, "seed": seed, "timesteps": timesteps}
             over = {k: v for k, v in given.items() if v is not None}
             over.update(parse_settings(settings or [], type(cfg)))
+            if params is not None:  # checked against the run's on resume
+                over["metric_params"] = params
             cfg = cfg.replace(minutes=minutes, device=device, **over)
         else:
             cfg = _new_config(env, method, paper, model_free, seed, timesteps, minutes,
-                              device, settings or [])
+                              device, settings or [], params)
         result = runs.train_run(cfg, out, resume=resume, progress=not quiet)
     except InputError as err:
         fail(str(err))
@@ -114,7 +134,8 @@ def train_command(
 
 def _new_config(env: str, method: str | None, paper: bool, model_free: bool,
                 seed: int | None, timesteps: int | None, minutes: float | None,
-                device: str, settings: list[str]) -> object:
+                device: str, settings: list[str],
+                metric_params: dict[str, object] | None = None) -> object:
     """The config of a new run from the command-line options."""
     from learn import runs
 
@@ -134,6 +155,8 @@ def _new_config(env: str, method: str | None, paper: bool, model_free: bool,
     over = parse_settings(settings, cls)
     if variant in ("paper", "midpoint", "midpoint-free"):
         over.setdefault("method", method)
+    if metric_params is not None:
+        over["metric_params"] = metric_params
     return runs.make_config(env, variant, seed=0 if seed is None else seed,
                             timesteps=timesteps, minutes=minutes, device=device, **over)
 
@@ -148,7 +171,9 @@ def parse_settings(items: list[str], cls: type | None = None) -> dict[str, objec
     import learn
 
     names = [f.name for f in dataclasses.fields(cls or learn.TrainConfig)]
-    reserved = {"env": "--env", "device": "--device", "minutes": "--minutes"}
+    reserved = {"env": "--env", "device": "--device", "minutes": "--minutes",
+                "metric_params": "--metric-param NAME=VALUE",
+                "metric_class": "--metric-module MODULE"}
     for item in items:  # the run-control fields have options of their own
         key = item.partition("=")[0].strip()
         if key in reserved:
@@ -176,6 +201,12 @@ def evaluate_command(
         help="best (selected on the validation set during training) or latest (the last "
              "one, no selection).")] = "best",
     as_json: Annotated[bool, typer.Option("--json", help="Print JSON.")] = False,
+    metric_param: Annotated[list[str] | None, typer.Option(
+        "--metric-param", metavar="NAME=VALUE",
+        help="Metric parameter the policy must have been trained with (repeatable; the "
+             "run's own parameters are always used).")] = None,
+    metric_module: Annotated[list[str] | None, typer.Option(
+        "--metric-module", metavar="MODULE", help=METRIC_MODULE_HELP)] = None,
 ) -> None:
     """Evaluate a trained policy (section 5.1): success rate, mean length, max segment cost.
 
@@ -186,6 +217,8 @@ def evaluate_command(
     from learn.runs import load_any_policy
 
     try:
+        import_metric_modules(metric_module)
+        params = parse_metric_params(metric_param)
         if run is None and env is None:
             raise InputError("give --run DIR or --env NAME")
         if checkpoint not in ("best", "latest"):
@@ -193,14 +226,15 @@ def evaluate_command(
         if run is not None:
             if not run.is_dir():
                 raise InputError(f"run directory {run} does not exist")
-            policy = load_any_policy(run, checkpoint=checkpoint, env=env)
+            policy = load_any_policy(run, checkpoint=checkpoint, env=env,
+                                     metric_params=params)
         else:
             finsler.registry.check_name(env, "environment")
             if env not in learn.shipped_policies():
                 raise InputError(f"no shipped policy for {env!r}; shipped: "
                                  f"{', '.join(learn.shipped_policies())}; train one with "
                                  "`geodesics train` and pass --run")
-            policy = learn.load_policy(env, checkpoint=checkpoint)
+            policy = learn.load_policy(env, checkpoint=checkpoint, metric_params=params)
         if eps is not None and not (np.isfinite(eps) and eps > 0):
             raise InputError(f"--eps must be positive and finite, got {eps}")
         if depth is not None and depth < 0:
@@ -210,7 +244,8 @@ def evaluate_command(
     except InputError as err:
         fail(str(err))
         return
-    out = {"env": policy.metric.name, "source": policy.source,
+    mp = getattr(policy.config, "metric_params", None) or {}
+    out = {"env": policy.metric.name, "metric_params": mp, "source": policy.source,
            "checkpoint": policy.checkpoint, **res.to_dict()}
     if as_json:
         typer.echo(json.dumps(out, indent=2))
@@ -218,6 +253,8 @@ def evaluate_command(
     typer.echo(f"policy      {policy.source} ({policy.checkpoint})")
     typer.echo(f"environment {policy.metric.name}  depth {res.depth}  eps {res.eps:g}  "
                f"pairs {len(res.success)}")
+    if mp:
+        typer.echo("parameters  " + ", ".join(f"{k}={v}" for k, v in mp.items()))
     typer.echo(f"success     {res.success_rate:.2%}")
     typer.echo(f"mean length {res.mean_length:.6g}")
     typer.echo(f"mean max segment cost {res.mean_max_segment_cost:.6g}")

@@ -9,7 +9,12 @@ from typing import Annotated
 import typer
 
 from finsler.errors import InputError
-from validation.cli_common import fail
+from validation.cli_common import (
+    METRIC_MODULE_HELP,
+    fail,
+    import_metric_modules,
+    parse_metric_params,
+)
 
 __all__ = ["register", "report_command"]
 
@@ -38,6 +43,12 @@ def report_command(
         help="Processes for the exact solves (default: CPU count).")] = None,
     progress: Annotated[bool, typer.Option("--progress/--no-progress",
                                            help="Show progress bars.")] = True,
+    metric_param: Annotated[list[str] | None, typer.Option(
+        "--metric-param", metavar="NAME=VALUE",
+        help="Metric parameter the policy must have been trained with (repeatable; the "
+             "run's own parameters are always used).")] = None,
+    metric_module: Annotated[list[str] | None, typer.Option(
+        "--metric-module", metavar="MODULE", help=METRIC_MODULE_HELP)] = None,
 ) -> None:
     """Benchmark a learned policy against exact geodesics and the straight-line baseline:
     success rates, length ratios, midpoint errors, timing, figures."""
@@ -48,14 +59,19 @@ def report_command(
             raise InputError(f"--workers must be >= 1, got {workers}")
         if out.exists() and not out.is_dir():
             raise InputError(f"--out {out} exists and is not a directory")
+        import_metric_modules(metric_module)
+        params = parse_metric_params(metric_param)
         doc = build_report(env, out, run=run, pairs=pairs, quick=quick, continuum=continuum,
-                           workers=workers, progress=progress, checkpoint=checkpoint)
+                           workers=workers, progress=progress, checkpoint=checkpoint,
+                           metric_params=params)
     except InputError as err:
         fail(str(err))
         return
     sr = doc["success_rate"]
     lr = doc["length_ratio"]["learned"]["length"]
-    typer.echo(f"report for {doc['metric']} ({doc['pairs']} pairs) written to {out}/report.md")
+    mp = ", ".join(f"{k}={v}" for k, v in (doc.get("metric_params") or {}).items())
+    typer.echo(f"report for {doc['metric']}{f' ({mp})' if mp else ''} ({doc['pairs']} pairs) "
+               f"written to {out}/report.md")
     typer.echo(f"policy: {doc['policy_note']}")
     typer.echo(f"success: learned {sr['learned']:.0%}, exact ceiling {sr['exact_ceiling']:.0%}, "
                f"straight line {sr['straight']:.0%}")

@@ -11,7 +11,14 @@ import typer
 
 from finsler.errors import InputError
 from finsler.pool import PoolInterrupted
-from validation.cli_common import fail, parse_overrides
+from validation.cli_common import (
+    METRIC_MODULE_HELP,
+    METRIC_PARAM_HELP,
+    fail,
+    import_metric_modules,
+    parse_metric_params,
+    parse_overrides,
+)
 
 __all__ = ["format_table", "register", "sweep_command"]
 
@@ -47,6 +54,30 @@ def format_table(rows: list[dict[str, Any]]) -> str:
     return "\n".join(lines)
 
 
+def metric_overrides(envs: list[str], params: dict[str, Any] | None) -> dict[str, Any]:
+    """Config overrides for the sweep's metric: ``metric_params`` (the same for every
+    environment), and ``metric_class`` for a metric registered outside the toolkit, so
+    that worker processes (spawned, or on Ray) import it. A user metric is swept alone."""
+    import finsler
+    from learn.config import metric_class_path
+
+    out: dict[str, Any] = {}
+    if params is not None:
+        out["metric_params"] = params
+    user = {}
+    for e in envs:
+        if e in finsler.list_metrics():
+            path = metric_class_path(finsler.registry._REGISTRY[e])
+            if path is not None:
+                user[e] = path
+    if user:
+        if len(envs) > 1:
+            raise InputError(f"sweep the user metric(s) {', '.join(user)} alone (one --envs "
+                             "entry): the workers import its class from the run's config")
+        out["metric_class"] = next(iter(user.values()))
+    return out
+
+
 def sweep_command(
     envs: Annotated[str, typer.Option(help="Comma-separated environments, e.g. "
                                            "matsumoto,carlike.")],
@@ -76,6 +107,11 @@ def sweep_command(
              "VALUE is JSON or a bare string), e.g. --set eval_every=10.")] = None,
     quiet: Annotated[bool, typer.Option("--quiet", help="No progress bar.")] = False,
     as_json: Annotated[bool, typer.Option("--json", help="Print the rows as JSON.")] = False,
+    metric_param: Annotated[list[str] | None, typer.Option(
+        "--metric-param", metavar="NAME=VALUE",
+        help=METRIC_PARAM_HELP + " Applies to every environment of the sweep.")] = None,
+    metric_module: Annotated[list[str] | None, typer.Option(
+        "--metric-module", metavar="MODULE", help=METRIC_MODULE_HELP)] = None,
 ) -> None:
     """Train every (environment, variant, seed) into its own run directory: finished runs
     are skipped, unfinished ones resumed, absent ones started, so an interrupted sweep is
@@ -90,8 +126,15 @@ def sweep_command(
     try:
         if workers is not None and workers < 1:
             raise InputError(f"--workers must be a positive integer, got {workers}")
+        import_metric_modules(metric_module)
+        overrides = parse_overrides(settings or [])
+        for key, option in (("metric_params", "--metric-param"),
+                            ("metric_class", "--metric-module")):
+            if key in overrides:
+                raise InputError(f"--set {key}=... is not allowed; use {option}")
+        overrides.update(metric_overrides(_split(envs), parse_metric_params(metric_param)))
         plan = sw.plan_sweep(_split(envs), _split(methods), seeds, timesteps=timesteps,
-                             minutes=minutes, overrides=parse_overrides(settings or []))
+                             minutes=minutes, overrides=overrides)
         result = sw.run_sweep(plan, out, workers=workers, ray_address=ray,
                               progress=not quiet)
     except InputError as err:

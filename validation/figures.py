@@ -41,7 +41,11 @@ __all__ = [
     "STRAIGHT_COLOR",
     "X_LABELS",
     "carlike_headings",
+    "coordinates_along_path",
     "figure_bytes",
+    "has_kinematics",
+    "height_map",
+    "is_planar_pose",
     "learning_curve",
     "length_ratios",
     "midpoint_errors",
@@ -156,26 +160,57 @@ def _finsler_background(ax: Any, metric: Metric, res: int = 160) -> None:
     ys = np.linspace(lo[1], hi[1], res)
     gx, gy = np.meshgrid(xs, ys)
     pts = np.stack([gx.ravel(), gy.ravel()], 1)
-    if metric.dim == 2:
-        inside = metric.domain.contains(pts)
-        lam = np.full(len(pts), np.nan)
-        if metric.convex_everywhere:
-            lam[inside] = 1.0
-        else:
-            lam[inside] = metric.convexity(pts[inside], n_directions=32)
-        z = np.where(np.isnan(lam), np.nan, (lam > 0).astype(float)).reshape(gx.shape)
-    else:  # car-like: (x, y) slice; convex everywhere (C^0-Finsler)
-        inside = np.linalg.norm(pts, axis=1) <= float(hi[0])
-        z = np.where(inside, 1.0, np.nan).reshape(gx.shape)
+    if metric.dim > 2:  # the (x0, x1) slice through the centre of the other coordinates
+        lo_all, hi_all = metric.domain.bounds()
+        rest = np.broadcast_to(0.5 * (lo_all[2:] + hi_all[2:]), (len(pts), metric.dim - 2))
+        full = np.concatenate([pts, rest], axis=1)
+    else:
+        full = pts
+    inside = metric.domain.contains(full)
+    lam = np.full(len(pts), np.nan)
+    if metric.convex_everywhere:
+        lam[inside] = 1.0
+    else:
+        lam[inside] = metric.convexity(full[inside], n_directions=32)
+    z = np.where(np.isnan(lam), np.nan, (lam > 0).astype(float)).reshape(gx.shape)
     ax.pcolormesh(gx, gy, z, cmap=ListedColormap(["#f4c7c3", "#e8f1e4"]), vmin=0, vmax=1,
                   shading="auto", rasterized=True)
-    if metric.name == "matsumoto":
-        h = -float(getattr(metric, "height", 1.0)) * (gx**2 + gy**2)
-        h = np.where(np.isnan(z), np.nan, h)
+    height = height_map(metric)
+    if height is not None and metric.dim == 2:
+        h = np.where(np.isnan(z.ravel()), np.nan, height(pts)).reshape(gx.shape)
         cs = ax.contour(gx, gy, h, levels=8, colors="grey", linewidths=0.6)
         ax.clabel(cs, fontsize=6, fmt="%.2f")
-        ax.add_patch(Circle((0, 0), metric.convex_radius, fill=False, ls="-.",
-                            color="darkgreen", lw=0.8))
+    radius = getattr(metric, "convex_radius", None)
+    if isinstance(radius, (int, float)) and metric.dim == 2:
+        ax.add_patch(Circle((0, 0), radius, fill=False, ls="-.", color="darkgreen", lw=0.8))
+
+
+def height_map(metric: Metric) -> Any:
+    """The height function ``(N, 2) -> (N,)`` drawn as contours under 2-D paths: the
+    metric's own ``height_map`` method if it has one (a plotting hook for user metrics),
+    ``h(p) = -height |p|^2`` for a Matsumoto metric (eq. 21), else None."""
+    hook = getattr(metric, "height_map", None)
+    if callable(hook):
+        return hook
+    from finsler.metrics import Matsumoto
+
+    if isinstance(metric, Matsumoto):
+        k = float(metric.height)
+        return lambda p: -k * np.sum(np.asarray(p) ** 2, axis=1)
+    return None
+
+
+def is_planar_pose(metric: Metric) -> bool:
+    """True for a 3-D metric whose coordinates are a planar position and a heading angle
+    (third coordinate named theta, heading or yaw), like the car-like metric."""
+    names = tuple(getattr(metric.domain, "names", ()) or ())
+    return metric.dim == 3 and len(names) == 3 and names[2] in ("theta", "heading", "yaw")
+
+
+def has_kinematics(metric: Metric) -> bool:
+    """True for a metric with the ``frame_positions(q) -> (N, frames, 3)`` hook (a robot
+    arm's forward kinematics, like the Panda metric)."""
+    return callable(getattr(metric, "frame_positions", None))
 
 
 def _legend_handles() -> list[Any]:
@@ -221,10 +256,12 @@ def paths_2d(cmp: Comparison, metric: Metric) -> Figure:
     handles = [*_legend_handles(),
                Line2D([], [], ls="", marker="o", color="green", label="start"),
                Line2D([], [], ls="", marker="*", color="red", label="goal")]
-    if metric.name == "matsumoto":
+    if height_map(metric) is not None:
         handles.append(Line2D([], [], color="grey", lw=0.6, label="height h(p) contours"))
+    radius = getattr(metric, "convex_radius", None)
+    if isinstance(radius, (int, float)):
         handles.append(Line2D([], [], color="darkgreen", ls="-.", lw=0.8,
-                              label=f"convex radius {metric.convex_radius:.4f}"))
+                              label=f"convex radius {radius:.4f}"))
     fig.legend(handles=handles, loc="lower center", ncol=min(len(handles), 5), fontsize=8)
     fig.suptitle(f"{metric.name}: learned vs exact paths ({2**cmp.depth} segments), "
                  "pairs spread over the length ratio", fontsize=10)
@@ -233,7 +270,8 @@ def paths_2d(cmp: Comparison, metric: Metric) -> Figure:
 
 
 def carlike_headings(cmp: Comparison, metric: Metric) -> Figure:
-    """Car-like: positions with heading arrows (top row) and theta along the path."""
+    """Planar pose metrics (:func:`is_planar_pose`, e.g. car-like): positions with heading
+    arrows (top row) and the heading along the path."""
     sel = _select_pairs(cmp, 4)
     fig = new_figure((3.6 * len(sel), 7))
     axes = fig.subplots(2, len(sel), squeeze=False)
@@ -272,22 +310,24 @@ def carlike_headings(cmp: Comparison, metric: Metric) -> Figure:
         ax2.grid(alpha=0.3)
         if k == 0:
             ax2.legend(fontsize=7)
-    fig.suptitle("car-like: positions in the unit disk (shaded) with headings (arrows point "
-                 "along theta), and theta along the path", fontsize=10)
+    fig.suptitle(f"{metric.name}: positions in the domain (shaded) with headings (arrows "
+                 "point along theta), and theta along the path", fontsize=10)
     fig.tight_layout()
     return fig
 
 
 def panda_motion(cmp: Comparison, metric: Metric) -> Figure:
-    """Panda: joint angles along one path, and link positions seen from above."""
+    """Arms (:func:`has_kinematics`, e.g. Panda): joint angles along one path, and link
+    positions seen from above (with the pole, if the metric has ``pole_x``, ``pole_y``)."""
     r = cmp.ratios("learned")
     i = int(_select_pairs(cmp, 3)[-1]) if len(cmp.pairs) > 1 else 0
     fig = new_figure((12, 4.8))
     axes = fig.subplots(1, 2)
     ax = axes[0]
-    colors = matplotlib.colormaps["tab10"](np.arange(7))
-    for j in range(7):
-        ax.plot(cmp.learned.paths[i][:, j], color=colors[j], lw=1.5, label=f"q{j + 1}")
+    colors = matplotlib.colormaps["tab10"](np.arange(metric.dim) % 10)
+    names = _coordinate_names(metric)
+    for j in range(metric.dim):
+        ax.plot(cmp.learned.paths[i][:, j], color=colors[j], lw=1.5, label=names[j])
         ax.plot(cmp.exact.paths[i][:, j], color=colors[j], lw=1.0, ls="--")
     ax.set_xlabel("path point index")
     ax.set_ylabel("joint angle (rad)")
@@ -306,8 +346,9 @@ def panda_motion(cmp: Comparison, metric: Metric) -> Figure:
                     label=lab if a == len(idx) - 1 else None)
         ax.plot(fp[:, -1, 0], fp[:, -1, 1], color=col, lw=1.8,
                 ls="-" if lab == "learned" else "--", label=f"hand trajectory ({lab})")
-    px, py = float(metric.pole_x), float(metric.pole_y)
-    ax.add_patch(Circle((px, py), 0.03, color="tab:red", label="pole"))
+    if hasattr(metric, "pole_x") and hasattr(metric, "pole_y"):
+        px, py = float(metric.pole_x), float(metric.pole_y)
+        ax.add_patch(Circle((px, py), 0.03, color="tab:red", label="pole"))
     ax.set_aspect("equal")
     ax.set_xlabel("x (m, world frame)")
     ax.set_ylabel("y (m, world frame)")
@@ -315,6 +356,36 @@ def panda_motion(cmp: Comparison, metric: Metric) -> Figure:
                  fontsize=9)
     ax.legend(fontsize=7, loc="best")
     ax.grid(alpha=0.3)
+    fig.tight_layout()
+    return fig
+
+
+def _coordinate_names(metric: Metric) -> list[str]:
+    names = list(getattr(metric.domain, "names", ()) or ())
+    return names if len(names) == metric.dim else [f"x{j}" for j in range(metric.dim)]
+
+
+def coordinates_along_path(cmp: Comparison, metric: Metric) -> Figure:
+    """Any metric: every coordinate along the path (learned solid, exact dashed, straight
+    dotted) for 4 pairs spread over the length ratio; one panel per pair."""
+    sel = _select_pairs(cmp, 4)
+    r = cmp.ratios("learned")
+    fig = new_figure((4.2 * len(sel), 4.2))
+    axes = fig.subplots(1, len(sel), squeeze=False)[0]
+    colors = matplotlib.colormaps["tab10"](np.arange(metric.dim) % 10)
+    names = _coordinate_names(metric)
+    for ax, i in zip(axes, sel):
+        for j in range(metric.dim):
+            ax.plot(cmp.learned.paths[i][:, j], color=colors[j], lw=1.5, label=names[j])
+            ax.plot(cmp.exact.paths[i][:, j], color=colors[j], lw=1.0, ls="--")
+            ax.plot(cmp.straight.paths[i][:, j], color=colors[j], lw=0.7, ls=":")
+        ax.set_title(f"pair {i}: learned/exact = {r[i]:.3f}", fontsize=8)
+        ax.set_xlabel("path point index")
+        ax.grid(alpha=0.3)
+    axes[0].set_ylabel("coordinate value")
+    axes[0].legend(fontsize=7, ncol=2, title="solid learned, dashed exact, dotted straight",
+                   title_fontsize=6)
+    fig.suptitle(f"{metric.name}: coordinates along the path", fontsize=10)
     fig.tight_layout()
     return fig
 

@@ -9,9 +9,12 @@ shipped), runs :func:`validation.compare` on the evaluation pairs and writes
 * ``report.md``: the same numbers as tables, with the figures;
 * ``learning_curve.png`` (Fig. 2 style, from the run's ``metrics.csv``: success rate
   against all-inclusive evaluations of C and wall time);
-* ``paths.png`` for 2-D metrics: 8 pairs learned vs exact vs straight, over a map of where
-  ``F(x, .)`` is convex (the Finsler region) and the height contours (Matsumoto);
-  ``carlike_headings.png`` for the car-like metric; ``panda_motion.png`` for the arm;
+* one path figure chosen by what the metric is (never by its name): ``paths.png`` for
+  2-D metrics (8 pairs learned vs exact vs straight, over a map of where ``F(x, .)`` is
+  convex, with height contours where the metric has a height map, e.g. Matsumoto);
+  ``carlike_headings.png`` for planar poses (x, y, heading: car-like);
+  ``panda_motion.png`` for metrics with the ``frame_positions`` kinematics hook (Panda);
+  ``coordinates.png`` (every coordinate along the path) for any other metric;
 * ``length_ratio.png`` (histograms) and ``midpoint_error.png``.
 
 The figures are drawn by :mod:`validation.figures`; files are written atomically.
@@ -38,11 +41,12 @@ __all__ = ["build_report", "load_report_policy", "read_learning_curve", "write_f
 # ----------------------------------------------------------------------------------------
 def load_report_policy(
     env: str | None, run: str | Path | None, quick: bool, out: Path, progress: bool = True,
-    checkpoint: str = "best",
+    checkpoint: str = "best", metric_params: dict[str, Any] | None = None,
 ) -> tuple[Any, Path | None, str]:
     """The policy to report on (``checkpoint``: ``best``, selected on the validation set,
     or ``latest``), its run directory (for the learning curve, may be None) and a sentence
-    saying where it came from and which checkpoint file was used."""
+    saying where it came from and which checkpoint file was used. ``metric_params``, if
+    given, must be the parameters the policy was trained with."""
     import learn
 
     if checkpoint not in ("best", "latest"):
@@ -51,13 +55,14 @@ def load_report_policy(
         run = Path(run)
         if not run.is_dir():
             raise InputError(f"run directory {run} does not exist")
-        pol = learn.load_any_policy(run, checkpoint=checkpoint, env=env)
+        pol = learn.load_any_policy(run, checkpoint=checkpoint, env=env,
+                                    metric_params=metric_params)
         return pol, run, f"run directory {run}, {pol.checkpoint}"
     if env is None:
         raise InputError("give --env NAME or --run DIR")
     finsler.registry.check_name(env, "environment")
     if env in learn.shipped_policies():
-        pol = learn.load_policy(env, checkpoint=checkpoint)
+        pol = learn.load_policy(env, checkpoint=checkpoint, metric_params=metric_params)
         src = Path(pol.source)
         return pol, src if src.is_dir() else None, (
             f"shipped policy for {env} ({src}, {pol.checkpoint}; its checkpoint was selected "
@@ -69,14 +74,15 @@ def load_report_policy(
         run_dir = out / "quick_run"
         if (run_dir / "config.json").is_file():  # a previous --quick run: reuse its policy
             try:
-                pol = learn.load_policy(run_dir, checkpoint=checkpoint)
+                pol = learn.load_policy(run_dir, checkpoint=checkpoint,
+                                        metric_params=metric_params)
                 return pol, run_dir, (
                     f"small policy trained by an earlier --quick run, reused from {run_dir}"
                     f", {pol.checkpoint}")
             except InputError:
                 pass  # incomplete or corrupt: train again below
         cfg = learn.default_config("matsumoto", timesteps=3_000_000, minutes=3.0,
-                                   eval_every=5)
+                                   eval_every=5, metric_params=metric_params)
         learn.train(cfg, run_dir, progress=progress)
         pol = learn.load_policy(run_dir, checkpoint=checkpoint)
         return pol, run_dir, (
@@ -121,12 +127,15 @@ def write_figures(cmp: Comparison, metric: Metric, out: Path, curve: list[dict[s
     from validation import figures as fg
 
     drawn = [("learning_curve.png", fg.learning_curve(curve, cmp))]
+    # by what the metric is, not by its name: its dimension, its coordinates, its hooks
     if metric.dim == 2:
         drawn.append(("paths.png", fg.paths_2d(cmp, metric)))
-    if metric.name == "carlike":
+    elif fg.is_planar_pose(metric):
         drawn.append(("carlike_headings.png", fg.carlike_headings(cmp, metric)))
-    if metric.name == "panda-pole":
+    elif fg.has_kinematics(metric):
         drawn.append(("panda_motion.png", fg.panda_motion(cmp, metric)))
+    else:
+        drawn.append(("coordinates.png", fg.coordinates_along_path(cmp, metric)))
     drawn.append(("length_ratio.png", fg.length_ratios(cmp)))
     if cmp.midpoint is not None:
         drawn.append(("midpoint_error.png", fg.midpoint_errors(cmp, floor)))
@@ -151,6 +160,17 @@ def _pct(x: float) -> str:
     return f"{100 * x:.0f}%"
 
 
+def _params(metric: Metric) -> dict[str, Any]:
+    """The metric's parameters (its dataclass fields)."""
+    import dataclasses
+
+    return {f.name: getattr(metric, f.name) for f in dataclasses.fields(metric) if f.init}
+
+
+def _params_text(metric: Metric) -> str:
+    return ", ".join(f"{k} = {v}" for k, v in _params(metric).items()) or "(none)"
+
+
 def _markdown(doc: dict[str, Any], figures: list[str], metric: Metric) -> str:
     sr = doc["success_rate"]
     lines = [
@@ -161,6 +181,7 @@ def _markdown(doc: dict[str, Any], figures: list[str], metric: Metric) -> str:
         f"- task: D = {doc['depth']} ({doc['segments']} segments), eps = {doc['eps']:g}; "
         "success iff every segment cost C(p_i, p_(i+1)) <= eps (section 5.1)",
         f"- metric: {metric.convexity_note}",
+        f"- metric parameters: {_params_text(metric)}",
         "",
         "## Success rate",
         "",
@@ -271,9 +292,11 @@ def _markdown(doc: dict[str, Any], figures: list[str], metric: Metric) -> str:
         "paths.png": "Learned (blue), exact (black dashed) and straight (orange dotted) paths "
         "for 8 pairs spread over the learned/exact length ratio; background: where F(x, .) "
         "is convex.",
-        "carlike_headings.png": "Car-like paths with headings, and theta along the path.",
-        "panda_motion.png": "Panda: joint angles along the path and link positions from "
-        "above with the pole.",
+        "carlike_headings.png": "Planar positions with headings, and theta along the path.",
+        "panda_motion.png": "Joint angles along the path and link positions from above "
+        "(with the pole, for the Panda metric).",
+        "coordinates.png": "Every coordinate along the path for 4 pairs spread over the "
+        "length ratio (learned solid, exact dashed, straight dotted).",
         "length_ratio.png": "Histograms of the per-pair length ratio to the exact geodesic.",
         "midpoint_error.png": "First-level midpoint error against the pair's distance.",
     }
@@ -311,19 +334,22 @@ def build_report(
     progress: bool = True,
     policy: Any = None,
     checkpoint: str = "best",
+    metric_params: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
     """Write the report for ``env`` (or the run's environment) into ``out``; returns the
     ``report.json`` document. ``policy`` overrides the loaded policy (any object with the
     policy interface, e.g. :class:`validation.StraightLine`). ``continuum`` (default: on
     unless ``quick``) adds continuum distances to the midpoint error, where
     :func:`solvers.distance` converges (the metric is Finsler along the path).
-    ``checkpoint``: ``best`` (selected on the validation set) or ``latest``."""
+    ``checkpoint``: ``best`` (selected on the validation set) or ``latest``.
+    ``metric_params``: the metric's parameters; a loaded policy must have been trained
+    with them (its run's own parameters are always the ones reported)."""
     out = Path(out)
     created = not out.exists()
     try:
         return _build_report(env, out, run=run, pairs=pairs, quick=quick, continuum=continuum,
                              workers=workers, progress=progress, policy=policy,
-                             checkpoint=checkpoint)
+                             checkpoint=checkpoint, metric_params=metric_params)
     except BaseException:
         if created and out.is_dir() and not any(out.iterdir()):
             out.rmdir()  # a failed report leaves nothing behind
@@ -333,15 +359,22 @@ def build_report(
 def _build_report(env: str | None, out: Path, *, run: str | Path | None,
                   pairs: str | Path | np.ndarray | None, quick: bool, continuum: bool | None,
                   workers: int | None, progress: bool, policy: Any,
-                  checkpoint: str) -> dict[str, Any]:
+                  checkpoint: str, metric_params: dict[str, Any] | None) -> dict[str, Any]:
     out.mkdir(parents=True, exist_ok=True)
     if policy is None:
-        pol, run_dir, note = load_report_policy(env, run, quick, out, progress, checkpoint)
+        pol, run_dir, note = load_report_policy(env, run, quick, out, progress, checkpoint,
+                                                metric_params)
     else:
         pol, run_dir, note = policy, (Path(run) if run is not None else None), str(
             getattr(policy, "source", type(policy).__name__))
-    metric = finsler.get_metric(pol.metric.name) if hasattr(pol, "metric") else \
-        finsler.get_metric(env)
+    if hasattr(pol, "metric"):  # the policy's own metric, with its parameters
+        metric = pol.metric
+    else:
+        from learn.config import build_metric, resolve_metric
+
+        if env is None:
+            raise InputError("give env for a policy without a metric attribute")
+        metric = build_metric(env, resolve_metric(env, metric_params)[0])
     if isinstance(pairs, (str, Path)):
         arr = load_pairs(pairs, metric)
         pairs_note = f"from {pairs}"
@@ -363,6 +396,7 @@ def _build_report(env: str | None, out: Path, *, run: str | Path | None,
                            workers=workers, progress=progress)
     doc = cmp.to_dict()
     doc["policy_note"] = note
+    doc["metric_params"] = _params(metric)
     doc["pairs_note"] = pairs_note
     doc["midpoint_error_exact_floor"] = floor.summary()
     doc["learning_curve"] = read_learning_curve(run_dir)
