@@ -1,0 +1,533 @@
+"""Side-by-side benchmark of the exact solvers against geomstats 2.8 and finslerax 1.1
+(issue 14 part 5): the same pairs, one table of time per pair, error and failures.
+
+Metrics and references
+----------------------
+* ``poincare`` (Riemannian, exact distance known) and ``bump``, a conformal metric without a
+  closed form, ``F(x, v) = (1 + A exp(-|x - c|^2 / (2 s^2))) |v|`` on the disk of radius 0.8
+  (defined below as a project metric, one SX expression). geomstats gets each only as its
+  metric matrix ``G(x) = f(x)^2 I`` on ``Euclidean(2)``, with its generic solvers: ``LogODESolver``
+  (defaults: 10 nodes, ``ScipySolveBVP`` tol 1e-3; accurate: 50 nodes, tol 1e-8; both
+  ``use_jac=False``: there is no ``jacobian_christoffels`` for a bare metric matrix),
+  ``LogShootingSolver`` (defaults, with the default ``ExpODESolver``) and
+  ``PathStraightening`` (defaults: 100 nodes; accurate: 257 nodes).
+* ``randers`` (constant wind, exact distance known) and ``matsumoto`` (no closed form, not
+  convex everywhere). finslerax gets each as ``F(x, v)``: its ``Randers`` with
+  ``wind_mode="raw"`` (equal to the project's F; the default "soft" wind differs by ~1e-7)
+  and a ``FinslerMetric`` subclass for Matsumoto, solved with ``GaussNewtonGeodesic`` and
+  ``AVBDSolver`` (defaults, ``train_mode=False`` for early stopping), one pair per call and
+  batched over all pairs with ``jax.vmap``, every call ``equinox.filter_jit``-compiled
+  (compile time reported apart).
+* The project: ``solve_geodesic`` at the task size (energy stage, no min-max) and at 256
+  segments, ``distance`` (default rtol 1e-8), ``solve_geodesic(tol=1e-7)`` when that
+  parameter exists (issue 14 part 3; otherwise the row says it was skipped), and
+  ``log_map`` (Riemannian rows and Randers).
+
+Every peer's own formula of the metric is checked against the project's ``F`` at sample
+points (the largest relative difference is printed) so that all rows solve the same problem.
+
+What the columns mean
+---------------------
+``length`` of a method: for path methods, the length of the returned polyline (each
+segment's eq. 58 quadrature of the project's F, order 8), an upper bound of ``d`` whatever N;
+for log methods (geomstats' ``LogODESolver``/``LogShootingSolver``, the project's
+``log_map``) ``F(x, v)`` of the returned initial velocity, i.e. geomstats' ``dist``; for
+``distance``/``tol`` the length they return. ``err`` is ``(length - d) / d`` where ``d`` is
+exact, else ``(length - best) / best`` with ``best`` the shortest upper bound found on that
+pair (path lengths and converged ``distance`` values): "length vs the shortest found".
+A pair is a failure when the method raised, returned non-finite numbers, a path leaving
+the domain (Matsumoto: the unit disk) or not converged (project status), or, for log
+methods, a velocity whose geodesic (integrated by the project's ``exp_map`` at 1e-13)
+misses the goal by more than 1e-6. Median and max of ``|err|`` are over the non-failed
+pairs. Times are wall seconds per pair on one thread after one warm-up pair (building
+NLPs / JIT compilation excluded, reported as ``setup``); batched rows divide the batch's
+time by the number of pairs.
+
+Peer environments (each peer in its own venv, driven by subprocess with JSON on stdin and
+stdout; no peer is a dependency of the project; geomstats 2.8 imports ``numpy.trapz`` and
+needs ``numpy<2`` and ``autograd``)::
+
+    python3.11 -m venv /work/peers/geomstats
+    /work/peers/geomstats/bin/pip install "numpy<2" autograd geomstats==2.8.0 scipy
+    python3.11 -m venv /work/peers/finslerax
+    /work/peers/finslerax/bin/pip install "jax[cpu]" finslerax==1.1.0
+
+Usage (from the project's venv)::
+
+    python benchmarks/peers.py [--pairs 10] [--seed 0] [--metrics poincare,bump,randers,matsumoto]
+        [--geomstats-python /work/peers/geomstats/bin/python]
+        [--finslerax-python /work/peers/finslerax/bin/python] [--json OUT.json]
+
+A peer whose interpreter is missing or fails to import is skipped with the reason printed.
+The same file is the peers' worker (``--worker geomstats|finslerax``, JSON on stdin): only
+the standard library and numpy are imported at module level.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+DEFAULT_PEERS = {
+    "geomstats": "/work/peers/geomstats/bin/python",
+    "finslerax": "/work/peers/finslerax/bin/python",
+}
+
+#: Parameters of the conformal "bump" metric (shared by the project's and geomstats' side).
+BUMP = {"amplitude": 2.0, "cx": 0.15, "cy": 0.05, "sigma": 0.25, "radius": 0.8}
+#: Randers wind (the registered metric's default) and Matsumoto height.
+WIND = (0.5, 0.2)
+HEIGHT = 1.0
+#: Radius of the disk the pairs of the disk metrics are drawn from.
+PAIR_RADIUS = {"poincare": 0.7, "bump": 0.7, "matsumoto": 0.9}
+MISS_TOL = 1e-6
+ONE_THREAD = {
+    "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1",
+    "XLA_FLAGS": "--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1",
+    "JAX_ENABLE_X64": "1", "JAX_PLATFORMS": "cpu", "GEOMSTATS_BACKEND": "autograd",
+}
+
+
+# ----------------------------------------------------------------------------------------
+# Workers (run by the peers' interpreters)
+# ----------------------------------------------------------------------------------------
+def _timed(fn: Any) -> tuple[Any, float, str | None]:
+    t0 = time.perf_counter()
+    try:
+        out = fn()
+        return out, time.perf_counter() - t0, None
+    except Exception as err:  # a peer's failure is a result of the benchmark
+        return None, time.perf_counter() - t0, f"{type(err).__name__}: {err}"[:300]
+
+
+def _geomstats_worker(job: dict) -> dict:
+    import geomstats
+    import geomstats.backend as gs
+    from geomstats.geometry.euclidean import Euclidean
+    from geomstats.geometry.riemannian_metric import RiemannianMetric
+    from geomstats.numerics.bvp import ScipySolveBVP
+    from geomstats.numerics.geodesic import (
+        ExpODESolver,
+        LogODESolver,
+        LogShootingSolver,
+        PathStraightening,
+    )
+
+    name, p = job["metric"], job["params"]
+
+    def factor(x: Any) -> Any:  # the conformal factor f(x), F = f |v|
+        if name == "poincare":
+            return 2.0 / (1.0 - gs.sum(x * x, axis=-1))
+        c = gs.array([p["cx"], p["cy"]])
+        r2 = gs.sum((x - c) ** 2, axis=-1)
+        return 1.0 + p["amplitude"] * gs.exp(-r2 / (2.0 * p["sigma"] ** 2))
+
+    class MatrixMetric(RiemannianMetric):
+        def metric_matrix(self, base_point: Any = None) -> Any:
+            f = factor(base_point)
+            return gs.einsum("...,ij->...ij", f * f, gs.eye(2))
+
+    space = Euclidean(2, equip=False)
+    space.equip_with_metric(MatrixMetric)
+    space.metric.exp_solver = ExpODESolver(space)
+    check = [float(gs.sqrt(gs.einsum("i,ij,j->", v, space.metric.metric_matrix(x), v)))
+             for x, v in np.asarray(job["check"])]
+    settings = [
+        ("LogODESolver", "defaults (10 nodes, tol 1e-3)", "log",
+         lambda: LogODESolver(space, use_jac=False)),
+        ("LogODESolver", "accurate (50 nodes, tol 1e-8)", "log",
+         lambda: LogODESolver(space, n_nodes=50, integrator=ScipySolveBVP(tol=1e-8),
+                              use_jac=False)),
+        ("LogShootingSolver", "defaults", "log", lambda: LogShootingSolver(space)),
+        ("PathStraightening", "defaults (100 nodes)", "path",
+         lambda: PathStraightening(space)),
+        ("PathStraightening", "accurate (257 nodes)", "path",
+         lambda: PathStraightening(space, n_nodes=257)),
+    ]
+    rows = []
+    pairs = np.asarray(job["pairs"], dtype=np.float64)
+    for method, setting, kind, make in settings:
+        solver = make()
+        space.metric.log_solver = solver
+
+        def one(x: np.ndarray, y: np.ndarray, solver: Any = solver, kind: str = kind) -> dict:
+            if kind == "log":
+                v = space.metric.log(gs.array(y), gs.array(x))
+                return {"velocity": np.asarray(v, float).tolist(),
+                        "length": float(space.metric.norm(v, gs.array(x)))}
+            path = solver.discrete_geodesic_bvp(gs.array(y), gs.array(x))
+            return {"path": np.asarray(path, float).tolist()}
+
+        _, setup, _ = _timed(lambda: one(pairs[0, 0], pairs[0, 1]))
+        per = []
+        for x, y in pairs:
+            out, sec, err = _timed(lambda x=x, y=y: one(x, y))
+            per.append({"seconds": sec, "error": err, **(out or {})})
+        rows.append({"method": method, "setting": setting, "kind": kind, "setup": setup,
+                     "per_pair": per})
+    return {"peer": "geomstats", "version": geomstats.__version__, "check": check,
+            "rows": rows}
+
+
+def _finslerax_worker(job: dict) -> dict:
+    import equinox as eqx
+    import finslerax as fx
+    import jax
+    import jax.numpy as jnp
+    from finslerax.solvers import AVBDSolver, GaussNewtonGeodesic
+
+    name, p, n = job["metric"], job["params"], int(job["segments"])
+    space = fx.EuclideanSpace(2)
+    if name == "randers":
+        wind = jnp.array(p["wind"])
+        metric = fx.Randers(space, h_net=lambda x: jnp.eye(2), w_net=lambda x: wind,
+                            wind_mode="raw")
+    else:
+        height = float(p["height"])
+
+        class Matsumoto(fx.FinslerMetric):
+            def metric_fn(self, x: Any, v: Any) -> Any:
+                beta = jnp.dot(-2.0 * height * x, v)
+                alpha = jnp.sqrt(jnp.dot(v, v) + beta * beta)
+                return alpha * alpha / (alpha - beta)
+
+        metric = Matsumoto(space)
+    check = [float(metric.metric_fn(jnp.array(x), jnp.array(v)))
+             for x, v in np.asarray(job["check"])]
+    pairs = jnp.asarray(np.asarray(job["pairs"], dtype=np.float64))
+    x0, y0, xs, ys = pairs[0, 0], pairs[0, 1], pairs[:, 0], pairs[:, 1]
+    rows = []
+    for method, solver in (("GaussNewtonGeodesic", GaussNewtonGeodesic()),
+                           ("AVBDSolver", AVBDSolver())):
+        single = eqx.filter_jit(
+            lambda m, a, b, s=solver: s.solve(m, a, b, n_steps=n, train_mode=False).xs)
+        batched = eqx.filter_jit(lambda m, a, b, s=solver: jax.vmap(
+            lambda u, w: s.solve(m, u, w, n_steps=n, train_mode=False).xs)(a, b))
+        _, setup, err0 = _timed(lambda f=single: f(metric, x0, y0).block_until_ready())
+        per = []
+        for x, y in pairs:
+            out, sec, err = _timed(lambda x=x, y=y, f=single: np.asarray(
+                f(metric, x, y).block_until_ready()))
+            per.append({"seconds": sec, "error": err,
+                        "path": None if out is None else out.tolist()})
+        rows.append({"method": method, "setting": f"defaults, {n} segments, one pair per "
+                     "call", "kind": "path", "setup": setup, "per_pair": per,
+                     "setup_error": err0})
+        _, bsetup, _ = _timed(lambda f=batched: f(metric, xs, ys).block_until_ready())
+        out, sec, err = _timed(lambda f=batched: np.asarray(
+            f(metric, xs, ys).block_until_ready()))
+        per = [{"seconds": sec / len(pairs), "error": err,
+                "path": None if out is None else out[k].tolist()} for k in range(len(pairs))]
+        rows.append({"method": method, "setting": f"defaults, {n} segments, batched (vmap)",
+                     "kind": "path", "setup": bsetup, "per_pair": per})
+    return {"peer": "finslerax", "version": fx.__version__, "check": check, "rows": rows}
+
+
+def worker_main(peer: str) -> None:
+    job = json.load(sys.stdin)
+    out = _geomstats_worker(job) if peer == "geomstats" else _finslerax_worker(job)
+    json.dump(out, sys.stdout)
+
+
+# ----------------------------------------------------------------------------------------
+# Driver (the project's environment)
+# ----------------------------------------------------------------------------------------
+def bump_metric() -> Any:
+    """The conformal test metric without a closed form, as a project metric."""
+    from dataclasses import dataclass
+    from typing import ClassVar
+
+    import casadi as ca
+
+    from finsler.domains import Disk
+    from finsler.metric import Metric, Task
+
+    @dataclass(frozen=True)
+    class Bump(Metric):
+        """``F(x, v) = (1 + A exp(-|x - c|^2 / (2 s^2))) |v|`` on a disk: a costly hill."""
+
+        amplitude: float = BUMP["amplitude"]
+        cx: float = BUMP["cx"]
+        cy: float = BUMP["cy"]
+        sigma: float = BUMP["sigma"]
+        radius: float = BUMP["radius"]
+
+        name: ClassVar[str] = "bump"
+        task: ClassVar[Task] = Task(depth=5, eps=0.3)
+        reversible: ClassVar[bool] = True
+
+        @property
+        def domain(self) -> Disk:
+            return Disk(radius=self.radius)
+
+        def F_sx(self, x: ca.SX, v: ca.SX) -> ca.SX:
+            r2 = (x[0] - self.cx) ** 2 + (x[1] - self.cy) ** 2
+            return (1.0 + self.amplitude * ca.exp(-r2 / (2.0 * self.sigma**2))) * ca.sqrt(
+                ca.dot(v, v))
+
+    return Bump()
+
+
+def make_pairs(name: str, m: Any, k: int, seed: int) -> np.ndarray:
+    """``k`` pairs ``(k, 2, 2)`` at least 0.2 apart, drawn with ``seed``."""
+    rng = np.random.default_rng(seed)
+    out = []
+    while len(out) < k:
+        if name in PAIR_RADIUS:
+            r = PAIR_RADIUS[name] * np.sqrt(rng.uniform(size=2))
+            a = rng.uniform(0, 2 * np.pi, size=2)
+            pq = np.stack([r * np.cos(a), r * np.sin(a)], 1)
+        else:
+            pq = rng.uniform(-0.9, 0.9, size=(2, 2))
+        if np.linalg.norm(pq[1] - pq[0]) >= 0.2:
+            out.append(pq)
+    return np.asarray(out)
+
+
+def run_peer(peer: str, python: str | None, job: dict) -> dict:
+    """Run the worker in the peer's interpreter; ``{"skipped": reason}`` if it cannot."""
+    if not python:
+        return {"skipped": f"no interpreter given (--{peer}-python)"}
+    if not Path(python).exists():
+        return {"skipped": f"interpreter {python} does not exist (create the venv as the "
+                f"docstring of benchmarks/peers.py says)"}
+    env = {**os.environ, **ONE_THREAD}
+    try:
+        proc = subprocess.run([python, str(Path(__file__).resolve()), "--worker", peer],
+                              input=json.dumps(job), capture_output=True, text=True,
+                              env=env, timeout=3600, check=False)
+    except subprocess.TimeoutExpired:
+        return {"skipped": f"{peer} worker timed out after an hour"}
+    if proc.returncode != 0:
+        tail = proc.stderr.strip().splitlines()[-3:]
+        return {"skipped": f"{peer} worker failed (exit {proc.returncode}): "
+                + " | ".join(tail)}
+    return json.loads(proc.stdout)
+
+
+def project_rows(m: Any, pairs: np.ndarray, with_log: bool) -> list[dict]:
+    """The project's methods on ``pairs``, in the same row format as the peers."""
+    import inspect
+
+    import solvers
+
+    n_task = m.task.segments
+    methods: list[tuple[str, str, str, Any]] = [
+        ("solve_geodesic", f"task size, {n_task} segments", "path",
+         lambda s, g: solvers.solve_geodesic(m, s, g, n_task)),
+        ("solve_geodesic", "256 segments", "path",
+         lambda s, g: solvers.solve_geodesic(m, s, g, 256)),
+        ("distance", "rtol 1e-8 (default)", "value", lambda s, g: solvers.distance(m, s, g)),
+    ]
+    has_tol = "tol" in inspect.signature(solvers.solve_geodesic).parameters
+    if has_tol:
+        methods.append(("solve_geodesic", "tol=1e-7", "value",
+                        lambda s, g: solvers.solve_geodesic(m, s, g, tol=1e-7)))
+    if with_log:
+        methods.append(("log_map", "defaults (Newton shooting from distance)", "log",
+                        lambda s, g: solvers.log_map(m, s, g)))
+    rows = []
+    for method, setting, kind, fn in methods:
+        _, setup, _ = _timed(lambda fn=fn: fn(pairs[0, 0], pairs[0, 1]))
+        per = []
+        for s, g in pairs:
+            out, sec, err = _timed(lambda s=s, g=g, fn=fn: fn(s, g))
+            rec: dict[str, Any] = {"seconds": sec, "error": err}
+            if out is not None:
+                rec["converged"] = bool(out.converged)
+                if kind == "path":
+                    rec["path"] = out.points.tolist()
+                elif kind == "log":
+                    rec["velocity"] = out.velocity.tolist()
+                    rec["length"] = out.length
+                elif method == "distance":
+                    rec["length"] = out.distance
+                    rec["status"] = out.status.value
+                else:
+                    rec["length"] = out.length
+                    rec["error_estimate"] = getattr(out, "error_estimate", None)
+            per.append(rec)
+        rows.append({"peer": "project", "method": method, "setting": setting, "kind": kind,
+                     "setup": setup, "per_pair": per})
+    if not has_tol:
+        rows.append({"peer": "project", "method": "solve_geodesic", "setting": "tol=1e-7",
+                     "skipped": "solve_geodesic has no tol= parameter yet (issue 14 part 3 "
+                                "not landed)"})
+    return rows
+
+
+def score(m: Any, pairs: np.ndarray, rows: list[dict], exact: np.ndarray | None) -> None:
+    """Add ``length``, ``failed`` and ``err`` to every per-pair record of ``rows``."""
+    import solvers
+
+    k = len(pairs)
+    for row in rows:
+        for i, rec in enumerate(row.get("per_pair", [])):
+            s, g = pairs[i]
+            why = rec.get("error")
+            length = rec.get("length")
+            if why is None and row["kind"] == "path" and rec.get("path") is not None:
+                pts = np.asarray(rec["path"], dtype=np.float64)
+                if not np.all(np.isfinite(pts)):
+                    why = "non-finite path"
+                elif not np.all(m.domain.contains(pts, tol=1e-9)):
+                    why = "path leaves the domain"
+                elif max(np.max(np.abs(pts[0] - s)), np.max(np.abs(pts[-1] - g))) > 1e-9:
+                    why = "path does not join the pair"
+                else:
+                    length = float(np.sum(m.segment_length(pts[:-1], pts[1:], 8,
+                                                           check=False)))
+            if why is None and row["kind"] == "log" and rec.get("velocity") is not None:
+                v = np.asarray(rec["velocity"], dtype=np.float64)
+                if not np.all(np.isfinite(v)):
+                    why = "non-finite velocity"
+                else:
+                    length = float(m.F(s, v))
+                    try:
+                        e = solvers.exp_map(m, s, v)
+                        miss = float(np.max(np.abs(e.point - g))) if e.converged else math.inf
+                    except Exception as err:  # e.g. a velocity into a refused region
+                        miss, why = math.inf, f"exp refused: {err}"
+                    rec["miss"] = miss
+                    if why is None and miss > MISS_TOL:
+                        why = f"misses the goal by {miss:.1e}"
+            if why is None and rec.get("converged") is False:
+                why = f"not converged ({rec.get('status', 'status')})"
+            if why is None and (length is None or not math.isfinite(length)):
+                why = "no length"
+            rec["length"], rec["failed"] = length, why
+    best = np.full(k, np.inf)
+    if exact is None:
+        for row in rows:
+            for i, rec in enumerate(row.get("per_pair", [])):
+                upper = row["kind"] == "path" or row["method"] == "distance"
+                if upper and rec["failed"] is None:
+                    best[i] = min(best[i], rec["length"])
+    ref = exact if exact is not None else best
+    for row in rows:
+        for i, rec in enumerate(row.get("per_pair", [])):
+            rec["err"] = (None if rec["failed"] is not None
+                          else (rec["length"] - ref[i]) / ref[i])
+
+
+def summarise(name: str, rows: list[dict], exact: bool) -> list[str]:
+    head = (f"{'peer':<10} {'method':<20} {'setting':<42} {'time/pair':>10} {'setup':>8} "
+            f"{'med |err|':>9} {'max |err|':>9} {'fail':>5}")
+    lines = [f"== {name}: error = "
+             + ("relative to the exact distance" if exact else
+                "length vs the shortest found (relative)"), head, "-" * len(head)]
+    for row in rows:
+        peer = row.get("peer", "?")
+        if "skipped" in row:
+            lines.append(f"{peer:<10} {row.get('method', ''):<20} {row.get('setting', ''):<42} "
+                         f"skipped: {row['skipped']}")
+            continue
+        per = row["per_pair"]
+        secs = np.array([r["seconds"] for r in per])
+        errs = np.array([abs(r["err"]) for r in per if r["err"] is not None])
+        fails = [r["failed"] for r in per if r["failed"] is not None]
+        med = f"{np.median(errs):9.1e}" if errs.size else f"{'-':>9}"
+        mx = f"{np.max(errs):9.1e}" if errs.size else f"{'-':>9}"
+        lines.append(f"{peer:<10} {row['method']:<20} {row['setting'][:42]:<42} "
+                     f"{_ms(np.median(secs)):>10} {_ms(row.get('setup', 0.0)):>8} {med} {mx} "
+                     f"{len(fails):>2}/{len(per)}")
+        if fails:
+            kinds: dict[str, int] = {}
+            for f in fails:
+                key = f.split(" by ")[0] if f.startswith("misses") else f[:60]
+                kinds[key] = kinds.get(key, 0) + 1
+            misses = [r["miss"] for r in per if r.get("miss") is not None
+                      and r["failed"] is not None and math.isfinite(r["miss"])]
+            by = f" (max miss {max(misses):.1e})" if misses else ""
+            lines.append(f"{'':<10}   failures: "
+                         + "; ".join(f"{v} x {k}" for k, v in kinds.items()) + by)
+    return lines
+
+
+def _ms(sec: float) -> str:
+    return f"{sec * 1e3:.1f} ms" if sec < 1 else f"{sec:.2f} s"
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--worker", choices=("geomstats", "finslerax"), help=argparse.SUPPRESS)
+    ap.add_argument("--pairs", type=int, default=10, help="pairs per metric (default 10)")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--metrics", default="poincare,bump,randers,matsumoto")
+    ap.add_argument("--geomstats-python", default=DEFAULT_PEERS["geomstats"],
+                    help="python of a venv with geomstats 2.8 (numpy<2, autograd)")
+    ap.add_argument("--finslerax-python", default=DEFAULT_PEERS["finslerax"],
+                    help="python of a venv with finslerax 1.1 and jax[cpu]")
+    ap.add_argument("--json", type=Path, help="also write every per-pair record here")
+    args = ap.parse_args()
+    if args.worker:
+        worker_main(args.worker)
+        return
+    if args.pairs < 1:
+        ap.error("--pairs must be >= 1")
+    for k, v in ONE_THREAD.items():
+        os.environ.setdefault(k, v)
+    import torch
+
+    import finsler
+
+    torch.set_num_threads(1)
+    names = [s.strip() for s in args.metrics.split(",") if s.strip()]
+    unknown = set(names) - {"poincare", "bump", "randers", "matsumoto"}
+    if unknown:
+        ap.error(f"unknown metrics {sorted(unknown)}")
+    report: dict[str, Any] = {"pairs": args.pairs, "seed": args.seed, "metrics": {}}
+    t_start = time.perf_counter()
+    for name in names:
+        m = bump_metric() if name == "bump" else finsler.get_metric(name)
+        pairs = make_pairs(name, m, args.pairs, args.seed)
+        rng = np.random.default_rng(args.seed + 1)
+        check = np.stack([make_pairs(name, m, 8, args.seed + 2)[:, 0],
+                          rng.normal(size=(8, 2))], 1)
+        truth = m.F(check[:, 0], check[:, 1])
+        riemannian = name in ("poincare", "bump")
+        rows = project_rows(m, pairs, with_log=name != "matsumoto")
+        job: dict[str, Any] = {"metric": name, "pairs": pairs.tolist(),
+                               "check": check.tolist(), "segments": m.task.segments}
+        if riemannian:
+            job["params"] = BUMP if name == "bump" else {}
+            peer = "geomstats"
+        else:
+            job["params"] = {"wind": list(WIND)} if name == "randers" else {"height": HEIGHT}
+            peer = "finslerax"
+        res = run_peer(peer, getattr(args, f"{peer}_python"), job)
+        notes = []
+        if "skipped" in res:
+            rows.append({"peer": peer, "method": "(all)", "setting": "", "skipped":
+                         res["skipped"]})
+        else:
+            gap = float(np.max(np.abs(np.asarray(res["check"]) - truth) / truth))
+            notes.append(f"{peer} {res['version']}: its F equals the project's F to {gap:.1e} "
+                         "(max relative, 8 sample points)")
+            for r in res["rows"]:
+                r["peer"] = peer
+                rows.append(r)
+        exact = (m.distance(pairs[:, 0], pairs[:, 1]) if name in ("poincare", "randers")
+                 else None)
+        score(m, pairs, rows, exact)
+        lines = summarise(name, rows, exact is not None) + [f"   {t}" for t in notes]
+        print("\n".join(lines) + "\n", flush=True)
+        report["metrics"][name] = {"pairs": pairs.tolist(), "rows": rows, "notes": notes,
+                                   "exact": None if exact is None else exact.tolist()}
+    total = time.perf_counter() - t_start
+    print(f"{len(names)} metrics x {args.pairs} pairs in {total:.0f} s (one thread each)")
+    if args.json:
+        finsler.atomic_write_text(args.json, json.dumps(report), "--json")
+
+
+if __name__ == "__main__":
+    main()
