@@ -34,6 +34,7 @@ from solvers.seeding import SeedPlan, graph_seeder, resample, seed_curves
 from solvers.transcription import energy_nlp, minmax_nlp
 
 __all__ = [
+    "check_initial_paths",
     "check_pairs",
     "check_segments",
     "midpoint",
@@ -104,6 +105,29 @@ def check_pairs(metric: Metric, pairs: Any) -> np.ndarray:
     return arr
 
 
+def check_initial_paths(metric: Metric, pairs: np.ndarray, n: int, paths: Any
+                        ) -> np.ndarray | None:
+    """Validate caller-given initial paths ``(K, m+1, dim)`` for ``pairs`` ``(K, 2, dim)``
+    (one per pair, finite, in the domain, ending at the pair's start and goal) and resample
+    them to ``(K, n+1, dim)``; ``None`` passes through."""
+    if paths is None:
+        return None
+    try:
+        arr = np.array(paths, dtype=np.float64)
+    except (TypeError, ValueError) as err:
+        raise InputError(f"initial_paths must be a numeric array, got "
+                         f"{type(paths).__name__}") from err
+    K = pairs.shape[0]
+    if arr.ndim != 3 or arr.shape[0] != K or arr.shape[2] != metric.dim or arr.shape[1] < 2:
+        raise InputError(f"initial_paths must have shape ({K}, m+1, {metric.dim}) (one path "
+                         f"of m >= 1 segments per pair), got {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        bad = int(np.flatnonzero(~np.all(np.isfinite(arr), axis=(1, 2)))[0])
+        raise InputError(f"initial_paths[{bad}] has non-finite values")
+    return np.stack([_initial_path(metric, arr[k], pairs[k, 0], pairs[k, 1], n,
+                                   f"initial_paths[{k}]") for k in range(K)])
+
+
 def _finish(metric: Metric, points: np.ndarray) -> dict[str, Any]:
     costs = metric.path_costs(points[None])[0]
     quad = metric.segment_length(points[:-1], points[1:], 8)
@@ -129,6 +153,38 @@ def _onto_domain(m: Metric, pts: np.ndarray) -> np.ndarray:
     return out
 
 
+#: Endpoints of a given initial path may differ from start/goal by this much (relative to
+#: the domain size; float32 paths of a learned policy), then they are replaced exactly.
+INITIAL_END_RTOL = 1e-5
+
+
+def _initial_path(m: Metric, path: Any, s: np.ndarray, g: np.ndarray, n: int,
+                  name: str) -> np.ndarray:
+    """Validate a caller-given initial path ``(k+1, dim)`` (finite, in the domain, ends at
+    ``s`` and ``g``) and resample it to ``(n+1, dim)`` at equal parameter spacing (the
+    given points are kept when ``k`` divides ``n``)."""
+    try:
+        arr = np.array(path, dtype=np.float64)
+    except (TypeError, ValueError) as err:
+        raise InputError(f"{name} must be a numeric array, got {type(path).__name__}") from err
+    if arr.ndim != 2 or arr.shape[1] != m.dim or arr.shape[0] < 2:
+        raise InputError(f"{name} must have shape (k+1, {m.dim}) with k >= 1 (here "
+                         f"{n + 1} points are solved), got {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise InputError(f"{name} has non-finite values")
+    tol = INITIAL_END_RTOL * domain_scale(m)
+    m.domain.check(arr, name, tol=tol)
+    for end, want, which in ((arr[0], s, "start"), (arr[-1], g, "goal")):
+        if np.max(np.abs(end - want)) > tol:
+            raise InputError(f"{name} does not end at the pair's {which}: {end.tolist()} vs "
+                             f"{want.tolist()}")
+    if arr.shape[0] != n + 1:
+        arr = resample(arr, np.ones(arr.shape[0] - 1), n)
+    arr = np.asarray(m.domain.project(arr), dtype=np.float64)
+    arr[0], arr[-1] = s, g
+    return arr
+
+
 def solve_geodesic(
     metric: Metric | str,
     start: Any,
@@ -137,6 +193,7 @@ def solve_geodesic(
     *,
     seeds: SeedPlan | None = None,
     initial: Sequence[np.ndarray] = (),
+    global_seeds: bool = True,
     minmax: bool = False,
     strict: bool = False,
 ) -> GeodesicResult:
@@ -144,8 +201,11 @@ def solve_geodesic(
 
     Minimises ``sum_i C(p_i, p_{i+1})**2`` over the interior points of an ``n``-segment path
     (default ``n = 2**D`` of the metric's task) from every seed of ``seeds`` (default
-    :meth:`SeedPlan.default`) plus the given ``initial`` paths ``(n+1, dim)`` (e.g. a
-    learned path); returns the lowest energy among IPOPT-converged solves, with
+    :meth:`SeedPlan.default`) plus the given ``initial`` paths ``(m+1, dim)`` (e.g. a
+    learned path or an exact path of another size; resampled to ``n + 1`` points at equal
+    parameter spacing when ``m != n``); with ``global_seeds=False`` only the ``initial``
+    paths are solved (a warm start: no seed plan, no graph); returns the lowest energy
+    among IPOPT-converged solves, with
     ``seeds_tried`` / ``seeds_agreeing``. With ``minmax=True`` the min-max refinement is
     attached (``result.minmax``). ``strict=True`` raises :class:`SolverError` unless
     converged.
@@ -173,18 +233,18 @@ def solve_geodesic(
                                       False)
         return res
 
-    candidates = seed_curves(m, s, g, n, plan)
-    if plan.graph:
-        gp = graph_seeder(m).path(s, g)
-        if gp is not None:
-            candidates.append(("graph", resample(gp[0], gp[1], n)))
-    for k, init in enumerate(initial):
-        arr = np.array(init, dtype=np.float64)
-        if arr.shape != (n + 1, m.dim) or not np.all(np.isfinite(arr)):
-            raise InputError(f"initial path {k} must be a finite ({n + 1}, {m.dim}) array")
-        arr = np.asarray(m.domain.project(arr), dtype=np.float64)
-        arr[0], arr[-1] = s, g
-        candidates.append((f"initial{k}", arr))
+    given = [(f"initial{k}", _initial_path(m, init, s, g, n, f"initial path {k}"))
+             for k, init in enumerate(initial)]
+    if not global_seeds and not given:
+        raise InputError("global_seeds=False needs at least one initial path")
+    candidates = []
+    if global_seeds:
+        candidates = seed_curves(m, s, g, n, plan)
+        if plan.graph:
+            gp = graph_seeder(m).path(s, g)
+            if gp is not None:
+                candidates.append(("graph", resample(gp[0], gp[1], n)))
+    candidates += given
 
     total_iter = 0
     if plan.coarse is not None and plan.coarse < n and len(candidates) > plan.refine_top:
@@ -297,9 +357,11 @@ def _metric_spec(m: Metric) -> tuple[type, dict[str, Any]]:
 
 
 def _batch_worker(args: tuple) -> tuple[int, GeodesicResult]:
-    (cls, params), k, s, g, n, plan, minmax = args
+    (cls, params), k, s, g, n, plan, minmax, init, global_seeds = args
     m = _cached_metric(cls, tuple(sorted(params.items())))
-    return k, solve_geodesic(m, s, g, n, seeds=plan, minmax=minmax)
+    initial = () if init is None else (init,)
+    return k, solve_geodesic(m, s, g, n, seeds=plan, minmax=minmax, initial=initial,
+                             global_seeds=global_seeds)
 
 
 _METRICS: dict[tuple, Metric] = {}
@@ -315,7 +377,8 @@ def _cached_metric(cls: type, items: tuple) -> Metric:
 class _BatchStore:
     """Per-pair result files of a resumable :func:`solve_batch` (pickle, atomic rename)."""
 
-    def __init__(self, folder: Any, metric: Metric, n: int, plan: SeedPlan, minmax: bool):
+    def __init__(self, folder: Any, metric: Metric, n: int, plan: SeedPlan, minmax: bool,
+                 global_seeds: bool = True):
         import pathlib
 
         self.folder = pathlib.Path(folder)
@@ -324,12 +387,15 @@ class _BatchStore:
         except OSError as err:
             raise OutputError(f"cannot create the folder of resumable parts {self.folder}: "
                               f"{err.strerror}") from err
-        self.key = (repr(metric), int(n), repr(plan), bool(minmax))
+        self.key = (repr(metric), int(n), repr(plan), bool(minmax), bool(global_seeds))
 
     def _path(self, k: int) -> Any:
         return self.folder / f"pair_{k:07d}.pkl"
 
-    def load(self, k: int, pair: np.ndarray) -> GeodesicResult | None:
+    def load(self, k: int, pair: np.ndarray, init: np.ndarray | None = None
+             ) -> GeodesicResult | None:
+        """The saved result of pair ``k`` if it was solved from the same pair ``(2, dim)``
+        and initial path (``None``: none), else ``None``."""
         import pickle
 
         path = self._path(k)
@@ -337,18 +403,23 @@ class _BatchStore:
             return None
         try:
             with path.open("rb") as fh:
-                key, saved_pair, result = pickle.load(fh)
+                key, saved_pair, saved_init, result = pickle.load(fh)
         except Exception:  # a corrupt or foreign file is recomputed, never trusted
             return None
         if key != self.key or not np.array_equal(saved_pair, pair):
             return None
+        if (saved_init is None) != (init is None) or (
+                init is not None and not np.array_equal(saved_init, init)):
+            return None
         return result
 
-    def save(self, k: int, pair: np.ndarray, result: GeodesicResult) -> None:
+    def save(self, k: int, pair: np.ndarray, result: GeodesicResult,
+             init: np.ndarray | None = None) -> None:
         import pickle
 
-        atomic_write_bytes(self._path(k), pickle.dumps((self.key, np.array(pair), result)),
-                           "resumable part")
+        saved_init = None if init is None else np.array(init)
+        atomic_write_bytes(self._path(k), pickle.dumps((self.key, np.array(pair), saved_init,
+                                                        result)), "resumable part")
 
 
 def solve_batch(
@@ -363,6 +434,8 @@ def solve_batch(
     checkpoint_dir: str | os.PathLike[str] | None = None,
     ray_address: str | None = None,
     chunk_size: int | None = None,
+    initial_paths: Any = None,
+    global_seeds: bool = True,
 ) -> list[GeodesicResult]:
     """Solve every pair of ``pairs`` ``(K, 2, dim)``; results in the order of the pairs.
 
@@ -380,6 +453,12 @@ def solve_batch(
     tasks of ``chunk_size`` pairs (default: about four chunks per CPU of the cluster, at
     most 64 pairs) by :mod:`solvers.distributed`; every finished chunk's pairs are saved
     as the same parts as above, and the results equal the local ones.
+
+    ``initial_paths`` ``(K, m+1, dim)``: one caller-given initial path per pair (e.g. a
+    learned policy's paths, or exact paths of another size ``m``: resampled to ``n + 1``
+    points), solved as ``solve_geodesic(initial=[path])``. With ``global_seeds=False`` only
+    that path is solved (the fast warm-start mode: a good path converges in a few IPOPT
+    iterations); with ``True`` the global seeds are solved too and the lowest energy kept.
     """
     from tqdm.auto import tqdm
 
@@ -396,15 +475,26 @@ def solve_batch(
                                    or chunk_size < 1):
         raise InputError(f"chunk_size must be a positive integer, got {chunk_size!r}")
     if ray_address is not None:
-        from solvers.distributed import require_ray
+        from finsler.cluster import probe_address, require_ray
 
         require_ray()  # before any file is made
-    store = _BatchStore(checkpoint_dir, m, n, plan, minmax) if checkpoint_dir else None
+        probe_address(ray_address)  # a wrong address fails in seconds
+    if not isinstance(global_seeds, (bool, np.bool_)):
+        raise InputError(f"global_seeds must be True or False, got {global_seeds!r}")
+    inits = check_initial_paths(m, arr, n, initial_paths)
+    if not global_seeds and inits is None:
+        raise InputError("global_seeds=False needs initial_paths (one path per pair)")
+    store = (_BatchStore(checkpoint_dir, m, n, plan, minmax, bool(global_seeds))
+             if checkpoint_dir else None)
     workers = int(min(workers, arr.shape[0]))
     results: list[GeodesicResult | None] = [None] * arr.shape[0]
+
+    def init_of(k: int) -> np.ndarray | None:
+        return None if inits is None else inits[k]
+
     if store is not None:
         for k in range(arr.shape[0]):
-            results[k] = store.load(k, arr[k])
+            results[k] = store.load(k, arr[k], init_of(k))
     todo = [k for k in range(arr.shape[0]) if results[k] is None]
     bar = tqdm(total=arr.shape[0], desc=f"solve {m.name}", disable=not progress, unit="pair",
                initial=arr.shape[0] - len(todo))
@@ -415,26 +505,31 @@ def solve_batch(
             local_cpus = int(min(workers, len(todo)))
             for k, res in solve_chunks_ray(ray_address, _batch_worker, _metric_spec(m), arr,
                                            todo, n, plan, minmax, chunk_size,
-                                           num_cpus=local_cpus):
+                                           num_cpus=local_cpus, initial_paths=inits,
+                                           global_seeds=bool(global_seeds)):
                 results[k] = res
                 if store is not None:
-                    store.save(k, arr[k], res)
+                    store.save(k, arr[k], res, init_of(k))
                 bar.update(1)
         elif workers == 1 or len(todo) <= 1:
             for k in todo:
+                init = init_of(k)
                 results[k] = solve_geodesic(m, arr[k, 0], arr[k, 1], n, seeds=plan,
-                                            minmax=minmax)
+                                            minmax=minmax,
+                                            initial=() if init is None else (init,),
+                                            global_seeds=bool(global_seeds))
                 if store is not None:
-                    store.save(k, arr[k], results[k])
+                    store.save(k, arr[k], results[k], init)
                 bar.update(1)
         else:
             spec = _metric_spec(m)
-            jobs = [(spec, k, arr[k, 0], arr[k, 1], n, plan, minmax) for k in todo]
+            jobs = [(spec, k, arr[k, 0], arr[k, 1], n, plan, minmax, init_of(k),
+                     bool(global_seeds)) for k in todo]
             with ProcessPool(workers) as pool:
                 for k, res in pool.map_unordered(_batch_worker, jobs):
                     results[k] = res
                     if store is not None:
-                        store.save(k, arr[k], res)
+                        store.save(k, arr[k], res, init_of(k))
                     bar.update(1)
     finally:
         bar.close()

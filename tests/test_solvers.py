@@ -441,3 +441,101 @@ def test_cli_solve_pairs_resumes_and_cleans_up(tmp_path) -> None:
                                    "--workers", "1", "--no-progress"])
     assert res.exit_code == 0, res.output
     assert out.is_file() and not (tmp_path / "r.json.parts").exists()
+
+
+# ----------------------------------------------------------------------------------------
+# caller-given initial paths in batches (warm starts)
+# ----------------------------------------------------------------------------------------
+def test_solve_batch_warm_start_from_exact_paths() -> None:
+    """A warm start from the exact path converges in a few IPOPT iterations (against
+    hundreds for the globally seeded solve) to the same energy; the paths of another size
+    are resampled; workers=2 equals workers=1; with global_seeds=True the seeds are kept."""
+    m = finsler.get_metric("matsumoto")
+    pairs = finsler.sample_pairs(m, 3, seed=5)
+    full = [solvers.solve_geodesic(m, s, g, 32) for s, g in pairs]
+    paths = np.stack([r.points for r in full])
+    warm = solvers.solve_batch(m, pairs, 32, initial_paths=paths, global_seeds=False,
+                               workers=1, progress=False)
+    for a, b in zip(full, warm):
+        assert b.status is Status.SUCCESS and b.seeds_tried == 1
+        assert b.best_seed == "initial0"
+        assert b.iterations <= 10 < a.iterations
+        assert b.energy == pytest.approx(a.energy, rel=1e-10)
+    par = solvers.solve_batch(m, pairs, 32, initial_paths=paths, global_seeds=False,
+                              workers=2, progress=False)
+    for a, b in zip(warm, par):
+        np.testing.assert_allclose(a.points, b.points, rtol=0, atol=1e-12)
+    # the 32-segment paths at 64 segments: every other point is the given one (interpolated
+    # in between), so the solve starts close and needs few iterations
+    fine = solvers.solve_batch(m, pairs, 64, initial_paths=paths, global_seeds=False,
+                               workers=1, progress=False)
+    for (s, g), b in zip(pairs, fine):
+        assert b.points.shape == (65, 2) and b.status is Status.SUCCESS
+        assert b.iterations <= 15
+        ref = solvers.solve_geodesic(m, s, g, 64)  # globally seeded at 64
+        assert b.energy <= ref.energy * (1 + 1e-9)
+    both = solvers.solve_batch(m, pairs[:1], 32, initial_paths=paths[:1], workers=1,
+                               progress=False)[0]
+    assert both.seeds_tried == full[0].seeds_tried + 1 and "initial0" in both.seed_energies
+    assert both.energy <= full[0].energy * (1 + 1e-12)
+
+
+def test_solve_batch_initial_paths_reach_the_ray_chunks() -> None:
+    """The Ray task body passes each pair's own initial path (checked without Ray: the
+    chunk function is plain Python)."""
+    from solvers.distributed import _solve_chunk
+    from solvers.geodesic import _batch_worker, _metric_spec
+
+    m = finsler.get_metric("matsumoto")
+    pairs = finsler.sample_pairs(m, 2, seed=5)
+    paths = np.stack([solvers.solve_geodesic(m, s, g, 16).points for s, g in pairs])
+    out = _solve_chunk(_batch_worker, _metric_spec(m), [4, 7], pairs, 16, SeedPlan(), False,
+                       paths, False)
+    assert [k for k, _ in out] == [4, 7]
+    for (_, r), p in zip(out, paths):
+        assert r.seeds_tried == 1 and r.iterations <= 10
+        np.testing.assert_allclose(r.points, p, atol=1e-6)
+
+
+def test_solve_batch_initial_paths_checkpoint_key(tmp_path) -> None:
+    """Parts saved for one set of initial paths are not reused for another."""
+    m = finsler.get_metric("matsumoto")
+    pairs = finsler.sample_pairs(m, 1, seed=5)
+    exact = solvers.solve_geodesic(m, *pairs[0], 16).points[None]
+    straight = np.linspace(pairs[:, 0], pairs[:, 1], 17, axis=1)
+    parts = tmp_path / "parts"
+    a = solvers.solve_batch(m, pairs, 16, initial_paths=exact, global_seeds=False, workers=1,
+                            progress=False, checkpoint_dir=parts)[0]
+    again = solvers.solve_batch(m, pairs, 16, initial_paths=exact, global_seeds=False,
+                                workers=1, progress=False, checkpoint_dir=parts)[0]
+    assert again.wall_time == a.wall_time  # loaded
+    b = solvers.solve_batch(m, pairs, 16, initial_paths=straight, global_seeds=False,
+                            workers=1, progress=False, checkpoint_dir=parts)[0]
+    assert b.wall_time != a.wall_time and b.iterations > a.iterations
+
+
+@pytest.mark.parametrize("change, match", [
+    (lambda p: p[:1], r"shape \(2, m\+1, 2\)"),
+    (lambda p: p[..., :1], r"shape \(2, m\+1, 2\)"),
+    (lambda p: p[:, :1], r"shape \(2, m\+1, 2\)"),
+    (lambda p: np.where(np.arange(17)[None, :, None] == 5, np.nan, p), r"initial_paths\[0\]"),
+    (lambda p: p + np.array([0.0, 0.0])[None, None] + (np.arange(17) == 8)[None, :, None] * 3,
+     "outside the domain"),
+    (lambda p: p[:, ::-1], "does not end at the pair's start"),
+])
+def test_solve_batch_initial_paths_bad_input(change, match) -> None:
+    m = finsler.get_metric("matsumoto")
+    pairs = finsler.sample_pairs(m, 2, seed=5)
+    paths = np.linspace(pairs[:, 0], pairs[:, 1], 17, axis=1)
+    with pytest.raises(InputError, match=match):
+        solvers.solve_batch(m, pairs, 16, initial_paths=change(paths), workers=1,
+                            progress=False)
+
+
+def test_solve_batch_global_seeds_false_needs_paths() -> None:
+    m = finsler.get_metric("matsumoto")
+    pairs = finsler.sample_pairs(m, 1, seed=5)
+    with pytest.raises(InputError, match="initial_paths"):
+        solvers.solve_batch(m, pairs, 16, global_seeds=False, workers=1, progress=False)
+    with pytest.raises(InputError, match="initial path"):
+        solvers.solve_geodesic(m, *pairs[0], 16, global_seeds=False)
