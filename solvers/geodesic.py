@@ -22,7 +22,14 @@ from finsler.errors import InputError
 from finsler.files import OutputError, atomic_write_bytes
 from finsler.metric import Metric
 from finsler.pool import ProcessPool
-from finsler.registry import get_metric
+from solvers.inputs import (
+    as_metric,
+    check_pairs,
+    check_point,
+    check_segments,
+    domain_scale,
+    is_short_pair,
+)
 from solvers.result import (
     GeodesicResult,
     MidpointResult,
@@ -46,63 +53,9 @@ __all__ = [
 #: Relative energy difference under which two seeds count as agreeing with the best.
 AGREE_RTOL = 1e-6
 
-#: Pairs with ``max |g - s| <= SHORT_PAIR * domain size`` are solved as straight segments.
-SHORT_PAIR = 1e-7
-
-
-def domain_scale(m: Metric) -> float:
-    """Largest side of the domain's bounding box (1 if unbounded)."""
-    lo, hi = m.domain.bounds()
-    span = np.asarray(hi, float) - np.asarray(lo, float)
-    span = span[np.isfinite(span)]
-    return float(np.max(span)) if span.size else 1.0
-
-
-def is_short_pair(m: Metric, s: np.ndarray, g: np.ndarray) -> bool:
-    """True if start and goal are closer than ``SHORT_PAIR`` times the domain size."""
-    return bool(np.max(np.abs(g - s)) <= SHORT_PAIR * domain_scale(m))
-
-
-def _metric(metric: Metric | str) -> Metric:
-    if isinstance(metric, Metric):
-        return metric
-    if isinstance(metric, str):
-        return get_metric(metric)
-    raise InputError(f"metric must be a finsler.Metric or a registered name, got {metric!r}")
-
-
-def check_segments(metric: Metric, segments: int | None) -> int:
-    """Validate the number of segments (``None`` -> the task's ``2**D``); ``n >= 2``."""
-    if segments is None:
-        return metric.task.segments
-    if isinstance(segments, bool) or not isinstance(segments, (int, np.integer)):
-        raise InputError(f"segments must be an integer >= 2, got {segments!r}")
-    if segments < 2:
-        raise InputError(f"segments must be >= 2 (interior points to optimise), got {segments}")
-    if segments > 1 << 16:
-        raise InputError(f"segments = {segments} is too large (max 65536)")
-    return int(segments)
-
-
-def _point(metric: Metric, x: Any, name: str) -> np.ndarray:
-    arr = np.asarray(x, dtype=np.float64) if not hasattr(x, "detach") else x
-    if getattr(arr, "ndim", 0) == 2 and arr.shape[0] != 1:
-        raise InputError(f"{name} must be a single point of shape ({metric.dim},), got "
-                         f"{tuple(arr.shape)}")
-    return metric.domain.check(arr, name)[0].astype(np.float64)
-
-
-def check_pairs(metric: Metric, pairs: Any) -> np.ndarray:
-    """Validate start/goal pairs ``(K, 2, dim)``: shape, finiteness, domain membership."""
-    arr = np.asarray(pairs, dtype=np.float64)
-    if arr.ndim != 3 or arr.shape[1] != 2 or arr.shape[2] != metric.dim or arr.shape[0] < 1:
-        raise InputError(
-            f"pairs must have shape (K, 2, {metric.dim}) with K >= 1 for metric "
-            f"{metric.name!r}, got {arr.shape}"
-        )
-    metric.domain.check(arr[:, 0], "pairs[:, 0] (starts)")
-    metric.domain.check(arr[:, 1], "pairs[:, 1] (goals)")
-    return arr
+#: Old private names kept for callers inside the package.
+_metric = as_metric
+_point = check_point
 
 
 def check_initial_paths(metric: Metric, pairs: np.ndarray, n: int, paths: Any

@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 
 from finsler.errors import InputError
+from solvers.chebyshev import interpolation_matrix
 
 __all__ = [
     "DistanceResult",
@@ -36,7 +37,7 @@ class SolverError(RuntimeError):
 class Status(enum.Enum):
     """IPOPT's return status (``return_status`` of CasADi's ``nlpsol`` stats), plus the
     toolkit's own ``TRIVIAL`` (start == goal: nothing to solve) and ``SHORT`` (start and goal
-    closer than :data:`solvers.geodesic.SHORT_PAIR` times the domain's size: the straight
+    closer than :data:`solvers.inputs.SHORT_PAIR` times the domain's size: the straight
     segment, equally divided, is the geodesic to within ``O(|g - s|**2)`` ~ 1e-14 in
     coordinates, below what IPOPT resolves, and ``F**2`` is not differentiable at zero
     velocity, so no NLP is solved)."""
@@ -239,8 +240,6 @@ class DistanceResult:
 
     def curve(self, t: Any) -> np.ndarray:
         """Points of the curve at parameters ``t`` ``(T,)`` in ``[0, 1]`` -> ``(T, dim)``."""
-        from solvers.spectral import interpolation_matrix
-
         t = np.asarray(t, dtype=np.float64).reshape(-1)
         if not np.all(np.isfinite(t)) or np.any(t < 0) or np.any(t > 1):
             raise InputError("curve parameters t must be finite and lie in [0, 1]")

@@ -29,6 +29,9 @@ import numpy as np
 
 from finsler.errors import InputError
 from finsler.metric import Metric
+from solvers.chebyshev import chebyshev_nodes, differentiation_matrix, interpolation_matrix
+from solvers.geodesic import solve_geodesic
+from solvers.inputs import as_metric, check_point, domain_scale, is_short_pair
 from solvers.result import DistanceResult, DistanceStatus, SolverError, Status
 from solvers.transcription import Constraints, _ident, ipopt_options, smooth_square
 
@@ -47,46 +50,6 @@ DEGREES_HIGH_DIM = (8, 16, 32, 64)
 
 #: Relative rounding floor added to every error estimate.
 ROUNDING_FLOOR = 1e-13
-
-
-def chebyshev_nodes(n: int) -> np.ndarray:
-    """Chebyshev-Gauss-Lobatto nodes ``-cos(pi j / n)``, ``j = 0..n`` (ascending) ``(n+1,)``."""
-    return -np.cos(np.pi * np.arange(n + 1) / n)
-
-
-def _bary_weights(n: int) -> np.ndarray:
-    w = (-1.0) ** np.arange(n + 1)
-    w[0] *= 0.5
-    w[-1] *= 0.5
-    return w
-
-
-def interpolation_matrix(n: int, y: np.ndarray) -> np.ndarray:
-    """Barycentric interpolation from the ``n + 1`` Chebyshev nodes to points ``y`` ``(T,)``
-    in ``[-1, 1]`` -> ``(T, n+1)``."""
-    x = chebyshev_nodes(n)
-    w = _bary_weights(n)
-    y = np.asarray(y, dtype=np.float64).reshape(-1)
-    diff = y[:, None] - x[None, :]
-    exact = diff == 0.0
-    diff[exact] = 1.0
-    a = w[None, :] / diff
-    out = a / a.sum(axis=1, keepdims=True)
-    rows = np.flatnonzero(exact.any(axis=1))
-    out[rows] = exact[rows].astype(np.float64)
-    return out
-
-
-def differentiation_matrix(n: int) -> np.ndarray:
-    """Derivative at the nodes of the interpolant of node values ``(n+1, n+1)``."""
-    x = chebyshev_nodes(n)
-    w = _bary_weights(n)
-    dx = x[:, None] - x[None, :]
-    np.fill_diagonal(dx, 1.0)
-    d = (w[None, :] / w[:, None]) / dx
-    np.fill_diagonal(d, 0.0)
-    np.fill_diagonal(d, -d.sum(axis=1))
-    return d
 
 
 def _quadrature_points(n: int) -> int:
@@ -202,10 +165,8 @@ def distance(
     local minimiser, not the continuum infimum). ``strict=True`` raises
     :class:`SolverError` unless converged.
     """
-    from solvers.geodesic import _metric, _point, domain_scale, is_short_pair, solve_geodesic
-
     t0 = time.perf_counter()
-    m = _metric(metric)
+    m = as_metric(metric)
     if rtol is None:
         rtol = 1e-8 if m.smooth else 1e-4
     if not (isinstance(rtol, (float, int)) and math.isfinite(rtol) and 0 < rtol < 1):
@@ -217,8 +178,8 @@ def distance(
     ) or list(degrees) != sorted(set(degrees)):
         raise InputError(f"degrees must be >= 2 increasing integers (two or more), got "
                          f"{degrees!r}")
-    s = _point(m, start, "start")
-    g = _point(m, goal, "goal")
+    s = check_point(m, start, "start")
+    g = check_point(m, goal, "goal")
     if np.array_equal(s, g):
         nodes = np.repeat(s[None], degrees[0] + 1, 0)
         return DistanceResult(0.0, 0.0, float(rtol), DistanceStatus.TRIVIAL, [], [], nodes,

@@ -539,3 +539,37 @@ def test_solve_batch_global_seeds_false_needs_paths() -> None:
         solvers.solve_batch(m, pairs, 16, global_seeds=False, workers=1, progress=False)
     with pytest.raises(InputError, match="initial path"):
         solvers.solve_geodesic(m, *pairs[0], 16, global_seeds=False)
+
+
+def test_no_import_cycles_in_solvers() -> None:
+    """Every import between modules of ``solvers`` (top level or inside functions) points
+    one way: the graph has no cycle (geodesic <-> spectral went round through result)."""
+    import ast
+    import pathlib
+
+    folder = pathlib.Path(solvers.__file__).parent
+    edges: dict[str, set[str]] = {}
+    for path in folder.glob("*.py"):
+        if path.stem == "__init__":
+            continue
+        out = edges.setdefault(path.stem, set())
+        for node in ast.walk(ast.parse(path.read_text())):
+            names = []
+            if isinstance(node, ast.ImportFrom) and node.module:
+                names = [node.module]
+            elif isinstance(node, ast.Import):
+                names = [a.name for a in node.names]
+            out.update(n.split(".")[1] for n in names if n.startswith("solvers."))
+    assert "geodesic" in edges["spectral"]  # the check sees the imports
+
+    def cycle_from(node: str, stack: list[str]) -> list[str] | None:
+        if node in stack:
+            return [*stack[stack.index(node):], node]
+        for nxt in sorted(edges.get(node, ())):
+            found = cycle_from(nxt, [*stack, node])
+            if found:
+                return found
+        return None
+
+    for start in sorted(edges):
+        assert cycle_from(start, []) is None, f"import cycle {cycle_from(start, [])}"
