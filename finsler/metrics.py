@@ -120,12 +120,41 @@ class CarLike(Metric):
             (Disk(radius=self.radius), Box((-math.pi,), (math.pi,), names=("theta",)))
         )
 
-    def F_sx(self, x: ca.SX, v: ca.SX) -> ca.SX:
+    def _square_sx(self, x: ca.SX, v: ca.SX, xi: ca.SX | None = None
+                   ) -> tuple[ca.SX, ca.SX, ca.SX]:
+        """The formula, written once for ``F_sx`` and the smooth hook: returns
+        ``(vx**2 + vy**2 + c_p (h**2 + xi**2), u, excess)`` with the forward speed
+        ``u = vx cos(th) + vy sin(th)``, the excess turning rate
+        ``excess = max(r_min |v_th| - u, 0)``, and ``xi = excess`` unless given (then the
+        first entry is ``F**2`` exactly when ``xi == excess``)."""
         th = x[2]
         c, s = ca.cos(th), ca.sin(th)
         h = -v[0] * s + v[1] * c
-        xi = ca.fmax(self.r_min * ca.fabs(v[2]) - v[0] * c - v[1] * s, 0.0)
-        return ca.sqrt(v[0] * v[0] + v[1] * v[1] + self.c_p * (h * h + xi * xi))
+        u = v[0] * c + v[1] * s
+        excess = ca.fmax(self.r_min * ca.fabs(v[2]) - v[0] * c - v[1] * s, 0.0)
+        w = excess if xi is None else xi
+        return v[0] * v[0] + v[1] * v[1] + self.c_p * (h * h + w * w), u, excess
+
+    def F_sx(self, x: ca.SX, v: ca.SX) -> ca.SX:
+        return ca.sqrt(self._square_sx(x, v)[0])
+
+    def smooth_square_sx(self, x: ca.SX, v: ca.SX, tag: str = "") -> dict[str, Any]:
+        """Hook for optimisers that need C^2 functions (solvers' transcriptions): ``F**2``
+        as a smooth expression of ``(x, v, xi)`` with one slack ``xi``, exact at any
+        minimiser of an objective increasing in ``F**2``.
+
+        ``max(r_min |v_th| - u, 0)`` becomes ``xi >= 0``, ``xi >= r_min v_th - u``,
+        ``xi >= -r_min v_th - u``: the objective increases with ``xi**2``, so at a minimiser
+        ``xi`` equals the max. Returns a dict: ``f2`` (SX scalar), ``w`` (slack symbols
+        ``(1, 1)``) with bounds ``lbw``/``ubw``, ``w_value`` (the exact slack as an
+        expression of ``(x, v)``, for initial points), constraints ``g`` ``(2, 1)`` with
+        bounds ``lbg``/``ubg``.
+        """
+        xi = ca.SX.sym(f"xi{tag}")
+        f2, u, excess = self._square_sx(x, v, xi)
+        g = ca.vertcat(xi - (self.r_min * v[2] - u), xi - (-self.r_min * v[2] - u))
+        return {"f2": f2, "w": xi, "w_value": excess, "lbw": [0.0],
+                "ubw": [ca.inf], "g": g, "lbg": [0.0, 0.0], "ubg": [ca.inf, ca.inf]}
 
 
 @dataclass(frozen=True)

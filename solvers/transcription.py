@@ -9,9 +9,9 @@ seed curve).
 Smooth reformulation (:func:`smooth_square`): IPOPT needs twice continuously differentiable
 functions. The objective uses ``F**2`` rather than ``F`` (CasADi simplifies
 ``sq(sqrt(q))`` to ``q``, so for metrics of the form ``sqrt(q)`` no square root remains);
-the car-like metric's ``max(r|v_th| - u, 0)`` becomes a slack ``xi >= 0`` with
-``xi >= r v_th - u`` and ``xi >= -r v_th - u``: the objective increases with ``xi**2``, so
-at a minimiser ``xi`` equals the max and the reformulation is exact.
+a metric whose ``F`` is not C^2 may define ``smooth_square_sx`` (the car-like metric
+does: its ``max(r|v_th| - u, 0)`` becomes a slack with two linear constraints, exact at
+a minimiser), and the transcription uses it: the formula lives only in the metric.
 """
 
 from __future__ import annotations
@@ -23,7 +23,6 @@ import casadi as ca
 import numpy as np
 
 from finsler.metric import Metric
-from finsler.metrics import CarLike
 from solvers.result import Status
 
 __all__ = [
@@ -57,17 +56,13 @@ class SmoothSquare:
 
 
 def smooth_square(metric: Metric, x: ca.SX, v: ca.SX, tag: str = "") -> SmoothSquare:
-    """Smooth form of ``F(x, v)**2`` for ``metric`` (exact: see the module docstring)."""
-    if isinstance(metric, CarLike):
-        th = x[2]
-        c, s = ca.cos(th), ca.sin(th)
-        h = -v[0] * s + v[1] * c
-        u = v[0] * c + v[1] * s
-        xi = ca.SX.sym(f"xi{tag}")
-        f2 = v[0] * v[0] + v[1] * v[1] + metric.c_p * (h * h + xi * xi)
-        g = ca.vertcat(xi - (metric.r_min * v[2] - u), xi - (-metric.r_min * v[2] - u))
-        value = ca.fmax(metric.r_min * ca.fabs(v[2]) - u, 0.0)
-        return SmoothSquare(f2, xi, value, [0.0], [ca.inf], g, [0.0, 0.0], [ca.inf, ca.inf])
+    """Smooth form of ``F(x, v)**2`` for ``metric``: the metric's own
+    ``smooth_square_sx(x, v, tag)`` hook where it defines one (metrics whose ``F`` is not
+    C^2, e.g. the car-like metric's ``max``; the formula stays in the metric), else
+    ``F_sx(x, v)**2``."""
+    hook = getattr(metric, "smooth_square_sx", None)
+    if callable(hook):
+        return SmoothSquare(**hook(x, v, tag))
     f = metric.F_sx(x, v)
     empty = ca.SX(0, 1)
     return SmoothSquare(f * f, empty, empty, [], [], empty, [], [])

@@ -573,3 +573,37 @@ def test_no_import_cycles_in_solvers() -> None:
 
     for start in sorted(edges):
         assert cycle_from(start, []) is None, f"import cycle {cycle_from(start, [])}"
+
+
+def test_smooth_square_comes_from_the_metric() -> None:
+    """The car-like smooth square is the metric's hook (one source): at the exact slack it
+    equals F**2 (against the metric's lowered F, random points), the constraints hold there
+    and fail below it; solvers/ has no copy of the formula; a metric without the hook gets
+    plain F**2."""
+    import casadi as ca
+
+    from solvers.transcription import smooth_square
+
+    m = finsler.get_metric("carlike")
+    x, v = ca.SX.sym("x", 3), ca.SX.sym("v", 3)
+    sq = smooth_square(m, x, v, "t")
+    assert sq.w.numel() == 1
+    f2 = ca.Function("f2", [x, v, sq.w], [sq.f2, sq.g])
+    wval = ca.Function("w", [x, v], [sq.w_value])
+    rng = np.random.default_rng(0)
+    xs = m.domain.sample(50, rng)
+    vs = rng.normal(size=(50, 3))
+    F = m.F(xs, vs)
+    for xk, vk, fk in zip(xs, vs, F):
+        w = float(wval(xk, vk))
+        val, g = f2(xk, vk, w)
+        assert float(val) == pytest.approx(fk**2, rel=1e-12)
+        assert np.all(np.asarray(g) >= -1e-12)
+        if w > 1e-9:  # the max is tight: a smaller slack violates a constraint
+            assert np.min(np.asarray(f2(xk, vk, 0.5 * w)[1])) < 0
+    import pathlib
+
+    src = "".join(p.read_text() for p in pathlib.Path(solvers.__file__).parent.glob("*.py"))
+    assert "r_min" not in src and "CarLike" not in src
+    plain = smooth_square(finsler.get_metric("matsumoto"), x[:2], v[:2])
+    assert plain.w.numel() == 0 and plain.g.numel() == 0
