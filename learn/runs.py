@@ -49,6 +49,7 @@ __all__ = [
     "run_one",
     "run_status",
     "train_run",
+    "warm_start_paths",
 ]
 
 VARIANTS: dict[str, str] = {
@@ -145,6 +146,52 @@ def load_any_policy(run: str | Path, checkpoint: str = "best", device: str = "cp
     _, _, loader = _backend(method)
     return loader(run, device=device, checkpoint=checkpoint, env=env,
                   metric_params=metric_params)
+
+
+def warm_start_paths(source: str | Path, metric: Any, pairs: Any,
+                     checkpoint: str = "best") -> tuple[Any, Any]:
+    """Learned paths to seed exact solves: ``(paths (K, 2**D + 1, dim) float64, policy)``.
+
+    ``source`` is a run directory (any method) or the name of an environment with a shipped
+    policy; ``metric`` (a :class:`finsler.Metric`) is the metric of the solve and must be
+    the policy's: the same registered metric with the same parameters, else
+    :class:`InputError` naming the difference. ``pairs`` ``(K, 2, dim)``.
+    """
+    import dataclasses
+
+    import learn
+
+    src = str(source)
+    path = Path(source)
+    if path.is_dir():
+        pol = load_any_policy(path, checkpoint=checkpoint)
+    elif src in learn.shipped_policies():
+        pol = learn.load_policy(src, checkpoint=checkpoint)
+    else:
+        import finsler
+
+        known = ", ".join(learn.shipped_policies()) or "none"
+        if src in finsler.list_metrics():
+            raise InputError(f"--warm-start {src}: no shipped policy for {src!r} (shipped: "
+                             f"{known}); train one with `geodesics train` and pass its run "
+                             "directory")
+        raise InputError(f"--warm-start {src}: no such run directory, and not an environment "
+                         f"with a shipped policy (shipped: {known})")
+    pm = pol.metric
+    if pm.name != metric.name:
+        raise InputError(f"--warm-start {src} is a policy for {pm.name!r}, not for "
+                         f"{metric.name!r}")
+    if pm != metric:
+        def params(m: Any) -> dict[str, Any]:
+            return {f.name: getattr(m, f.name) for f in dataclasses.fields(m) if f.init}
+
+        a, b = params(pm), params(metric)
+        diff = ", ".join(f"{k}={a.get(k)!r} (solve: {b.get(k)!r})" for k in sorted(set(a) | set(b))
+                         if a.get(k) != b.get(k)) or f"class {type(pm)} vs {type(metric)}"
+        raise InputError(f"--warm-start {src} was trained on {pm.name} with other parameters "
+                         f"than the solve's metric: {diff}")
+    paths = pol.generate(pairs[:, 0], pairs[:, 1])
+    return paths, pol
 
 
 def run_status(out: str | Path) -> str:

@@ -60,6 +60,21 @@ def _pairs_or_fail(path: Path, metric: finsler.Metric) -> np.ndarray:
         raise  # unreachable
 
 
+def _warm_start(source: str | None, metric: finsler.Metric, pairs: np.ndarray,
+                keep_global_seeds: bool) -> tuple[np.ndarray | None, dict[str, Any] | None]:
+    """Learned initial paths ``(K, 2**D + 1, dim)`` for ``--warm-start`` (None without it)
+    and the payload's ``warm_start`` entry. solvers never imports learn: the joining is
+    done here (:func:`learn.runs.warm_start_paths`)."""
+    if source is None:
+        return None, None
+    from learn.runs import warm_start_paths
+
+    paths, pol = warm_start_paths(source, metric, pairs)
+    return paths, {"policy": str(pol.source), "checkpoint": str(pol.checkpoint),
+                   "segments": int(paths.shape[1] - 1),
+                   "global_seeds": bool(keep_global_seeds)}
+
+
 def solve_command(
     metric: Annotated[str, typer.Option(help="Registered metric name (see `geodesics metrics`).")],
     start: Annotated[str | None, typer.Option(help='Start point, e.g. "0.1,-0.2".')] = None,
@@ -82,6 +97,15 @@ def solve_command(
     chunk_size: Annotated[int | None, typer.Option(
         help="Pairs per Ray task (default: about four tasks per CPU of the cluster, at most "
              "64 pairs).")] = None,
+    warm_start: Annotated[str | None, typer.Option(
+        "--warm-start", metavar="RUN_DIR_OR_ENV",
+        help="Seed IPOPT with learned paths: a run directory of `geodesics train` or an "
+             "environment with a shipped policy; the policy must be for --metric. Without "
+             "--keep-global-seeds only the learned path is solved (fast).")] = None,
+    keep_global_seeds: Annotated[bool, typer.Option(
+        "--keep-global-seeds",
+        help="With --warm-start: also solve the global seeds and keep the lowest energy "
+             "(a check of the learned start; as slow as without --warm-start).")] = False,
 ) -> None:
     """Exact discrete geodesics (globally seeded IPOPT) with min-max refinement.
 
@@ -99,6 +123,8 @@ def solve_command(
         fail("--ray and --chunk-size apply to --pairs")
     if chunk_size is not None and chunk_size < 1:
         fail(f"--chunk-size must be >= 1, got {chunk_size}")
+    if keep_global_seeds and warm_start is None:
+        fail("--keep-global-seeds applies to --warm-start")
     parts = None
     if out is not None:
         # checked before any work: a bad --out must not cost a batch of solves
@@ -122,11 +148,13 @@ def solve_command(
             m.domain.check(arr[0, 0], "--start")
             m.domain.check(arr[0, 1], "--goal")
         n = solvers.check_segments(m, segments)
+        inits, warm = _warm_start(warm_start, m, arr, keep_global_seeds)
         # With --out, finished pairs are kept beside it (parts) until the JSON is written,
         # so an interrupted run resumes where it stopped when the same command is run again.
         results = solvers.solve_batch(
             m, arr, n, minmax=True, workers=workers, progress=progress and pairs is not None,
             checkpoint_dir=parts, ray_address=ray, chunk_size=chunk_size,
+            initial_paths=inits, global_seeds=inits is None or keep_global_seeds,
         )
     except InputError as err:
         fail(str(err))
@@ -137,6 +165,8 @@ def solve_command(
         typer.echo(f"interrupted ({stop.signal_name}), all workers stopped: {kept}", err=True)
         raise typer.Exit(code=130) from None
     payload = solve_payload(m, results, n)
+    if warm is not None:
+        payload["warm_start"] = warm
     text = json.dumps(payload, indent=None if pairs is not None else 2)
     if out is not None:
         try:

@@ -1,0 +1,112 @@
+"""Learned warm starts for exact solves (issue 11, part 3): ``geodesics solve
+--warm-start RUN_OR_ENV`` seeds IPOPT with the policy's paths; the result equals the
+globally seeded one on easy pairs; bad sources are refused with clear messages."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from typer.testing import CliRunner
+
+import finsler
+import learn
+import solvers
+from finsler.errors import InputError
+from learn.runs import warm_start_paths
+from validation.cli import app
+
+torch.set_num_threads(1)
+
+
+@pytest.fixture(scope="module")
+def easy_pairs() -> np.ndarray:
+    """Matsumoto pairs with one geodesic (all 8 global seeds agree): three inside the
+    convex disk |p| < 0.2887 where F is Finsler, one across the slope. Elsewhere the
+    discrete energy has many near-equal local minima and a warm start may end in another
+    one (benchmarks/warm_start.py counts them)."""
+    return np.array([[[0.1, 0.05], [-0.15, 0.1]], [[-0.2, -0.1], [0.15, 0.12]],
+                     [[0.0, 0.2], [0.05, -0.2]], [[0.5, 0.3], [-0.4, 0.2]]])
+
+
+def test_warm_started_solve_equals_globally_seeded(easy_pairs: np.ndarray) -> None:
+    m = finsler.get_metric("matsumoto")
+    paths, pol = warm_start_paths("matsumoto", m, easy_pairs)
+    assert paths.shape == (4, 65, 2) and pol.metric == m
+    # the learned path is not already the geodesic: the solve has work to do
+    glob = solvers.solve_batch(m, easy_pairs, workers=1, progress=False)
+    warm = solvers.solve_batch(m, easy_pairs, workers=1, progress=False, initial_paths=paths,
+                               global_seeds=False)
+    for w, g, p in zip(warm, glob, paths):
+        assert w.converged and g.converged
+        assert w.seeds_tried == 1 < g.seeds_tried
+        assert w.energy == pytest.approx(g.energy, rel=1e-6)
+        assert np.max(np.abs(w.points - g.points)) < 1e-4
+        learned_energy = np.sum(m.path_costs(p[None])[0] ** 2)
+        assert learned_energy > g.energy * (1 + 1e-4)
+
+
+def test_cli_warm_start_matches_the_python_api(tmp_path: Path, easy_pairs: np.ndarray) -> None:
+    m = finsler.get_metric("matsumoto")
+    pfile = tmp_path / "pairs.npy"
+    np.save(pfile, easy_pairs)
+    r = CliRunner()
+    res = r.invoke(app, ["solve", "--metric", "matsumoto", "--pairs", str(pfile),
+                         "--warm-start", "matsumoto", "--workers", "1", "--no-progress",
+                         "--json"])
+    assert res.exit_code == 0, res.output
+    doc = json.loads(res.output)
+    assert doc["warm_start"]["global_seeds"] is False
+    assert doc["warm_start"]["policy"].endswith("matsumoto")
+    glob = solvers.solve_batch(m, easy_pairs, workers=1, progress=False)
+    for row, g in zip(doc["results"], glob):
+        assert row["seeds_tried"] == 1
+        assert row["energy"] == pytest.approx(g.energy, rel=1e-6)
+    # --keep-global-seeds: the learned path is one more start beside the global seeds
+    res = r.invoke(app, ["solve", "--metric", "matsumoto", "--pairs", str(pfile),
+                         "--warm-start", "matsumoto", "--keep-global-seeds", "--workers", "1",
+                         "--no-progress", "--json"])
+    assert res.exit_code == 0, res.output
+    doc = json.loads(res.output)
+    assert doc["warm_start"]["global_seeds"] is True
+    for row, g in zip(doc["results"], glob):
+        assert row["seeds_tried"] == g.seeds_tried + 1
+        assert row["energy"] <= g.energy * (1 + 1e-9)
+
+
+def test_bad_warm_start_is_refused_clearly(tmp_path: Path) -> None:
+    r = CliRunner()
+    base = ["solve", "--metric", "matsumoto", "--start", "0.1,0.2", "--goal", "-0.3,0.1"]
+    cases = [
+        (["--warm-start", str(tmp_path / "missing_run")], "no such run directory"),
+        (["--warm-start", "euclidean"], "no shipped policy for 'euclidean'"),
+        (["--warm-start", "carlike"], "policy for 'carlike', not for 'matsumoto'"),
+        (["--keep-global-seeds"], "--keep-global-seeds applies to --warm-start"),
+    ]
+    for extra, message in cases:
+        res = r.invoke(app, [*base, *extra])
+        assert res.exit_code == 2, (extra, res.output)
+        assert message in res.output, (extra, res.output)
+
+    # a run trained on other metric parameters than the solve's metric
+    cfg = learn.default_config("matsumoto", metric_params={"height": 1.5}, timesteps=1_500,
+                               depth=2, hidden=(8,), collection_size=128, minibatch_size=64,
+                               epochs=1, eval_every=1, eval_pairs=4, path_energy_weight=0.0)
+    learn.train(cfg, tmp_path / "run", progress=False)
+    res = r.invoke(app, [*base, "--warm-start", str(tmp_path / "run")])
+    assert res.exit_code == 2 and "height=1.5 (solve: 1.0)" in res.output, res.output
+    with pytest.raises(InputError, match=r"height=1\.5"):
+        warm_start_paths(tmp_path / "run", finsler.get_metric("matsumoto"),
+                         np.zeros((1, 2, 2)))
+    # the same run warm-starts a solve on its own metric (Python API)
+    m15 = finsler.get_metric("matsumoto", height=1.5)
+    pairs = np.array([[[0.1, 0.2], [-0.3, 0.1]]])
+    paths, _ = warm_start_paths(tmp_path / "run", m15, pairs)
+    assert paths.shape == (1, 2**2 + 1, 2)  # the run's depth; the solver resamples to n
+    res = solvers.solve_geodesic(m15, pairs[0, 0], pairs[0, 1], initial=(paths[0],),
+                                 global_seeds=False)
+    ref = solvers.solve_geodesic(m15, pairs[0, 0], pairs[0, 1])
+    assert res.converged and res.energy == pytest.approx(ref.energy, rel=1e-6)
