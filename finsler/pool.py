@@ -13,6 +13,9 @@ a Ctrl-C in a terminal reaches them only through the parent.
   process per job, at most ``workers`` at a time. On an interruption no new job starts,
   every running job gets SIGTERM (it finishes its iteration, saves a resumable checkpoint
   and returns), and the parent waits for them (``grace`` seconds at most, then SIGKILL).
+  A job whose process dies without a result (killed by the OOM killer, a segfault) stops
+  the pool with ``RuntimeError``, unless ``on_death(job, exitcode)`` is given: then its
+  return value stands for that job's result and the other jobs go on.
 
 It lives in ``finsler`` because ``solvers`` and ``learn`` both use it and may not import
 each other.
@@ -73,9 +76,13 @@ class ProcessPool:
     """See the module docstring."""
 
     def __init__(self, workers: int, initializer: Callable[[], None] | None = None,
-                 graceful: bool = False, grace: float = 300.0) -> None:
+                 graceful: bool = False, grace: float = 300.0,
+                 on_death: Callable[[Any, int], Any] | None = None) -> None:
+        if on_death is not None and not graceful:
+            raise ValueError("on_death needs graceful=True (one process per job)")
         self.workers, self.initializer = max(1, int(workers)), initializer
         self.graceful, self.grace = graceful, float(grace)
+        self.on_death = on_death
         self._ctx = mp.get_context("spawn")
         self._pool: Any = None
         self._running: dict[int, Any] = {}
@@ -116,8 +123,14 @@ class ProcessPool:
             except queue.Empty:
                 for k2, p in list(self._running.items()):
                     if not p.is_alive() and p.exitcode not in (0, None):
-                        raise RuntimeError(f"worker of job {k2} died (exit code "
-                                           f"{p.exitcode})") from None
+                        if self.on_death is None:
+                            raise RuntimeError(f"worker of job {k2} died (exit code "
+                                               f"{p.exitcode})") from None
+                        self._running.pop(k2).join()
+                        done += 1
+                        yield self.on_death(jobs[k2], p.exitcode)
+                continue
+            if k not in self._running:  # a late word from a job already counted as dead
                 continue
             self._running.pop(k).join()
             done += 1

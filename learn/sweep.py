@@ -301,6 +301,17 @@ def _run_local(spec: RunSpec, out: str, timesteps: int | None, minutes: float | 
                 "traceback": traceback.format_exc(), "seconds": time.perf_counter() - t0}
 
 
+def _died(job: tuple, exitcode: int) -> tuple[int, dict[str, Any]]:
+    """The outcome of a run whose process died without a word (``exitcode`` < 0: killed by
+    that signal, e.g. -9 from the kernel's OOM killer)."""
+    k, _spec, out = job[:3]
+    how = (f"killed by signal {-exitcode}" + (" (SIGKILL: the kernel's OOM killer, or kill "
+           "-9)" if exitcode == -9 else "") if exitcode < 0 else f"exit code {exitcode}")
+    return k, {"action": "failed", "seconds": 0.0,
+               "error": f"the training process died ({how}); its last checkpoint in {out} "
+                        "is kept: run the sweep again to resume it"}
+
+
 def _describe(err: BaseException) -> str:
     return f"{type(err).__name__}: {err}"
 
@@ -454,7 +465,9 @@ def _sweep_local(plan: SweepPlan, root: Path, todo: list[RunOutcome], workers: i
              dict(plan.overrides.get(o.spec.variant, {}))) for k, o in enumerate(todo)]
     # SIGINT / SIGTERM: every worker gets SIGTERM, saves a resumable checkpoint and exits;
     # finsler.pool.PoolInterrupted is raised once they are gone
-    with ProcessPool(workers, initializer=_set_threads, graceful=True) as pool:
+    # a run whose process dies (OOM killer, segfault) is reported failed; the others go on
+    with ProcessPool(workers, initializer=_set_threads, graceful=True,
+                     on_death=_died) as pool:
         for k, res in pool.map_unordered(_run_local_job, jobs):
             done(todo[k], res)
 

@@ -376,3 +376,37 @@ def test_a_wrong_ray_address_fails_in_seconds_naming_it(work, command, address) 
     assert res.exit_code == 2, res.output
     assert f"Ray at {address!r}" in res.output or f"--ray address {address!r}" in res.output
     assert _digest(work) == before
+
+
+def test_a_sweep_run_killed_by_sigkill_is_reported_and_the_others_finish(tmp_path):
+    """The OOM killer's SIGKILL on one training process: that run is reported failed (with
+    the signal) and kept resumable, the other run finishes, and the next sweep resumes it."""
+    import json
+    import signal
+
+    import learn
+
+    args = ("sweep", "--envs", "euclidean", "--methods", "midpoint", "--seeds", "2",
+            "--timesteps", "100000", "--out", "sw", "--quiet", "--set", "eval_every=2")
+    proc = _geodesics(*args, cwd=tmp_path)
+    runs = [tmp_path / "sw" / "euclidean" / "midpoint" / f"seed-{s}" for s in (0, 1)]
+    _wait_for(lambda: all((r / "checkpoint_latest.pt").is_file() for r in runs))
+    workers = [k for k in _children(proc.pid)
+               if b"resource_tracker" not in Path(f"/proc/{k}/cmdline").read_bytes()]
+    assert len(workers) == 2
+    os.kill(workers[0], signal.SIGKILL)
+    _, err = proc.communicate(timeout=300)
+    assert proc.returncode == 1, err
+    doc = json.loads((tmp_path / "sw" / "sweep.json").read_text())
+    actions = sorted(r["action"] for r in doc["runs"])
+    assert actions == ["failed", "started"], doc["runs"]
+    failed = next(r for r in doc["runs"] if r["action"] == "failed")
+    assert "killed by signal 9" in failed["error"] and "resume" in failed["error"]
+    dead = runs[failed["seed"]]
+    assert learn.runs.run_status(dead) == "unfinished"
+    learn.storage.load_checkpoint(dead / "checkpoint_latest.pt")  # intact
+    proc = _geodesics(*args, cwd=tmp_path)
+    _, err = proc.communicate(timeout=300)
+    assert proc.returncode == 0, err
+    doc = json.loads((tmp_path / "sw" / "sweep.json").read_text())
+    assert sorted(r["action"] for r in doc["runs"]) == ["resumed", "skipped"]
