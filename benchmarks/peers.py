@@ -15,9 +15,9 @@ Metrics and references
   convex everywhere). finslerax gets each as ``F(x, v)``: its ``Randers`` with
   ``wind_mode="raw"`` (equal to the project's F; the default "soft" wind differs by ~1e-7)
   and a ``FinslerMetric`` subclass for Matsumoto, solved with ``GaussNewtonGeodesic`` and
-  ``AVBDSolver`` (defaults, ``train_mode=False`` for early stopping), one pair per call and
-  batched over all pairs with ``jax.vmap``, every call ``equinox.filter_jit``-compiled
-  (compile time reported apart).
+  ``AVBDSolver`` (defaults, and 2000 iterations; ``train_mode=False`` for early stopping),
+  one pair per call and batched over all pairs with ``jax.vmap``, every call
+  ``equinox.filter_jit``-compiled (compile time reported apart).
 * The project: ``solve_geodesic`` at the task size (energy stage, no min-max) and at 256
   segments, ``distance`` (default rtol 1e-8), ``solve_geodesic(tol=1e-7)`` when that
   parameter exists (issue 14 part 3; otherwise the row says it was skipped), and
@@ -38,7 +38,8 @@ pair (path lengths and converged ``distance`` values): "length vs the shortest f
 A pair is a failure when the method raised, returned non-finite numbers, a path leaving
 the domain (Matsumoto: the unit disk) or not converged (project status), or, for log
 methods, a velocity whose geodesic (integrated by the project's ``exp_map`` at 1e-13)
-misses the goal by more than 1e-6. Median and max of ``|err|`` are over the non-failed
+misses the goal by more than 1e-4 (``max miss``: the largest miss of
+the non-failed pairs). Median and max of ``|err|`` are over the non-failed
 pairs. Times are wall seconds per pair on one thread after one warm-up pair (building
 NLPs / JIT compilation excluded, reported as ``setup``); batched rows divide the batch's
 time by the number of pairs.
@@ -89,7 +90,10 @@ WIND = (0.5, 0.2)
 HEIGHT = 1.0
 #: Radius of the disk the pairs of the disk metrics are drawn from.
 PAIR_RADIUS = {"poincare": 0.7, "bump": 0.7, "matsumoto": 0.9}
-MISS_TOL = 1e-6
+#: A log method's velocity whose geodesic misses the goal by more than this (max norm, in
+#: coordinates of a domain of size ~1) gave a wrong answer: a failure. Smaller misses are
+#: shown in the ``max miss`` column.
+MISS_TOL = 1e-4
 ONE_THREAD = {
     "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1",
     "XLA_FLAGS": "--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1",
@@ -206,8 +210,10 @@ def _finslerax_worker(job: dict) -> dict:
     pairs = jnp.asarray(np.asarray(job["pairs"], dtype=np.float64))
     x0, y0, xs, ys = pairs[0, 0], pairs[0, 1], pairs[:, 0], pairs[:, 1]
     rows = []
-    for method, solver in (("GaussNewtonGeodesic", GaussNewtonGeodesic()),
-                           ("AVBDSolver", AVBDSolver())):
+    for method, label, solver in (
+            ("GaussNewtonGeodesic", "defaults", GaussNewtonGeodesic()),
+            ("AVBDSolver", "defaults", AVBDSolver()),
+            ("AVBDSolver", "2000 iterations", AVBDSolver(iterations=2000))):
         single = eqx.filter_jit(
             lambda m, a, b, s=solver: s.solve(m, a, b, n_steps=n, train_mode=False).xs)
         batched = eqx.filter_jit(lambda m, a, b, s=solver: jax.vmap(
@@ -219,7 +225,7 @@ def _finslerax_worker(job: dict) -> dict:
                 f(metric, x, y).block_until_ready()))
             per.append({"seconds": sec, "error": err,
                         "path": None if out is None else out.tolist()})
-        rows.append({"method": method, "setting": f"defaults, {n} segments, one pair per "
+        rows.append({"method": method, "setting": f"{label}, {n} segments, one pair per "
                      "call", "kind": "path", "setup": setup, "per_pair": per,
                      "setup_error": err0})
         _, bsetup, _ = _timed(lambda f=batched: f(metric, xs, ys).block_until_ready())
@@ -227,7 +233,7 @@ def _finslerax_worker(job: dict) -> dict:
             f(metric, xs, ys).block_until_ready()))
         per = [{"seconds": sec / len(pairs), "error": err,
                 "path": None if out is None else out[k].tolist()} for k in range(len(pairs))]
-        rows.append({"method": method, "setting": f"defaults, {n} segments, batched (vmap)",
+        rows.append({"method": method, "setting": f"{label}, {n} segments, batched (vmap)",
                      "kind": "path", "setup": bsetup, "per_pair": per})
     return {"peer": "finslerax", "version": fx.__version__, "check": check, "rows": rows}
 
@@ -421,7 +427,7 @@ def score(m: Any, pairs: np.ndarray, rows: list[dict], exact: np.ndarray | None)
 
 def summarise(name: str, rows: list[dict], exact: bool) -> list[str]:
     head = (f"{'peer':<10} {'method':<20} {'setting':<42} {'time/pair':>10} {'setup':>8} "
-            f"{'med |err|':>9} {'max |err|':>9} {'fail':>5}")
+            f"{'med |err|':>9} {'max |err|':>9} {'max miss':>8} {'fail':>5}")
     lines = [f"== {name}: error = "
              + ("relative to the exact distance" if exact else
                 "length vs the shortest found (relative)"), head, "-" * len(head)]
@@ -437,9 +443,11 @@ def summarise(name: str, rows: list[dict], exact: bool) -> list[str]:
         fails = [r["failed"] for r in per if r["failed"] is not None]
         med = f"{np.median(errs):9.1e}" if errs.size else f"{'-':>9}"
         mx = f"{np.max(errs):9.1e}" if errs.size else f"{'-':>9}"
+        ok_miss = [r["miss"] for r in per if r.get("miss") is not None and r["failed"] is None]
+        miss = f"{max(ok_miss):8.1e}" if ok_miss else f"{'-':>8}"
         lines.append(f"{peer:<10} {row['method']:<20} {row['setting'][:42]:<42} "
                      f"{_ms(np.median(secs)):>10} {_ms(row.get('setup', 0.0)):>8} {med} {mx} "
-                     f"{len(fails):>2}/{len(per)}")
+                     f"{miss} {len(fails):>2}/{len(per)}")
         if fails:
             kinds: dict[str, int] = {}
             for f in fails:
