@@ -221,3 +221,51 @@ def test_cli_exp_and_log():
     out = run.invoke(app, ["log", "--metric", "matsumoto", "--start", "0.5,0", "--goal",
                            "-0.5,0.1"])
     assert out.exit_code == 2 and "not strongly convex" in out.output
+
+
+def _peers_module():
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "benchmarks" / "peers.py"
+    spec = importlib.util.spec_from_file_location("peers_benchmark", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_peers_benchmark_scoring_judges_paths_and_log_velocities():
+    """benchmarks/peers.py: a missing peer is skipped with the reason; a path leaving the
+    domain and a velocity whose geodesic (exp_map) misses the goal are failures; errors are
+    against the exact distance."""
+    peers = _peers_module()
+    skip = peers.run_peer("geomstats", "/nonexistent/python", {})
+    assert "does not exist" in skip["skipped"]
+    m = finsler.get_metric("randers")
+    pairs = np.array([[[-0.5, 0.1], [0.5, 0.3]], [[0.2, -0.6], [-0.4, 0.7]]])
+    t = np.linspace(0, 1, 9)[:, None]
+    line = [(s + t * (g - s)).tolist() for s, g in pairs]
+    bent = np.array(line[1])
+    bent[4, 0] = 1.2  # outside the box [-1, 1]^2
+    rows = [
+        {"peer": "p", "method": "paths", "setting": "", "kind": "path",
+         "per_pair": [{"seconds": 0.1, "error": None, "path": line[0]},
+                      {"seconds": 0.3, "error": None, "path": bent.tolist()}]},
+        {"peer": "p", "method": "logs", "setting": "", "kind": "log",
+         "per_pair": [{"seconds": 0.1, "error": None, "velocity": (pairs[0, 1] - pairs[0, 0])
+                       .tolist()},
+                      {"seconds": 0.1, "error": None,
+                       "velocity": (1.01 * (pairs[1, 1] - pairs[1, 0])).tolist()}]},
+    ]
+    exact = m.distance(pairs[:, 0], pairs[:, 1])
+    peers.score(m, pairs, rows, exact)
+    p0, p1 = rows[0]["per_pair"]
+    assert p0["failed"] is None and abs(p0["err"]) < 1e-14
+    assert p1["failed"] == "path leaves the domain" and p1["err"] is None
+    l0, l1 = rows[1]["per_pair"]
+    assert l0["failed"] is None and l0["miss"] < 1e-12 and abs(l0["err"]) < 1e-14
+    # 1 % too fast: the straight geodesic overshoots by 1 % of |y - x|
+    miss = 0.01 * np.max(np.abs(pairs[1, 1] - pairs[1, 0]))
+    assert abs(l1["miss"] - miss) < 1e-10 and l1["failed"].startswith("misses the goal")
+    text = "\n".join(peers.summarise("randers", rows, True))
+    assert text.count(" 1/2") == 2 and "path leaves the domain" in text
