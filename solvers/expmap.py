@@ -379,15 +379,18 @@ def _integrate(m: Metric, sp: Spray, x: np.ndarray, v: np.ndarray, t: float, *,
         # g(x, x') positive definite is what the equation needs; for a metric that is not
         # convex everywhere also refuse points where F(x, .) fails convexity in some
         # direction (the curve is then not locally shortest among all curves)
-        inside = m.domain.project(pts[:, :d])
+        # checked at the steps and at 4 points inside each step (dense output)
+        ts = np.concatenate([sol.t[:-1, None] + np.linspace(0.0, 1.0, 5, endpoint=False)[None]
+                             * np.diff(sol.t)[:, None], sol.t[-1:, None]], axis=None)
+        inside = m.domain.project(sol.sol(ts)[:d].T)
         lam = m.convexity(inside)
         bad = np.flatnonzero(lam <= 0)
         if bad.size:
             k = int(bad[0])
             status = ExpStatus.NOT_CONVEX
-            y_end, t_end = sol.y[:, k], float(sol.t[k])
+            y_end, t_end = sol.sol(ts[k]), float(ts[k])
             if k > 0:  # bisect the dense output for the first non-convex point
-                lo_t, hi_t = float(sol.t[k - 1]), t_end
+                lo_t, hi_t = float(ts[k - 1]), t_end
                 for _ in range(60):
                     mid = 0.5 * (lo_t + hi_t)
                     xm = m.domain.project(sol.sol(mid)[:d][None])
