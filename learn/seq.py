@@ -101,6 +101,8 @@ __all__ = [
 
 #: Reward of a zero action (appendix B.2); the point does not move.
 ZERO_ACTION_REWARD = -100.0
+TIME_LIMITS = ("truncate", "terminate")
+"""How the step limit may end an episode (see :class:`SeqConfig`.time_limit)."""
 #: Relative tolerance on the segment test ``C(p_i, p_i+1) <= eps`` of Seq's paths: every
 #: step of eq. (57) has ``C = eps`` exactly in exact arithmetic, ``eps * (1 +- 1e-16)`` in
 #: float64 (see :func:`evaluate_seq`).
@@ -242,8 +244,12 @@ class GeodesicEnv(gymnasium.Env):
 
     def __init__(self, metric: finsler.Metric | str = "matsumoto", eps: float | None = None,
                  depth: int | None = None, reject_solved: bool = True,
-                 render_mode: str | None = None) -> None:
+                 render_mode: str | None = None, time_limit: str = "truncate") -> None:
         super().__init__()
+        if time_limit not in TIME_LIMITS:
+            raise InputError(f"time_limit must be one of {', '.join(TIME_LIMITS)}, got "
+                             f"{time_limit!r}")
+        self.time_limit = time_limit
         self.metric = _metric_of(metric)
         self.eps = float(self.metric.task.eps if eps is None else eps)
         self.depth = int(self.metric.task.depth if depth is None else depth)
@@ -300,7 +306,9 @@ class GeodesicEnv(gymnasium.Env):
         self.evaluations += n_eval
         terminated = bool(reached[0])
         truncated = (not terminated) and self._t >= self.max_steps
-        info = {"is_success": terminated, "evaluations": n_eval}
+        if truncated and self.time_limit == "terminate":
+            terminated, truncated = True, False
+        info = {"is_success": bool(reached[0]), "evaluations": n_eval}
         return _obs(self._p, self._g)[0], float(reward[0]), terminated, truncated, info
 
 
@@ -319,10 +327,13 @@ class GeodesicVecEnv(VecEnv):
     """
 
     def __init__(self, metric: finsler.Metric | str, n_envs: int, eps: float | None = None,
-                 depth: int | None = None, reject_solved: bool = True) -> None:
+                 depth: int | None = None, reject_solved: bool = True,
+                 time_limit: str = "truncate") -> None:
         if not isinstance(n_envs, (int, np.integer)) or n_envs < 1:
             raise InputError(f"n_envs must be a positive integer, got {n_envs!r}")
-        proto = GeodesicEnv(metric, eps=eps, depth=depth, reject_solved=reject_solved)
+        proto = GeodesicEnv(metric, eps=eps, depth=depth, reject_solved=reject_solved,
+                            time_limit=time_limit)
+        self.time_limit = time_limit
         self.metric, self.eps, self.max_steps = proto.metric, proto.eps, proto.max_steps
         self.reject_solved = proto.reject_solved
         self.render_mode = None
@@ -370,7 +381,8 @@ class GeodesicVecEnv(VecEnv):
         dones = reached | truncated
         obs = _obs(self._p, self._g)
         infos: list[dict[str, Any]] = [
-            {"is_success": bool(reached[i]), "TimeLimit.truncated": bool(truncated[i])}
+            {"is_success": bool(reached[i]),
+             "TimeLimit.truncated": bool(truncated[i]) and self.time_limit == "truncate"}
             for i in range(self.num_envs)
         ]
         done_rows = np.flatnonzero(dones)
@@ -501,6 +513,10 @@ class SeqConfig(MetricConfig):
     """Steps per copy per rollout; ``n_envs * n_steps`` = 2048, SB3's default rollout."""
     n_epochs: int = 10
     """PPO epochs per rollout (SB3 default)."""
+    time_limit: str = "truncate"
+    """What the step limit ``n`` is to PPO: ``truncate`` (gymnasium's ``truncated``: SB3
+    bootstraps the last step with the critic's value) or ``terminate`` (the episode ends as
+    if absorbed, no bootstrap: the authors' gym-0.21 code)."""
     gae_lambda: float = 0.95
     """GAE lambda (SB3 default)."""
     clip_range: float = 0.2
@@ -547,6 +563,9 @@ class SeqConfig(MetricConfig):
             raise InputError(f"eps must be positive and finite, got {self.eps!r}")
         if not (0 < self.lr < 1):
             raise InputError(f"lr must be in (0, 1), got {self.lr!r}")
+        if self.time_limit not in TIME_LIMITS:
+            raise InputError(f"time_limit must be one of {', '.join(TIME_LIMITS)}, got "
+                             f"{self.time_limit!r}")
         if not (0 < self.gamma <= 1):
             raise InputError(f"gamma must be in (0, 1], got {self.gamma!r}")
         if not (0 <= self.gae_lambda <= 1):
@@ -911,7 +930,8 @@ class SeqTrainer:
         self.metric = cfg.metric
         self.eval_pairs = finsler.validation_pairs(self.metric, cfg.eval_pairs)
         self.venv = GeodesicVecEnv(self.metric, cfg.n_envs, eps=cfg.eval_eps,
-                                   depth=cfg.max_depth, reject_solved=cfg.reject_solved)
+                                   depth=cfg.max_depth, reject_solved=cfg.reject_solved,
+                                   time_limit=cfg.time_limit)
         self.model = PPO(
             "MlpPolicy", self.venv, learning_rate=cfg.lr, n_steps=cfg.n_steps,
             batch_size=cfg.batch_size, n_epochs=cfg.n_epochs, gamma=cfg.gamma,

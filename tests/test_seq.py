@@ -103,6 +103,36 @@ def test_zero_action_stays_gives_minus_100_and_truncation_comes_at_step_n() -> N
     assert env.evaluations == before and env.env_steps == 4
 
 
+def test_time_limit_terminate_ends_episodes_like_the_authors_gym_code() -> None:
+    """``time_limit="terminate"``: the n-th step is a termination (no bootstrap) in the single
+    env, and the batched env reports no ``TimeLimit.truncated`` (so SB3 does not bootstrap),
+    like a DummyVecEnv of such single envs."""
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    env = GeodesicEnv("matsumoto", depth=2, time_limit="terminate")
+    env.reset(seed=1)
+    for t in range(1, 5):
+        _, _, terminated, truncated, info = env.step(np.zeros(2, np.float32))
+        assert terminated == (t == 4) and not truncated and not info["is_success"]
+    n = 2
+    batched = GeodesicVecEnv("matsumoto", n, depth=2, time_limit="terminate")
+    default = GeodesicVecEnv("matsumoto", n, depth=2)
+    dummy = DummyVecEnv([lambda: GeodesicEnv("matsumoto", depth=2, time_limit="terminate")
+                         for _ in range(n)])
+    for e in (batched, default, dummy):
+        e.seed(3)
+        e.reset()
+    zero = np.zeros((n, 2), np.float32)
+    for t in range(1, 5):
+        _, _, d1, i1 = batched.step(zero)
+        _, _, d2, i2 = default.step(zero)
+        _, _, d3, i3 = dummy.step(zero)
+        assert list(d1) == list(d2) == list(d3) == [t == 4] * n
+        assert [i["TimeLimit.truncated"] for i in i1] == [False] * n
+        assert [i["TimeLimit.truncated"] for i in i2] == [t == 4] * n
+        assert [i.get("TimeLimit.truncated", False) for i in i3] == [False] * n
+
+
 def test_success_terminates_at_the_right_step_and_rewards_telescope() -> None:
     env = GeodesicEnv("euclidean", depth=3)  # eps 0.2, n = 8
     env.reset(options={"start": [-0.5, 0.0], "goal": [0.45, 0.0]})
@@ -371,6 +401,7 @@ def test_resume_continues_exactly_like_an_uninterrupted_run(tmp_path, monkeypatc
     ({"gae_lambda": 2.0}, "gae_lambda"),
     ({"ent_coef": -1.0}, "ent_coef"),
     ({"reject_solved": 1}, "reject_solved"),
+    ({"time_limit": "bootstrap"}, "time_limit"),
     ({"no_such_field": 1}, "no_such_field"),
 ])
 def test_bad_config_values_raise_input_error_naming_the_field(over, match) -> None:
