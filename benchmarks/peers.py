@@ -23,6 +23,12 @@ Metrics and references
   parameter exists (issue 14 part 3; otherwise the row says it was skipped), and
   ``log_map`` (Riemannian rows and Randers).
 
+* ``exp``: exp maps on the Poincare pairs, with the closed-form initial velocity of the
+  geodesic from x to y (Moebius maps), so the error is ``|exp(x, v) - y|_max``: the
+  project's ``exp_map`` (spray from the SX expression, DOP853 at 1e-13), geomstats'
+  ``ExpODESolver`` (defaults: 10 Euler steps; accurate: scipy DOP853 at 1e-12) and
+  finslerax's ``ExponentialMap`` (RK4: defaults 100 steps, and 1000 steps; single, batched).
+
 Every peer's own formula of the metric is checked against the project's ``F`` at sample
 points (the largest relative difference is printed) so that all rows solve the same problem.
 
@@ -55,7 +61,8 @@ needs ``numpy<2`` and ``autograd``)::
 
 Usage (from the project's venv)::
 
-    python benchmarks/peers.py [--pairs 10] [--seed 0] [--metrics poincare,bump,randers,matsumoto]
+    python benchmarks/peers.py [--pairs 10] [--seed 0]
+        [--metrics poincare,bump,randers,matsumoto,exp]
         [--geomstats-python /work/peers/geomstats/bin/python]
         [--finslerax-python /work/peers/finslerax/bin/python] [--json OUT.json]
 
@@ -94,6 +101,9 @@ PAIR_RADIUS = {"poincare": 0.7, "bump": 0.7, "matsumoto": 0.9}
 #: coordinates of a domain of size ~1) gave a wrong answer: a failure. Smaller misses are
 #: shown in the ``max miss`` column.
 MISS_TOL = 1e-4
+#: Sections of the table and the peers run in each ("exp": exp maps on the Poincare disk).
+SECTIONS = {"poincare": ("geomstats",), "bump": ("geomstats",), "randers": ("finslerax",),
+            "matsumoto": ("finslerax",), "exp": ("geomstats", "finslerax")}
 ONE_THREAD = {
     "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1",
     "XLA_FLAGS": "--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1",
@@ -145,6 +155,32 @@ def _geomstats_worker(job: dict) -> dict:
     space.metric.exp_solver = ExpODESolver(space)
     check = [float(gs.sqrt(gs.einsum("i,ij,j->", v, space.metric.metric_matrix(x), v)))
              for x, v in np.asarray(job["check"])]
+    pairs = np.asarray(job["pairs"], dtype=np.float64)
+    if job.get("task") == "exp":
+        from geomstats.numerics.ivp import ScipySolveIVP
+
+        vel = np.asarray(job["velocities"], dtype=np.float64)
+        rows = []
+        for setting, solver in (
+                ("defaults (10 Euler steps)", ExpODESolver(space)),
+                ("accurate (DOP853, rtol=atol=1e-12)", ExpODESolver(
+                    space, integrator=ScipySolveIVP(method="DOP853", rtol=1e-12,
+                                                    atol=1e-12)))):
+            space.metric.exp_solver = solver
+
+            def shoot(x: np.ndarray, v: np.ndarray) -> dict:
+                return {"point": np.asarray(space.metric.exp(gs.array(v), gs.array(x)),
+                                            float).tolist()}
+
+            _, setup, _ = _timed(lambda: shoot(pairs[0, 0], vel[0]))
+            per = []
+            for (x, _y), v in zip(pairs, vel):
+                out, sec, err = _timed(lambda x=x, v=v: shoot(x, v))
+                per.append({"seconds": sec, "error": err, **(out or {})})
+            rows.append({"method": "ExpODESolver", "setting": setting, "kind": "exp",
+                         "setup": setup, "per_pair": per})
+        return {"peer": "geomstats", "version": geomstats.__version__, "check": check,
+                "rows": rows}
     settings = [
         ("LogODESolver", "defaults (10 nodes, tol 1e-3)", "log",
          lambda: LogODESolver(space, use_jac=False)),
@@ -158,7 +194,6 @@ def _geomstats_worker(job: dict) -> dict:
          lambda: PathStraightening(space, n_nodes=257)),
     ]
     rows = []
-    pairs = np.asarray(job["pairs"], dtype=np.float64)
     for method, setting, kind, make in settings:
         solver = make()
         space.metric.log_solver = solver
@@ -191,6 +226,8 @@ def _finslerax_worker(job: dict) -> dict:
 
     name, p, n = job["metric"], job["params"], int(job["segments"])
     space = fx.EuclideanSpace(2)
+    if job.get("task") == "exp":
+        return _finslerax_exp(job, fx, jax, jnp, eqx, space)
     if name == "randers":
         wind = jnp.array(p["wind"])
         metric = fx.Randers(space, h_net=lambda x: jnp.eye(2), w_net=lambda x: wind,
@@ -235,6 +272,44 @@ def _finslerax_worker(job: dict) -> dict:
                 "path": None if out is None else out[k].tolist()} for k in range(len(pairs))]
         rows.append({"method": method, "setting": f"{label}, {n} segments, batched (vmap)",
                      "kind": "path", "setup": bsetup, "per_pair": per})
+    return {"peer": "finslerax", "version": fx.__version__, "check": check, "rows": rows}
+
+
+def _finslerax_exp(job: dict, fx: Any, jax: Any, jnp: Any, eqx: Any, space: Any) -> dict:
+    """finslerax's ExponentialMap (RK4, fixed steps) on the Poincare disk."""
+
+    class Poincare(fx.FinslerMetric):
+        def metric_fn(self, x: Any, v: Any) -> Any:
+            return 2.0 * jnp.sqrt(jnp.dot(v, v)) / (1.0 - jnp.dot(x, x))
+
+    metric = Poincare(space)
+    check = [float(metric.metric_fn(jnp.array(x), jnp.array(v)))
+             for x, v in np.asarray(job["check"])]
+    xs = jnp.asarray(np.asarray(job["pairs"], dtype=np.float64)[:, 0])
+    vs = jnp.asarray(np.asarray(job["velocities"], dtype=np.float64))
+    rows = []
+    for setting, em in (("defaults (100 RK4 steps)", fx.ExponentialMap()),
+                        ("1000 RK4 steps", fx.ExponentialMap(max_steps=1000))):
+        single = eqx.filter_jit(lambda m, a, b, e=em: e.shoot(m, a, b))
+        batched = eqx.filter_jit(lambda m, a, b, e=em: jax.vmap(
+            lambda u, w: e.shoot(m, u, w))(a, b))
+        _, setup, _ = _timed(lambda f=single: f(metric, xs[0], vs[0]).block_until_ready())
+        per = []
+        for x, v in zip(xs, vs):
+            out, sec, err = _timed(lambda x=x, v=v, f=single: np.asarray(
+                f(metric, x, v).block_until_ready()))
+            per.append({"seconds": sec, "error": err,
+                        "point": None if out is None else out.tolist()})
+        rows.append({"method": "ExponentialMap", "setting": f"{setting}, one pair per call",
+                     "kind": "exp", "setup": setup, "per_pair": per})
+        _, bsetup, _ = _timed(lambda f=batched: f(metric, xs, vs).block_until_ready())
+        out, sec, err = _timed(lambda f=batched: np.asarray(f(metric, xs, vs)
+                                                           .block_until_ready()))
+        rows.append({"method": "ExponentialMap", "setting": f"{setting}, batched (vmap)",
+                     "kind": "exp", "setup": bsetup, "per_pair": [
+                         {"seconds": sec / len(xs), "error": err,
+                          "point": None if out is None else out[k].tolist()}
+                         for k in range(len(xs))]})
     return {"peer": "finslerax", "version": fx.__version__, "check": check, "rows": rows}
 
 
@@ -371,6 +446,34 @@ def project_rows(m: Any, pairs: np.ndarray, with_log: bool) -> list[dict]:
     return rows
 
 
+def poincare_velocity(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Closed-form initial velocity of the geodesic from x to y on [0, 1] (Poincare disk):
+    the Moebius map z = (u + zx) / (1 + conj(zx) u) sends the diameter
+    u(t) = tanh(t d / 2) w / |w| to it, so v = d / 2 (1 - |x|^2) w / |w| with
+    w = (zy - zx) / (1 - conj(zx) zy)."""
+    zx, zy = complex(*x), complex(*y)
+    w = (zy - zx) / (1 - zx.conjugate() * zy)
+    d = math.acosh(1 + 2 * float(np.sum((x - y) ** 2)) / ((1 - x @ x) * (1 - y @ y)))
+    v = d / 2 * (1 - abs(zx) ** 2) * w / abs(w)
+    return np.array([v.real, v.imag])
+
+
+def project_exp_rows(m: Any, pairs: np.ndarray, vel: np.ndarray) -> list[dict]:
+    import solvers
+
+    fn = lambda k: solvers.exp_map(m, pairs[k, 0], vel[k])  # noqa: E731
+    _, setup, _ = _timed(lambda: fn(0))
+    per = []
+    for k in range(len(pairs)):
+        out, sec, err = _timed(lambda k=k: fn(k))
+        per.append({"seconds": sec, "error": err,
+                    **({} if out is None else {"point": out.point.tolist(),
+                                               "converged": out.converged,
+                                               "status": out.status.value})})
+    return [{"peer": "project", "method": "exp_map", "setting": "defaults (DOP853, 1e-13)",
+             "kind": "exp", "setup": setup, "per_pair": per}]
+
+
 def score(m: Any, pairs: np.ndarray, rows: list[dict], exact: np.ndarray | None) -> None:
     """Add ``length``, ``failed`` and ``err`` to every per-pair record of ``rows``."""
     import solvers
@@ -406,6 +509,12 @@ def score(m: Any, pairs: np.ndarray, rows: list[dict], exact: np.ndarray | None)
                     rec["miss"] = miss
                     if why is None and miss > MISS_TOL:
                         why = f"misses the goal by {miss:.1e}"
+            if why is None and row["kind"] == "exp" and rec.get("point") is not None:
+                pt = np.asarray(rec["point"], dtype=np.float64)
+                if not np.all(np.isfinite(pt)):
+                    why = "non-finite point"
+                else:
+                    length = float(np.max(np.abs(pt - g)))  # the endpoint error
             if why is None and rec.get("converged") is False:
                 why = f"not converged ({rec.get('status', 'status')})"
             if why is None and (length is None or not math.isfinite(length)):
@@ -421,20 +530,27 @@ def score(m: Any, pairs: np.ndarray, rows: list[dict], exact: np.ndarray | None)
     ref = exact if exact is not None else best
     for row in rows:
         for i, rec in enumerate(row.get("per_pair", [])):
-            rec["err"] = (None if rec["failed"] is not None
-                          else (rec["length"] - ref[i]) / ref[i])
+            if rec["failed"] is not None:
+                rec["err"] = None
+            elif row["kind"] == "exp":
+                rec["err"] = rec["length"]
+            else:
+                rec["err"] = (rec["length"] - ref[i]) / ref[i]
 
 
-def summarise(name: str, rows: list[dict], exact: bool) -> list[str]:
-    head = (f"{'peer':<10} {'method':<20} {'setting':<42} {'time/pair':>10} {'setup':>8} "
+def summarise(name: str, rows: list[dict], exact: bool | None) -> list[str]:
+    """Table lines of one section (``exact`` None: the exp section)."""
+    head = (f"{'peer':<10} {'method':<20} {'setting':<46} {'time/pair':>10} {'setup':>8} "
             f"{'med |err|':>9} {'max |err|':>9} {'max miss':>8} {'fail':>5}")
-    lines = [f"== {name}: error = "
-             + ("relative to the exact distance" if exact else
-                "length vs the shortest found (relative)"), head, "-" * len(head)]
+    what = ("relative to the exact distance" if exact else
+            "length vs the shortest found (relative)" if exact is not None else
+            "|exp(x, v) - y|_max with v the closed-form initial velocity of the geodesic "
+            "from x to y")
+    lines = [f"== {name}: error = {what}", head, "-" * len(head)]
     for row in rows:
         peer = row.get("peer", "?")
         if "skipped" in row:
-            lines.append(f"{peer:<10} {row.get('method', ''):<20} {row.get('setting', ''):<42} "
+            lines.append(f"{peer:<10} {row.get('method', ''):<20} {row.get('setting', ''):<46} "
                          f"skipped: {row['skipped']}")
             continue
         per = row["per_pair"]
@@ -445,7 +561,7 @@ def summarise(name: str, rows: list[dict], exact: bool) -> list[str]:
         mx = f"{np.max(errs):9.1e}" if errs.size else f"{'-':>9}"
         ok_miss = [r["miss"] for r in per if r.get("miss") is not None and r["failed"] is None]
         miss = f"{max(ok_miss):8.1e}" if ok_miss else f"{'-':>8}"
-        lines.append(f"{peer:<10} {row['method']:<20} {row['setting'][:42]:<42} "
+        lines.append(f"{peer:<10} {row['method']:<20} {row['setting'][:46]:<46} "
                      f"{_ms(np.median(secs)):>10} {_ms(row.get('setup', 0.0)):>8} {med} {mx} "
                      f"{miss} {len(fails):>2}/{len(per)}")
         if fails:
@@ -470,7 +586,8 @@ def main() -> None:
     ap.add_argument("--worker", choices=("geomstats", "finslerax"), help=argparse.SUPPRESS)
     ap.add_argument("--pairs", type=int, default=10, help="pairs per metric (default 10)")
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--metrics", default="poincare,bump,randers,matsumoto")
+    ap.add_argument("--metrics", default=",".join(SECTIONS),
+                    help="sections to run (default all): " + ",".join(SECTIONS))
     ap.add_argument("--geomstats-python", default=DEFAULT_PEERS["geomstats"],
                     help="python of a venv with geomstats 2.8 (numpy<2, autograd)")
     ap.add_argument("--finslerax-python", default=DEFAULT_PEERS["finslerax"],
@@ -490,49 +607,54 @@ def main() -> None:
 
     torch.set_num_threads(1)
     names = [s.strip() for s in args.metrics.split(",") if s.strip()]
-    unknown = set(names) - {"poincare", "bump", "randers", "matsumoto"}
+    unknown = set(names) - set(SECTIONS)
     if unknown:
-        ap.error(f"unknown metrics {sorted(unknown)}")
+        ap.error(f"unknown metrics {sorted(unknown)}; choose from {','.join(SECTIONS)}")
     report: dict[str, Any] = {"pairs": args.pairs, "seed": args.seed, "metrics": {}}
     t_start = time.perf_counter()
     for name in names:
-        m = bump_metric() if name == "bump" else finsler.get_metric(name)
-        pairs = make_pairs(name, m, args.pairs, args.seed)
+        metric_name = "poincare" if name == "exp" else name
+        m = bump_metric() if name == "bump" else finsler.get_metric(metric_name)
+        pairs = make_pairs(metric_name, m, args.pairs, args.seed)
         rng = np.random.default_rng(args.seed + 1)
-        check = np.stack([make_pairs(name, m, 8, args.seed + 2)[:, 0],
+        check = np.stack([make_pairs(metric_name, m, 8, args.seed + 2)[:, 0],
                           rng.normal(size=(8, 2))], 1)
         truth = m.F(check[:, 0], check[:, 1])
-        riemannian = name in ("poincare", "bump")
-        rows = project_rows(m, pairs, with_log=name != "matsumoto")
-        job: dict[str, Any] = {"metric": name, "pairs": pairs.tolist(),
-                               "check": check.tolist(), "segments": m.task.segments}
-        if riemannian:
-            job["params"] = BUMP if name == "bump" else {}
-            peer = "geomstats"
+        job: dict[str, Any] = {"metric": metric_name, "pairs": pairs.tolist(),
+                               "check": check.tolist(), "segments": m.task.segments,
+                               "params": {"poincare": {}, "bump": BUMP,
+                                          "randers": {"wind": list(WIND)},
+                                          "matsumoto": {"height": HEIGHT}}[metric_name]}
+        if name == "exp":
+            vel = np.stack([poincare_velocity(s, g) for s, g in pairs])
+            job.update(task="exp", velocities=vel.tolist())
+            rows = project_exp_rows(m, pairs, vel)
         else:
-            job["params"] = {"wind": list(WIND)} if name == "randers" else {"height": HEIGHT}
-            peer = "finslerax"
-        res = run_peer(peer, getattr(args, f"{peer}_python"), job)
+            rows = project_rows(m, pairs, with_log=name != "matsumoto")
         notes = []
-        if "skipped" in res:
-            rows.append({"peer": peer, "method": "(all)", "setting": "", "skipped":
-                         res["skipped"]})
-        else:
+        for peer in SECTIONS[name]:
+            res = run_peer(peer, getattr(args, f"{peer}_python"), job)
+            if "skipped" in res:
+                rows.append({"peer": peer, "method": "(all)", "setting": "",
+                             "skipped": res["skipped"]})
+                continue
             gap = float(np.max(np.abs(np.asarray(res["check"]) - truth) / truth))
             notes.append(f"{peer} {res['version']}: its F equals the project's F to {gap:.1e} "
                          "(max relative, 8 sample points)")
             for r in res["rows"]:
                 r["peer"] = peer
                 rows.append(r)
-        exact = (m.distance(pairs[:, 0], pairs[:, 1]) if name in ("poincare", "randers")
+        exact = (m.distance(pairs[:, 0], pairs[:, 1]) if metric_name in ("poincare", "randers")
                  else None)
         score(m, pairs, rows, exact)
-        lines = summarise(name, rows, exact is not None) + [f"   {t}" for t in notes]
+        title = "poincare, exp map" if name == "exp" else name
+        kind = None if name == "exp" else exact is not None
+        lines = summarise(title, rows, kind) + [f"   {t}" for t in notes]
         print("\n".join(lines) + "\n", flush=True)
         report["metrics"][name] = {"pairs": pairs.tolist(), "rows": rows, "notes": notes,
                                    "exact": None if exact is None else exact.tolist()}
     total = time.perf_counter() - t_start
-    print(f"{len(names)} metrics x {args.pairs} pairs in {total:.0f} s (one thread each)")
+    print(f"{len(names)} sections x {args.pairs} pairs in {total:.0f} s (one thread each)")
     if args.json:
         finsler.atomic_write_text(args.json, json.dumps(report), "--json")
 
