@@ -39,7 +39,10 @@ from scipy.integrate import solve_ivp
 
 from finsler.errors import InputError
 from finsler.metric import Metric
+from solvers.chebyshev import differentiation_matrix
+from solvers.inputs import as_metric, check_point, is_short_pair
 from solvers.result import SolverError
+from solvers.spectral import distance
 
 __all__ = ["ExpResult", "ExpStatus", "LogResult", "LogStatus", "exp_map", "log_map"]
 
@@ -271,12 +274,6 @@ def spray(metric: Metric) -> Spray:
 # ----------------------------------------------------------------------------------------
 # exp
 # ----------------------------------------------------------------------------------------
-def _metric(metric: Metric | str) -> Metric:
-    from solvers.geodesic import _metric as geodesic_metric
-
-    return geodesic_metric(metric)
-
-
 def _vector(m: Metric, v: Any, name: str) -> np.ndarray:
     try:
         arr = np.asarray(v, dtype=np.float64)
@@ -440,11 +437,9 @@ def exp_map(
     bad input, a non-smooth metric or a start where ``F(x, .)`` is not strongly convex;
     ``strict=True`` raises :class:`SolverError` unless the status is ``SUCCESS``.
     """
-    m = _metric(metric)
+    m = as_metric(metric)
     sp = spray(m)
-    from solvers.geodesic import _point
-
-    xs = _point(m, x, "x")
+    xs = check_point(m, x, "x")
     vs = _vector(m, v, "v")
     if isinstance(t, bool) or not isinstance(t, (int, float, np.integer, np.floating)) or not (
             math.isfinite(t) and t >= 0):
@@ -511,14 +506,11 @@ def log_map(
     ``y`` or along the shortest path (e.g. Matsumoto outside ``|p| ~ 0.289``);
     ``strict=True`` raises :class:`SolverError` unless converged.
     """
-    from solvers.geodesic import _point, is_short_pair
-    from solvers.spectral import differentiation_matrix, distance
-
     t0 = time.perf_counter()
-    m = _metric(metric)
+    m = as_metric(metric)
     sp = spray(m)
-    xs = _point(m, x, "x")
-    ys = _point(m, y, "y")
+    xs = check_point(m, x, "x")
+    ys = check_point(m, y, "y")
     if not (isinstance(tol, float) and math.isfinite(tol) and 0 < tol < 1):
         raise InputError(f"tol must be a float in (0, 1), got {tol!r}")
     if isinstance(max_iter, bool) or not isinstance(max_iter, (int, np.integer)) or max_iter < 1:
