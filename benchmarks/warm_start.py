@@ -14,8 +14,9 @@ It prints the time per exact geodesic of both (the warm start's includes its sha
 the batched path generation), the speed-up of the means, and on how many pairs the warm
 start's energy is within 1e-6 (relative) of the globally seeded one, lower than it (the
 learned route found a better local minimum) or higher (the warm start ended in a worse
-local minimum: those pairs are listed). One-off setup (building the NLP and the seeding
-graph, loading the policy) is done on an extra pair before timing and printed apart.
+local minimum: those pairs are listed), and how many are within 1e-4, 1e-3, 1e-2.
+One-off setup (building the NLP and the seeding graph, loading the policy) is done on an
+extra pair before timing and printed apart.
 
 Usage::
 
@@ -41,6 +42,8 @@ from solvers import solve_geodesic
 TASKS = {"matsumoto": 64, "carlike": 256, "panda-pole": 32}
 #: Relative energy difference below which the two solves count as the same geodesic.
 RTOL = 1e-6
+#: Relative gaps (warm minus global, over global) at which the pairs are also counted.
+GAPS = (1e-6, 1e-4, 1e-3, 1e-2)
 
 
 def run_task(name: str, k: int, seed: int) -> dict:
@@ -90,7 +93,10 @@ def run_task(name: str, k: int, seed: int) -> dict:
         "speedup_median": float(np.median(gt) / np.median(wt)),
         "equal": int(equal.sum()), "better": int(better.sum()), "worse": int(worse.sum()),
         "warm_converged": int(np.sum(warm_ok)), "global_converged": int(np.sum(glob_ok)),
-        "worse_pairs": [{"pair": int(i), "relative_energy_gap": float(rel[i])}
+        "within": {f"{t:g}": int(np.sum(rel <= t)) for t in GAPS},
+        "worse_pairs": [{"pair": int(i), "relative_energy_gap": float(rel[i]),
+                         "pair_distance_coordinates": float(np.linalg.norm(
+                             pairs[i, 1] - pairs[i, 0]))}
                         for i in np.flatnonzero(worse)],
     }
 
@@ -134,9 +140,11 @@ def main() -> None:
         print(f"  energy within {RTOL:g} of the globally seeded: {r['equal']}/{r['pairs']}; "
               f"lower (better minimum): {r['better']}; higher: {r['worse']}; converged: "
               f"warm {r['warm_converged']}, global {r['global_converged']}")
+        print("  warm-start energy at most (1 + gap) x the globally seeded one: " + ", ".join(
+            f"gap {t}: {c}/{r['pairs']}" for t, c in r["within"].items()))
         for w in r["worse_pairs"]:
-            print(f"    pair {w['pair']}: warm-start energy higher by "
-                  f"{100 * w['relative_energy_gap']:.3g}%")
+            print(f"    pair {w['pair']} (|g - s| = {w['pair_distance_coordinates']:.2f}): "
+                  f"warm-start energy higher by {100 * w['relative_energy_gap']:.3g}%")
     if args.json:
         from learn.storage import atomic_write_text
 

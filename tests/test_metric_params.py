@@ -304,3 +304,19 @@ def test_report_picks_figures_by_what_the_metric_is(tmp_path: Path) -> None:
         shapes = {"paths.png", "carlike_headings.png", "panda_motion.png", "coordinates.png"}
         assert shapes & set(doc["figures"]) == {want}, doc["figures"]
         assert (tmp_path / cls.name / want).stat().st_size > 10_000
+
+
+def test_sweep_passes_the_metric_to_its_workers() -> None:
+    from validation.cli_sweep import metric_overrides
+
+    assert metric_overrides(["matsumoto"], None) == {}
+    assert metric_overrides(["matsumoto", "carlike"], {"radius": 0.9}) == {
+        "metric_params": {"radius": 0.9}}
+    # a user metric: its class goes to the (spawned) workers, which import it
+    assert metric_overrides(["wavy"], {"a": 0.2}) == {"metric_params": {"a": 0.2},
+                                                      "metric_class": THIS_CLASS}
+    with pytest.raises(InputError, match="alone"):
+        metric_overrides(["wavy", "matsumoto"], None)
+    res = CliRunner().invoke(app, ["train", "--env", "wavy", "--out", "/nonexistent/x",
+                                   "--set", 'metric_params={"a": 0.2}'])
+    assert res.exit_code == 2 and "use --metric-param" in res.output
