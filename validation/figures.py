@@ -99,13 +99,16 @@ def save_figure(fig: Figure, path: Path, dpi: int = 120) -> None:
 # ----------------------------------------------------------------------------------------
 # report: learning curve of one run
 # ----------------------------------------------------------------------------------------
-def learning_curve(rows: Sequence[Mapping[str, Any]], cmp: Comparison) -> Figure | None:
+def learning_curve(rows: Sequence[Mapping[str, Any]], cmp: Comparison,
+                   pairs: str = "validation") -> Figure | None:
     """Success rate of one run against all-inclusive evaluations of C (metrics.csv
     ``timesteps``) and wall time, with the exact ceiling and the straight-line baseline;
     a third panel against ``timesteps_paper`` if the log has it and it differs from
     ``timesteps``. A log without ``timesteps_paper`` predates the run-directory contract:
-    its ``timesteps`` axis is labelled as such, not as all-inclusive. None if the rows hold
-    no (timesteps, success_rate)."""
+    its ``timesteps`` axis is labelled as such, not as all-inclusive. ``pairs``: the pair
+    set the rows were evaluated on (``validation`` or ``default``, see
+    :func:`validation.report.curve_set`), named in the legend. None if the rows hold no
+    (timesteps, success_rate)."""
     rows = [r for r in rows if "timesteps" in r and "success_rate" in r]
     if not rows:
         return None
@@ -123,7 +126,7 @@ def learning_curve(rows: Sequence[Mapping[str, Any]], cmp: Comparison) -> Figure
     fig = new_figure((5.5 * len(panels), 4))
     axes = fig.subplots(1, len(panels))
     for ax, (x, lab) in zip(axes, panels):
-        ax.plot(x, sr, color=LEARNED_COLOR, label="learned policy (validation set)")
+        ax.plot(x, sr, color=LEARNED_COLOR, label=f"learned policy ({pairs} set)")
         ax.axhline(100 * cmp.exact.ceiling_rate, color=EXACT_COLOR, ls="--",
                    label="exact geodesics (ceiling)")
         ax.axhline(100 * cmp.straight.success_rate, color=STRAIGHT_COLOR, ls=":",

@@ -117,16 +117,38 @@ def read_learning_curve(run_dir: Path | None) -> list[dict[str, Any]]:
     return read_metrics(Path(run_dir) / METRICS_FILE)
 
 
+def curve_set(run_dir: Path | None) -> str:
+    """Which pairs the run's learning curve was evaluated on, from its ``config.json``
+    (``selection``): ``"validation"`` (runs since the validation set existed) or
+    ``"default"`` (the shipped policies, trained before it: their curve and best checkpoint
+    are on the default evaluation set)."""
+    if run_dir is None:
+        return "validation"
+    from learn.storage import read_json
+
+    try:
+        selection = str(read_json(Path(run_dir) / "config.json").get("selection", ""))
+    except Exception:  # no or unreadable config: the loader has already judged the run
+        return "validation"
+    return "default" if "DEFAULT evaluation set" in selection else "validation"
+
+
+CURVE_SETS = {"validation": "the validation pairs (finsler.validation_pairs)",
+              "default": "the DEFAULT evaluation pairs (finsler.default_pairs: this run "
+                         "predates the validation set, so its curve and its best checkpoint "
+                         "are on the set reported here, which is optimistic)"}
+
+
 # ----------------------------------------------------------------------------------------
 # figures (drawn by validation.figures)
 # ----------------------------------------------------------------------------------------
 def write_figures(cmp: Comparison, metric: Metric, out: Path, curve: list[dict[str, Any]],
-                  floor: Any = None) -> list[str]:
+                  floor: Any = None, curve_pairs: str = "validation") -> list[str]:
     """Write the report's PNG figures (drawn by :mod:`validation.figures`) into ``out``,
     atomically; returns their file names."""
     from validation import figures as fg
 
-    drawn = [("learning_curve.png", fg.learning_curve(curve, cmp))]
+    drawn = [("learning_curve.png", fg.learning_curve(curve, cmp, curve_pairs))]
     # by what the metric is, not by its name: its dimension, its coordinates, its hooks
     if metric.dim == 2:
         drawn.append(("paths.png", fg.paths_2d(cmp, metric)))
@@ -284,7 +306,8 @@ def _markdown(doc: dict[str, Any], figures: list[str], metric: Metric) -> str:
         "",
     ]
     captions = {
-        "learning_curve.png": "Learning curve (success rate on the validation pairs, from "
+        "learning_curve.png": "Learning curve (success rate on "
+        + CURVE_SETS[doc.get("learning_curve_pairs", "validation")] + ", from "
         "`metrics.csv`) against evaluations of C, all-inclusive (column `timesteps`: every "
         "evaluation the learner made in training), and wall time, with the exact ceiling "
         "and the straight-line baseline; when the log also has the paper's count "
@@ -309,8 +332,10 @@ def _markdown(doc: dict[str, Any], figures: list[str], metric: Metric) -> str:
             reached.append(f"{100 * float(t):.0f}%: " + (
                 "not reached" if hit is None else
                 f"{hit['timesteps']:.3g} evaluations of C, {hit['wall_seconds']:.0f} s"))
+        on = ("validation" if doc.get("learning_curve_pairs", "validation") == "validation"
+              else "default-set")
         lines += ["Time to a success rate (the first evaluation at which a running mean of "
-                  "5 consecutive validation evaluations reached it): "
+                  f"5 consecutive {on} evaluations reached it): "
                   + "; ".join(reached) + ".", ""]
     for f in figures:
         lines += [f"![{f}]({f})", "", captions.get(f, ""), ""]
@@ -400,10 +425,12 @@ def _build_report(env: str | None, out: Path, *, run: str | Path | None,
     doc["pairs_note"] = pairs_note
     doc["midpoint_error_exact_floor"] = floor.summary()
     doc["learning_curve"] = read_learning_curve(run_dir)
+    doc["learning_curve_pairs"] = curve_set(run_dir)
     doc["time_to_success"] = time_to_success(doc["learning_curve"])
     doc["learned_length_ratio_per_pair"] = [
         None if not np.isfinite(x) else float(x) for x in cmp.ratios("learned")]
-    figures = write_figures(cmp, metric, out, doc["learning_curve"], floor)
+    figures = write_figures(cmp, metric, out, doc["learning_curve"], floor,
+                            doc["learning_curve_pairs"])
     doc["figures"] = figures
     doc["summary"] = {
         "learned_success": doc["success_rate"]["learned"],
