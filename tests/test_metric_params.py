@@ -320,3 +320,24 @@ def test_sweep_passes_the_metric_to_its_workers() -> None:
     res = CliRunner().invoke(app, ["train", "--env", "wavy", "--out", "/nonexistent/x",
                                    "--set", 'metric_params={"a": 0.2}'])
     assert res.exit_code == 2 and "use --metric-param" in res.output
+
+
+@pytest.mark.parametrize("variant", ["seq", "pg"])
+def test_baselines_train_and_reload_on_the_parameters(tmp_path: Path, variant: str) -> None:
+    """The paper's baselines go through the same metric fields (learn.runs entry points)."""
+    small = {"seq": dict(timesteps=600, eval_every=300, eval_pairs=4, n_envs=2, n_steps=32,
+                         batch_size=32, n_epochs=1, depth=3),
+             "pg": dict(depth=2, cycles_first=1, cycles_other=1, pairs_per_cycle=2,
+                        samples_per_pair=2, eval_every=1, eval_pairs=4)}[variant]
+    cfg = learn.make_config("wavy", variant, metric_params={"a": 0.2}, **small)
+    assert cfg.metric_params == {"a": 0.2} and cfg.metric_class == THIS_CLASS
+    learn.train_run(cfg, tmp_path / "r", progress=False)
+    assert read_json(tmp_path / "r" / CONFIG_FILE)["metric"]["params"] == {"a": 0.2}
+    pol = learn.load_any_policy(tmp_path / "r", metric_params={"a": 0.2})
+    x, y = np.array([[0.3, 0.1]]), np.array([[-0.2, 0.4]])
+    assert pol.metric.cost(x, y)[0] == pytest.approx(_wavy_cost(0.2, x, y)[0], rel=1e-14)
+    with pytest.raises(InputError, match=r"a=0.2 \(given 0.5\)"):
+        learn.load_any_policy(tmp_path / "r", metric_params={})  # {} = the defaults
+    with pytest.raises(InputError, match="metric_params"):
+        learn.train_run(cfg.replace(metric_params={"a": 0.3}), tmp_path / "r", resume=True,
+                        progress=False)
