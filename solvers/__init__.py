@@ -14,6 +14,7 @@ Public API::
     log_map(metric, x, y) -> LogResult
 """
 
+from solvers.certify import CertifyResult, MeshSpec, certify
 from solvers.expmap import ExpResult, ExpStatus, LogResult, LogStatus, exp_map, log_map
 from solvers.geodesic import (
     check_pairs,
@@ -36,6 +37,7 @@ from solvers.seeding import SeedPlan
 from solvers.spectral import distance
 
 __all__ = [
+    "CertifyResult",
     "DistanceResult",
     "DistanceStatus",
     "ExpResult",
@@ -43,11 +45,13 @@ __all__ = [
     "GeodesicResult",
     "LogResult",
     "LogStatus",
+    "MeshSpec",
     "MidpointResult",
     "MinMaxResult",
     "SeedPlan",
     "SolverError",
     "Status",
+    "certify",
     "check_pairs",
     "check_segments",
     "distance",

@@ -1,0 +1,802 @@
+"""Certified intervals ``lower <= d(start, goal) <= upper`` for 2-D metrics (issue 10).
+
+Lower bound by convex duality. If a potential ``phi`` satisfies ``dphi_z(v) <= F(z, v)`` for
+every point ``z`` and every vector ``v`` (the dual norm ``F*(z, dphi_z) <= 1``), then for
+every curve ``gamma`` from ``x`` to ``y``, ``phi(y) - phi(x) = int dphi(gamma') <=
+int F(gamma, gamma')``, hence ``d(x, y) >= phi(y) - phi(x)``. :func:`certify` maximises
+``phi(goal) - phi(start)`` over continuous piecewise-quadratic (P2) potentials on a Delaunay
+triangulation that covers the whole domain (a convex polygon containing it), a linear
+program solved with cvxpy (Clarabel).
+
+The condition must hold at EVERY ``z`` of a triangle and EVERY direction, not only at
+samples. With ``K`` unit directions ``v_k`` and the chords ``w(t) = (1 - t) v_j + t v_{j+1}``
+between them (every direction is a positive multiple of a chord point, and both sides are
+1-homogeneous in ``v``), the rows are, at each vertex ``z_m`` of each triangle ``T``::
+
+    grad phi_T(z_m) . v_k  <=  F(z_m, v_k) - Hz_{T,k} R_T**2 / 2 - max(Ht_{T,k-1}, Ht_{T,k}) / 8
+
+``grad phi_T`` is affine on ``T`` (P2), so ``F(z, v_k) - grad phi_T(z) . v_k`` differs from
+its linear interpolant by at most ``Hz R**2 / 2`` (``Hz`` >= the largest eigenvalue of
+``Hess_z F(., v_k)`` on ``T``, ``R`` the circumradius: ``sum_i lambda_i |z_i - z|**2 <= R**2``),
+and along a chord ``F(z, w(t))`` lies above the chord's linear interpolant minus
+``Ht / 8`` (``Ht`` >= ``d2/dt2 F(z, w(t))`` on ``T`` x the arc). Neither bound needs
+``F(z, .)`` to be convex. ``Hz`` and ``Ht`` come from the CasADi Hessians of the metric's own
+``F`` at the triangle's vertices, edge midpoints and centroid (chords at t = 0, 1/2, 1),
+inflated by the spread of those samples (``safety``): an ESTIMATE of a second-order bound,
+the one non-exact ingredient (a third-order term); everything else is exact arithmetic on
+float64 values of F. The LP is solved with rows added in rounds (the most violated
+direction at each vertex); the final potential is checked against every row and divided
+by the largest ratio ``(grad phi . v_k) / bound``, so the returned lower bound satisfies
+every row exactly whatever the LP solver's tolerance.
+
+Convexity: where ``F(z, .)`` is not convex (Matsumoto outside ``|p| = 1/(2 sqrt 3)``) the
+condition ``dphi(v) <= F(z, v)`` for all ``v`` is the same as for the convexification
+``F**(z, .)``; the lower bound is valid for the distance (an infimum of lengths, which the
+convexification does not change), and the result says which case applies.
+
+Upper bound: the length of the solver's path (:func:`solvers.solve_geodesic`) by adaptive
+quadrature plus its error estimate (:meth:`finsler.Metric.path_length_error`).
+
+Refinement: triangles are refined (edge midpoints, Delaunay again) where the LP's dual
+solution says the corrections cost most (``sum_rows y_r c_r``, the bound's sensitivity),
+starting from a mesh graded around the solver's path, until the gap reaches
+``MeshSpec.target_gap`` or a size / round limit.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+import os
+import time
+from dataclasses import asdict, dataclass, field, fields
+from typing import Any
+
+import casadi as ca
+import numpy as np
+
+from finsler.domains import Box, Disk
+from finsler.errors import InputError
+from finsler.lowering import LoweredFunction, lower
+from finsler.metric import Metric
+from finsler.registry import get_metric
+
+__all__ = ["CertifyResult", "MeshSpec", "certify"]
+
+#: cvxpy solver of the LPs (Clarabel: an interior-point method, far faster here than HiGHS).
+LP_SOLVER = "CLARABEL"
+#: Rows whose dual exceeds this fraction of the largest dual count as tight (refined).
+TIGHT_DUAL = 1e-7
+#: Evenly spaced rays per vertex in the first LP of a mesh (more are added where needed).
+INITIAL_DIRECTIONS = 8
+
+
+@dataclass(frozen=True)
+class MeshSpec:
+    """Mesh and refinement settings of :func:`certify`.
+
+    Lengths are in coordinates. The first mesh has spacing ``h_path`` within ``corridor`` of
+    the solver's path, growing by ``grade`` per unit distance beyond, up to ``h_far``.
+    """
+
+    h_path: float = 0.05
+    """Spacing of the first mesh along the solver's path."""
+    corridor: float = 0.1
+    """Half-width of the band around the path meshed at ``h_path``."""
+    grade: float = 0.6
+    """Growth of the spacing per unit distance outside the band."""
+    h_far: float = 0.25
+    """Largest spacing (far from the path)."""
+    directions: int = 128
+    """Number K of sampled unit directions per triangle (>= 8)."""
+    target_gap: float = 1e-2
+    """Stop refining once the relative gap (upper - lower) / upper is at most this."""
+    max_triangles: int = 12000
+    """Stop refining before the mesh would exceed this many triangles."""
+    max_rounds: int = 8
+    """Largest number of refinement rounds (LP solves)."""
+    mark_fraction: float = 0.5
+    """Refine the triangles that carry this fraction of the dual-weighted corrections."""
+    safety: float = 0.5
+    """Second-order bounds: sampled max + ``safety`` x (max - min) of the samples."""
+    segments: int | None = None
+    """Segments of the solver's path (the upper bound); default: 4 x the task's 2**D."""
+
+    def __post_init__(self) -> None:
+        for name in ("h_path", "corridor", "grade", "h_far", "target_gap", "mark_fraction"):
+            val = getattr(self, name)
+            if isinstance(val, bool) or not isinstance(val, (int, float)) or not (
+                    math.isfinite(val) and val > 0):
+                raise InputError(f"MeshSpec.{name} must be positive and finite, got {val!r}")
+        if not self.safety >= 0 or not math.isfinite(self.safety):
+            raise InputError(f"MeshSpec.safety must be >= 0, got {self.safety!r}")
+        if self.h_path > self.h_far:
+            raise InputError(f"MeshSpec.h_path ({self.h_path}) must be <= h_far ({self.h_far})")
+        if self.mark_fraction > 1:
+            raise InputError(f"MeshSpec.mark_fraction must be <= 1, got {self.mark_fraction}")
+        for name, low in (("directions", 8), ("max_triangles", 2), ("max_rounds", 1)):
+            val = getattr(self, name)
+            if isinstance(val, bool) or not isinstance(val, (int, np.integer)) or val < low:
+                raise InputError(f"MeshSpec.{name} must be an integer >= {low}, got {val!r}")
+        if self.segments is not None and (isinstance(self.segments, bool) or not isinstance(
+                self.segments, (int, np.integer)) or self.segments < 2):
+            raise InputError(f"MeshSpec.segments must be an integer >= 2, got "
+                             f"{self.segments!r}")
+
+    @classmethod
+    def preset(cls, name: str) -> MeshSpec:
+        """``"coarse"`` (gap ~ a few 1e-2, fast), ``"default"`` (target 1e-2) or ``"fine"``
+        (target 1e-3, more directions and triangles)."""
+        presets = {
+            "coarse": cls(h_path=0.1, h_far=0.3, directions=64, target_gap=5e-2, max_rounds=3,
+                          max_triangles=3000),
+            "default": cls(),
+            "fine": cls(h_path=0.04, directions=256, target_gap=1e-3, max_rounds=12,
+                        max_triangles=40000),
+        }
+        if name not in presets:
+            raise InputError(f"unknown mesh preset {name!r}; choose one of "
+                             f"{', '.join(presets)}")
+        return presets[name]
+
+    @classmethod
+    def names(cls) -> list[str]:
+        return ["coarse", "default", "fine"]
+
+
+@dataclass
+class CertifyResult:
+    """A certified interval ``lower <= d(start, goal) <= upper``.
+
+    ``gap = (upper - lower) / upper``. ``upper = length + length_error`` of ``path``
+    ``(n+1, 2)`` (the solver's path, adaptive quadrature). ``convexity`` is ``"convex"``
+    (``F(z, .)`` convex on the whole domain) or ``"convexified"`` (not convex somewhere:
+    the dual condition equals that of the convexification, see the module docstring);
+    ``convexity_note`` says it in words. ``rounds`` lists, per LP solve, the triangles,
+    rows used, lower bound and gap. ``times`` in seconds: ``solve`` (upper bound), ``mesh``,
+    ``bounds`` (F and its Hessians), ``lp`` and ``total``. ``lp_status`` is cvxpy's status
+    of the last LP; ``max_row_ratio`` the largest ``grad phi . v / bound`` over every row
+    of the last potential before the final check (``<= 1`` up to the LP solver's
+    feasibility tolerance; the potential is divided by it when above 1). ``lp_rows`` counts
+    the rows of the last LP (edges of the inner polygons), ``lp_rows_total`` the sampled
+    rows they imply (3 x triangles x directions).
+    """
+
+    metric: str
+    start: np.ndarray
+    goal: np.ndarray
+    lower: float
+    upper: float
+    length: float
+    length_error: float
+    gap: float
+    triangles: int
+    vertices: int
+    unknowns: int
+    directions: int
+    lp_rows: int
+    lp_rows_total: int
+    lp_status: str
+    lp_solver: str
+    max_row_ratio: float
+    convexity: str
+    convexity_note: str
+    solver_status: str
+    mesh: dict[str, Any]
+    times: dict[str, float]
+    rounds: list[dict[str, Any]] = field(default_factory=list)
+    path: np.ndarray | None = None
+
+    @property
+    def certified(self) -> bool:
+        """True if the interval is non-empty and the lower bound is positive or zero."""
+        return bool(np.isfinite(self.lower) and self.lower <= self.upper)
+
+    def to_dict(self, with_path: bool = False) -> dict[str, Any]:
+        """JSON-ready dict (keys ``lower``, ``upper``, ``gap`` first; ``path`` only if
+        ``with_path``)."""
+        out: dict[str, Any] = {}
+        for f in fields(self):
+            val = getattr(self, f.name)
+            if f.name == "path" and not with_path:
+                continue
+            out[f.name] = val.tolist() if isinstance(val, np.ndarray) else val
+        return out
+
+
+# ----------------------------------------------------------------------------------------
+# derivatives of F (CasADi, lowered once per metric)
+# ----------------------------------------------------------------------------------------
+@functools.lru_cache(maxsize=8)
+def _derivatives(metric: Metric) -> LoweredFunction:
+    """Lowered ``(x, v) -> (F, Hess_x F, Hess_v F)``, batch ``(N, 2)`` -> ``(N, 1), (N, 4),
+    (N, 4)``."""
+    x = ca.SX.sym("x", 2)
+    v = ca.SX.sym("v", 2)
+    f = metric.F_sx(x, v)
+    hx, _ = ca.hessian(f, x)
+    hv, _ = ca.hessian(f, v)
+    fun = ca.Function(f"certify_{metric._ident}", [x, v],
+                      [f, ca.reshape(ca.densify(hx), 4, 1), ca.reshape(ca.densify(hv), 4, 1)])
+    return lower(fun)
+
+
+def _eval_derivatives(metric: Metric, x: np.ndarray, v: np.ndarray,
+                      chunk: int = 200_000) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    fun = _derivatives(metric)
+    fs, hxs, hvs = [], [], []
+    for a in range(0, x.shape[0], chunk):
+        with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+            f, hx, hv = fun(x[a:a + chunk], v[a:a + chunk])
+        fs.append(np.asarray(f, float).reshape(-1))
+        hxs.append(np.asarray(hx, float).reshape(-1, 2, 2))
+        hvs.append(np.asarray(hv, float).reshape(-1, 2, 2))
+    out = np.concatenate(fs), np.concatenate(hxs), np.concatenate(hvs)
+    if not all(np.all(np.isfinite(a)) for a in out):
+        raise InputError(f"{metric.name}: F or its Hessians are not finite on the mesh "
+                         "(the polygon covering the domain reaches a singularity of F?)")
+    return out
+
+
+def _lam_max(h: np.ndarray) -> np.ndarray:
+    """Largest eigenvalue of symmetric 2x2 matrices ``(..., 2, 2)``."""
+    a, b, c = h[..., 0, 0], 0.5 * (h[..., 0, 1] + h[..., 1, 0]), h[..., 1, 1]
+    return 0.5 * (a + c) + np.sqrt(0.25 * (a - c) ** 2 + b * b)
+
+
+class _PointData:
+    """Per-point samples, computed once per point and reused across refinement rounds:
+    ``F(p, v_k)`` ``(K,)``, ``lambda_max(Hess_z F(p, v_k))`` ``(K,)`` and the chord
+    curvature ``max_t d2/dt2 F(p, w_j(t))`` over t in {0, 1/2, 1} ``(K,)`` (arc j from v_j
+    to v_{j+1})."""
+
+    def __init__(self, metric: Metric, k: int) -> None:
+        self.metric = metric
+        ang = 2 * np.pi * np.arange(k) / k
+        self.dirs = np.stack([np.cos(ang), np.sin(ang)], 1)
+        mid = ang + np.pi / k
+        self.mids = np.stack([np.cos(mid), np.sin(mid)], 1)  # unit; chord midpoint = cos * mid
+        self.delta = np.roll(self.dirs, -1, axis=0) - self.dirs  # chord j: v_{j+1} - v_j
+        self.cos = math.cos(math.pi / k)
+        self.index: dict[bytes, int] = {}
+        self.F = np.zeros((0, k))
+        self.Hz = np.zeros((0, k))
+        self.Ht = np.zeros((0, k))
+        self.seconds = 0.0
+
+    def rows(self, pts: np.ndarray) -> np.ndarray:
+        """Row indices of ``pts`` ``(P, 2)``, computing the samples of new points."""
+        keys = [p.tobytes() for p in np.ascontiguousarray(pts)]
+        new = []
+        for i, key in enumerate(keys):
+            if key not in self.index:
+                self.index[key] = len(self.index)
+                new.append(i)
+        if new:
+            t0 = time.perf_counter()
+            self._compute(pts[new])
+            self.seconds += time.perf_counter() - t0
+        return np.fromiter((self.index[key] for key in keys), dtype=np.int64, count=len(keys))
+
+    def _compute(self, p: np.ndarray) -> None:
+        k = self.dirs.shape[0]
+        n = p.shape[0]
+        xs = np.repeat(p, k, axis=0)
+        f, hx, hv = _eval_derivatives(self.metric, xs, np.tile(self.dirs, (n, 1)))
+        _, _, hvm = _eval_derivatives(self.metric, xs, np.tile(self.mids, (n, 1)))
+        hv = hv.reshape(n, k, 2, 2)
+        hvm = hvm.reshape(n, k, 2, 2) / self.cos  # Hess_v is homogeneous of degree -1
+        d = self.delta
+        at_start = np.einsum("ki,nkij,kj->nk", d, hv, d)  # t = 0: v_j
+        at_end = np.einsum("ki,nkij,kj->nk", d, np.roll(hv, -1, axis=1), d)  # t = 1: v_{j+1}
+        at_mid = np.einsum("ki,nkij,kj->nk", d, hvm, d)
+        self.F = np.concatenate([self.F, f.reshape(n, k)])
+        self.Hz = np.concatenate([self.Hz, _lam_max(hx).reshape(n, k)])
+        self.Ht = np.concatenate([self.Ht, np.maximum(np.maximum(at_start, at_end), at_mid)])
+
+
+def _estimate_bound(samples: np.ndarray, safety: float) -> np.ndarray:
+    """Upper bound estimate from samples ``(T, S, K)`` -> ``(T, K)``: max + safety x spread,
+    positive part."""
+    hi = samples.max(axis=1)
+    lo = samples.min(axis=1)
+    return np.maximum(hi + safety * (hi - lo), 0.0)
+
+
+# ----------------------------------------------------------------------------------------
+# meshes
+# ----------------------------------------------------------------------------------------
+def _outline(metric: Metric) -> np.ndarray:
+    """Vertices ``(M, 2)`` (counter-clockwise) of a convex polygon containing the domain."""
+    dom = metric.domain
+    if isinstance(dom, Box):
+        (x0, y0), (x1, y1) = dom.low, dom.high
+        return np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]], float)
+    if isinstance(dom, Disk):
+        m = 64
+        r = dom.radius / math.cos(math.pi / m)  # circumscribed: the disk lies inside
+        a = 2 * np.pi * (np.arange(m) + 0.5) / m
+        return np.asarray(dom.center, float) + r * np.stack([np.cos(a), np.sin(a)], 1)
+    raise InputError(f"certify needs a 2-D box or disk domain, {metric.name} has "
+                     f"{dom.describe()}")
+
+
+def _inside_polygon(pts: np.ndarray, poly: np.ndarray, margin: float) -> np.ndarray:
+    """Points at least ``margin`` inside the convex counter-clockwise polygon."""
+    ok = np.ones(pts.shape[0], bool)
+    for a, b in zip(poly, np.roll(poly, -1, axis=0)):
+        e = b - a
+        normal = np.array([e[1], -e[0]]) / np.linalg.norm(e)  # outward for ccw
+        ok &= (pts - a) @ normal <= -margin
+    return ok
+
+
+def _distance_to_path(pts: np.ndarray, path: np.ndarray, chunk: int = 4096) -> np.ndarray:
+    """Euclidean distance of ``pts`` ``(P, 2)`` to the polyline ``path`` ``(n+1, 2)``."""
+    a, b = path[:-1], path[1:]
+    e = b - a
+    ee = np.maximum(np.einsum("ij,ij->i", e, e), 1e-300)
+    out = np.empty(pts.shape[0])
+    for s in range(0, pts.shape[0], chunk):
+        p = pts[s:s + chunk, None, :]
+        t = np.clip(np.einsum("pij,ij->pi", p - a[None], e) / ee, 0.0, 1.0)
+        d = p - (a[None] + t[..., None] * e[None])
+        out[s:s + chunk] = np.sqrt(np.min(np.einsum("pij,pij->pi", d, d), axis=1))
+    return out
+
+
+def _spacing(dist: np.ndarray, spec: MeshSpec) -> np.ndarray:
+    return np.minimum(spec.h_far, spec.h_path + spec.grade * np.maximum(dist - spec.corridor,
+                                                                          0.0))
+
+
+def _hex_lattice(lo: np.ndarray, hi: np.ndarray, h: float) -> np.ndarray:
+    """Hexagonal lattice of spacing ``h`` through the origin, covering ``[lo, hi]``; the
+    lattice of spacing ``2h`` is a subset of it (levels nest)."""
+    dy = h * math.sqrt(3) / 2
+    j = np.arange(math.floor(lo[1] / dy) - 1, math.ceil(hi[1] / dy) + 2)
+    i = np.arange(math.floor(lo[0] / h) - 2, math.ceil(hi[0] / h) + 3)
+    ii, jj = np.meshgrid(i, j)
+    x = h * (ii + 0.5 * jj)
+    y = dy * jj
+    pts = np.stack([x.ravel(), y.ravel()], 1)
+    keep = np.all((pts >= lo - h) & (pts <= hi + h), axis=1)
+    return pts[keep]
+
+
+def _initial_points(poly: np.ndarray, path: np.ndarray, s: np.ndarray, g: np.ndarray,
+                    spec: MeshSpec) -> np.ndarray:
+    lo, hi = poly.min(0), poly.max(0)
+    levels = max(0, math.ceil(math.log2(spec.h_far / spec.h_path)))
+    pieces = []
+    for lev in range(levels + 1):
+        h = spec.h_path * 2**lev
+        pts = _hex_lattice(lo, hi, h)
+        pts = pts[_inside_polygon(pts, poly, 0.3 * h)]
+        level = np.ceil(np.log2(_spacing(_distance_to_path(pts, path), spec) / spec.h_path
+                                - 1e-9))
+        level = np.clip(level, 0, levels)
+        pieces.append(pts[level == lev] if lev < levels else pts[level >= lev])
+    # the boundary: every polygon edge sampled at the local spacing
+    bnd = []
+    for a, b in zip(poly, np.roll(poly, -1, axis=0)):
+        length = float(np.linalg.norm(b - a))
+        t = np.linspace(0.0, 1.0, max(2, math.ceil(length / (0.5 * spec.h_path)) + 1))
+        cand = a + t[:, None] * (b - a)
+        h = _spacing(_distance_to_path(cand, path), spec)
+        keep, last = [0], 0.0
+        for i in range(1, len(t) - 1):
+            if (t[i] - last) * length >= h[i]:
+                keep.append(i)
+                last = t[i]
+        bnd.append(cand[keep])
+    pts = np.concatenate(pieces + bnd)
+    far = (np.linalg.norm(pts - s, axis=1) > 0.4 * spec.h_path) & (
+        np.linalg.norm(pts - g, axis=1) > 0.4 * spec.h_path)
+    return np.concatenate([s[None], g[None], pts[far]])
+
+
+class _Mesh:
+    """Delaunay triangulation with P2 unknowns: vertices, then one per edge (midpoint)."""
+
+    def __init__(self, points: np.ndarray) -> None:
+        from scipy.spatial import Delaunay
+
+        self.points = points
+        self.delaunay = Delaunay(points)
+        tri = self.delaunay.simplices
+        z = points[tri]
+        area2 = ((z[:, 1, 0] - z[:, 0, 0]) * (z[:, 2, 1] - z[:, 0, 1])
+                 - (z[:, 1, 1] - z[:, 0, 1]) * (z[:, 2, 0] - z[:, 0, 0]))
+        keep = np.abs(area2) > 1e-14 * np.max(np.abs(area2))  # drop slivers of zero area
+        self.simplex_row = np.cumsum(keep) - 1
+        self.simplex_row[~keep] = -1
+        tri = tri[keep]
+        self.tri = tri
+        nv = points.shape[0]
+        local = np.array([[0, 1], [1, 2], [2, 0]])
+        e = np.sort(tri[:, local].reshape(-1, 2), axis=1)
+        edges, inverse = np.unique(e, axis=0, return_inverse=True)
+        self.edges = edges
+        self.dofs = np.concatenate([tri, nv + inverse.reshape(-1, 3)], axis=1)  # (T, 6)
+        self.n_dofs = nv + edges.shape[0]
+        z = points[tri]  # (T, 3, 2)
+        jac = np.stack([z[:, 1] - z[:, 0], z[:, 2] - z[:, 0]], axis=2)  # columns
+        inv = np.linalg.inv(jac)  # rows: grad lambda_1, grad lambda_2
+        gl = np.stack([-(inv[:, 0] + inv[:, 1]), inv[:, 0], inv[:, 1]], axis=1)  # (T, 3, 2)
+        # gradient of the P2 potential at vertex m: C[T, m] (2, 6) times the local unknowns
+        c = np.zeros((tri.shape[0], 3, 2, 6))
+        for m in range(3):
+            for i in range(3):
+                c[:, m, :, i] = (4.0 * (i == m) - 1.0) * gl[:, i]
+            for e_idx, (i, j) in enumerate(local):
+                c[:, m, :, 3 + e_idx] = 4.0 * ((j == m) * gl[:, i] + (i == m) * gl[:, j])
+        self.grad = c
+        # circumradius squared
+        a = np.linalg.norm(z[:, 1] - z[:, 2], axis=1)
+        b = np.linalg.norm(z[:, 2] - z[:, 0], axis=1)
+        cc = np.linalg.norm(z[:, 0] - z[:, 1], axis=1)
+        area = 0.5 * np.abs(jac[:, 0, 0] * jac[:, 1, 1] - jac[:, 0, 1] * jac[:, 1, 0])
+        self.r2 = (a * b * cc / (4.0 * area)) ** 2
+        self.midpoints = 0.5 * (points[edges[:, 0]] + points[edges[:, 1]])
+        self.centroids = z.mean(axis=1)
+
+    @property
+    def n_tri(self) -> int:
+        return int(self.tri.shape[0])
+
+    def gradients(self, phi: np.ndarray) -> np.ndarray:
+        """Gradient of the potential at the vertices of every triangle ``(T, 3, 2)``."""
+        return np.einsum("tmid,td->tmi", self.grad, phi[self.dofs])
+
+    def locate(self, pts: np.ndarray) -> np.ndarray:
+        """Triangle (row of ``tri``) holding each point, -1 if none."""
+        simplex = self.delaunay.find_simplex(pts)
+        return np.where(simplex >= 0, self.simplex_row[simplex], -1)
+
+    def refine(self, marked: np.ndarray) -> np.ndarray:
+        """Points of a refined mesh: the marked triangles' edge midpoints added."""
+        e = np.unique(self.dofs[marked, 3:].ravel()) - self.points.shape[0]
+        return np.concatenate([self.points, self.midpoints[e]])
+
+
+# ----------------------------------------------------------------------------------------
+# the LP
+# ----------------------------------------------------------------------------------------
+def _row_bounds(mesh: _Mesh, data: _PointData, safety: float) -> tuple[np.ndarray, np.ndarray]:
+    """Right-hand sides ``b`` ``(T, 3, K)`` and the corrections ``c`` ``(T, K)``."""
+    nv = mesh.points.shape[0]
+    vert_rows = data.rows(mesh.points)
+    mid_rows = data.rows(mesh.midpoints)
+    cen_rows = data.rows(mesh.centroids)
+    edge_rows = mid_rows[mesh.dofs[:, 3:] - nv]  # (T, 3)
+    samples = np.concatenate([vert_rows[mesh.tri], edge_rows, cen_rows[:, None]], axis=1)
+    hz = _estimate_bound(data.Hz[samples], safety)  # (T, K)
+    ht = _estimate_bound(data.Ht[samples], safety)  # (T, K): arc j from v_j to v_{j+1}
+    corr = 0.5 * hz * mesh.r2[:, None] + np.maximum(ht, np.roll(ht, 1, axis=1)) / 8.0
+    b = data.F[vert_rows[mesh.tri]] - corr[:, None, :]
+    return b, corr
+
+
+class _Rays:
+    """Inner polygons of the rows' feasible sets, one per triangle vertex ``(T, 3)``.
+
+    At vertex ``m`` of triangle ``T`` the rows allow the gradient set
+    ``P = {g : g . v_k <= b[T, m, k] for all k}``, convex and containing 0 (``b > 0``).
+    A ray from 0 at angle ``a`` leaves ``P`` at ``r(a) u(a)``,
+    ``r(a) = min_{k : u . v_k > 0} b_k / (u . v_k)``; the polygon through the exit points of
+    a few rays (in angular order, gaps below pi) lies inside ``P`` (it is a union of
+    triangles ``0, g_i, g_{i+1}``, each inside the convex ``P``), and so does the
+    intersection of its edges' half-planes. The LP uses those edges as rows: every
+    potential it returns satisfies every sampled row by construction. Rays are added where
+    the LP's solution touches an edge, until the edges resolve ``P`` at its sampling.
+    """
+
+    def __init__(self, n_vertices: int, k: int, extra: tuple[np.ndarray, np.ndarray] | None
+                 ) -> None:
+        base = 2 * np.pi * np.arange(INITIAL_DIRECTIONS) / INITIAL_DIRECTIONS + 1e-3
+        vid = np.repeat(np.arange(n_vertices), INITIAL_DIRECTIONS)
+        ang = np.tile(base, n_vertices)
+        if extra is not None:
+            vid = np.concatenate([vid, extra[0]])
+            ang = np.concatenate([ang, np.mod(extra[1], 2 * np.pi)])
+        self.k = k
+        self._set(vid, ang)
+
+    def _set(self, vid: np.ndarray, ang: np.ndarray) -> None:
+        ang = np.round(np.mod(ang, 2 * np.pi), 12)
+        order = np.lexsort((ang, vid))
+        vid, ang = vid[order], ang[order]
+        keep = np.ones(vid.size, bool)
+        keep[1:] = (vid[1:] != vid[:-1]) | (ang[1:] != ang[:-1])
+        self.vid, self.ang = vid[keep], ang[keep]
+        # next ray of the same vertex (cyclic)
+        n = self.vid.size
+        start = np.flatnonzero(np.r_[True, self.vid[1:] != self.vid[:-1]])
+        ends = np.r_[start[1:], n] - 1
+        nxt = np.arange(1, n + 1)
+        nxt[ends] = start
+        self.next = nxt
+
+    def facets(self, b_flat: np.ndarray, dirs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Rows ``normal . g <= rhs`` (normals ``(R, 2)``, rhs ``(R,)``), one per ray (the edge
+        from this ray's exit point to the next's) of vertex ``vid``."""
+        u = np.stack([np.cos(self.ang), np.sin(self.ang)], 1)
+        r = np.full(self.vid.size, np.inf)
+        for a in range(0, self.vid.size, 20000):
+            sl = slice(a, a + 20000)
+            proj = u[sl] @ dirs.T  # (R, K)
+            with np.errstate(divide="ignore"):
+                q = np.where(proj > 1e-12, b_flat[self.vid[sl]] / np.where(proj > 1e-12, proj,
+                                                                             1.0), np.inf)
+            r[sl] = q.min(axis=1)
+        pts = r[:, None] * u
+        e = pts[self.next] - pts
+        normal = np.stack([e[:, 1], -e[:, 0]], 1)  # outward for counter-clockwise order
+        return normal, np.einsum("ri,ri->r", normal, pts)
+
+    def refine(self, tight: np.ndarray, pieces: int = 8) -> bool:
+        """Split the angular gaps of the tight edges wider than the sampling (pi / K) into
+        ``pieces``; False if none is left to split."""
+        gap = np.mod(self.ang[self.next] - self.ang, 2 * np.pi)
+        gap = np.where(gap == 0, 2 * np.pi, gap)
+        sel = tight & (gap > np.pi / self.k)
+        if not np.any(sel):
+            return False
+        frac = np.arange(1, pieces) / pieces
+        new_ang = (self.ang[sel][:, None] + gap[sel][:, None] * frac[None]).ravel()
+        new_vid = np.repeat(self.vid[sel], pieces - 1)
+        self._set(np.concatenate([self.vid, new_vid]), np.concatenate([self.ang, new_ang]))
+        return True
+
+
+def _solve_lp(mesh: _Mesh, b: np.ndarray, dirs: np.ndarray, s_idx: int, g_idx: int,
+              upper: float, target: float, rays: _Rays, tol: float = 0.05,
+              max_iter: int = 12) -> dict[str, Any]:
+    """Maximise ``phi[g] - phi[s]`` over potentials whose vertex gradients lie in the
+    inner polygons of ``rays`` (every row ``(T, 3, K)`` then holds), refining the polygons
+    where the solution touches them until ``(upper - value) / upper <= target``, or a round
+    gains less than ``tol`` times ``upper - value``, or the polygons resolve the sampling.
+    The potential is finally checked against every row (and divided by the largest ratio
+    if rounding left one above 1)."""
+    import cvxpy as cp
+    import scipy.sparse as sp
+
+    k = b.shape[2]
+    b_flat = b.reshape(-1, k)
+    gradc = mesh.grad.reshape(-1, 2, 6)  # (T*3, 2, 6)
+    dofs = np.repeat(mesh.dofs, 3, axis=0)  # (T*3, 6)
+    phi = np.zeros(mesh.n_dofs)
+    status = "none"
+    n_iter = 0
+    lp_seconds = 0.0
+    debug = bool(os.environ.get("CERTIFY_DEBUG"))
+    value = -np.inf
+    duals = np.zeros(0)
+    while n_iter < max_iter:
+        n_iter += 1
+        normal, rhs = rays.facets(b_flat, dirs)
+        coef = np.einsum("ri,rij->rj", normal, gradc[rays.vid])
+        a = sp.csr_matrix((coef.ravel(), (np.repeat(np.arange(rhs.size), 6),
+                                          dofs[rays.vid].ravel())),
+                          shape=(rhs.size, mesh.n_dofs))
+        x = cp.Variable(mesh.n_dofs)
+        cons = [a @ x <= rhs, x[s_idx] == 0]
+        prob = cp.Problem(cp.Maximize(x[g_idx]), cons)
+        t0 = time.perf_counter()
+        try:
+            prob.solve(solver=LP_SOLVER)
+        except cp.error.SolverError as err:
+            raise RuntimeError(f"certify: the LP solver failed: {err}") from err
+        lp_seconds += time.perf_counter() - t0
+        status = str(prob.status)
+        if x.value is None:
+            raise RuntimeError(f"certify: the LP ended with status {status}")
+        phi = np.asarray(x.value, float)
+        duals = np.maximum(np.asarray(cons[0].dual_value, float), 0.0)
+        new_value = float(phi[g_idx] - phi[s_idx])
+        if debug:
+            print(f"  LP rows {rhs.size} solve {time.perf_counter() - t0:.2f}s value "
+                  f"{new_value:.8f}")
+        gain = new_value - value
+        value = new_value
+        # stop once the target is met, or once the last gain is small against what remains
+        # (then the mesh, not the polygons, limits the bound)
+        if upper - value <= target * upper or gain <= tol * (upper - value):
+            break
+        tight = duals > TIGHT_DUAL * max(float(duals.max(initial=0.0)), 1e-300)
+        if not rays.refine(tight):
+            break
+    ratio = np.einsum("tmi,ki->tmk", mesh.gradients(phi), dirs) / b
+    ratio_max = float(np.max(ratio))
+    scale = max(ratio_max, 1.0) * (1.0 + 1e-12)
+    phi = (phi - phi[s_idx]) / scale
+    # rows of the last LP: vertex (T*3 + m), the direction nearest to the edge's normal
+    ang = np.arctan2(normal[:, 1], normal[:, 0])
+    kk = np.mod(np.rint(ang / (2 * np.pi / k)).astype(np.int64), k)
+    rows = np.stack([rays.vid // 3, rays.vid % 3, kk], 1)
+    return {"phi": phi, "lower": float(phi[g_idx]), "status": status, "rows": rows,
+            "duals": duals, "n_rows": int(rhs.size), "iterations": n_iter,
+            "lp_seconds": lp_seconds, "ratio": ratio_max, "solver": LP_SOLVER,
+            "rays": rays}
+
+
+def _initial_rays(mesh: _Mesh, k: int, previous: tuple[_Mesh, dict[str, Any]] | None
+                  ) -> _Rays:
+    """Rays of the first LP of a mesh: 8 evenly spaced, plus, after a refinement, every
+    added ray of the old triangle holding each new triangle's centroid."""
+    if previous is None:
+        return _Rays(3 * mesh.n_tri, k, None)
+    old, lp = previous
+    host = old.locate(mesh.centroids)  # (T_new,)
+    rays: _Rays = lp["rays"]
+    # the refined rays (beyond the evenly spaced ones) of each old triangle, any vertex
+    refined = np.bincount(rays.vid, minlength=3 * old.n_tri) > INITIAL_DIRECTIONS
+    sel = refined[rays.vid]
+    t_tri, t_ang = rays.vid[sel] // 3, rays.ang[sel]
+    order = np.argsort(t_tri, kind="stable")
+    t_tri, t_ang = t_tri[order], t_ang[order]
+    lo = np.searchsorted(t_tri, host)
+    hi = np.where(host >= 0, np.searchsorted(t_tri, host, side="right"), lo)
+    counts = hi - lo
+    new_t = np.repeat(np.arange(mesh.n_tri), counts)
+    idx = (np.concatenate([np.arange(a, c) for a, c in zip(lo, hi) if c > a])
+           if counts.sum() else np.zeros(0, np.int64))
+    ang = t_ang[idx]
+    vid = (3 * new_t[:, None] + np.arange(3)[None]).ravel()
+    return _Rays(3 * mesh.n_tri, k, (vid, np.repeat(ang, 3)))
+
+
+# ----------------------------------------------------------------------------------------
+# public API
+# ----------------------------------------------------------------------------------------
+def _metric(metric: Metric | str) -> Metric:
+    if isinstance(metric, Metric):
+        return metric
+    if isinstance(metric, str):
+        return get_metric(metric)
+    raise InputError(f"metric must be a finsler.Metric or a registered name, got {metric!r}")
+
+
+def _convexity(m: Metric, points: np.ndarray) -> tuple[str, str]:
+    if m.convex_everywhere:
+        return "convex", f"F(x, .) is convex on the whole domain ({m.convexity_note})"
+    inside = points[m.domain.contains(points, tol=0.0)]
+    bad = int(np.sum(m.convexity(inside) < 0.0)) if inside.size else 0
+    return ("convexified",
+            f"F(x, .) is not convex at {bad} of {inside.shape[0]} mesh vertices "
+            f"({m.convexity_note}); the dual condition dphi(v) <= F(x, v) for all v equals "
+            "that of the convexification F**, so the lower bound holds for the distance "
+            "(an infimum of lengths, unchanged by convexification)")
+
+
+def certify(
+    metric: Metric | str,
+    start: Any,
+    goal: Any,
+    mesh: MeshSpec | str | None = None,
+    *,
+    path: Any = None,
+    time_limit: float | None = None,
+) -> CertifyResult:
+    """Certified interval ``lower <= d(start, goal) <= upper`` on a 2-D metric.
+
+    ``start``, ``goal``: points ``(2,)`` in the domain. ``mesh``: a :class:`MeshSpec` or a
+    preset name (``"coarse"``, ``"default"``, ``"fine"``). ``path`` ``(n+1, 2)``: a curve
+    from start to goal for the upper bound and the first mesh (default: solved with
+    :func:`solvers.solve_geodesic` at ``mesh.segments`` segments). ``time_limit``
+    (seconds): no new refinement round starts after it. The upper bound is the path's
+    length plus its quadrature error estimate; the lower bound is the dual bound
+    described in the module docstring. Raises :class:`InputError` for a metric that is
+    not 2-D (or whose domain is not a box or a disk), points outside the domain, or bad
+    options.
+    """
+    t_start = time.perf_counter()
+    m = _metric(metric)
+    if m.dim != 2:
+        raise InputError(f"certify works on 2-D metrics; {m.name} has dimension {m.dim}")
+    spec = MeshSpec.preset(mesh) if isinstance(mesh, str) else (mesh or MeshSpec())
+    if not isinstance(spec, MeshSpec):
+        raise InputError(f"mesh must be a MeshSpec or a preset name, got {type(mesh).__name__}")
+    if time_limit is not None and not (isinstance(time_limit, (int, float))
+                                       and math.isfinite(time_limit) and time_limit > 0):
+        raise InputError(f"time_limit must be a positive number of seconds, got {time_limit!r}")
+    poly = _outline(m)
+    s = m.domain.check(np.asarray(start, float), "start")[0]
+    g = m.domain.check(np.asarray(goal, float), "goal")[0]
+    if np.array_equal(s, g):
+        raise InputError("start equals goal: the distance is 0, nothing to certify")
+
+    # upper bound: a curve's length with its quadrature error
+    t0 = time.perf_counter()
+    if path is None:
+        from solvers.geodesic import solve_geodesic
+
+        n = spec.segments if spec.segments is not None else 4 * m.task.segments
+        sol = solve_geodesic(m, s, g, n)
+        pts = np.asarray(sol.points, float)
+        solver_status = sol.status.value
+    else:
+        pts = np.array(path, dtype=np.float64)
+        if pts.ndim != 2 or pts.shape[1] != 2 or pts.shape[0] < 2:
+            raise InputError(f"path must have shape (n+1, 2), got {pts.shape}")
+        if not (np.allclose(pts[0], s, rtol=0, atol=1e-12)
+                and np.allclose(pts[-1], g, rtol=0, atol=1e-12)):
+            raise InputError("path must run from start to goal")
+        m.domain.check(pts, "path")
+        solver_status = "given"
+    est = m.path_length_error(pts)
+    upper = float(est.value + est.error)
+    t_solve = time.perf_counter() - t0
+
+    # lower bound: dual LP on meshes refined where the corrections cost most
+    t0 = time.perf_counter()
+    points = _initial_points(poly, pts, s, g, spec)
+    t_mesh = time.perf_counter() - t0
+    data = _PointData(m, spec.directions)
+    t_lp = 0.0
+    best: dict[str, Any] | None = None
+    rounds: list[dict[str, Any]] = []
+    lp = None
+    msh = None
+    previous = None
+    for _ in range(spec.max_rounds):
+        t0 = time.perf_counter()
+        msh = _Mesh(points)
+        t_mesh += time.perf_counter() - t0
+        b, corr = _row_bounds(msh, data, spec.safety)
+        bad = np.min(b, axis=(1, 2)) <= 0.0
+        if np.any(bad):  # corrections above F: refine those triangles before any LP
+            t0 = time.perf_counter()
+            points = msh.refine(np.flatnonzero(bad))
+            t_mesh += time.perf_counter() - t0
+            continue
+        t0 = time.perf_counter()
+        lp = _solve_lp(msh, b, data.dirs, 0, 1, upper, spec.target_gap,
+                       rays=_initial_rays(msh, spec.directions, previous))
+        previous = (msh, lp)
+        t_lp += time.perf_counter() - t0
+        gap = (upper - lp["lower"]) / upper
+        rounds.append({"triangles": msh.n_tri, "unknowns": msh.n_dofs, "rows": lp["n_rows"],
+                       "row_rounds": lp["iterations"], "lower": lp["lower"], "gap": gap,
+                       "seconds": time.perf_counter() - t_start})
+        if best is None or lp["lower"] > best["lower"]:
+            best = {**lp, "mesh": msh}
+        if gap <= spec.target_gap:
+            break
+        if time_limit is not None and time.perf_counter() - t_start > time_limit:
+            break
+        # Doerfler marking by the dual-weighted corrections sum_r y_r c_r per triangle
+        rows, y = lp["rows"], np.maximum(lp["duals"], 0.0)
+        weight = np.bincount(rows[:, 0], weights=y * corr[rows[:, 0], rows[:, 2]],
+                             minlength=msh.n_tri)
+        order = np.argsort(-weight)
+        cum = np.cumsum(weight[order])
+        if cum[-1] <= 0:
+            break
+        n_mark = int(np.searchsorted(cum, spec.mark_fraction * cum[-1]) + 1)
+        if msh.n_tri + 3 * n_mark > spec.max_triangles:
+            break
+        t0 = time.perf_counter()
+        points = msh.refine(order[:n_mark])
+        t_mesh += time.perf_counter() - t0
+    if best is None:
+        raise InputError(f"certify: the mesh never got fine enough for the corrections to stay "
+                         f"below F within {spec.max_rounds} rounds; lower h_path")
+    final: _Mesh = best["mesh"]
+    lower = best["lower"]
+    kind, note = _convexity(m, final.points)
+    total = time.perf_counter() - t_start
+    return CertifyResult(
+        metric=m.name, start=s, goal=g, lower=lower, upper=upper, length=float(est.value),
+        length_error=float(est.error), gap=(upper - lower) / upper, triangles=final.n_tri,
+        vertices=int(final.points.shape[0]), unknowns=final.n_dofs,
+        directions=spec.directions, lp_rows=best["n_rows"],
+        lp_rows_total=int(3 * final.n_tri * spec.directions), lp_status=best["status"],
+        lp_solver=best["solver"], max_row_ratio=best["ratio"], convexity=kind,
+        convexity_note=note, solver_status=solver_status,
+        mesh={**asdict(spec), "element": "P2", "domain_polygon_vertices": int(poly.shape[0])},
+        times={"solve": t_solve, "mesh": t_mesh, "bounds": data.seconds,
+               "lp": t_lp - 0.0, "total": total},
+        rounds=rounds, path=pts,
+    )
