@@ -41,7 +41,7 @@ from finsler.errors import InputError
 from finsler.metric import Metric
 from solvers.chebyshev import differentiation_matrix
 from solvers.inputs import as_metric, check_point, is_short_pair
-from solvers.result import SolverError
+from solvers.result import DistanceStatus, SolverError
 from solvers.spectral import distance
 
 __all__ = ["ExpResult", "ExpStatus", "LogResult", "LogStatus", "exp_map", "log_map"]
@@ -528,7 +528,7 @@ def log_map(
         est = dist * 1e-13
     else:
         dres = distance(m, xs, ys)
-        if dres.min_convexity <= 0 or dres.status.value == "not_convex":
+        if dres.min_convexity <= 0 or dres.status is DistanceStatus.NOT_CONVEX:
             raise InputError(
                 f"{m.name}: the shortest path from {xs.tolist()} to {ys.tolist()} crosses a "
                 f"region where F(x, .) is not strongly convex (smallest eigenvalue of the "
