@@ -221,6 +221,15 @@ class Wavy(Metric):
 '''
 
 
+@pytest.fixture()
+def _clean_imports(monkeypatch):
+    """--metric-module puts the file's folder on sys.path and imports it: undo both."""
+    monkeypatch.setattr(sys, "path", list(sys.path))
+    yield
+    sys.modules.pop("user_wavy_metric", None)
+
+
+@pytest.mark.usefixtures("_clean_imports")
 def test_cli_train_evaluate_report_with_metric_params(tmp_path: Path) -> None:
     finsler.registry._REGISTRY.pop("wavy")  # the CLI imports it from the user's file
     mod = tmp_path / "user_wavy_metric.py"
