@@ -542,17 +542,21 @@ def log_map(
     v = v0.copy()
     integrations = 0
 
-    def shoot(vel: np.ndarray) -> tuple[ExpResult, float]:
+    def shoot(vel: np.ndarray, variational: bool = True) -> tuple[ExpResult, float]:
         nonlocal integrations
         integrations += 1
-        r = _integrate(m, sp, xs, vel, 1.0, variational=True, samples=0, rtol=rtol, atol=atol)
+        r = _integrate(m, sp, xs, vel, 1.0, variational=variational, samples=0, rtol=rtol,
+                       atol=atol)
         res = float(np.max(np.abs(r.point - ys))) if r.converged else math.inf
         return r, res
 
-    cur, resid = shoot(v)
+    # the solver's curve is usually within tol already: check it without the (4x dearer)
+    # variational equation, and only then shoot with it
+    cur, resid = shoot(v, variational=False)
+    if resid > tol:
+        cur, resid = shoot(v)
     iterations = 0
-    while (resid > tol or iterations == 0) and iterations < max_iter:
-        # at least one Newton step: the guess may already be within tol, a step polishes it
+    while resid > tol and iterations < max_iter:
         if cur.jacobian is None or not cur.converged:
             break
         iterations += 1
