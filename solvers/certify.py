@@ -24,10 +24,11 @@ and along a chord ``F(z, w(t))`` lies above the chord's linear interpolant minus
 ``F`` at the triangle's vertices, edge midpoints and centroid (chords at t = 0, 1/2, 1),
 inflated by the spread of those samples (``safety``): an ESTIMATE of a second-order bound,
 the one non-exact ingredient (a third-order term); everything else is exact arithmetic on
-float64 values of F. The LP is solved with rows added in rounds (the most violated
-direction at each vertex); the final potential is checked against every row and divided
-by the largest ratio ``(grad phi . v_k) / bound``, so the returned lower bound satisfies
-every row exactly whatever the LP solver's tolerance.
+float64 values of F. The LP keeps the vertices away from the path inside inner polygons
+of the rows' sets (they can never violate a row) and gives the vertices near the path the
+sampled rows themselves, adding violated directions in rounds; every round's potential is
+checked against ALL rows and divided by the largest ratio ``(grad phi . v_k) / bound``, so
+the returned lower bound satisfies every row exactly whatever the LP solver's tolerance.
 
 Convexity: where ``F(z, .)`` is not convex (Matsumoto outside ``|p| = 1/(2 sqrt 3)``) the
 condition ``dphi(v) <= F(z, v)`` for all ``v`` is the same as for the convexification
@@ -46,8 +47,8 @@ starting from a mesh graded around the solver's path, until the gap reaches
 from __future__ import annotations
 
 import functools
+import logging
 import math
-import os
 import time
 from dataclasses import asdict, dataclass, field, fields
 from typing import Any
@@ -63,10 +64,14 @@ from finsler.registry import get_metric
 
 __all__ = ["CertifyResult", "MeshSpec", "certify"]
 
+_LOG = logging.getLogger(__name__)
+
 #: cvxpy solver of the LPs (Clarabel: an interior-point method, far faster here than HiGHS).
 LP_SOLVER = "CLARABEL"
 #: Rows whose dual exceeds this fraction of the largest dual count as tight (refined).
 TIGHT_DUAL = 1e-7
+#: Refinements of triangles whose corrections exceed half of F, before the first LP.
+MAX_PRE_REFINE = 8
 #: Evenly spaced rays per vertex in the first LP of a mesh (more are added where needed).
 INITIAL_DIRECTIONS = 8
 
@@ -149,7 +154,13 @@ class CertifyResult:
     """A certified interval ``lower <= d(start, goal) <= upper``.
 
     ``gap = (upper - lower) / upper``. ``upper = length + length_error`` of ``path``
-    ``(n+1, 2)`` (the solver's path, adaptive quadrature). ``convexity`` is ``"convex"``
+    ``(n+1, 2)`` (adaptive quadrature): the solver's (or the given) path
+    (``upper_source == "path"``) or, where ``F(z, .)`` is not convex, the same path with
+    every segment replaced by a zigzag along the two directions of the convexification
+    when that is shorter (``"zigzag"``: switchbacks, the curves whose lengths approach the
+    infimum there). ``path_upper`` / ``path_gap`` are the bound and gap of the solver's
+    path itself: a small ``path_gap`` certifies that path near-globally optimal.
+    ``convexity`` is ``"convex"``
     (``F(z, .)`` convex on the whole domain) or ``"convexified"`` (not convex somewhere:
     the dual condition equals that of the convexification, see the module docstring);
     ``convexity_note`` says it in words. ``rounds`` lists, per LP solve, the triangles,
@@ -170,6 +181,9 @@ class CertifyResult:
     length: float
     length_error: float
     gap: float
+    upper_source: str
+    path_upper: float
+    path_gap: float
     triangles: int
     vertices: int
     unknowns: int
@@ -301,6 +315,58 @@ def _estimate_bound(samples: np.ndarray, safety: float) -> np.ndarray:
     hi = samples.max(axis=1)
     lo = samples.min(axis=1)
     return np.maximum(hi + safety * (hi - lo), 0.0)
+
+
+def _zigzag(m: Metric, pts: np.ndarray, k: int, teeth: int = 2) -> np.ndarray | None:
+    """The polyline ``pts`` ``(n+1, 2)`` with each segment whose direction ``u`` is cheaper
+    as a combination ``a v_j + b v_l`` (``a, b >= 0``, two of ``k`` sampled directions;
+    ``a F(z, v_j) + b F(z, v_l) < F(z, u)`` at the segment's midpoint ``z``) replaced by
+    ``teeth`` zigzags along ``v_j`` and ``v_l``, projected into the domain; None if no
+    segment is. Any curve's length bounds the distance from above, so the zigzag is only a
+    candidate: its length is measured, not assumed."""
+    ang = 2 * np.pi * np.arange(k) / k
+    dirs = np.stack([np.cos(ang), np.sin(ang)], 1)
+    d = pts[1:] - pts[:-1]
+    n = d.shape[0]
+    length = np.linalg.norm(d, axis=1)
+    mids = 0.5 * (pts[1:] + pts[:-1])
+    ok = length > 0
+    fv = m.F(np.repeat(mids, k, axis=0), np.tile(dirs, (n, 1)), check=False).reshape(n, k)
+    u = d / np.where(ok, length, 1.0)[:, None]
+    fu = m.F(mids, u, check=False)
+    # every pair (j, l): solve a v_j + b v_l = u, keep a, b >= 0
+    cross = dirs[:, 0][:, None] * dirs[:, 1][None] - dirs[:, 1][:, None] * dirs[:, 0][None]
+    good = np.abs(cross) > 1e-9
+    safe = np.where(good, cross, 1.0)
+    out = [pts[:1]]
+    changed = False
+    for i in range(n):
+        if not ok[i]:
+            out.append(pts[i + 1:i + 2])
+            continue
+        # Cramer: a = (u x v_l) / (v_j x v_l), b = (v_j x u) / (v_j x v_l)
+        ux = u[i, 0] * dirs[:, 1] - u[i, 1] * dirs[:, 0]  # u x v
+        a = ux[None, :] / safe
+        b = -ux[:, None] / safe
+        cost = np.where(good & (a >= 0) & (b >= 0), a * fv[i][:, None] + b * fv[i][None, :],
+                        np.inf)
+        j, l_ = np.unravel_index(int(np.argmin(cost)), cost.shape)
+        if not cost[j, l_] < fu[i] * (1 - 1e-9):
+            out.append(pts[i + 1:i + 2])
+            continue
+        changed = True
+        step_a = length[i] * a[j, l_] * dirs[j] / teeth
+        step_b = length[i] * b[j, l_] * dirs[l_] / teeth
+        pieces = np.tile(np.stack([step_a, step_b]), (teeth, 1))
+        seg = pts[i] + np.cumsum(pieces, axis=0)
+        seg[-1] = pts[i + 1]
+        out.append(seg)
+    if not changed:
+        return None
+    zig = np.concatenate(out)
+    zig = np.asarray(m.domain.project(zig), dtype=np.float64)
+    zig[0], zig[-1] = pts[0], pts[-1]
+    return zig
 
 
 # ----------------------------------------------------------------------------------------
@@ -488,8 +554,8 @@ class _Rays:
     a few rays (in angular order, gaps below pi) lies inside ``P`` (it is a union of
     triangles ``0, g_i, g_{i+1}``, each inside the convex ``P``), and so does the
     intersection of its edges' half-planes. The LP uses those edges as rows: every
-    potential it returns satisfies every sampled row by construction. Rays are added where
-    the LP's solution touches an edge, until the edges resolve ``P`` at its sampling.
+    potential it returns satisfies every sampled row by construction (used for the vertices
+    away from the path; see :func:`_solve_lp`).
     """
 
     def __init__(self, n_vertices: int, k: int, extra: tuple[np.ndarray, np.ndarray] | None
@@ -535,57 +601,64 @@ class _Rays:
         normal = np.stack([e[:, 1], -e[:, 0]], 1)  # outward for counter-clockwise order
         return normal, np.einsum("ri,ri->r", normal, pts)
 
-    def refine(self, tight: np.ndarray, pieces: int = 8) -> bool:
-        """Split the angular gaps of the tight edges wider than the sampling (pi / K) into
-        ``pieces``; False if none is left to split."""
-        gap = np.mod(self.ang[self.next] - self.ang, 2 * np.pi)
-        gap = np.where(gap == 0, 2 * np.pi, gap)
-        sel = tight & (gap > np.pi / self.k)
-        if not np.any(sel):
-            return False
-        frac = np.arange(1, pieces) / pieces
-        new_ang = (self.ang[sel][:, None] + gap[sel][:, None] * frac[None]).ravel()
-        new_vid = np.repeat(self.vid[sel], pieces - 1)
-        self._set(np.concatenate([self.vid, new_vid]), np.concatenate([self.ang, new_ang]))
-        return True
-
 
 def _solve_lp(mesh: _Mesh, b: np.ndarray, dirs: np.ndarray, s_idx: int, g_idx: int,
-              upper: float, target: float, rays: _Rays, tol: float = 0.05,
-              max_iter: int = 12) -> dict[str, Any]:
-    """Maximise ``phi[g] - phi[s]`` over potentials whose vertex gradients lie in the
-    inner polygons of ``rays`` (every row ``(T, 3, K)`` then holds), refining the polygons
-    where the solution touches them until ``(upper - value) / upper <= target``, or a round
-    gains less than ``tol`` times ``upper - value``, or the polygons resolve the sampling.
-    The potential is finally checked against every row (and divided by the largest ratio
-    if rounding left one above 1)."""
+              upper: float, target: float, start: dict[str, np.ndarray],
+              max_iter: int = 30) -> dict[str, Any]:
+    """Maximise ``phi[g] - phi[s]`` under the rows ``(T, 3, K)`` (``g . v_k <= b``) at every
+    triangle vertex, in rounds.
+
+    A vertex is either SAFE: its gradient is kept in the inner polygon of 8 rays
+    (:class:`_Rays`), inside the rows' set, so it can never violate a row; or EXACT: it
+    has sampled rows ``g . v_k <= b_k`` directly, a set of directions grown in rounds by the
+    violated ones. A safe vertex whose polygon edge is tight (positive dual) becomes exact,
+    with the directions near that edge's normal and 16 evenly spaced ones. Each round's
+    potential, divided by its largest row ratio over ALL rows, is a valid potential; the
+    best one is returned. Stops when no vertex changes mode and no row is violated beyond
+    ``0.1 target``, when a potential certifies ``target``, or after ``max_iter`` rounds.
+    ``start``: ``exact`` ``(T*3,)`` bool and ``active`` ``(T*3, K)`` bool, the first
+    exact vertices and their directions.
+    """
+    import warnings
+
     import cvxpy as cp
     import scipy.sparse as sp
 
     k = b.shape[2]
-    b_flat = b.reshape(-1, k)
-    gradc = mesh.grad.reshape(-1, 2, 6)  # (T*3, 2, 6)
+    nv = 3 * mesh.n_tri
+    b_flat = b.reshape(nv, k)
+    gradc = mesh.grad.reshape(nv, 2, 6)
     dofs = np.repeat(mesh.dofs, 3, axis=0)  # (T*3, 6)
-    phi = np.zeros(mesh.n_dofs)
-    status = "none"
+    rays = _Rays(nv, k, None)
+    safe_normal, safe_rhs = rays.facets(b_flat, dirs)
+    exact = start["exact"].copy()
+    active = start["active"].copy()
+    active[~exact] = False
+    coarse = np.zeros(k, bool)
+    coarse[:: max(1, k // 16)] = True
+    best: dict[str, Any] = {"lower": -np.inf}
     n_iter = 0
     lp_seconds = 0.0
-    debug = bool(os.environ.get("CERTIFY_DEBUG"))
-    value = -np.inf
-    duals = np.zeros(0)
     while n_iter < max_iter:
         n_iter += 1
-        normal, rhs = rays.facets(b_flat, dirs)
-        coef = np.einsum("ri,rij->rj", normal, gradc[rays.vid])
+        safe_rows = ~exact[rays.vid]
+        s_vid = rays.vid[safe_rows]
+        s_normal, s_rhs = safe_normal[safe_rows], safe_rhs[safe_rows]
+        e_vid, e_k = np.nonzero(active & exact[:, None])
+        normal = np.concatenate([s_normal, dirs[e_k]])
+        rhs = np.concatenate([s_rhs, b_flat[e_vid, e_k]])
+        vid = np.concatenate([s_vid, e_vid])
+        coef = np.einsum("ri,rij->rj", normal, gradc[vid])
         a = sp.csr_matrix((coef.ravel(), (np.repeat(np.arange(rhs.size), 6),
-                                          dofs[rays.vid].ravel())),
-                          shape=(rhs.size, mesh.n_dofs))
+                                          dofs[vid].ravel())), shape=(rhs.size, mesh.n_dofs))
         x = cp.Variable(mesh.n_dofs)
         cons = [a @ x <= rhs, x[s_idx] == 0]
         prob = cp.Problem(cp.Maximize(x[g_idx]), cons)
         t0 = time.perf_counter()
         try:
-            prob.solve(solver=LP_SOLVER)
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")  # "inaccurate" is in the status, checked below
+                prob.solve(solver=LP_SOLVER)
         except cp.error.SolverError as err:
             raise RuntimeError(f"certify: the LP solver failed: {err}") from err
         lp_seconds += time.perf_counter() - t0
@@ -594,62 +667,90 @@ def _solve_lp(mesh: _Mesh, b: np.ndarray, dirs: np.ndarray, s_idx: int, g_idx: i
             raise RuntimeError(f"certify: the LP ended with status {status}")
         phi = np.asarray(x.value, float)
         duals = np.maximum(np.asarray(cons[0].dual_value, float), 0.0)
-        new_value = float(phi[g_idx] - phi[s_idx])
-        if debug:
-            print(f"  LP rows {rhs.size} solve {time.perf_counter() - t0:.2f}s value "
-                  f"{new_value:.8f}")
-        gain = new_value - value
-        value = new_value
-        # stop once the target is met, or once the last gain is small against what remains
-        # (then the mesh, not the polygons, limits the bound)
-        if upper - value <= target * upper or gain <= tol * (upper - value):
+        ratio = np.einsum("vi,ki->vk", np.einsum("vid,vd->vi", gradc, phi[dofs]), dirs) / b_flat
+        ratio_max = float(np.max(ratio))
+        scale = max(ratio_max, 1.0) * (1.0 + 1e-12)
+        lower = float(phi[g_idx] - phi[s_idx]) / scale
+        _LOG.debug("LP rows %d (%d exact vertices) %.2f s: value %.8f, max row ratio %.6f "
+                   "-> bound %.8f", rhs.size, int(exact.sum()), time.perf_counter() - t0,
+                   phi[g_idx] - phi[s_idx], ratio_max, lower)
+        if lower > best["lower"]:
+            ang = np.arctan2(normal[:, 1], normal[:, 0])
+            kk = np.mod(np.rint(ang / (2 * np.pi / k)).astype(np.int64), k)
+            best = {"phi": (phi - phi[s_idx]) / scale, "lower": lower, "status": status,
+                    "rows": np.stack([vid // 3, vid % 3, kk], 1), "duals": duals,
+                    "n_rows": int(rhs.size), "ratio": ratio_max}
+        if upper - lower <= target * upper:
             break
-        tight = duals > TIGHT_DUAL * max(float(duals.max(initial=0.0)), 1e-300)
-        if not rays.refine(tight):
+        # safe vertices with a tight edge become exact; violated exact rows are added
+        thr = TIGHT_DUAL * max(float(duals.max(initial=0.0)), 1e-300)
+        tight_safe = np.flatnonzero(duals[: s_vid.size] > thr)
+        promote = np.zeros(nv, bool)
+        promote[s_vid[tight_safe]] = True
+        promote &= ~exact
+        if promote.any():
+            pv = s_vid[tight_safe]
+            ang = np.arctan2(s_normal[tight_safe, 1], s_normal[tight_safe, 0])
+            kc = np.rint(ang / (2 * np.pi / k)).astype(np.int64)
+            for off in range(-(k // 16), k // 16 + 1):
+                active[pv, (kc + off) % k] = True
+            active[promote] |= coarse
+            exact |= promote
+        viol = exact[:, None] & (ratio > 1.0 + 0.1 * target) & ~active
+        worst = np.argmax(np.where(exact[:, None], ratio, -np.inf), axis=1)
+        bad = exact & (ratio[np.arange(nv), worst] > 1.0 + 0.1 * target)
+        for off in (-1, 0, 1):
+            active[np.flatnonzero(bad), (worst[bad] + off) % k] = True
+        active |= viol
+        if not promote.any() and not bad.any():
             break
-    ratio = np.einsum("tmi,ki->tmk", mesh.gradients(phi), dirs) / b
-    ratio_max = float(np.max(ratio))
-    scale = max(ratio_max, 1.0) * (1.0 + 1e-12)
-    phi = (phi - phi[s_idx]) / scale
-    # rows of the last LP: vertex (T*3 + m), the direction nearest to the edge's normal
-    ang = np.arctan2(normal[:, 1], normal[:, 0])
-    kk = np.mod(np.rint(ang / (2 * np.pi / k)).astype(np.int64), k)
-    rows = np.stack([rays.vid // 3, rays.vid % 3, kk], 1)
-    return {"phi": phi, "lower": float(phi[g_idx]), "status": status, "rows": rows,
-            "duals": duals, "n_rows": int(rhs.size), "iterations": n_iter,
-            "lp_seconds": lp_seconds, "ratio": ratio_max, "solver": LP_SOLVER,
-            "rays": rays}
+    best.update({"iterations": n_iter, "lp_seconds": lp_seconds, "solver": LP_SOLVER,
+                 "exact": exact, "active": active})
+    return best
 
 
-def _initial_rays(mesh: _Mesh, k: int, previous: tuple[_Mesh, dict[str, Any]] | None
-                  ) -> _Rays:
-    """Rays of the first LP of a mesh: 8 evenly spaced, plus, after a refinement, every
-    added ray of the old triangle holding each new triangle's centroid."""
+def _initial_modes(mesh: _Mesh, k: int, previous: tuple[_Mesh, dict[str, Any]] | None,
+                   path: np.ndarray, width: float) -> dict[str, np.ndarray]:
+    """Exact vertices and directions of the first LP of a mesh. First mesh: the vertices of
+    the triangles whose centroid is within ``width`` of the path, with 16 evenly spaced
+    directions and those within pi/8 of the path's local direction. After a refinement:
+    every vertex of a new triangle whose centroid lies in an old triangle with an exact
+    vertex, with the union of that triangle's directions."""
+    nv = 3 * mesh.n_tri
+    exact = np.zeros(nv, bool)
+    active = np.zeros((nv, k), bool)
     if previous is None:
-        return _Rays(3 * mesh.n_tri, k, None)
-    old, lp = previous
-    host = old.locate(mesh.centroids)  # (T_new,)
-    rays: _Rays = lp["rays"]
-    # the refined rays (beyond the evenly spaced ones) of each old triangle, any vertex
-    refined = np.bincount(rays.vid, minlength=3 * old.n_tri) > INITIAL_DIRECTIONS
-    sel = refined[rays.vid]
-    t_tri, t_ang = rays.vid[sel] // 3, rays.ang[sel]
-    order = np.argsort(t_tri, kind="stable")
-    t_tri, t_ang = t_tri[order], t_ang[order]
-    lo = np.searchsorted(t_tri, host)
-    hi = np.where(host >= 0, np.searchsorted(t_tri, host, side="right"), lo)
-    counts = hi - lo
-    new_t = np.repeat(np.arange(mesh.n_tri), counts)
-    idx = (np.concatenate([np.arange(a, c) for a, c in zip(lo, hi) if c > a])
-           if counts.sum() else np.zeros(0, np.int64))
-    ang = t_ang[idx]
-    vid = (3 * new_t[:, None] + np.arange(3)[None]).ravel()
-    return _Rays(3 * mesh.n_tri, k, (vid, np.repeat(ang, 3)))
+        near = _distance_to_path(mesh.centroids, path) <= width
+        # the path's direction at the nearest path point of each near triangle
+        seg = path[1:] - path[:-1]
+        mids = 0.5 * (path[1:] + path[:-1])
+        c = mesh.centroids[near]
+        nearest = np.argmin(((c[:, None, :] - mids[None]) ** 2).sum(-1), axis=1)
+        ang = np.arctan2(seg[nearest, 1], seg[nearest, 0])
+        kc = np.rint(ang / (2 * np.pi / k)).astype(np.int64)
+        act = np.zeros((int(near.sum()), k), bool)
+        act[:, :: max(1, k // 16)] = True
+        rows = np.arange(act.shape[0])
+        for off in range(-(k // 16), k // 16 + 1):
+            act[rows, (kc + off) % k] = True
+        tri_exact = near
+        exact = np.repeat(tri_exact, 3)
+        active[exact] = np.repeat(act, 3, axis=0)
+    else:
+        old, lp = previous
+        host = old.locate(mesh.centroids)
+        ok = host >= 0
+        old_exact = lp["exact"].reshape(-1, 3).any(axis=1)
+        old_active = (lp["active"] & lp["exact"][:, None]).reshape(-1, 3, k).any(axis=1)
+        new_exact = np.zeros(mesh.n_tri, bool)
+        new_exact[ok] = old_exact[host[ok]]
+        exact = np.repeat(new_exact, 3)
+        act = np.zeros((mesh.n_tri, k), bool)
+        act[ok] = old_active[host[ok]]
+        active = np.repeat(act, 3, axis=0)
+    return {"exact": exact, "active": active}
 
 
-# ----------------------------------------------------------------------------------------
-# public API
-# ----------------------------------------------------------------------------------------
 def _metric(metric: Metric | str) -> Metric:
     if isinstance(metric, Metric):
         return metric
@@ -726,7 +827,15 @@ def certify(
         m.domain.check(pts, "path")
         solver_status = "given"
     est = m.path_length_error(pts)
-    upper = float(est.value + est.error)
+    solver_upper = float(est.value + est.error)
+    upper, upper_source, upper_path = solver_upper, "path", pts
+    if not m.convex_everywhere:
+        zig = _zigzag(m, pts, spec.directions)
+        if zig is not None:
+            zest = m.path_length_error(zig)
+            if zest.value + zest.error < upper:
+                est, upper_path = zest, zig
+                upper, upper_source = float(zest.value + zest.error), "zigzag"
     t_solve = time.perf_counter() - t0
 
     # lower bound: dual LP on meshes refined where the corrections cost most
@@ -745,15 +854,23 @@ def certify(
         msh = _Mesh(points)
         t_mesh += time.perf_counter() - t0
         b, corr = _row_bounds(msh, data, spec.safety)
-        bad = np.min(b, axis=(1, 2)) <= 0.0
-        if np.any(bad):  # corrections above F: refine those triangles before any LP
+        # triangles whose corrections eat half of F somewhere are refined before any LP
+        for _ in range(MAX_PRE_REFINE):
+            bad = np.min(b / data.F[data.rows(msh.points)][msh.tri], axis=(1, 2)) < 0.5
+            if not np.any(bad):
+                break
             t0 = time.perf_counter()
-            points = msh.refine(np.flatnonzero(bad))
+            msh = _Mesh(msh.refine(np.flatnonzero(bad)))
             t_mesh += time.perf_counter() - t0
-            continue
+            b, corr = _row_bounds(msh, data, spec.safety)
+        if np.min(b) <= 0.0:
+            raise InputError(f"certify: {int(np.sum(np.min(b, axis=(1, 2)) <= 0))} triangles "
+                             "keep second-order corrections above F after "
+                             f"{MAX_PRE_REFINE} refinements; use a smaller h_path / h_far")
         t0 = time.perf_counter()
         lp = _solve_lp(msh, b, data.dirs, 0, 1, upper, spec.target_gap,
-                       rays=_initial_rays(msh, spec.directions, previous))
+                       start=_initial_modes(msh, spec.directions, previous, pts,
+                                            2.0 * spec.h_path))
         previous = (msh, lp)
         t_lp += time.perf_counter() - t0
         gap = (upper - lp["lower"]) / upper
@@ -780,16 +897,16 @@ def certify(
         t0 = time.perf_counter()
         points = msh.refine(order[:n_mark])
         t_mesh += time.perf_counter() - t0
-    if best is None:
-        raise InputError(f"certify: the mesh never got fine enough for the corrections to stay "
-                         f"below F within {spec.max_rounds} rounds; lower h_path")
+    assert best is not None  # max_rounds >= 1
     final: _Mesh = best["mesh"]
     lower = best["lower"]
     kind, note = _convexity(m, final.points)
     total = time.perf_counter() - t_start
     return CertifyResult(
         metric=m.name, start=s, goal=g, lower=lower, upper=upper, length=float(est.value),
-        length_error=float(est.error), gap=(upper - lower) / upper, triangles=final.n_tri,
+        length_error=float(est.error), gap=(upper - lower) / upper,
+        upper_source=upper_source, path_upper=solver_upper,
+        path_gap=(solver_upper - lower) / solver_upper, triangles=final.n_tri,
         vertices=int(final.points.shape[0]), unknowns=final.n_dofs,
         directions=spec.directions, lp_rows=best["n_rows"],
         lp_rows_total=int(3 * final.n_tri * spec.directions), lp_status=best["status"],
@@ -798,5 +915,5 @@ def certify(
         mesh={**asdict(spec), "element": "P2", "domain_polygon_vertices": int(poly.shape[0])},
         times={"solve": t_solve, "mesh": t_mesh, "bounds": data.seconds,
                "lp": t_lp - 0.0, "total": total},
-        rounds=rounds, path=pts,
+        rounds=rounds, path=upper_path,
     )

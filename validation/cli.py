@@ -127,6 +127,7 @@ def _register_optional_commands() -> None:
     for module in (cli_solve, cli_learn, cli_report, cli_plot, cli_sweep):
         module.register(app)
     importlib.import_module("validation.cli_expmap").register(app)
+    importlib.import_module("validation.cli_certify").register(app)
 
 
 _register_optional_commands()

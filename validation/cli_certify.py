@@ -1,0 +1,102 @@
+"""``geodesics certify``: a certified interval ``lower <= d(start, goal) <= upper`` on a 2-D
+metric (:func:`solvers.certify`).
+
+JSON keys (``--json``): ``lower``, ``upper``, ``gap`` ((upper - lower) / upper), then
+``length``, ``length_error`` (the upper bound is their sum), ``triangles``, ``vertices``,
+``unknowns``, ``directions``, ``lp_rows``, ``lp_rows_total``, ``lp_status``, ``lp_solver``,
+``convexity`` (``convex`` | ``convexified``), ``convexity_note``, ``solver_status``,
+``mesh`` (the settings), ``times`` (seconds: solve, mesh, bounds, lp, total), ``rounds``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from finsler.errors import InputError
+from finsler.files import atomic_write_text, check_output_path
+from validation.cli_common import fail, metric_or_fail, parse_point
+
+__all__ = ["certify_command", "register"]
+
+
+def certify_command(
+    metric: Annotated[str, typer.Option(help="Registered 2-D metric (see `geodesics metrics`).")],
+    start: Annotated[str, typer.Option(help='Start point, e.g. "0.1,-0.2".')],
+    goal: Annotated[str, typer.Option(help='Goal point, e.g. "0.5,0.3".')],
+    mesh: Annotated[str, typer.Option(
+        help="Mesh preset: coarse (a few 1e-2, fastest), default (gap <= 1e-2) or fine "
+             "(gap <= 1e-3, minutes).")] = "default",
+    h: Annotated[float | None, typer.Option(
+        "--h", help="Spacing of the first mesh along the path (overrides the preset).")] = None,
+    directions: Annotated[int | None, typer.Option(
+        help="Sampled directions per triangle (>= 8; overrides the preset).")] = None,
+    target_gap: Annotated[float | None, typer.Option(
+        help="Refine until the relative gap is at most this (overrides the preset).")] = None,
+    time_limit: Annotated[float | None, typer.Option(
+        help="Seconds after which no new refinement round starts.")] = None,
+    out: Annotated[Path | None, typer.Option(help="Also write the JSON result here.")] = None,
+    as_json: Annotated[bool, typer.Option("--json", help="Print JSON.")] = False,
+) -> None:
+    """Certified lower and upper bounds of the distance: a dual (potential) lower bound on a
+    refined triangulation and the solver's path length with its quadrature error."""
+    import dataclasses
+
+    from solvers.certify import MeshSpec, certify
+
+    m = metric_or_fail(metric)
+    if m.dim != 2:
+        fail(f"certify works on 2-D metrics; {m.name} has dimension {m.dim}")
+    s = parse_point(start, m.dim, "--start")
+    g = parse_point(goal, m.dim, "--goal")
+    try:
+        m.domain.check(s, "--start")
+        m.domain.check(g, "--goal")
+        spec = MeshSpec.preset(mesh)
+        changes = {}
+        if h is not None:
+            changes["h_path"] = h
+            changes["h_far"] = max(spec.h_far, h)
+        if directions is not None:
+            changes["directions"] = directions
+        if target_gap is not None:
+            if not (math.isfinite(target_gap) and 0 < target_gap < 1):
+                raise InputError(f"--target-gap must be in (0, 1), got {target_gap!r}")
+            changes["target_gap"] = target_gap
+        if changes:
+            spec = dataclasses.replace(spec, **changes)
+        if time_limit is not None and not (math.isfinite(time_limit) and time_limit > 0):
+            raise InputError(f"--time-limit must be a positive number of seconds, got "
+                             f"{time_limit!r}")
+        if out is not None:
+            check_output_path(out, "--out")
+        res = certify(m, s, g, spec, time_limit=time_limit)
+        doc = res.to_dict()
+        if out is not None:
+            atomic_write_text(out, json.dumps(doc, indent=2), "certify result")
+    except InputError as err:
+        fail(str(err))
+        return
+    if as_json:
+        typer.echo(json.dumps(doc, indent=2))
+        return
+    typer.echo(f"metric {m.name}: start {tuple(s.tolist())} goal {tuple(g.tolist())}")
+    typer.echo(f"lower  = {res.lower:.10g}   (dual potential, P2 on {res.triangles} triangles, "
+               f"{res.directions} directions)")
+    typer.echo(f"upper  = {res.upper:.10g}   (path length {res.length:.10g} + quadrature "
+               f"error {res.length_error:.2g})")
+    typer.echo(f"gap    = {res.gap:.3e}   (upper - lower) / upper")
+    typer.echo(f"mesh   : {res.vertices} vertices, {res.unknowns} unknowns, {len(res.rounds)} "
+               f"LP round(s), last LP {res.lp_rows} rows ({res.lp_status}, {res.lp_solver})")
+    typer.echo(f"time   : {res.times['total']:.2f} s (solve {res.times['solve']:.2f}, LP "
+               f"{res.times['lp']:.2f})")
+    typer.echo(f"convexity: {res.convexity}: {res.convexity_note}")
+
+
+def register(app: typer.Typer) -> None:
+    """Add ``certify`` to the ``geodesics`` app."""
+    app.command("certify")(certify_command)
