@@ -37,7 +37,7 @@ from solvers.result import (
     SolverError,
     Status,
 )
-from solvers.seeding import SeedPlan, graph_seeder, resample, seed_curves
+from solvers.seeding import SeedPlan, graph_seeder, perturbed_curves, resample, seed_curves
 from solvers.transcription import energy_nlp, minmax_nlp
 
 __all__ = [
@@ -138,6 +138,127 @@ def _initial_path(m: Metric, path: Any, s: np.ndarray, g: np.ndarray, n: int,
     return arr
 
 
+@dataclasses.dataclass
+class _Solve:
+    """One IPOPT energy solve: the candidate's name, points ``(n+1, dim)``, status,
+    iterations, energy (float64, from the projected points), whether the points lie in the
+    domain."""
+
+    name: str
+    points: np.ndarray
+    status: Status
+    iterations: int
+    energy: float
+    feasible: bool
+
+    @property
+    def ok(self) -> bool:
+        return self.status.converged and self.feasible and bool(np.isfinite(self.energy))
+
+    @property
+    def rank(self) -> float:
+        return self.energy if self.ok else np.inf
+
+
+def _solve_one(m: Metric, nlp: Any, name: str, seed: np.ndarray) -> _Solve:
+    pts, status, its, _ = nlp.solve(seed)
+    pts = _onto_domain(m, pts)
+    feasible = bool(np.all(m.domain.contains(pts, tol=1e-9)))
+    energy = float(np.sum(m.path_costs(pts[None])[0] ** 2))
+    return _Solve(name, pts, status, its, energy, feasible)
+
+
+def _distinct(m: Metric, ranked: list[_Solve], keep: int, drop_rtol: float) -> list[_Solve]:
+    """The ``keep`` lowest-energy converged solves of ``ranked``, one per optimum (paths
+    within 1e-4 of the domain size of a kept one are the same optimum), none more than
+    ``drop_rtol`` above the lowest energy (a clearly losing start stops here)."""
+    ranked = sorted((r for r in ranked if r.ok), key=lambda r: r.energy)
+    out: list[_Solve] = []
+    tol = 1e-4 * domain_scale(m)
+    for r in ranked:
+        if len(out) >= keep or (out and r.energy > out[0].energy * (1.0 + drop_rtol)):
+            break
+        if any(np.max(np.abs(r.points - o.points)) <= tol for o in out):
+            continue
+        out.append(r)
+    return out
+
+
+def _ladder(m: Metric, s: np.ndarray, g: np.ndarray, n: int, plan: SeedPlan,
+            given: list[tuple[str, np.ndarray]]
+            ) -> tuple[list[_Solve], list[dict[str, Any]], int, int, int]:
+    """Multiresolution energy stage: every seed of ``plan`` solved at the plan's coarse
+    size, ``plan.restarts`` perturbed copies of the best coarse optimum added, then only
+    the ``plan.refine_top`` best distinct optima carried up the ladder ``plan.ladder(n)``
+    (each level warm started from the previous one by interpolation, losing candidates
+    dropped at every level); caller-given paths join at the final size.
+
+    Returns (solves at the final size, per-level summaries, seeds tried, starts (seeds and
+    restarts) agreeing with the best coarse energy, total IPOPT iterations)."""
+    sizes = plan.ladder(n)
+    n0 = sizes[0]
+    t0 = time.perf_counter()
+    seeds = seed_curves(m, s, g, n0, plan)
+    if plan.graph:
+        gp = graph_seeder(m).path(s, g)
+        if gp is not None:
+            seeds.append(("graph", resample(gp[0], gp[1], n0)))
+    if len(sizes) == 1:
+        seeds += given
+    nlp = energy_nlp(m, n0)
+    solved = [_solve_one(m, nlp, name, seed) for name, seed in seeds]
+    n_seeds = len(solved)
+    if plan.restarts:
+        best = min(solved, key=lambda r: r.rank)
+        if best.ok:
+            for k, curve in enumerate(perturbed_curves(m, best.points, plan.restarts,
+                                                       plan.restart_scale, plan.seed)):
+                solved.append(_solve_one(m, nlp, f"{best.name}~{k}", curve))
+    total_iter = sum(max(r.iterations, 0) for r in solved)
+    e0 = min((r.rank for r in solved), default=np.inf)
+    agree = sum(1 for r in solved
+                if r.ok and abs(r.energy - e0) <= AGREE_RTOL * max(e0, 1e-300))
+    levels = [{"segments": n0, "solved": len(solved), "iterations": total_iter,
+               "wall_time": time.perf_counter() - t0}]
+    for k, size in enumerate(sizes[1:], start=1):
+        t1 = time.perf_counter()
+        keep = _distinct(m, solved, plan.refine_top, plan.drop_rtol)
+        if not keep:  # nothing converged: carry the best attempts so a status comes back
+            keep = sorted(solved, key=lambda r: (r.rank, r.energy))[: plan.refine_top]
+        prev = sizes[k - 1]
+        nlp = energy_nlp(m, size, warm=True)
+        solved = []
+        for r in keep:
+            name = r.name if "@" in r.name else f"{r.name}@{prev}"
+            warm = resample(r.points, np.ones(prev), size)
+            solved.append(_solve_one(m, nlp, name, warm))
+        if k == len(sizes) - 1:
+            solved += [_solve_one(m, nlp, name, path) for name, path in given]
+        its = sum(max(r.iterations, 0) for r in solved)
+        total_iter += its
+        levels.append({"segments": size, "solved": len(solved), "iterations": its,
+                       "wall_time": time.perf_counter() - t1})
+    if plan.polish:
+        t1 = time.perf_counter()
+        nlp = energy_nlp(m, n)
+        best = min(solved, key=lambda r: r.rank)
+        tries = []
+        if best.ok:
+            for k in range(plan.polish):
+                curve = perturbed_curves(m, best.points, 1, plan.polish_scale,
+                                         plan.seed + 1000 + k)[0]
+                r = _solve_one(m, nlp, f"{best.name.split('~')[0]}~p{k}", curve)
+                tries.append(r)
+                if r.rank < best.energy * (1.0 - 1e-12):
+                    best = r
+        solved += tries
+        its = sum(max(r.iterations, 0) for r in tries)
+        total_iter += its
+        levels.append({"segments": n, "solved": len(tries), "iterations": its,
+                       "wall_time": time.perf_counter() - t1, "polish": True})
+    return solved, levels, n_seeds, agree, total_iter
+
+
 def solve_geodesic(
     metric: Metric | str,
     start: Any,
@@ -190,56 +311,34 @@ def solve_geodesic(
              for k, init in enumerate(initial)]
     if not global_seeds and not given:
         raise InputError("global_seeds=False needs at least one initial path")
-    candidates = []
     if global_seeds:
-        candidates = seed_curves(m, s, g, n, plan)
-        if plan.graph:
-            gp = graph_seeder(m).path(s, g)
-            if gp is not None:
-                candidates.append(("graph", resample(gp[0], gp[1], n)))
-    candidates += given
-
-    total_iter = 0
-    if plan.coarse is not None and plan.coarse < n and len(candidates) > plan.refine_top:
-        nc = plan.coarse
-        coarse_nlp = energy_nlp(m, nc)
-        ranked = []
-        for name, seed in candidates:
-            cs = resample(seed, np.ones(n), nc) if seed.shape[0] != nc + 1 else seed
-            cs[0], cs[-1] = s, g
-            pts, status, its, _ = coarse_nlp.solve(cs)
-            total_iter += max(its, 0)
-            e = float(np.sum(m.path_costs(_onto_domain(m, pts)[None])[0] ** 2))
-            ranked.append((e if status.converged and np.isfinite(e) else np.inf, name, pts))
-        ranked.sort(key=lambda r: r[0])
-        candidates = [
-            (f"{name}@{nc}", resample(pts, np.ones(nc), n)) for _, name, pts in
-            ranked[: plan.refine_top]
-        ]
-    nlp = energy_nlp(m, n)
-    solved = []
-    for name, seed in candidates:
-        pts, status, its, _ = nlp.solve(seed)
-        total_iter += max(its, 0)
-        pts = _onto_domain(m, pts)
-        feasible = bool(np.all(m.domain.contains(pts, tol=1e-9)))
-        energy = float(np.sum(m.path_costs(pts[None])[0] ** 2))
-        solved.append((name, pts, status, its, energy, feasible))
-    ok = [r for r in solved if r[2].converged and r[5] and np.isfinite(r[4])]
-    pool = ok or [r for r in solved if r[5] and np.isfinite(r[4])] or solved
-    best = min(pool, key=lambda r: r[4])
-    agree = sum(1 for r in ok if abs(r[4] - best[4]) <= AGREE_RTOL * max(best[4], 1e-300))
+        solved, levels, n_seeds, agree, total_iter = _ladder(m, s, g, n, plan, given)
+    else:
+        solved, levels, total_iter = [], [], 0
+        nlp = energy_nlp(m, n)
+        for name, seed in given:
+            solved.append(_solve_one(m, nlp, name, seed))
+            total_iter += max(solved[-1].iterations, 0)
+        n_seeds, agree = len(given), 0
+    ok = [r for r in solved if r.ok]
+    pool = ok or [r for r in solved if r.feasible and np.isfinite(r.energy)] or solved
+    best = min(pool, key=lambda r: r.energy)
+    if not global_seeds:
+        agree = sum(1 for r in ok if abs(r.energy - best.energy)
+                    <= AGREE_RTOL * max(best.energy, 1e-300))
     res = GeodesicResult(
         metric=m.name,
-        points=best[1],
-        status=best[2],
+        points=best.points,
+        status=best.status,
         iterations=total_iter,
         wall_time=0.0,
-        seeds_tried=len(solved),
+        seeds_tried=n_seeds,
         seeds_agreeing=agree,
-        seed_energies={r[0]: (r[4] if r[2].converged else float("nan")) for r in solved},
-        best_seed=best[0],
-        **_finish(m, best[1]),
+        seed_energies={r.name: (r.energy if r.status.converged else float("nan"))
+                       for r in solved},
+        best_seed=best.name,
+        levels=levels,
+        **_finish(m, best.points),
     )
     if minmax:
         res.minmax = refine_minmax(m, res)

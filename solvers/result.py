@@ -134,7 +134,11 @@ class GeodesicResult:
     solve; ``seeds_tried`` initial curves were solved, ``seeds_agreeing`` of them reached the
     best energy (relative 1e-6). ``nonconvex_points`` counts path points where ``F(x, .)``
     is not convex (for metrics not convex everywhere; there the discrete minimiser may
-    chatter). ``minmax`` holds the min-max refinement when it was requested.
+    chatter). ``minmax`` holds the min-max refinement when it was requested. ``levels``
+    summarises the multiresolution ladder: one dict per size solved (``segments``,
+    ``solved`` candidates, ``iterations``, ``wall_time``); ``seed_energies`` holds the
+    energies of the candidates solved at the final size (names ``seed@coarse`` for those
+    carried up the ladder).
     """
 
     metric: str
@@ -153,6 +157,7 @@ class GeodesicResult:
     best_seed: str = ""
     nonconvex_points: int = 0
     minmax: MinMaxResult | None = None
+    levels: list[dict[str, Any]] = field(default_factory=list)
 
     @property
     def segments(self) -> int:

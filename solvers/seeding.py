@@ -23,20 +23,36 @@ from scipy.spatial import cKDTree
 
 from finsler.metric import Metric
 
-__all__ = ["GraphSeeder", "SeedPlan", "graph_seeder", "resample", "seed_curves"]
+__all__ = [
+    "GraphSeeder",
+    "SeedPlan",
+    "graph_seeder",
+    "perturbed_curves",
+    "resample",
+    "seed_curves",
+]
 
 
 @dataclass(frozen=True)
 class SeedPlan:
-    """Which initial curves to try (a strategy object, see STYLE.md).
+    """Which initial curves to try, and how they are carried to the requested size (a
+    strategy object, see STYLE.md).
 
     ``bulges``: amplitudes (fractions of ``|g - s|``) of the sine bulges, each tried on
     both sides (in 2-D; in higher dimensions along seeded random directions orthogonal to
     ``g - s``); ``random``: number of seeded random smooth perturbations; ``graph``: use the
     lattice / roadmap shortest path; ``seed``: seed of the random perturbations.
-    ``coarse``: if set (and below the requested ``n``), every seed is first solved with
-    ``coarse`` segments and only the ``refine_top`` lowest energies are refined at ``n``
-    (warm started from the coarse solutions); selection stays by the fine energy.
+
+    Multiresolution (``coarse`` set): every seed is solved with ``coarse`` segments (or
+    the requested ``n`` if smaller); ``restarts`` perturbed copies of the best coarse
+    optimum (smooth random perturbations of ``restart_scale * |g - s|``) are solved too;
+    then only the ``refine_top`` lowest distinct optima are carried up the ladder
+    :meth:`ladder` (sizes x ``factor`` up to ``n``), warm started by interpolation, and at
+    every level a candidate more than ``drop_rtol`` (relative energy) above the best
+    stops. ``coarse=None`` solves every seed at the requested size. ``polish``: basin
+    hopping at the final size, that many perturbations (``polish_scale * |g - s|``) of
+    the current best, each kept if its energy is lower (near-equal discrete local minima
+    of non-convex metrics lie close together).
     """
 
     bulges: tuple[float, ...] = (0.3,)
@@ -45,34 +61,82 @@ class SeedPlan:
     seed: int = 0
     coarse: int | None = None
     refine_top: int = 3
+    restarts: int = 0
+    restart_scale: float = 0.15
+    drop_rtol: float = 0.05
+    factor: int = 4
+    polish: int = 0
+    polish_scale: float = 0.03
 
     def __post_init__(self) -> None:
         from finsler.errors import InputError
 
         if any(not (np.isfinite(a) and a > 0) for a in self.bulges):
             raise InputError(f"bulge amplitudes must be positive, got {self.bulges!r}")
-        if not isinstance(self.random, int) or self.random < 0:
-            raise InputError(f"random must be a non-negative integer, got {self.random!r}")
+        for name in ("random", "restarts", "polish"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or v < 0:
+                raise InputError(f"{name} must be a non-negative integer, got {v!r}")
         if self.coarse is not None and (not isinstance(self.coarse, int) or self.coarse < 2):
             raise InputError(f"coarse must be None or an integer >= 2, got {self.coarse!r}")
         if not isinstance(self.refine_top, int) or self.refine_top < 1:
             raise InputError(f"refine_top must be a positive integer, got {self.refine_top!r}")
+        if not isinstance(self.factor, int) or self.factor < 2:
+            raise InputError(f"factor must be an integer >= 2, got {self.factor!r}")
+        for name in ("restart_scale", "drop_rtol", "polish_scale"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and np.isfinite(v) and v > 0):
+                raise InputError(f"{name} must be positive and finite, got {v!r}")
+
+    def ladder(self, n: int) -> list[int]:
+        """Sizes solved on the way to ``n`` segments: ``coarse``, ``coarse * factor``, ...,
+        ``n`` (``[n]`` without ``coarse`` or when ``n <= coarse``)."""
+        if self.coarse is None or n <= self.coarse:
+            return [n]
+        sizes = [self.coarse]
+        while sizes[-1] * self.factor < n:
+            sizes.append(sizes[-1] * self.factor)
+        return [*sizes, n]
 
     @staticmethod
     def default(metric: Metric) -> SeedPlan:
-        """Defaults measured to meet the speed targets (see benchmarks/solver_speed.py)."""
-        if metric.name == "matsumoto":
-            # measured on 200 pairs (n=64): never above Adam-from-straight-line; against 20
-            # starts, higher energy on 11 pairs by at most 0.46% (near-equal local minima of
-            # the non-convex metric), lower on 3
-            return SeedPlan(bulges=(0.25, 0.6), random=2, graph=True)
-        if metric.name == "carlike":
-            # measured on 40 pairs: (0.3,) alone missed a lower energy on 10 of them, by up
-            # to 157%; these 14 starts were within 0.5% of 19 starts on all 40
-            return SeedPlan(bulges=(0.15, 0.3, 0.5, 0.7), random=4, graph=True)
-        if metric.name == "panda-pole":
-            return SeedPlan(bulges=(0.3,), random=2, graph=True)
-        return SeedPlan(bulges=(0.3,), random=0, graph=metric.dim <= 3)
+        """The plan for ``metric``, chosen by what the metric can do, never by its name.
+
+        A metric may define ``seed_plan()`` returning a :class:`SeedPlan` (a hook); else:
+        high dimension (> 3) -> a few random curves and the roadmap, coarse size 8; not
+        smooth (e.g. car-like: kinks that the energy penalises in one long segment) ->
+        four bulge amplitudes and four random curves, coarse size 16; not convex
+        everywhere (e.g. Matsumoto: local minima round the hill, non-convex regions) ->
+        bulges at six amplitudes, 20 random curves and the graph at 32 segments, the best
+        4 refined; convex and smooth (Finsler, e.g. Riemannian or Randers: few local
+        minima) -> the straight line, one bulge each side and the graph, coarse size 16.
+        Every plan climbs a x4 ladder to the requested size; measured in
+        ``benchmarks/solver_speed.py``.
+        """
+        hook = getattr(metric, "seed_plan", None)
+        if callable(hook):
+            plan = hook()
+            if not isinstance(plan, SeedPlan):
+                from finsler.errors import InputError
+
+                raise InputError(f"{type(metric).__name__}.seed_plan() must return a "
+                                 f"SeedPlan, got {type(plan).__name__}")
+            return plan
+        if metric.dim > 3:
+            return SeedPlan(bulges=(0.3,), random=2, graph=True, coarse=8)
+        if not metric.smooth:
+            # measured on 40 car-like pairs: (0.3,) alone missed a lower energy on 10 of
+            # them, by up to 157%; these 14 starts were within 0.5% of 19 starts on all 40
+            return SeedPlan(bulges=(0.15, 0.3, 0.5, 0.7), random=4, graph=True, coarse=16)
+        if not metric.convex_everywhere:
+            # measured on 100 fresh Matsumoto pairs (n = 64, benchmarks/solver_speed.py):
+            # 8 seeds at 16 segments reached the best-known energy (1e-4) on 96, 50 seeds
+            # at 16 on 93 (the coarse ranking misleads: discrete minima of the non-convex
+            # metric differ between sizes), 34 seeds at 32 on 99 (worst 3e-4), as did 50
+            # seeds at the full size, 15x slower
+            return SeedPlan(bulges=(0.1, 0.2, 0.3, 0.45, 0.6, 0.8), random=20, graph=True,
+                            coarse=32, refine_top=4)
+        return SeedPlan(bulges=(0.3,), random=0, graph=True, coarse=16)
 
 
 def resample(path: np.ndarray, weights: np.ndarray, n: int) -> np.ndarray:
@@ -130,6 +194,26 @@ def seed_curves(
         pert = np.sin(np.pi * t * modes[None, :]) @ coef
         out.append((f"random{k}", line + pert))
     return [(name, _project(metric, c, s, g)) for name, c in out]
+
+
+def perturbed_curves(metric: Metric, path: np.ndarray, k: int, scale: float, seed: int
+                     ) -> list[np.ndarray]:
+    """``k`` seeded smooth random perturbations of ``path`` ``(n+1, dim)`` (sine modes
+    1-3, amplitude ``scale * max(|g - s|, 1 if dim > 3)``, decaying with the mode), ends
+    fixed, projected into the domain -> list of ``(n+1, dim)`` (restarts from an optimum:
+    another basin nearby)."""
+    s, g = path[0], path[-1]
+    n = path.shape[0] - 1
+    t = np.linspace(0.0, 1.0, n + 1)[:, None]
+    dist = float(np.linalg.norm(g - s))
+    amp = scale * (dist if metric.dim <= 3 else max(dist, 1.0))
+    rng = np.random.default_rng([seed, 1])
+    modes = np.arange(1, 4)
+    out = []
+    for _ in range(k):
+        coef = rng.normal(size=(len(modes), metric.dim)) * amp / modes[:, None]
+        out.append(_project(metric, path + np.sin(np.pi * t * modes[None, :]) @ coef, s, g))
+    return out
 
 
 def _project(metric: Metric, curve: np.ndarray, s: np.ndarray, g: np.ndarray) -> np.ndarray:

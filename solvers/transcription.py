@@ -218,8 +218,8 @@ class EnergyNLP(_NLPBase):
     derivatives. IPOPT sees it divided by the seed's value (a parameter), so that its
     tolerances and barrier parameter are relative."""
 
-    def __init__(self, metric: Metric, n: int, tol: float = 1e-10, max_iter: int = 1000
-                 ) -> None:
+    def __init__(self, metric: Metric, n: int, tol: float = 1e-10, max_iter: int = 1000,
+                 warm: bool = False) -> None:
         path = _build_path(metric, n)
         self.n, self.dim = n, metric.dim
         scale = ca.SX.sym("scale")  # 1 / (seed's energy): the objective starts at ~1
@@ -232,6 +232,13 @@ class EnergyNLP(_NLPBase):
         # local minima (Adam from the straight line then beat us by 4.2% on 1 pair); 1e-3
         # on the normalised objective gave lower energies everywhere and 25% fewer seconds.
         opts = ipopt_options(tol, max_iter, mu_init=1e-3)
+        if warm:
+            # a start that is already a nearly converged path (the ladder's interpolated
+            # optimum of the previous size): a small barrier keeps it in its basin
+            # (measured at n = 4096: mu_init 1e-3 drifted to a 0.4% longer local minimum)
+            opts = ipopt_options(tol, max_iter, mu_init=1e-7, bound_push=1e-8,
+                                 bound_frac=1e-8, mumps_pivtol=1e-8)
+            name += "_warm"
         self.solver = ca.nlpsol(name, "ipopt", nlp, opts)
         self._energy = ca.Function("energy", [path.z, path.params], [n * ca.sum1(
             ca.vertcat(*path.f2))])
@@ -253,66 +260,99 @@ class EnergyNLP(_NLPBase):
 
 
 class MinMaxNLP(_NLPBase):
-    """``min t`` subject to ``n**2 F(p_i, p_{i+1} - p_i)**2 * scale <= t`` for every segment
-    (the epigraph form of minimising the largest segment cost; ``scale`` normalises the
-    starting max to 1), plus a tiny multiple of the
-    energy that makes the minimiser unique without moving the max by more than ~1e-8
-    relative."""
+    """``min t_1`` subject to ``n**2 F(p_i, p_{i+1} - p_i)**2 * scale <= t_i`` for every
+    segment and ``t_i = t_{i+1}`` (the epigraph form of minimising the largest segment
+    cost, one epigraph variable per segment so that every constraint is local and the KKT
+    matrix stays banded; ``scale`` normalises the starting max to 1), plus a tiny multiple
+    of the energy that makes the minimiser unique without moving the max by more than
+    ~1e-8 relative.
+
+    Solved from the energy solution in up to three attempts, each limited to
+    :meth:`wall_budget` seconds (IPOPT's ``max_wall_time``, so a size that cannot be
+    solved returns its status in bounded time, never hangs): a warm start (barrier and
+    bound push 1e-6 / 1e-8: the start is feasible and nearly optimal), then IPOPT's
+    default barrier start, then the default start without the cap on ``t``.
+    Measured (Matsumoto, n = 1024): a single ``t`` coupling all constraints and MUMPS's
+    default pivot tolerance gave 260 ms per iteration (fill-in) and, at 4096, restoration
+    failures after minutes; the chained form with ``mumps_pivtol=1e-8`` and the warm start
+    converges in 7-10 iterations.
+    """
 
     REG = 1e-8
 
     def __init__(self, metric: Metric, n: int, tol: float = 1e-10) -> None:
         path = _build_path(metric, n)
         self.n, self.dim = n, metric.dim
-        t = ca.SX.sym("t")
         scale = ca.SX.sym("scale")  # 1 / (starting value of n**2 max C**2): t starts at ~1
         f2 = ca.vertcat(*path.f2)
-        obj = t + self.REG * n * scale * ca.sum1(f2)
-        g = ca.vertcat(scale * n * n * f2 - t, *path.g)
-        lbg = np.concatenate([np.full(n, -np.inf), np.asarray(path.lbg, float)])
-        ubg = np.concatenate([np.zeros(n), np.asarray(path.ubg, float)])
-        nlp = {"x": ca.vertcat(path.z, t), "p": ca.vertcat(path.params, scale), "f": obj,
-               "g": g}
-        # Measured on Matsumoto pairs (n=64): a warm start with mu_init 1e-6 and tiny bound
-        # pushes stalled (1000+ iterations, or max-iterations) on 3 of 10 pairs; IPOPT's
-        # default barrier start (mu_init 0.1, bound push 1e-2) from the energy solution
-        # converged on all in 13-17 iterations and reached equal or lower maxima.
-        opts = ipopt_options(tol, bound_push=1e-2, bound_frac=1e-2)
-        self.solver = ca.nlpsol(f"minmax_{_ident(metric.name)}_{n}", "ipopt", nlp, opts)
-        self.lbx = np.concatenate([path.lbz, [0.0]])
-        self.ubx = np.concatenate([path.ubz, [np.inf]])
-        self.lbg, self.ubg = lbg, ubg
+        t = ca.SX.sym("t", n)
+        obj = t[0] + self.REG * n * scale * ca.sum1(f2)
+        g = ca.vertcat(scale * n * n * f2 - t, t[1:] - t[:-1], *path.g)
+        self.lbg = np.concatenate([np.full(n, -np.inf), np.zeros(n - 1),
+                                   np.asarray(path.lbg, float)])
+        self.ubg = np.concatenate([np.zeros(n), np.zeros(n - 1), np.asarray(path.ubg, float)])
+        self.nt = n
+        self._nlp = {"x": ca.vertcat(path.z, t), "p": ca.vertcat(path.params, scale),
+                     "f": obj, "g": g}
+        self._name = f"minmax_{_ident(metric.name)}_{n}"
+        self._tol = tol
+        self.lbx = np.concatenate([path.lbz, np.zeros(self.nt)])
+        self.ubx = np.concatenate([path.ubz, np.full(self.nt, np.inf)])
         self.slack_init = path.slack_init
+        self._solvers: dict[str, ca.Function] = {}
+        self.solver = self._solver("warm")
+
+    def wall_budget(self) -> float:
+        """Seconds allowed per attempt: ``5 + n / 200`` (25 s at n = 4096)."""
+        return 5.0 + self.n / 200.0
+
+    def _solver(self, kind: str) -> ca.Function:
+        if kind not in self._solvers:
+            common = {"mumps_pivtol": 1e-8, "max_wall_time": self.wall_budget()}
+            if kind == "warm":
+                extra = {"mu_init": 1e-6, "bound_push": 1e-8, "bound_frac": 1e-8}
+            else:
+                # IPOPT's default barrier start with a moderate bound push: measured at
+                # n = 64 to rescue the pairs where the warm start stalls
+                extra = {"bound_push": 1e-2, "bound_frac": 1e-2}
+            opts = ipopt_options(self._tol, 500, **common, **extra)
+            self._solvers[kind] = ca.nlpsol(f"{self._name}_{kind}", "ipopt", self._nlp, opts)
+        return self._solvers[kind]
 
     def solve(
         self, start_points: np.ndarray, start_max_cost: float, cap_factor: float = 1.0 + 1e-6
     ) -> tuple[np.ndarray, Status, int, bool]:
         """Refine ``start_points`` ``(n+1, dim)`` whose largest segment cost is
-        ``start_max_cost``; the epigraph variable is capped at ``cap_factor`` times its
-        starting value, and the cap is removed if IPOPT reports infeasibility.
+        ``start_max_cost``; the epigraph variables are capped at ``cap_factor`` times their
+        starting value (the cap is removed in the last attempt).
 
         Returns (points, status, iterations, cap_relaxed)."""
         s, g = start_points[0], start_points[-1]
         scale = 1.0 / max((self.n * start_max_cost) ** 2, 1e-300)
         t0 = cap_factor
-        x0 = np.concatenate([self.points_to_z(start_points), [t0]])
+        x0 = np.concatenate([self.points_to_z(start_points), np.full(self.nt, t0)])
         p = np.concatenate([s, g, [scale]])
-        ubx = self.ubx.copy()
-        ubx[-1] = t0 * (1.0 + 1e-9)
-        r = self._call(x0, p, ubx)
+        capped = self.ubx.copy()
+        capped[-self.nt:] = t0 * (1.0 + 1e-9)
+        its = 0
+        r = None
         relaxed = False
-        if not r.status.converged:
-            relaxed = True
-            r2 = self._call(x0, p)
-            its = r.iterations + r2.iterations
-            r = _Solved(r2.z, r2.status, its, r2.objective)
-        return self.z_to_points(r.z[:-1], s, g), r.status, r.iterations, relaxed
+        for kind, ubx in (("warm", capped), ("cold", capped), ("cold", None)):
+            self.solver = self._solver(kind)
+            r = self._call(x0, p, ubx)
+            its += max(r.iterations, 0)
+            relaxed = ubx is None
+            if r.status.converged:
+                break
+        assert r is not None
+        return self.z_to_points(r.z[:-self.nt], s, g), r.status, its, relaxed
 
 
 @functools.lru_cache(maxsize=32)
-def energy_nlp(metric: Metric, n: int) -> EnergyNLP:
-    """The energy NLP of ``metric`` with ``n`` segments, built once and cached."""
-    return EnergyNLP(metric, n)
+def energy_nlp(metric: Metric, n: int, warm: bool = False) -> EnergyNLP:
+    """The energy NLP of ``metric`` with ``n`` segments, built once and cached (``warm``:
+    IPOPT options for starts that are nearly converged)."""
+    return EnergyNLP(metric, n, warm=warm)
 
 
 @functools.lru_cache(maxsize=32)

@@ -249,7 +249,8 @@ def test_non_convergence_is_a_status_and_strict_raises(monkeypatch) -> None:
     assert Status.from_ipopt("something new") is Status.UNKNOWN
     m = finsler.get_metric("matsumoto")
     s, g = np.array([0.6, 0.1]), np.array([-0.5, -0.3])
-    monkeypatch.setattr(sg, "energy_nlp", lambda metric, n: EnergyNLP(metric, n, max_iter=2))
+    monkeypatch.setattr(sg, "energy_nlp",
+                        lambda metric, n, warm=False: EnergyNLP(metric, n, max_iter=2))
     r = solvers.solve_geodesic(m, s, g, 16)
     assert r.status is Status.MAX_ITERATIONS and not r.converged
     assert r.seeds_agreeing == 0
@@ -399,8 +400,14 @@ def test_coarse_to_fine_seed_plan() -> None:
     s, g = finsler.default_pairs(m, 1)[0]
     plan = SeedPlan(bulges=(0.3,), random=1, coarse=16, refine_top=2)
     r = solvers.solve_geodesic(m, s, g, 64, seeds=plan)
-    assert r.status is Status.SUCCESS and r.seeds_tried == 2
-    assert r.best_seed.endswith("@16")
+    # 5 seeds (straight, 2 bulges, 1 random, graph) at 16 segments, 2 carried to 64
+    assert r.status is Status.SUCCESS and r.seeds_tried == 5
+    assert [lv["segments"] for lv in r.levels] == [16, 64]
+    assert r.levels[0]["solved"] == 5 and r.levels[1]["solved"] == 2
+    assert r.best_seed.endswith("@16") and len(r.seed_energies) == 2
+    assert plan.ladder(64) == [16, 64] and plan.ladder(4096) == [16, 64, 256, 1024, 4096]
+    assert plan.ladder(100) == [16, 64, 100] and plan.ladder(8) == [8]
+    assert SeedPlan().ladder(4096) == [4096]
     with pytest.raises(InputError, match="coarse"):
         SeedPlan(coarse=1)
     with pytest.raises(InputError, match="bulge"):
