@@ -72,7 +72,7 @@ LP_SOLVER = "CLARABEL"
 TIGHT_DUAL = 1e-7
 #: Refinements of triangles whose corrections exceed half of F, before the first LP.
 MAX_PRE_REFINE = 8
-#: Evenly spaced rays per vertex in the first LP of a mesh (more are added where needed).
+#: Evenly spaced rays of the inner polygons that keep the vertices away from the path safe.
 INITIAL_DIRECTIONS = 8
 
 
@@ -144,10 +144,6 @@ class MeshSpec:
                              f"{', '.join(presets)}")
         return presets[name]
 
-    @classmethod
-    def names(cls) -> list[str]:
-        return ["coarse", "default", "fine"]
-
 
 @dataclass
 class CertifyResult:
@@ -203,8 +199,9 @@ class CertifyResult:
 
     @property
     def certified(self) -> bool:
-        """True if the interval is non-empty and the lower bound is positive or zero."""
-        return bool(np.isfinite(self.lower) and self.lower <= self.upper)
+        """True if both bounds are finite and ``lower <= upper``."""
+        return bool(np.isfinite(self.lower) and np.isfinite(self.upper)
+                    and self.lower <= self.upper)
 
     def to_dict(self, with_path: bool = False) -> dict[str, Any]:
         """JSON-ready dict (keys ``lower``, ``upper``, ``gap`` first; ``path`` only if
@@ -558,31 +555,11 @@ class _Rays:
     away from the path; see :func:`_solve_lp`).
     """
 
-    def __init__(self, n_vertices: int, k: int, extra: tuple[np.ndarray, np.ndarray] | None
-                 ) -> None:
-        base = 2 * np.pi * np.arange(INITIAL_DIRECTIONS) / INITIAL_DIRECTIONS + 1e-3
-        vid = np.repeat(np.arange(n_vertices), INITIAL_DIRECTIONS)
-        ang = np.tile(base, n_vertices)
-        if extra is not None:
-            vid = np.concatenate([vid, extra[0]])
-            ang = np.concatenate([ang, np.mod(extra[1], 2 * np.pi)])
-        self.k = k
-        self._set(vid, ang)
-
-    def _set(self, vid: np.ndarray, ang: np.ndarray) -> None:
-        ang = np.round(np.mod(ang, 2 * np.pi), 12)
-        order = np.lexsort((ang, vid))
-        vid, ang = vid[order], ang[order]
-        keep = np.ones(vid.size, bool)
-        keep[1:] = (vid[1:] != vid[:-1]) | (ang[1:] != ang[:-1])
-        self.vid, self.ang = vid[keep], ang[keep]
-        # next ray of the same vertex (cyclic)
-        n = self.vid.size
-        start = np.flatnonzero(np.r_[True, self.vid[1:] != self.vid[:-1]])
-        ends = np.r_[start[1:], n] - 1
-        nxt = np.arange(1, n + 1)
-        nxt[ends] = start
-        self.next = nxt
+    def __init__(self, n_vertices: int, rays: int = INITIAL_DIRECTIONS) -> None:
+        i = np.arange(rays)
+        self.vid = np.repeat(np.arange(n_vertices), rays)
+        self.ang = np.tile(2 * np.pi * i / rays + 1e-3, n_vertices)  # off the sampled angles
+        self.next = (self.vid * rays + np.tile((i + 1) % rays, n_vertices)).astype(np.int64)
 
     def facets(self, b_flat: np.ndarray, dirs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Rows ``normal . g <= rhs`` (normals ``(R, 2)``, rhs ``(R,)``), one per ray (the edge
@@ -629,7 +606,7 @@ def _solve_lp(mesh: _Mesh, b: np.ndarray, dirs: np.ndarray, s_idx: int, g_idx: i
     b_flat = b.reshape(nv, k)
     gradc = mesh.grad.reshape(nv, 2, 6)
     dofs = np.repeat(mesh.dofs, 3, axis=0)  # (T*3, 6)
-    rays = _Rays(nv, k, None)
+    rays = _Rays(nv)
     safe_normal, safe_rhs = rays.facets(b_flat, dirs)
     exact = start["exact"].copy()
     active = start["active"].copy()
@@ -846,8 +823,6 @@ def certify(
     t_lp = 0.0
     best: dict[str, Any] | None = None
     rounds: list[dict[str, Any]] = []
-    lp = None
-    msh = None
     previous = None
     for _ in range(spec.max_rounds):
         t0 = time.perf_counter()
@@ -914,6 +889,6 @@ def certify(
         convexity_note=note, solver_status=solver_status,
         mesh={**asdict(spec), "element": "P2", "domain_polygon_vertices": int(poly.shape[0])},
         times={"solve": t_solve, "mesh": t_mesh, "bounds": data.seconds,
-               "lp": t_lp - 0.0, "total": total},
+               "lp": t_lp, "total": total},
         rounds=rounds, path=upper_path,
     )
