@@ -11,9 +11,27 @@ getting "true" geodesics: Adam (lr 1e-3, 1000 steps) on the same discrete energy
 straight line (all pairs batched; points projected into the disk after each step), and
 prints the per-pair relative energy gap (Adam minus ours, over ours) and the time ratio.
 
+Two more sections (issues 10 and 14), each on pairs no solver default was tuned on
+(``finsler.sample_pairs(metric, K, seed)`` with a seed of their own):
+
+* ``--fresh K``: the global optimum on K fresh Matsumoto pairs (64 segments). For each
+  plan (the default; the previous default, 8 seeds all at the full size; 50 seeds all at
+  the full size, the reference run) it prints the time per pair (``solve_batch`` with 2
+  workers, wall time / K, and the median single-solve time), how many pairs reach the
+  best energy known (the lowest of every plan run, relative 1e-4 and 1e-6) and the worst
+  relative gap. ``--fresh-cache FILE.npz`` keeps every plan's energies, so a rerun adds
+  plans without redoing the 50-seed reference.
+* ``--scale K``: N vs time per plan on K fresh Matsumoto pairs (N = 64 ... 4096): full
+  solve (energy + min-max, one process, each size warmed up once so that building the
+  NLPs is not timed), median time per N, the ratio to N = 64, every status, the length
+  at 4096 against 1024, and (up to ``--full-max``) the energy of solving every seed at the
+  full N, which the multiresolution default must never be above.
+
 Usage::
 
     python benchmarks/solver_speed.py [--pairs 100] [--metrics matsumoto,carlike,panda-pole]
+    python benchmarks/solver_speed.py --metrics none --fresh 100 --fresh-cache fresh.npz
+    python benchmarks/solver_speed.py --metrics none --scale 5
 
 Timings are single-process (one pair at a time, as a user calling ``solve_geodesic``);
 one-off setup (building the NLPs and the seeding graph) is timed separately.
@@ -28,7 +46,7 @@ import numpy as np
 import torch
 
 import finsler
-from solvers import SeedPlan, solve_geodesic
+from solvers import SeedPlan, solve_batch, solve_geodesic
 from solvers.baseline import adam_energy_baseline
 from solvers.seeding import graph_seeder
 from solvers.transcription import energy_nlp, minmax_nlp
@@ -105,17 +123,128 @@ def compare_adam(info: dict) -> None:
           f"({ours_time / len(gap):.4f} s/pair); ratio ours/Adam {ours_time / t_adam:.2f}")
 
 
+#: Seeds of the fresh pair sets (never used to choose a default).
+FRESH_SEED = 2611
+SCALE_SEED = 1411
+
+
+def fresh_plans(m: finsler.Metric) -> dict[str, SeedPlan]:
+    """The plans compared on fresh pairs: the default, the previous default (8 seeds at
+    the full size) and the 50-seed reference (all at the full size)."""
+    return {
+        "default": SeedPlan.default(m),
+        "8 seeds, full size (previous default)": SeedPlan(bulges=(0.25, 0.6), random=2),
+        "50 seeds, full size (reference)": SeedPlan(
+            bulges=(0.1, 0.2, 0.3, 0.45, 0.6, 0.8), random=36),
+    }
+
+
+def run_fresh(k: int, cache: str | None) -> None:
+    """Seeds vs time vs how often the best-known energy is reached (issue 10)."""
+    import os
+
+    m = finsler.get_metric("matsumoto")
+    n = 64
+    pairs = finsler.sample_pairs(m, k, seed=FRESH_SEED)
+    stored: dict[str, np.ndarray] = {}
+    if cache and os.path.exists(cache):
+        with np.load(cache) as z:
+            if np.array_equal(z["pairs"], pairs):
+                stored = {key[2:]: z[key] for key in z.files if key.startswith("e:")}
+    rows = []
+    for name, plan in fresh_plans(m).items():
+        key = repr(plan)
+        if key in stored and "t:" + key in stored:
+            e, times = stored[key], stored["t:" + key]
+        else:
+            solve_batch(m, pairs[:2], n, seeds=plan, workers=2, progress=False)  # warm-up
+            t0 = time.perf_counter()
+            res = solve_batch(m, pairs, n, seeds=plan, workers=2, progress=False)
+            wall = time.perf_counter() - t0
+            e = np.array([r.energy for r in res])
+            times = np.array([wall / k, float(np.median([r.wall_time for r in res]))])
+            stored[key], stored["t:" + key] = e, times
+        rows.append((name, plan, e, times))
+    if cache:
+        np.savez(cache, pairs=pairs, **{"e:" + key: v for key, v in stored.items()})
+    best = np.min([v for key, v in stored.items() if not key.startswith("t:")], axis=0)
+    print(f"\n== global optimum, {k} fresh Matsumoto pairs (seed {FRESH_SEED}), n={n}; best "
+          f"known = lowest energy of {sum(1 for key in stored if not key.startswith('t:'))} "
+          f"plan runs")
+    print(f"{'plan':40s} {'starts':>6s} {'s/pair (2 workers)':>19s} {'median 1 solve':>15s} "
+          f"{'<=1e-4':>7s} {'<=1e-6':>7s} {'worst gap':>10s}")
+    for name, plan, e, times in rows:
+        gap = (e - best) / best
+        starts = 1 + 2 * len(plan.bulges) + plan.random + int(plan.graph) + plan.restarts
+        print(f"{name:40s} {starts:6d} {times[0]:19.3f} {times[1]:15.3f} "
+              f"{int(np.sum(gap <= 1e-4)):7d} {int(np.sum(gap <= 1e-6)):7d} {gap.max():10.2e}")
+    print(f"load average during the run: {os.getloadavg()[0]:.1f} (2 cores)")
+
+
+def run_scale(k: int, sizes: list[int], full_max: int) -> None:
+    """N vs time per plan, full solve with min-max (issue 14)."""
+    m = finsler.get_metric("matsumoto")
+    pairs = finsler.sample_pairs(m, k, seed=SCALE_SEED)
+    full = SeedPlan(bulges=(0.25, 0.6), random=2)  # every seed at the full N
+    plans = {"default (multiresolution)": SeedPlan.default(m), "all seeds at full N": full}
+    print(f"\n== N vs time, {k} fresh Matsumoto pairs (seed {SCALE_SEED}), energy + min-max, "
+          "one process, each size warmed up once")
+    lengths: dict[tuple[str, int], np.ndarray] = {}
+    energies: dict[tuple[str, int], np.ndarray] = {}
+    med64: dict[str, float] = {}
+    for name, plan in plans.items():
+        for n in sizes:
+            if plan is full and n > full_max:
+                continue
+            solve_geodesic(m, pairs[0, 0], pairs[0, 1], n, seeds=plan, minmax=True)  # warm-up
+            res = [solve_geodesic(m, s, g, n, seeds=plan, minmax=True) for s, g in pairs]
+            t = np.array([r.wall_time for r in res])
+            tm = np.array([r.minmax.wall_time for r in res])
+            st = sorted({r.status.value for r in res} | {r.minmax.status.value for r in res})
+            lengths[name, n] = np.array([r.length for r in res])
+            energies[name, n] = np.array([r.energy for r in res])
+            med = float(np.median(t))
+            med64.setdefault(name, med)
+            print(f"{name:28s} N={n:5d}: median {med:7.3f} s (min-max {np.median(tm):6.3f} s), "
+                  f"max {t.max():7.3f} s, x{med / med64[name]:6.1f} of N={sizes[0]}; "
+                  f"statuses {st}")
+    d = "default (multiresolution)"
+    if (d, 4096) in lengths and (d, 1024) in lengths:
+        rel = (lengths[d, 4096] - lengths[d, 1024]) / lengths[d, 1024]
+        print(f"length at 4096 vs 1024 (relative): max {rel.max():.2e} (bar: <= 1e-3)")
+    for n in sizes:
+        if (d, n) in energies and ("all seeds at full N", n) in energies:
+            gap = (energies[d, n] - energies["all seeds at full N", n]) / energies[
+                "all seeds at full N", n]
+            print(f"N={n}: default energy minus all-seeds-at-full-N energy, relative: "
+                  f"max {gap.max():.2e}, min {gap.min():.2e}")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--pairs", type=int, default=100)
-    ap.add_argument("--metrics", default="matsumoto,carlike,panda-pole")
+    ap.add_argument("--metrics", default="matsumoto,carlike,panda-pole",
+                    help="task metrics of the first section, or 'none'")
+    ap.add_argument("--fresh", type=int, default=0, help="fresh Matsumoto pairs (issue 10)")
+    ap.add_argument("--fresh-cache", default=None, help=".npz of every plan's energies")
+    ap.add_argument("--scale", type=int, default=0, help="fresh pairs for N vs time")
+    ap.add_argument("--sizes", default="64,256,1024,4096")
+    ap.add_argument("--full-max", type=int, default=1024,
+                    help="largest N for the all-seeds-at-full-N plan")
     args = ap.parse_args()
-    for name in args.metrics.split(","):
-        if name not in TASKS:
-            raise SystemExit(f"unknown task metric {name!r}; choose from {', '.join(TASKS)}")
-        info = run_metric(name, args.pairs)
-        if name == "matsumoto":
-            compare_adam(info)
+    torch.set_num_threads(1)
+    if args.metrics != "none":
+        for name in args.metrics.split(","):
+            if name not in TASKS:
+                raise SystemExit(f"unknown task metric {name!r}; choose from "
+                                 f"{', '.join(TASKS)}")
+            info = run_metric(name, args.pairs)
+            if name == "matsumoto":
+                compare_adam(info)
+    if args.fresh:
+        run_fresh(args.fresh, args.fresh_cache)
+    if args.scale:
+        run_scale(args.scale, [int(v) for v in args.sizes.split(",")], args.full_max)
 
 
 if __name__ == "__main__":

@@ -26,12 +26,12 @@ __all__ = ["RAY_MISSING", "connect_ray", "require_ray", "solve_chunks_ray"]
 
 def _solve_chunk(worker: Callable[[tuple], tuple[int, Any]], spec: tuple, ks: list[int],
                  pairs: np.ndarray, n: int, plan: Any, minmax: bool,
-                 inits: np.ndarray | None = None, global_seeds: bool = True
-                 ) -> list[tuple[int, Any]]:
+                 inits: np.ndarray | None = None, global_seeds: bool = True,
+                 tol: float | None = None) -> list[tuple[int, Any]]:
     """Ray-task body: solve ``pairs`` ``(len(ks), 2, dim)`` (initial paths ``inits``
     ``(len(ks), n+1, dim)`` or ``None``); returns ``[(k, result)]``."""
     return [worker((spec, k, p[0], p[1], n, plan, minmax,
-                    None if inits is None else inits[i], global_seeds))
+                    None if inits is None else inits[i], global_seeds, tol))
             for i, (k, p) in enumerate(zip(ks, pairs))]
 
 
@@ -40,13 +40,14 @@ def solve_chunks_ray(address: str, worker: Callable[[tuple], tuple[int, Any]], s
                      chunk_size: int | None = None,
                      num_cpus: int | None = None,
                      initial_paths: np.ndarray | None = None,
-                     global_seeds: bool = True) -> Iterator[tuple[int, Any]]:
+                     global_seeds: bool = True,
+                     tol: float | None = None) -> Iterator[tuple[int, Any]]:
     """Solve ``pairs[todo]`` as Ray tasks of ``chunk_size`` pairs (default: about four
     chunks per CPU of the cluster, at most 64 pairs each) with ``worker`` (the batch
     solver's per-pair function, passed in so that this module needs nothing of it);
     yields ``(k, result)`` chunk by chunk as chunks finish. ``num_cpus`` sizes a local
     instance (``address="local"``). ``initial_paths`` ``(K, n+1, dim)`` (indexed like
-    ``pairs``) and ``global_seeds`` go to every pair's solve."""
+    ``pairs``), ``global_seeds`` and ``tol`` go to every pair's solve."""
     if chunk_size is not None and (isinstance(chunk_size, bool) or chunk_size < 1):
         raise InputError(f"chunk_size must be a positive integer, got {chunk_size!r}")
     ray = require_ray()
@@ -61,7 +62,7 @@ def solve_chunks_ray(address: str, worker: Callable[[tuple], tuple[int, Any]], s
             ks = todo[i:i + chunk_size]
             inits = None if initial_paths is None else initial_paths[ks]
             refs.append(task.remote(worker, spec, ks, pairs[ks], n, plan, minmax, inits,
-                                    global_seeds))
+                                    global_seeds, tol))
         pending = list(refs)
         while pending:
             ready, pending = ray.wait(pending, num_returns=1)

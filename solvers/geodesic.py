@@ -50,6 +50,12 @@ __all__ = [
     "solve_geodesic",
 ]
 
+#: Largest size :func:`solve_geodesic` doubles to for ``tol``.
+TOL_MAX_SEGMENTS = 16384
+#: Order of the polyline length of a smooth geodesic: chords lose O(h**2) per unit length.
+EXPECTED_ORDER = 2.0
+
+
 #: Relative energy difference under which two seeds count as agreeing with the best.
 AGREE_RTOL = 1e-6
 
@@ -168,6 +174,18 @@ def _solve_one(m: Metric, nlp: Any, name: str, seed: np.ndarray) -> _Solve:
     return _Solve(name, pts, status, its, energy, feasible)
 
 
+def _solve_warm(m: Metric, name: str, seed: np.ndarray) -> _Solve:
+    """Solve from a nearly converged path with the warm IPOPT options; if that does not
+    converge, again with the default ones (iterations of both counted)."""
+    n = seed.shape[0] - 1
+    r = _solve_one(m, energy_nlp(m, n, warm=True), name, seed)
+    if r.ok:
+        return r
+    r2 = _solve_one(m, energy_nlp(m, n), name, seed)
+    r2.iterations += max(r.iterations, 0)
+    return r2
+
+
 def _distinct(m: Metric, ranked: list[_Solve], keep: int, drop_rtol: float) -> list[_Solve]:
     """The ``keep`` lowest-energy converged solves of ``ranked``, one per optimum (paths
     within 1e-4 of the domain size of a kept one are the same optimum), none more than
@@ -226,13 +244,12 @@ def _ladder(m: Metric, s: np.ndarray, g: np.ndarray, n: int, plan: SeedPlan,
         if not keep:  # nothing converged: carry the best attempts so a status comes back
             keep = sorted(solved, key=lambda r: (r.rank, r.energy))[: plan.refine_top]
         prev = sizes[k - 1]
-        nlp = energy_nlp(m, size, warm=True)
         solved = []
         for r in keep:
             name = r.name if "@" in r.name else f"{r.name}@{prev}"
-            warm = resample(r.points, np.ones(prev), size)
-            solved.append(_solve_one(m, nlp, name, warm))
+            solved.append(_solve_warm(m, name, resample(r.points, np.ones(prev), size)))
         if k == len(sizes) - 1:
+            nlp = energy_nlp(m, size)
             solved += [_solve_one(m, nlp, name, path) for name, path in given]
         its = sum(max(r.iterations, 0) for r in solved)
         total_iter += its
@@ -270,6 +287,9 @@ def solve_geodesic(
     global_seeds: bool = True,
     minmax: bool = False,
     strict: bool = False,
+    tol: float | None = None,
+    max_segments: int = TOL_MAX_SEGMENTS,
+    _nearly_converged: bool = False,
 ) -> GeodesicResult:
     """Globally seeded discrete geodesic from ``start`` to ``goal`` (each ``(dim,)``).
 
@@ -283,10 +303,22 @@ def solve_geodesic(
     ``seeds_tried`` / ``seeds_agreeing``. With ``minmax=True`` the min-max refinement is
     attached (``result.minmax``). ``strict=True`` raises :class:`SolverError` unless
     converged.
+
+    ``tol`` (relative, e.g. ``1e-7``): accuracy on request. The size is doubled from ``n``
+    (each size warm started from the previous path) until the estimated error of the
+    continuum length is below ``tol * length`` or ``max_segments`` is reached; the result
+    then carries ``length_estimate`` (Richardson extrapolation of the eq. (58) polyline
+    lengths when their order 2 is observed, else the finest length), ``error_estimate``
+    (absolute), ``order`` (observed) / ``order_seen`` and ``tol_levels``; min-max runs at
+    the final size.
     """
     t0 = time.perf_counter()
     m = _metric(metric)
     n = check_segments(m, segments)
+    if tol is not None:
+        return _solve_to_tol(m, start, goal, n, tol, max_segments, t0, seeds=seeds,
+                             initial=initial, global_seeds=global_seeds, minmax=minmax,
+                             strict=strict)
     s = _point(m, start, "start")
     g = _point(m, goal, "goal")
     plan = seeds if seeds is not None else SeedPlan.default(m)
@@ -317,7 +349,8 @@ def solve_geodesic(
         solved, levels, total_iter = [], [], 0
         nlp = energy_nlp(m, n)
         for name, seed in given:
-            solved.append(_solve_one(m, nlp, name, seed))
+            solved.append(_solve_warm(m, name, seed) if _nearly_converged
+                          else _solve_one(m, nlp, name, seed))
             total_iter += max(solved[-1].iterations, 0)
         n_seeds, agree = len(given), 0
     ok = [r for r in solved if r.ok]
@@ -350,6 +383,110 @@ def solve_geodesic(
             + ")",
             res,
         )
+    return res
+
+
+def richardson(sizes: Sequence[int], lengths: Sequence[float], quad_errors: Sequence[float],
+               expected: float = EXPECTED_ORDER) -> dict[str, Any]:
+    """Continuum length from polyline lengths at doubling sizes ``sizes`` ``(k,)``.
+
+    With three or more sizes the observed order ``p = log2(d1 / d2)`` of the last two
+    differences is computed; it is "seen" when both differences have the same sign, shrink,
+    and ``|p - expected| <= 0.5``. Then ``length = L_k - d2 / (2**expected - 1)`` and the
+    error estimate is the size of that correction (the estimated error of ``L_k``, an
+    overestimate of the extrapolated value's error) plus the quadrature errors. Otherwise
+    ``length = L_k`` with the estimate ``|d2|`` (bounds the error of ``L_k`` for any
+    monotone convergence of order >= 1) plus the quadrature errors; with one size the
+    estimate is infinite. Returns ``length``, ``error_estimate``, ``order`` (or None),
+    ``order_seen``."""
+    L = [float(v) for v in lengths]
+    q = float(quad_errors[-1]) + (float(quad_errors[-2]) if len(L) > 1 else 0.0)
+    if len(L) < 2:
+        return {"length": L[-1], "error_estimate": float("inf"), "order": None,
+                "order_seen": False}
+    d2 = L[-2] - L[-1]
+    order = None
+    seen = False
+    if len(L) >= 3:
+        d1 = L[-3] - L[-2]
+        if d1 != 0.0 and d2 != 0.0 and np.sign(d1) == np.sign(d2) and abs(d2) < abs(d1):
+            order = float(np.log(abs(d1) / abs(d2)) / np.log(sizes[-1] / sizes[-2]))
+            seen = abs(order - expected) <= 0.5
+    if seen:
+        corr = d2 / ((sizes[-1] / sizes[-2]) ** expected - 1.0)
+        return {"length": L[-1] - corr, "error_estimate": abs(corr) + q, "order": order,
+                "order_seen": True}
+    return {"length": L[-1], "error_estimate": abs(d2) + q, "order": order,
+            "order_seen": False}
+
+
+def _tol_estimate(levels: list[dict[str, Any]], nonconvex: bool) -> dict[str, Any]:
+    """:func:`richardson` over the sizes solved so far; through non-convex regions of ``F``
+    (where discrete minimisers may chatter and the order can change with the size) the
+    order must be seen on the last two triples of sizes before it is used."""
+    args = ([lv["segments"] for lv in levels], [lv["length"] for lv in levels],
+            [lv["quadrature_error"] for lv in levels])
+    est = richardson(*args)
+    if nonconvex and est["order_seen"]:
+        before = richardson(*(a[:-1] for a in args)) if len(levels) >= 4 else None
+        if before is None or not before["order_seen"]:
+            L = args[1]
+            est = {"length": L[-1], "error_estimate": abs(L[-2] - L[-1]) + args[2][-1]
+                   + args[2][-2], "order": est["order"], "order_seen": False}
+    return est
+
+
+def _solve_to_tol(m: Metric, start: Any, goal: Any, n: int, tol: Any, max_segments: Any,
+                  t0: float, *, minmax: bool, strict: bool, **kw: Any) -> GeodesicResult:
+    if isinstance(tol, bool) or not isinstance(tol, (int, float)) or not (
+            np.isfinite(tol) and 0 < tol < 1):
+        raise InputError(f"tol must be a relative tolerance in (0, 1), got {tol!r}")
+    if isinstance(max_segments, bool) or not isinstance(max_segments, (int, np.integer)) \
+            or max_segments < n:
+        raise InputError(f"max_segments must be an integer >= segments ({n}), got "
+                         f"{max_segments!r}")
+    check_segments(m, int(max_segments))
+    s = _point(m, start, "start")
+    g = _point(m, goal, "goal")
+    res = first = solve_geodesic(m, s, g, n, **kw)
+    iterations = first.iterations
+    levels: list[dict[str, Any]] = []
+    while True:
+        le = m.path_length_error(res.points, rtol=0.05 * float(tol))
+        levels.append({"segments": res.segments, "length": float(le.value),
+                       "quadrature_error": float(le.error), "status": res.status.value,
+                       "nonconvex_points": res.nonconvex_points})
+        est = _tol_estimate(levels, res.nonconvex_points > 0)
+        done = len(levels) >= 3 and est["error_estimate"] <= tol * abs(est["length"])
+        if done or 2 * res.segments > max_segments or not res.converged or res.status in (
+                Status.TRIVIAL, Status.SHORT):
+            break
+        res = solve_geodesic(m, s, g, 2 * res.segments, initial=[res.points],
+                             global_seeds=False, _nearly_converged=True)
+        iterations += res.iterations
+    # the seeding happened at the first size; later sizes are warm starts of its winner
+    res.seeds_tried, res.seeds_agreeing = first.seeds_tried, first.seeds_agreeing
+    res.seed_energies, res.best_seed = first.seed_energies, first.best_seed
+    res.levels, res.iterations = first.levels, iterations
+    if res.status in (Status.TRIVIAL, Status.SHORT):
+        est = {"length": float(m.segment_length(s, g, 8)), "error_estimate": 0.0,
+               "order": None, "order_seen": False}
+        done = True
+    res.length_estimate = float(est["length"])
+    res.error_estimate = float(est["error_estimate"])
+    res.order = est["order"]
+    res.order_seen = bool(est["order_seen"])
+    res.tol = float(tol)
+    res.tol_reached = bool(done)
+    res.tol_levels = levels
+    if minmax:
+        res.minmax = refine_minmax(m, res)
+    res.wall_time = time.perf_counter() - t0
+    if strict and not (res.converged and res.tol_reached
+                       and (res.minmax is None or res.minmax.converged)):
+        raise SolverError(f"{m.name}: tol {tol:g} not reached (estimate "
+                          f"{res.error_estimate:.3e} at {res.segments} segments, status "
+                          f"{res.status.value})", res)
     return res
 
 
@@ -409,11 +546,12 @@ def _metric_spec(m: Metric) -> tuple[type, dict[str, Any]]:
 
 
 def _batch_worker(args: tuple) -> tuple[int, GeodesicResult]:
-    (cls, params), k, s, g, n, plan, minmax, init, global_seeds = args
+    (cls, params), k, s, g, n, plan, minmax, init, global_seeds, *rest = args
+    tol = rest[0] if rest else None
     m = _cached_metric(cls, tuple(sorted(params.items())))
     initial = () if init is None else (init,)
     return k, solve_geodesic(m, s, g, n, seeds=plan, minmax=minmax, initial=initial,
-                             global_seeds=global_seeds)
+                             global_seeds=global_seeds, tol=tol)
 
 
 _METRICS: dict[tuple, Metric] = {}
@@ -430,7 +568,7 @@ class _BatchStore:
     """Per-pair result files of a resumable :func:`solve_batch` (pickle, atomic rename)."""
 
     def __init__(self, folder: Any, metric: Metric, n: int, plan: SeedPlan, minmax: bool,
-                 global_seeds: bool = True):
+                 global_seeds: bool = True, tol: float | None = None):
         import pathlib
 
         self.folder = pathlib.Path(folder)
@@ -439,7 +577,8 @@ class _BatchStore:
         except OSError as err:
             raise OutputError(f"cannot create the folder of resumable parts {self.folder}: "
                               f"{err.strerror}") from err
-        self.key = (repr(metric), int(n), repr(plan), bool(minmax), bool(global_seeds))
+        self.key = (repr(metric), int(n), repr(plan), bool(minmax), bool(global_seeds),
+                    None if tol is None else float(tol))
 
     def _path(self, k: int) -> Any:
         return self.folder / f"pair_{k:07d}.pkl"
@@ -488,6 +627,7 @@ def solve_batch(
     chunk_size: int | None = None,
     initial_paths: Any = None,
     global_seeds: bool = True,
+    tol: float | None = None,
 ) -> list[GeodesicResult]:
     """Solve every pair of ``pairs`` ``(K, 2, dim)``; results in the order of the pairs.
 
@@ -511,6 +651,8 @@ def solve_batch(
     points), solved as ``solve_geodesic(initial=[path])``. With ``global_seeds=False`` only
     that path is solved (the fast warm-start mode: a good path converges in a few IPOPT
     iterations); with ``True`` the global seeds are solved too and the lowest energy kept.
+    ``tol``: every pair solved to that relative accuracy of its length
+    (:func:`solve_geodesic`).
     """
     from tqdm.auto import tqdm
 
@@ -536,7 +678,10 @@ def solve_batch(
     inits = check_initial_paths(m, arr, n, initial_paths)
     if not global_seeds and inits is None:
         raise InputError("global_seeds=False needs initial_paths (one path per pair)")
-    store = (_BatchStore(checkpoint_dir, m, n, plan, minmax, bool(global_seeds))
+    if tol is not None and (isinstance(tol, bool) or not isinstance(tol, (int, float))
+                            or not (np.isfinite(tol) and 0 < tol < 1)):
+        raise InputError(f"tol must be a relative tolerance in (0, 1), got {tol!r}")
+    store = (_BatchStore(checkpoint_dir, m, n, plan, minmax, bool(global_seeds), tol)
              if checkpoint_dir else None)
     workers = int(min(workers, arr.shape[0]))
     results: list[GeodesicResult | None] = [None] * arr.shape[0]
@@ -558,7 +703,7 @@ def solve_batch(
             for k, res in solve_chunks_ray(ray_address, _batch_worker, _metric_spec(m), arr,
                                            todo, n, plan, minmax, chunk_size,
                                            num_cpus=local_cpus, initial_paths=inits,
-                                           global_seeds=bool(global_seeds)):
+                                           global_seeds=bool(global_seeds), tol=tol):
                 results[k] = res
                 if store is not None:
                     store.save(k, arr[k], res, init_of(k))
@@ -569,14 +714,14 @@ def solve_batch(
                 results[k] = solve_geodesic(m, arr[k, 0], arr[k, 1], n, seeds=plan,
                                             minmax=minmax,
                                             initial=() if init is None else (init,),
-                                            global_seeds=bool(global_seeds))
+                                            global_seeds=bool(global_seeds), tol=tol)
                 if store is not None:
                     store.save(k, arr[k], results[k], init)
                 bar.update(1)
         else:
             spec = _metric_spec(m)
             jobs = [(spec, k, arr[k, 0], arr[k, 1], n, plan, minmax, init_of(k),
-                     bool(global_seeds)) for k in todo]
+                     bool(global_seeds), tol) for k in todo]
             with ProcessPool(workers) as pool:
                 for k, res in pool.map_unordered(_batch_worker, jobs):
                     results[k] = res

@@ -138,7 +138,12 @@ class GeodesicResult:
     summarises the multiresolution ladder: one dict per size solved (``segments``,
     ``solved`` candidates, ``iterations``, ``wall_time``); ``seed_energies`` holds the
     energies of the candidates solved at the final size (names ``seed@coarse`` for those
-    carried up the ladder).
+    carried up the ladder). Solves with ``tol`` also fill ``length_estimate`` (of the
+    continuum distance along this path), ``error_estimate`` (absolute), ``order`` (observed
+    order of the polyline lengths, None if not measurable) and ``order_seen`` (the expected
+    order 2 observed; False e.g. through non-convex regions, where the estimate is the
+    plain difference of the last two sizes), ``tol_reached`` and ``tol_levels`` (one
+    dict per size: ``segments``, ``length``, ``quadrature_error``, ...).
     """
 
     metric: str
@@ -158,6 +163,13 @@ class GeodesicResult:
     nonconvex_points: int = 0
     minmax: MinMaxResult | None = None
     levels: list[dict[str, Any]] = field(default_factory=list)
+    length_estimate: float | None = None
+    error_estimate: float | None = None
+    order: float | None = None
+    order_seen: bool | None = None
+    tol: float | None = None
+    tol_reached: bool | None = None
+    tol_levels: list[dict[str, Any]] = field(default_factory=list)
 
     @property
     def segments(self) -> int:
@@ -196,6 +208,17 @@ class GeodesicResult:
             "seeds_agreeing": self.seeds_agreeing,
             "nonconvex_points": self.nonconvex_points,
         }
+        out["segments"] = self.segments
+        if self.error_estimate is not None:
+            # accuracy on request: "length" is the estimate of the continuum length
+            out["length_sum_costs"] = self.length
+            out["length"] = self.length_estimate
+            out["error_estimate"] = self.error_estimate
+            out["order"] = self.order
+            out["order_seen"] = self.order_seen
+            out["tol"] = self.tol
+            out["tol_reached"] = self.tol_reached
+            out["tol_levels"] = self.tol_levels
         if self.minmax is not None:
             out["minmax_max_segment_cost"] = self.minmax.max_segment_cost
             out["minmax_status"] = self.minmax.status.value

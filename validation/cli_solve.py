@@ -5,7 +5,12 @@ JSON schema (one pair with ``--json``, or ``--pairs``)::
     {"metric", "segments", "eps", "success_rate",
      "results": [{"points" (n+1, dim): the energy minimiser, "energy", "length",
                   "length_quadrature", "max_segment_cost", "minmax_max_segment_cost",
-                  "success" (min-max cost <= eps), "status", ...}]}
+                  "success" (min-max cost <= eps), "status", "segments", ...}]}
+
+With ``--tol`` each result also has ``error_estimate`` (absolute), ``order`` (observed
+order of the polyline lengths), ``order_seen``, ``tol_reached`` and ``tol_levels``, its
+``segments`` is the size the refinement stopped at, and ``length`` is the estimate of the
+continuum length (the discrete sum of costs is then ``length_sum_costs``).
 
 ``success_rate`` is the fraction of pairs whose min-max refined discrete geodesic has every
 segment cost ``<= eps``: the exact ceiling of the paper's task.
@@ -106,6 +111,10 @@ def solve_command(
         "--keep-global-seeds",
         help="With --warm-start: also solve the global seeds and keep the lowest energy "
              "(a check of the learned start; as slow as without --warm-start).")] = False,
+    tol: Annotated[float | None, typer.Option(
+        help="Relative accuracy of the length: double the segments from --segments until "
+             "the estimated error (Richardson extrapolation; says when the expected order "
+             "is not seen) is below TOL * length, e.g. 1e-7.")] = None,
 ) -> None:
     """Exact discrete geodesics (globally seeded IPOPT) with min-max refinement.
 
@@ -123,6 +132,8 @@ def solve_command(
         fail("--ray and --chunk-size apply to --pairs")
     if chunk_size is not None and chunk_size < 1:
         fail(f"--chunk-size must be >= 1, got {chunk_size}")
+    if tol is not None and not (np.isfinite(tol) and 0 < tol < 1):
+        fail(f"--tol must be a relative tolerance in (0, 1), e.g. 1e-7, got {tol:g}")
     if keep_global_seeds and warm_start is None:
         fail("--keep-global-seeds applies to --warm-start")
     parts = None
@@ -155,6 +166,7 @@ def solve_command(
             m, arr, n, minmax=True, workers=workers, progress=progress and pairs is not None,
             checkpoint_dir=parts, ray_address=ray, chunk_size=chunk_size,
             initial_paths=inits, global_seeds=inits is None or keep_global_seeds,
+            tol=tol,
         )
     except InputError as err:
         fail(str(err))
@@ -182,7 +194,7 @@ def solve_command(
         r = results[0]
         row = payload["results"][0]
         typer.echo(f"status                    {r.status.value}")
-        typer.echo(f"segments                  {n}")
+        typer.echo(f"segments                  {r.segments}")
         typer.echo(f"length (sum C)            {r.length:.12g}")
         typer.echo(f"length (eq. 58 quadr.)    {r.length_quadrature:.12g}")
         typer.echo(f"energy (sum C^2)          {r.energy:.12g}")
@@ -190,9 +202,17 @@ def solve_command(
         typer.echo(f"min-max max segment cost  {row['minmax_max_segment_cost']:.6g}"
                    f"  (eps {payload['eps']:g}: {'success' if row['success'] else 'fail'})")
         typer.echo(f"seeds agreeing / tried    {r.seeds_agreeing} / {r.seeds_tried}")
-        mid = (f"midpoint p_{n // 2}          " if n % 2 == 0 else
-               f"p_{n // 2} (n = {n} is odd: no midpoint node) ")
-        typer.echo(f"{mid:<26}{np.array2string(r.points[n // 2], precision=8)}")
+        if r.error_estimate is not None:
+            order = ("not seen" if not r.order_seen else f"{r.order:.2f}") + (
+                f" (observed {r.order:.2f})" if r.order is not None and not r.order_seen
+                else "")
+            typer.echo(f"length (continuum est.)   {r.length_estimate:.15g} +- "
+                       f"{r.error_estimate:.2e} at {r.segments} segments, order {order}"
+                       + ("" if r.tol_reached else f"  (tol {tol:g} NOT reached)"))
+        nr = r.segments  # --tol may refine beyond --segments
+        mid = (f"midpoint p_{nr // 2}          " if nr % 2 == 0 else
+               f"p_{nr // 2} (n = {nr} is odd: no midpoint node) ")
+        typer.echo(f"{mid:<26}{np.array2string(r.points[nr // 2], precision=8)}")
         typer.echo(f"wall time                 {r.wall_time:.3f} s")
     else:
         typer.echo(
