@@ -350,3 +350,25 @@ def test_baselines_train_and_reload_on_the_parameters(tmp_path: Path, variant: s
     with pytest.raises(InputError, match="metric_params"):
         learn.train_run(cfg.replace(metric_params={"a": 0.3}), tmp_path / "r", resume=True,
                         progress=False)
+
+
+def test_figure_hooks_follow_what_the_metric_is() -> None:
+    from validation import figures as fg
+
+    m = finsler.get_metric("matsumoto", height=2.0)
+    p = np.array([[0.3, 0.4], [0.0, 0.0]])
+    assert np.allclose(fg.height_map(m)(p), [-2.0 * 0.25, 0.0])  # h = -height |p|^2
+    assert fg.height_map(finsler.get_metric("wavy")) is None
+
+    @dataclass(frozen=True)
+    class Hill(Wavy):  # a user hook, under another name
+        name: ClassVar[str] = "hill"
+
+        def height_map(self, pts: np.ndarray) -> np.ndarray:
+            return np.exp(-np.sum(pts**2, axis=1))
+
+    assert np.allclose(fg.height_map(Hill())(p), np.exp(-np.array([0.25, 0.0])))
+    assert fg.is_planar_pose(finsler.get_metric("carlike"))
+    assert not fg.is_planar_pose(finsler.get_metric("matsumoto"))
+    assert fg.has_kinematics(finsler.get_metric("panda-pole"))
+    assert not fg.has_kinematics(finsler.get_metric("carlike"))
