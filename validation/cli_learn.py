@@ -121,7 +121,8 @@ def train_command(
     except TrainingInterrupted as stop:
         typer.echo(f"interrupted ({stop.signal_name}): the run is saved in {stop.run_dir} at "
                    f"{stop.timesteps} evaluations of C (iteration {stop.iterations}); resume "
-                   f"with: geodesics train --env {env} --out {stop.run_dir} --resume", err=True)
+                   f"with: geodesics train --env {env} --out {stop.run_dir} --resume"
+                   + "".join(f" --metric-module {m}" for m in metric_module or []), err=True)
         raise typer.Exit(code=130) from None
     f = result.final
     typer.echo(
