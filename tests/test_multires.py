@@ -115,7 +115,7 @@ def test_default_plan_follows_capabilities_not_names() -> None:
     assert SeedPlan.default(HookedPoincare()) == SeedPlan(bulges=(0.2,), random=7, coarse=8)
     car, panda = finsler.get_metric("carlike"), finsler.get_metric("panda-pole")
     assert not car.smooth and len(SeedPlan.default(car).bulges) == 4
-    assert panda.dim > 3 and SeedPlan.default(panda).coarse == 8
+    assert panda.dim > 3 and SeedPlan.default(panda).coarse == 32
     import inspect
 
     import solvers.seeding
