@@ -8,7 +8,10 @@ set's) this solves every pair twice, one pair at a time in this process:
   initial curves, a lattice graph path in 2-D / 3-D, a roadmap for the arm);
 * learned warm start: the shipped policy's path (``policy.generate``, all pairs in one
   batch) as the only initial path, ``solve_geodesic(..., initial=(path,),
-  global_seeds=False)`` -- what ``geodesics solve --warm-start ENV`` does.
+  global_seeds=False)`` -- what ``geodesics solve --warm-start ENV`` does;
+* with ``--recheck-above R`` (``geodesics solve --recheck-above R``): the pairs whose
+  learned path's energy is above R times the warm optimum solved again with the global
+  seeds plus the warm result (:func:`validation.cli_solve.recheck_flags`).
 
 It prints the time per exact geodesic of both (the warm start's includes its share of
 the batched path generation), the speed-up of the means, and on how many pairs the warm
@@ -21,7 +24,7 @@ extra pair before timing and printed apart.
 Usage::
 
     python benchmarks/warm_start.py [--pairs 100] [--metrics matsumoto,carlike,panda-pole]
-        [--seed 777] [--json out.json]
+        [--seed 777] [--recheck-above 1.05,1.3] [--json out.json]
 
 Pass ``--pairs`` per task as ``--pairs carlike=30`` (repeatable) to shorten a slow task.
 """
@@ -38,6 +41,7 @@ import torch
 import finsler
 from learn.runs import warm_start_paths
 from solvers import solve_geodesic
+from validation.cli_solve import recheck_flags
 
 TASKS = {"matsumoto": 64, "carlike": 256, "panda-pole": 32}
 #: Relative energy difference below which the two solves count as the same geodesic.
@@ -46,7 +50,7 @@ RTOL = 1e-6
 GAPS = (1e-6, 1e-4, 1e-3, 1e-2)
 
 
-def run_task(name: str, k: int, seed: int) -> dict:
+def run_task(name: str, k: int, seed: int, recheck: tuple[float, ...] = ()) -> dict:
     m = finsler.get_metric(name)
     n = TASKS[name]
     pairs = finsler.sample_pairs(m, k + 1, seed)
@@ -63,6 +67,7 @@ def run_task(name: str, k: int, seed: int) -> dict:
     paths, pol = warm_start_paths(name, m, pairs)
     gen = (time.perf_counter() - t0) / k
     warm_t, glob_t, warm_e, glob_e, warm_ok, glob_ok = [], [], [], [], [], []
+    warm_res = []
     for i in range(k):
         s, g = pairs[i]
         t0 = time.perf_counter()
@@ -71,11 +76,32 @@ def run_task(name: str, k: int, seed: int) -> dict:
         t0 = time.perf_counter()
         r = solve_geodesic(m, s, g, n)
         glob_t.append(time.perf_counter() - t0)
+        warm_res.append(w)
         warm_e.append(w.energy)
         glob_e.append(r.energy)
         warm_ok.append(w.converged)
         glob_ok.append(r.converged)
     we, ge = np.array(warm_e), np.array(glob_e)
+    # --recheck-above R: global seeds (plus the warm result) where the learned path's energy
+    # is above R times the warm optimum; each pair's recheck is solved once and reused
+    rechecks: dict[int, tuple[float, float]] = {}
+    recheck_rows = []
+    for ratio in recheck:
+        flags = recheck_flags(m, paths, warm_res, ratio)
+        for i in np.flatnonzero(flags):
+            if int(i) not in rechecks:
+                t0 = time.perf_counter()
+                r = solve_geodesic(m, pairs[i, 0], pairs[i, 1], n,
+                                   initial=(warm_res[i].points,))
+                rechecks[int(i)] = (time.perf_counter() - t0, r.energy)
+        e = np.array([rechecks[i][1] if flags[i] else we[i] for i in range(k)])
+        t = np.array([warm_t[i] + (rechecks[i][0] if flags[i] else 0.0) for i in range(k)])
+        rr = (e - ge) / ge
+        recheck_rows.append({"ratio": ratio, "rechecked": int(flags.sum()),
+                             "seconds_mean": t.mean(),
+                             "speedup_mean": float(np.mean(glob_t) / t.mean()),
+                             "equal_or_lower": int(np.sum(rr <= RTOL)),
+                             "lower": int(np.sum(rr < -RTOL))})
     rel = (we - ge) / ge
     equal = np.abs(rel) <= RTOL
     better = rel < -RTOL
@@ -94,6 +120,7 @@ def run_task(name: str, k: int, seed: int) -> dict:
         "equal": int(equal.sum()), "better": int(better.sum()), "worse": int(worse.sum()),
         "warm_converged": int(np.sum(warm_ok)), "global_converged": int(np.sum(glob_ok)),
         "within": {f"{t:g}": int(np.sum(rel <= t)) for t in GAPS},
+        "recheck": recheck_rows,
         "worse_pairs": [{"pair": int(i), "relative_energy_gap": float(rel[i]),
                          "pair_distance_coordinates": float(np.linalg.norm(
                              pairs[i, 1] - pairs[i, 0]))}
@@ -119,12 +146,15 @@ def main() -> None:
     ap.add_argument("--metrics", default=",".join(TASKS))
     ap.add_argument("--seed", type=int, default=777)
     ap.add_argument("--json", default=None, help="also write the rows to this file")
+    ap.add_argument("--recheck-above", default="1.05,1.3",
+                    help="comma-separated ratios R of `geodesics solve --recheck-above R`")
     args = ap.parse_args()
     torch.set_num_threads(1)
     default, per = _parse_pairs(args.pairs)
     rows = []
     for name in [t.strip() for t in args.metrics.split(",") if t.strip()]:
-        r = run_task(name, per.get(name, default), args.seed)
+        ratios = tuple(float(x) for x in args.recheck_above.split(",") if x.strip())
+        r = run_task(name, per.get(name, default), args.seed, ratios)
         rows.append(r)
         print(f"{name} (n={r['segments']}, {r['pairs']} fresh pairs, seed {r['seed']}; "
               f"policy {r['policy']})")
@@ -142,6 +172,11 @@ def main() -> None:
               f"warm {r['warm_converged']}, global {r['global_converged']}")
         print("  warm-start energy at most (1 + gap) x the globally seeded one: " + ", ".join(
             f"gap {t}: {c}/{r['pairs']}" for t, c in r["within"].items()))
+        for c in r["recheck"]:
+            print(f"  --recheck-above {c['ratio']:g}: {c['rechecked']} pairs re-solved with the "
+                  f"global seeds; mean {c['seconds_mean']:.3f} s per geodesic, speed-up "
+                  f"{c['speedup_mean']:.1f}x; equal or lower energy than global seeding: "
+                  f"{c['equal_or_lower']}/{r['pairs']} (lower: {c['lower']})")
         for w in r["worse_pairs"]:
             print(f"    pair {w['pair']} (|g - s| = {w['pair_distance_coordinates']:.2f}): "
                   f"warm-start energy higher by {100 * w['relative_energy_gap']:.3g}%")

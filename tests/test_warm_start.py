@@ -88,7 +88,10 @@ def test_bad_warm_start_is_refused_clearly(tmp_path: Path) -> None:
         (["--warm-start", str(tmp_path / "missing_run")], "no such run directory"),
         (["--warm-start", "euclidean"], "no shipped policy for 'euclidean'"),
         (["--warm-start", "carlike"], "policy for 'carlike', not for 'matsumoto'"),
-        (["--keep-global-seeds"], "--keep-global-seeds applies to --warm-start"),
+        (["--keep-global-seeds"], "apply to --warm-start"),
+        (["--recheck-above", "1.1"], "apply to --warm-start"),
+        (["--warm-start", "matsumoto", "--keep-global-seeds", "--recheck-above", "1.1"],
+         "without --keep-global-seeds"),
     ]
     for extra, message in cases:
         res = r.invoke(app, [*base, *extra])
@@ -114,3 +117,35 @@ def test_bad_warm_start_is_refused_clearly(tmp_path: Path) -> None:
                                  global_seeds=False)
     ref = solvers.solve_geodesic(m15, pairs[0, 0], pairs[0, 1])
     assert res.converged and res.energy == pytest.approx(ref.energy, rel=1e-6)
+
+
+def test_recheck_above_resolves_the_untrusted_pairs_globally(tmp_path: Path) -> None:
+    """Panda, 20 fresh pairs: the learned path passes the pole on the other side on some;
+    --recheck-above 1.3 re-solves exactly the pairs whose learned energy is above 1.3x the
+    warm optimum, and those end at or below the globally seeded energy."""
+    m = finsler.get_metric("panda-pole")
+    pairs = finsler.sample_pairs(m, 21, 777)[1:]
+    pfile = tmp_path / "pairs.npy"
+    np.save(pfile, pairs)
+    r = CliRunner()
+    base = ["solve", "--metric", "panda-pole", "--pairs", str(pfile), "--warm-start",
+            "panda-pole", "--workers", "1", "--no-progress", "--json"]
+    warm = json.loads(r.invoke(app, base).output)
+    res = r.invoke(app, [*base, "--recheck-above", "1.3"])
+    assert res.exit_code == 0, res.output
+    doc = json.loads(res.output)
+    redo = doc["warm_start"]["rechecked"]
+    # the flags, recomputed by hand: learned energy (same n) over the warm optimum
+    paths, _ = warm_start_paths("panda-pole", m, pairs)
+    learned = np.sum(m.path_costs(paths) ** 2, axis=1)
+    want = [k for k, row in enumerate(warm["results"]) if learned[k] > 1.3 * row["energy"]]
+    assert redo == want and 0 < len(redo) < len(pairs)
+    glob = solvers.solve_batch(m, pairs[redo], workers=1, progress=False)
+    for k, g in zip(redo, glob):
+        assert doc["results"][k]["energy"] <= g.energy * (1 + 1e-6)
+        assert doc["results"][k]["energy"] <= warm["results"][k]["energy"] * (1 + 1e-9)
+    others = [k for k in range(len(pairs)) if k not in redo]
+    assert [doc["results"][k]["energy"] for k in others] == [
+        warm["results"][k]["energy"] for k in others]
+    bad = r.invoke(app, [*base, "--recheck-above", "0.5"])
+    assert bad.exit_code == 2 and "ratio >= 1" in bad.output

@@ -32,7 +32,7 @@ from finsler.errors import InputError
 from finsler.pool import PoolInterrupted
 from validation.cli_common import fail, metric_or_fail, parse_point
 
-__all__ = ["register", "solve_command", "solve_payload"]
+__all__ = ["recheck_flags", "register", "solve_command", "solve_payload"]
 
 
 def solve_payload(metric: Any, results: list[solvers.GeodesicResult], n: int) -> dict[str, Any]:
@@ -80,6 +80,28 @@ def _warm_start(source: str | None, metric: finsler.Metric, pairs: np.ndarray,
                    "global_seeds": bool(keep_global_seeds)}
 
 
+def _at_size(points: np.ndarray, n: int) -> np.ndarray:
+    """A path ``(m+1, dim)`` at ``n + 1`` points (equal parameter spacing if ``m != n``)."""
+    from solvers.seeding import resample
+
+    return points if len(points) == n + 1 else resample(points, np.ones(len(points) - 1), n)
+
+
+def recheck_flags(metric: finsler.Metric, paths: np.ndarray,
+                  results: list[solvers.GeodesicResult], ratio: float) -> np.ndarray:
+    """Which warm-started pairs to solve again with the global seeds: ``(K,)`` bool, True
+    where the solve did not converge or where the learned path's energy (resampled to the
+    result's number of segments) is above ``ratio`` times the optimum it led to -- the
+    policy was far from a geodesic there, so its choice of route is not trusted.
+    ``paths`` ``(K, m+1, dim)``."""
+    out = np.zeros(len(results), dtype=bool)
+    for k, (path, r) in enumerate(zip(paths, results)):
+        p = _at_size(path, r.points.shape[0] - 1)
+        learned = float(np.sum(np.asarray(metric.path_costs(p[None], check=False)) ** 2))
+        out[k] = not r.converged or learned > ratio * r.energy
+    return out
+
+
 def solve_command(
     metric: Annotated[str, typer.Option(help="Registered metric name (see `geodesics metrics`).")],
     start: Annotated[str | None, typer.Option(help='Start point, e.g. "0.1,-0.2".')] = None,
@@ -111,6 +133,11 @@ def solve_command(
         "--keep-global-seeds",
         help="With --warm-start: also solve the global seeds and keep the lowest energy "
              "(a check of the learned start; as slow as without --warm-start).")] = False,
+    recheck_above: Annotated[float | None, typer.Option(
+        "--recheck-above", metavar="RATIO",
+        help="With --warm-start: solve again with the global seeds (the warm result as one "
+             "more start) every pair whose learned path's energy is above RATIO times the "
+             "optimum it led to, e.g. 1.05 (see benchmarks/warm_start.py).")] = None,
     tol: Annotated[float | None, typer.Option(
         help="Relative accuracy of the length: double the segments from --segments until "
              "the estimated error (Richardson extrapolation; says when the expected order "
@@ -134,8 +161,11 @@ def solve_command(
         fail(f"--chunk-size must be >= 1, got {chunk_size}")
     if tol is not None and not (np.isfinite(tol) and 0 < tol < 1):
         fail(f"--tol must be a relative tolerance in (0, 1), e.g. 1e-7, got {tol:g}")
-    if keep_global_seeds and warm_start is None:
-        fail("--keep-global-seeds applies to --warm-start")
+    if (keep_global_seeds or recheck_above is not None) and warm_start is None:
+        fail("--keep-global-seeds and --recheck-above apply to --warm-start")
+    if recheck_above is not None and (keep_global_seeds or not recheck_above >= 1.0):
+        fail("--recheck-above needs a ratio >= 1, without --keep-global-seeds (which "
+             f"already solves every pair with the global seeds); got {recheck_above}")
     parts = None
     if out is not None:
         # checked before any work: a bad --out must not cost a batch of solves
@@ -168,6 +198,20 @@ def solve_command(
             initial_paths=inits, global_seeds=inits is None or keep_global_seeds,
             tol=tol,
         )
+        if recheck_above is not None and inits is not None and warm is not None:
+            redo = np.flatnonzero(recheck_flags(m, inits, results, recheck_above))
+            if len(redo):
+                again = solvers.solve_batch(
+                    m, arr[redo], n, minmax=True, workers=workers,
+                    progress=progress and pairs is not None,
+                    checkpoint_dir=None if parts is None else parts / "recheck",
+                    ray_address=ray, chunk_size=chunk_size,
+                    initial_paths=np.stack([_at_size(results[k].points, n) for k in redo]),
+                    global_seeds=True, tol=tol)
+                for k, r in zip(redo, again):
+                    results[k] = r
+            warm["recheck_above"] = float(recheck_above)
+            warm["rechecked"] = [int(k) for k in redo]
     except InputError as err:
         fail(str(err))
     except PoolInterrupted as stop:
