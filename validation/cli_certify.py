@@ -2,7 +2,8 @@
 metric (:func:`solvers.certify`).
 
 JSON keys (``--json``): ``lower``, ``upper``, ``gap`` ((upper - lower) / upper), then
-``length``, ``length_error`` (the upper bound is their sum), ``triangles``, ``vertices``,
+``length``, ``length_error`` (the upper bound is their sum), ``upper_source`` (``path`` |
+``zigzag``), ``path_upper``, ``path_gap`` (the solver's own path), ``triangles``, ``vertices``,
 ``unknowns``, ``directions``, ``lp_rows``, ``lp_rows_total``, ``lp_status``, ``lp_solver``,
 ``convexity`` (``convex`` | ``convexified``), ``convexity_note``, ``solver_status``,
 ``mesh`` (the settings), ``times`` (seconds: solve, mesh, bounds, lp, total), ``rounds``.
@@ -90,6 +91,9 @@ def certify_command(
     typer.echo(f"upper  = {res.upper:.10g}   (path length {res.length:.10g} + quadrature "
                f"error {res.length_error:.2g})")
     typer.echo(f"gap    = {res.gap:.3e}   (upper - lower) / upper")
+    if res.upper_source == "zigzag":
+        typer.echo(f"         upper from the solver's path with switchbacks; the path itself: "
+                   f"{res.path_upper:.10g}, gap {res.path_gap:.3e}")
     typer.echo(f"mesh   : {res.vertices} vertices, {res.unknowns} unknowns, {len(res.rounds)} "
                f"LP round(s), last LP {res.lp_rows} rows ({res.lp_status}, {res.lp_solver})")
     typer.echo(f"time   : {res.times['total']:.2f} s (solve {res.times['solve']:.2f}, LP "
