@@ -3,8 +3,10 @@
 For ``--pairs`` (20) Matsumoto pairs drawn with a seed the project never used for anything
 else (``--seed`` 31337, :func:`finsler.sample_pairs`), this runs :func:`solvers.certify` at
 the default mesh (target gap 1e-2) and at the fine one (target 1e-3), and prints per pair
-the lower and upper bounds, the relative gap ``(upper - lower) / upper``, the triangles,
-LP rows and the wall time, then how many pairs meet each bar. A certified gap <= 1e-3 on
+the lower and upper bounds, the relative gap ``(upper - lower) / upper``, the gap of the
+solver's own path (``path_gap``: the upper bound may instead come from the path with
+switchbacks where F is not convex), the triangles, LP rows and the wall time, then how many
+pairs meet each bar. A certified gap <= 1e-3 on
 the solver's own path (the upper bound is its length) proves that path within 0.1 % of
 the global optimum: the count of such pairs is printed.
 
@@ -41,11 +43,12 @@ def run(pairs: np.ndarray, spec: MeshSpec, time_limit: float | None, label: str)
         r = certify(m, s, g, spec, time_limit=time_limit)
         wall = time.perf_counter() - t0
         rows.append({"pair": i, "lower": r.lower, "upper": r.upper, "gap": r.gap,
+                     "upper_source": r.upper_source, "path_gap": r.path_gap,
                      "triangles": r.triangles, "rows": r.lp_rows, "rounds": len(r.rounds),
                      "seconds": wall, "convexity": r.convexity})
         print(f"{label:7s} {i:3d}  {r.lower:.7f}  {r.upper:.7f}  {r.gap:9.2e}  "
-              f"{r.triangles:6d}  {r.lp_rows:7d}  {len(r.rounds):3d}  {wall:7.1f}",
-              flush=True)
+              f"{r.path_gap:9.2e}  {r.triangles:6d}  {r.lp_rows:7d}  {len(r.rounds):3d}  "
+              f"{wall:7.1f}", flush=True)
     return rows
 
 
@@ -71,7 +74,8 @@ def main() -> None:
     args = ap.parse_args()
     m = finsler.get_metric("matsumoto")
     pairs = finsler.sample_pairs(m, args.pairs, args.seed)
-    head = "mesh    pair  lower      upper      gap        triangles rows   rounds seconds"
+    head = ("mesh    pair  lower      upper      gap        path_gap   triangles rows   "
+            "rounds seconds")
     print(head)
     doc: dict = {"seed": args.seed, "pairs": args.pairs}
     doc["default"] = {"rows": run(pairs, MeshSpec.preset("default"), None, "default")}
@@ -80,8 +84,9 @@ def main() -> None:
         doc["fine"] = {"rows": run(pairs, MeshSpec.preset("fine"), args.fine_time_limit,
                                    "fine"), "time_limit": args.fine_time_limit}
         doc["fine"]["summary"] = summary(doc["fine"]["rows"], 1e-3, "fine mesh")
-        print(f"fine mesh: the solver's path is certified within 1e-3 of the global optimum "
-              f"on {doc['fine']['summary']['met']}/{args.pairs} pairs")
+        own = sum(r["path_gap"] <= 1e-3 for r in doc["fine"]["rows"])
+        print(f"fine mesh: the solver's own path is certified within 1e-3 of the global "
+              f"optimum (path_gap <= 1e-3) on {own}/{args.pairs} pairs")
     if args.json:
         atomic_write_text(args.json, json.dumps(doc, indent=2), "benchmark figures")
 
