@@ -3,13 +3,14 @@ refinement of the task ceiling, continuum distances with error estimates, batche
 
 Public API::
 
-    solve_geodesic(metric, start, goal, segments=None, *, seeds=None, minmax=False,
-                   strict=False) -> GeodesicResult
+    solve_geodesic(metric, start, goal, segments=None, *, seeds=None, initial=(),
+                   global_seeds=True, minmax=False, strict=False, tol=None) -> GeodesicResult
     midpoint(metric, start, goal, segments=None, **kw) -> MidpointResult
     refine_minmax(metric, result) -> MinMaxResult
     distance(metric, start, goal, rtol=None, *, strict=False) -> DistanceResult
     solve_batch(metric, pairs (K, 2, dim), segments=None, *, minmax=False, workers=None,
-                progress=True) -> list[GeodesicResult]
+                progress=True, initial_paths=None, global_seeds=True, tol=None)
+                -> list[GeodesicResult]
     exp_map(metric, x, v, t=1.0, return_curve=False) -> ExpResult
     log_map(metric, x, y) -> LogResult
 """

@@ -4,8 +4,11 @@
 over ``n`` segments) from every seed of a :class:`~solvers.seeding.SeedPlan` and keeps the
 lowest energy among the converged solves (selection by energy, not by length: a car-like
 local minimum can hide a cheap turn in one long segment, which the energy penalises).
+The seeds are solved at the plan's coarse size and only the best few distinct optima
+are carried up a ladder of sizes to ``n`` (multiresolution: time about linear in ``n``).
 ``refine_minmax`` then minimises the largest segment cost: the exact ceiling of the
-paper's task.
+paper's task. ``tol`` refines the size until the continuum length is known to that
+relative accuracy (Richardson extrapolation, :func:`richardson`).
 """
 
 from __future__ import annotations
