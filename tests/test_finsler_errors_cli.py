@@ -82,7 +82,15 @@ def test_cli_cost_equals_api() -> None:
     s, g = np.array([0.1, 0.2]), np.array([-0.5, 0.3])
     assert out["cost"] == pytest.approx(float(m.cost(s, g)), rel=1e-14)
     assert out["cost_symmetric"] == pytest.approx(float(m.cost_symmetric(s, g)), rel=1e-14)
-    assert out["segment_length"] == pytest.approx(float(m.segment_length(s, g)), rel=1e-14)
+    # the accurate length (adaptive Gauss-Kronrod) against scipy's QUADPACK on F along the
+    # segment, within the error the command states
+    from scipy.integrate import quad
+
+    ref, _ = quad(lambda t: float(m.F(s + t * (g - s), g - s)), 0.0, 1.0, epsabs=1e-14,
+                  epsrel=1e-14, limit=200)
+    assert out["segment_length_converged"] is True
+    assert 0 < out["segment_length_error"] < 1e-9
+    assert abs(out["segment_length"] - ref) <= out["segment_length_error"] + 1e-14
 
 
 @pytest.mark.parametrize(
