@@ -93,22 +93,6 @@ def test_cli_cost_equals_api() -> None:
     assert abs(out["segment_length"] - ref) <= out["segment_length_error"] + 1e-14
 
 
-@pytest.mark.parametrize(
-    ("args", "message"),
-    [
-        (["--metric", "nope", "--start", "0,0", "--goal", "0,0"], "unknown metric"),
-        (["--metric", "matsumoto", "--start", "0,0,0", "--goal", "0,0"], "needs 2"),
-        (["--metric", "matsumoto", "--start", "0,x", "--goal", "0,0"], "not a comma-separated"),
-        (["--metric", "matsumoto", "--start", "0,nan", "--goal", "0,0"], "NaN or inf"),
-        (["--metric", "matsumoto", "--start", "2,0", "--goal", "0,0"], "outside the domain"),
-    ],
-)
-def test_cli_cost_bad_input(args: list[str], message: str) -> None:
-    res = runner.invoke(app, ["cost", *args])
-    assert res.exit_code == 2
-    assert message in res.output
-
-
 def test_load_pairs_validates_files(tmp_path) -> None:
     m = finsler.get_metric("matsumoto")
     good = finsler.default_pairs(m, 5)

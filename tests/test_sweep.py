@@ -231,32 +231,6 @@ def test_solve_ray_equals_solve_workers_and_resumes_from_parts(ray_local, tmp_pa
     assert len(list(parts.glob("pair_*.pkl"))) == 3
 
 
-@pytest.mark.parametrize("args, message", [
-    (["--envs", "nowhere"], "unknown environment 'nowhere'"),
-    (["--methods", "midpoint,bogus"], "unknown variant 'bogus'"),
-    (["--seeds", "0"], "seeds must be a positive integer"),
-    (["--timesteps", "0"], "timesteps must be a positive integer"),
-    (["--minutes", "0"], "minutes must be positive"),
-    (["--workers", "0"], "--workers must be a positive integer"),
-    (["--set", "no_such_field=1"], "unknown config field(s) 'no_such_field'"),
-    (["--set", "seed=3"], "the sweep sets 'seed' itself"),
-    (["--set", "lr=fast"], "lr must be float"),
-    (["--set", "eval_every"], "--set expects FIELD=VALUE"),
-])
-def test_bad_input_exits_2_and_creates_nothing(tmp_path, args, message) -> None:
-    out = tmp_path / "never"
-    base = {"--envs": ENV, "--methods": "midpoint", "--seeds": "1", "--timesteps": "100"}
-    for key, value in zip(args[::2], args[1::2]):
-        base[key] = value
-    cli = [a for kv in base.items() for a in kv if kv[0] != "--set"]
-    if "--set" in base:
-        cli += ["--set", base["--set"]]
-    res = runner.invoke(app, ["sweep", *cli, "--out", str(out), "--quiet"])
-    assert res.exit_code == 2, res.output
-    assert message in res.output
-    assert not out.exists()
-
-
 def test_ray_missing_is_a_clear_error(tmp_path, monkeypatch) -> None:
     monkeypatch.setitem(sys.modules, "ray", None)  # `import ray` raises ImportError
     out = tmp_path / "never"
