@@ -107,10 +107,11 @@ class SeedPlan:
         smooth (e.g. car-like: kinks that the energy penalises in one long segment) ->
         four bulge amplitudes and four random curves, coarse size 256; not convex
         everywhere (e.g. Matsumoto: local minima round the hill, non-convex regions) ->
-        bulges at six amplitudes, 20 random curves and the graph at 32 segments, the best
+        bulges at six amplitudes, 20 random curves and the graph at 64 segments, the best
         4 refined; convex and smooth (Finsler, e.g. Riemannian or Randers: few local
         minima) -> the straight line, one bulge each side and the graph, coarse size 16.
-        Every plan climbs a x4 ladder to the requested size; measured in
+        Every plan climbs a x4 ladder from its coarse size to the requested size;
+        measured in
         ``benchmarks/solver_speed.py``.
         """
         hook = getattr(metric, "seed_plan", None)
@@ -134,13 +135,14 @@ class SeedPlan:
             # pairs, so the ladder starts at 256
             return SeedPlan(bulges=(0.15, 0.3, 0.5, 0.7), random=4, graph=True, coarse=256)
         if not metric.convex_everywhere:
-            # measured on 100 fresh Matsumoto pairs (n = 64, benchmarks/solver_speed.py):
-            # 8 seeds at 16 segments reached the best-known energy (1e-4) on 96, 50 seeds
-            # at 16 on 93 (the coarse ranking misleads: discrete minima of the non-convex
-            # metric differ between sizes), 34 seeds at 32 on 99 (worst 3e-4), as did 50
-            # seeds at the full size, 15x slower
+            # measured on 100 fresh Matsumoto pairs (n = 64, benchmarks/solver_speed.py,
+            # seed 2611): 8 seeds at 16 segments reached the best-known energy (1e-4) on
+            # 96, 50 seeds at 16 on 93 (the coarse ranking misleads: discrete minima of the
+            # non-convex metric differ between sizes), 34 seeds at 32 on 99 (worst 3e-4)
+            # but on a second set (seed 8123) one pair 1.5e-3 above; the same 34 seeds at
+            # 64: 99 and 100 pairs, worst 1.2e-4, 0.6 s per pair on 2 busy cores
             return SeedPlan(bulges=(0.1, 0.2, 0.3, 0.45, 0.6, 0.8), random=20, graph=True,
-                            coarse=32, refine_top=4)
+                            coarse=64, refine_top=4)
         return SeedPlan(bulges=(0.3,), random=0, graph=True, coarse=16)
 
 
