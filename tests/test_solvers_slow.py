@@ -54,7 +54,7 @@ def test_distance_closed_form_many_pairs(name: str) -> None:
 def test_issue14_bar_4096_segments() -> None:
     """5 fresh Matsumoto pairs, full solve (energy + min-max), each size warmed up once:
     every status converged, median time at 4096 at most 10x the median at 64, the length
-    at 4096 not above the length at 1024 by more than 1e-3 relative (measured: 2.4-3.3x
+    at 4096 not above the length at 1024 by more than 1e-3 relative (measured: 2.3-3.4x
     under a load of 8 on 2 cores; 4096 always shorter)."""
     m = finsler.get_metric("matsumoto")
     pairs = finsler.sample_pairs(m, 5, seed=1411)
