@@ -224,11 +224,11 @@ def _ladder(m: Metric, s: np.ndarray, g: np.ndarray, n: int, plan: SeedPlan,
         gp = graph_seeder(m).path(s, g)
         if gp is not None:
             seeds.append(("graph", resample(gp[0], gp[1], n0)))
+    n_seeds = len(seeds)  # the plan's seeds; caller-given paths are not counted here
     if len(sizes) == 1:
         seeds += given
     nlp = energy_nlp(m, n0)
     solved = [_solve_one(m, nlp, name, seed) for name, seed in seeds]
-    n_seeds = len(solved)
     if plan.restarts:
         best = min(solved, key=lambda r: r.rank)
         if best.ok:

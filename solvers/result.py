@@ -131,7 +131,9 @@ class GeodesicResult:
     ``segment_costs`` ``(n,)``. ``length`` is ``sum C`` (eq. 4 costs); ``length_quadrature``
     the polyline's length by Gauss-Legendre quadrature (eq. 58), an upper bound of the
     distance where the metric is Finsler. ``status`` is IPOPT's status of the returned
-    solve; ``seeds_tried`` initial curves were solved, ``seeds_agreeing`` of them reached the
+    solve; ``seeds_tried`` initial curves of the seed plan were solved (the caller's
+    ``initial`` paths are counted only when they are the only starts, ``global_seeds=False``;
+    they appear in ``seed_energies`` either way), ``seeds_agreeing`` of them reached the
     best energy (relative 1e-6). ``nonconvex_points`` counts path points where ``F(x, .)``
     is not convex (for metrics not convex everywhere; there the discrete minimiser may
     chatter). ``minmax`` holds the min-max refinement when it was requested. ``levels``
