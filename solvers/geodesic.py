@@ -92,7 +92,7 @@ def check_initial_paths(metric: Metric, pairs: np.ndarray, n: int, paths: Any
 
 def _finish(metric: Metric, points: np.ndarray) -> dict[str, Any]:
     costs = metric.path_costs(points[None])[0]
-    quad = metric.segment_length(points[:-1], points[1:], 8)
+    quad = metric.path_length_error(points, check=False)  # adaptive, with its error
     nonconvex = 0
     if not metric.convex_everywhere:
         nonconvex = int(np.sum(metric.convexity(points) < 0.0))
@@ -100,7 +100,8 @@ def _finish(metric: Metric, points: np.ndarray) -> dict[str, Any]:
         "segment_costs": costs,
         "energy": float(np.sum(costs**2)),
         "length": float(np.sum(costs)),
-        "length_quadrature": float(np.sum(quad)),
+        "length_quadrature": float(quad.value),
+        "length_quadrature_error": float(quad.error),
         "max_segment_cost": float(np.max(costs)),
         "nonconvex_points": nonconvex,
     }

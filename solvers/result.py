@@ -129,9 +129,11 @@ class GeodesicResult:
 
     Shapes: ``points`` ``(n+1, dim)`` with ``points[0] = start``, ``points[n] = goal``;
     ``segment_costs`` ``(n,)``. ``length`` is ``sum C`` (eq. 4 costs); ``length_quadrature``
-    the polyline's length by Gauss-Legendre quadrature (eq. 58), an upper bound of the
-    distance where the metric is Finsler. ``status`` is IPOPT's status of the returned
-    solve; ``seeds_tried`` initial curves of the seed plan were solved (the caller's
+    the polyline's length (eq. 58) by adaptive Gauss-Kronrod quadrature, with its estimated
+    absolute error ``length_quadrature_error`` (``Metric.path_length_error``):
+    ``length_quadrature + length_quadrature_error`` bounds the distance from above.
+    ``status`` is IPOPT's status of the returned solve; ``seeds_tried`` initial curves of
+    the seed plan were solved (the caller's
     ``initial`` paths are counted only when they are the only starts, ``global_seeds=False``;
     they appear in ``seed_energies`` either way), ``seeds_agreeing`` of them reached the
     best energy (relative 1e-6). ``nonconvex_points`` counts path points where ``F(x, .)``
@@ -172,6 +174,7 @@ class GeodesicResult:
     tol: float | None = None
     tol_reached: bool | None = None
     tol_levels: list[dict[str, Any]] = field(default_factory=list)
+    length_quadrature_error: float | None = None
 
     @property
     def segments(self) -> int:
@@ -202,6 +205,7 @@ class GeodesicResult:
             "energy": self.energy,
             "length": self.length,
             "length_quadrature": self.length_quadrature,
+            "length_quadrature_error": self.length_quadrature_error,
             "max_segment_cost": self.max_segment_cost,
             "status": self.status.value,
             "iterations": self.iterations,

@@ -617,3 +617,14 @@ def test_smooth_square_comes_from_the_metric() -> None:
     assert "r_min" not in src and "CarLike" not in src
     plain = smooth_square(finsler.get_metric("matsumoto"), x[:2], v[:2])
     assert plain.w.numel() == 0 and plain.g.numel() == 0
+
+
+def test_result_lengths_carry_a_quadrature_error_that_contains_a_converged_reference() -> None:
+    """``length_quadrature`` comes with its error (adaptive Gauss-Kronrod): a 512-point
+    Gauss-Legendre sum of every segment (an independent rule) lies within it."""
+    m = finsler.get_metric("matsumoto")
+    r = solvers.solve_geodesic(m, [0.6, -0.2], [-0.5, 0.4], minmax=False)
+    ref = float(np.sum(m.segment_length(r.points[:-1], r.points[1:], 512)))
+    assert r.length_quadrature_error is not None and 0 < r.length_quadrature_error < 1e-8
+    assert abs(r.length_quadrature - ref) <= r.length_quadrature_error + 1e-13
+    assert r.to_dict()["length_quadrature_error"] == r.length_quadrature_error

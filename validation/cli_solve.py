@@ -4,7 +4,8 @@ JSON schema (one pair with ``--json``, or ``--pairs``)::
 
     {"metric", "segments", "eps", "success_rate",
      "results": [{"points" (n+1, dim): the energy minimiser, "energy", "length",
-                  "length_quadrature", "max_segment_cost", "minmax_max_segment_cost",
+                  "length_quadrature" (+- "length_quadrature_error"), "max_segment_cost",
+                  "minmax_max_segment_cost",
                   "success" (min-max cost <= eps), "status", "segments", ...}]}
 
 With ``--tol`` each result also has ``error_estimate`` (absolute), ``order`` (observed
@@ -240,7 +241,9 @@ def solve_command(
         typer.echo(f"status                    {r.status.value}")
         typer.echo(f"segments                  {r.segments}")
         typer.echo(f"length (sum C)            {r.length:.12g}")
-        typer.echo(f"length (eq. 58 quadr.)    {r.length_quadrature:.12g}")
+        err = ("" if r.length_quadrature_error is None
+               else f" +- {r.length_quadrature_error:.2g}")
+        typer.echo(f"length (eq. 58 quadr.)    {r.length_quadrature:.12g}{err}")
         typer.echo(f"energy (sum C^2)          {r.energy:.12g}")
         typer.echo(f"max segment cost          {r.max_segment_cost:.6g}")
         typer.echo(f"min-max max segment cost  {row['minmax_max_segment_cost']:.6g}"
