@@ -477,7 +477,8 @@ def _solve_to_tol(m: Metric, start: Any, goal: Any, n: int, tol: Any, max_segmen
     res.seed_energies, res.best_seed = first.seed_energies, first.best_seed
     res.levels, res.iterations = first.levels, iterations
     if res.status in (Status.TRIVIAL, Status.SHORT):
-        est = {"length": float(m.segment_length(s, g, 8)), "error_estimate": 0.0,
+        seg = m.segment_length_error(s, g)
+        est = {"length": float(seg.value), "error_estimate": float(seg.error),
                "order": None, "order_seen": False}
         done = True
     res.length_estimate = float(est["length"])

@@ -144,16 +144,16 @@ def evaluate_path_set(
         raise InputError(f"{name} paths contain NaN or inf")
     costs = metric.path_costs(paths)
     k, m, dim = paths.shape
-    quad = metric.segment_length(
-        paths[:, :-1].reshape(-1, dim), paths[:, 1:].reshape(-1, dim), 8
-    ).reshape(k, m - 1)
+    # eq. (58) lengths by adaptive quadrature to 1e-10 (Metric.path_length_error), not a
+    # fixed order that can be percent-wrong on long segments
+    quad = np.asarray(metric.path_length_error(paths).value).reshape(k)
     if metric.convex_everywhere:
         ncf = np.zeros(k)
     else:
         conv = metric.convexity(metric.domain.project(paths.reshape(-1, dim)), n_directions=32)
         ncf = (conv.reshape(k, m) < 0).mean(axis=1)
     mx = costs.max(axis=1)
-    return PathSet(name, paths, costs, costs.sum(1), quad.sum(1), mx, mx <= eps, ncf,
+    return PathSet(name, paths, costs, costs.sum(1), quad, mx, mx <= eps, ncf,
                    float(seconds_per_path))
 
 
