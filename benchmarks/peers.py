@@ -433,8 +433,9 @@ def project_rows(m: Any, pairs: np.ndarray, with_log: bool) -> list[dict]:
                 elif method == "distance":
                     rec["length"] = out.distance
                     rec["status"] = out.status.value
-                else:
-                    rec["length"] = out.length
+                else:  # solve_geodesic(tol=): the estimate of the continuum length
+                    est = getattr(out, "length_estimate", None)
+                    rec["length"] = out.length if est is None else est
                     rec["error_estimate"] = getattr(out, "error_estimate", None)
             per.append(rec)
         rows.append({"peer": "project", "method": method, "setting": setting, "kind": kind,
