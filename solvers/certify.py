@@ -60,7 +60,7 @@ from finsler.domains import Box, Disk
 from finsler.errors import InputError
 from finsler.lowering import LoweredFunction, lower
 from finsler.metric import Metric
-from finsler.registry import get_metric
+from solvers.inputs import as_metric
 
 __all__ = ["CertifyResult", "MeshSpec", "certify"]
 
@@ -728,14 +728,6 @@ def _initial_modes(mesh: _Mesh, k: int, previous: tuple[_Mesh, dict[str, Any]] |
     return {"exact": exact, "active": active}
 
 
-def _metric(metric: Metric | str) -> Metric:
-    if isinstance(metric, Metric):
-        return metric
-    if isinstance(metric, str):
-        return get_metric(metric)
-    raise InputError(f"metric must be a finsler.Metric or a registered name, got {metric!r}")
-
-
 def _convexity(m: Metric, points: np.ndarray) -> tuple[str, str]:
     if m.convex_everywhere:
         return "convex", f"F(x, .) is convex on the whole domain ({m.convexity_note})"
@@ -770,7 +762,7 @@ def certify(
     options.
     """
     t_start = time.perf_counter()
-    m = _metric(metric)
+    m = as_metric(metric)
     if m.dim != 2:
         raise InputError(f"certify works on 2-D metrics; {m.name} has dimension {m.dim}")
     spec = MeshSpec.preset(mesh) if isinstance(mesh, str) else (mesh or MeshSpec())

@@ -261,9 +261,21 @@ def _wait_for(cond, timeout: float = 120.0) -> None:
         time.sleep(0.2)
 
 
-def test_sigterm_during_a_batch_solve_stops_every_worker_and_resume_is_equal(tmp_path):
+def _sigterm_leaves_no_process(proc, kids: set[int]) -> None:
+    """SIGTERM to a long command: exit 130 with the resume message, and none of its
+    processes ``kids`` outlives it."""
     import signal
     import time
+
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130, err
+    assert "interrupted (SIGTERM)" in err and "run the same command to resume" in err
+    time.sleep(0.5)
+    assert not [k for k in kids if _alive(k)], "a worker outlived the command"
+
+
+def test_sigterm_during_a_batch_solve_stops_every_worker_and_resume_is_equal(tmp_path):
 
     import solvers
 
@@ -276,12 +288,7 @@ def test_sigterm_during_a_batch_solve_stops_every_worker_and_resume_is_equal(tmp
     _wait_for(lambda: parts.is_dir() and len(list(parts.glob("*.pkl"))) >= 2)
     kids = _children(proc.pid)
     assert len(kids) >= 2  # the pool's workers (and the resource tracker)
-    proc.send_signal(signal.SIGTERM)
-    _, err = proc.communicate(timeout=120)
-    assert proc.returncode == 130, err
-    assert "interrupted (SIGTERM)" in err and "run the same command to resume" in err
-    time.sleep(0.5)
-    assert not [k for k in kids if _alive(k)], "a worker outlived the command"
+    _sigterm_leaves_no_process(proc, kids)
     kept = len(list(parts.glob("*.pkl")))
     assert 2 <= kept < 24 and not (tmp_path / "r.json").exists()
     # the same command resumes and gives what an uninterrupted solve gives
@@ -299,7 +306,6 @@ def test_sigterm_during_a_batch_solve_stops_every_worker_and_resume_is_equal(tmp
 
 
 def test_sigterm_during_a_sweep_keeps_every_run_resumable(tmp_path):
-    import signal
     import time
 
     proc = _geodesics("sweep", "--envs", "euclidean", "--methods", "midpoint", "--seeds", "2",
@@ -309,12 +315,7 @@ def test_sigterm_during_a_sweep_keeps_every_run_resumable(tmp_path):
     _wait_for(lambda: all((r / "checkpoint_latest.pt").is_file() for r in runs))
     time.sleep(1.0)
     kids = _children(proc.pid)
-    proc.send_signal(signal.SIGTERM)
-    _, err = proc.communicate(timeout=120)
-    assert proc.returncode == 130, err
-    assert "interrupted (SIGTERM)" in err and "run the same command to resume" in err
-    time.sleep(0.5)
-    assert not [k for k in kids if _alive(k)], "a worker outlived the command"
+    _sigterm_leaves_no_process(proc, kids)
     import learn
 
     for r in runs:
