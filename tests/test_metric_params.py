@@ -372,3 +372,33 @@ def test_figure_hooks_follow_what_the_metric_is() -> None:
     assert not fg.is_planar_pose(finsler.get_metric("matsumoto"))
     assert fg.has_kinematics(finsler.get_metric("panda-pole"))
     assert not fg.has_kinematics(finsler.get_metric("carlike"))
+
+
+def test_exact_commands_take_the_metric_parameters() -> None:
+    # cost, solve, certify, exp and log build the metric with --metric-param: their numbers
+    # are the Python API's on get_metric(name, **params), not the defaults'
+    cli = CliRunner()
+    s, g = "0.1,0.2", "0.6,-0.3"
+    steep = finsler.get_metric("matsumoto", height=2.0)
+    res = cli.invoke(app, ["cost", "--metric", "matsumoto", "--metric-param", "height=2",
+                           "--start", s, "--goal", g, "--json"])
+    assert res.exit_code == 0, res.output
+    a, b = np.array([0.1, 0.2]), np.array([0.6, -0.3])
+    want = float(np.asarray(steep.cost(a, b)).reshape(-1)[0])
+    default = float(np.asarray(finsler.get_metric("matsumoto").cost(a, b)).reshape(-1)[0])
+    got = json.loads(res.output)
+    assert abs(got["cost"] - want) < 1e-12 and abs(want - default) > 1e-2
+    res = cli.invoke(app, ["solve", "--metric", "matsumoto", "--metric-param", "height=2",
+                           "--start", s, "--goal", g, "--segments", "16", "--json"])
+    assert res.exit_code == 0, res.output
+    import solvers
+
+    ref = solvers.solve_geodesic(steep, np.array([0.1, 0.2]), np.array([0.6, -0.3]), 16)
+    assert abs(json.loads(res.output)["results"][0]["energy"] - ref.energy) < 1e-6 * ref.energy
+    # Poincare disk of radius 0.5 (curvature unchanged): a point at 0.6 is outside it
+    res = cli.invoke(app, ["exp", "--metric", "poincare", "--metric-param", "radius=0.5",
+                           "--start", "0.6,0", "--velocity", "0.1,0"])
+    assert res.exit_code == 2 and "outside" in res.output
+    res = cli.invoke(app, ["log", "--metric", "matsumoto", "--metric-param", "height=x",
+                           "--start", s, "--goal", g])
+    assert res.exit_code == 2 and "height" in res.output

@@ -15,7 +15,13 @@ import typer
 
 import finsler
 from finsler.errors import InputError
-from validation.cli_common import fail, metric_or_fail, parse_point
+from validation.cli_common import (
+    MetricModuleOption,
+    MetricParamOption,
+    fail,
+    metric_from_options,
+    parse_point,
+)
 
 app = typer.Typer(
     name="geodesics",
@@ -66,10 +72,12 @@ def cost_command(
     rtol: Annotated[float, typer.Option(
         help="Relative tolerance of the segment length (adaptive Gauss-Kronrod).")] = 1e-10,
     as_json: Annotated[bool, typer.Option("--json", help="Print JSON.")] = False,
+    metric_param: MetricParamOption = None,
+    metric_module: MetricModuleOption = None,
 ) -> None:
     """Local costs between two points: C (eq. 4), symmetric C (eq. 59), segment length (eq. 58)
     with an error estimate (adaptive quadrature to --rtol; a warning if not reached)."""
-    m = metric_or_fail(metric)
+    m = metric_from_options(metric, metric_param, metric_module)
     s = parse_point(start, m.dim, "--start")
     g = parse_point(goal, m.dim, "--goal")
     warnings = []

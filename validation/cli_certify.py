@@ -20,7 +20,13 @@ import typer
 
 from finsler.errors import InputError
 from finsler.files import atomic_write_text, check_output_path
-from validation.cli_common import fail, metric_or_fail, parse_point
+from validation.cli_common import (
+    MetricModuleOption,
+    MetricParamOption,
+    fail,
+    metric_from_options,
+    parse_point,
+)
 
 __all__ = ["certify_command", "register"]
 
@@ -42,6 +48,8 @@ def certify_command(
         help="Seconds after which no new refinement round starts.")] = None,
     out: Annotated[Path | None, typer.Option(help="Also write the JSON result here.")] = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print JSON.")] = False,
+    metric_param: MetricParamOption = None,
+    metric_module: MetricModuleOption = None,
 ) -> None:
     """Certified lower and upper bounds of the distance: a dual (potential) lower bound on a
     refined triangulation and the solver's path length with its quadrature error."""
@@ -49,7 +57,7 @@ def certify_command(
 
     from solvers.certify import MeshSpec, certify
 
-    m = metric_or_fail(metric)
+    m = metric_from_options(metric, metric_param, metric_module)
     if m.dim != 2:
         fail(f"certify works on 2-D metrics; {m.name} has dimension {m.dim}")
     s = parse_point(start, m.dim, "--start")

@@ -7,7 +7,7 @@ import importlib
 import json
 import sys
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any
 
 import numpy as np
 import typer
@@ -18,8 +18,11 @@ from finsler.errors import InputError
 __all__ = [
     "METRIC_MODULE_HELP",
     "METRIC_PARAM_HELP",
+    "MetricModuleOption",
+    "MetricParamOption",
     "fail",
     "import_metric_modules",
+    "metric_from_options",
     "metric_or_fail",
     "parse_metric_params",
     "parse_overrides",
@@ -33,6 +36,11 @@ METRIC_PARAM_HELP = ("Metric parameter NAME=VALUE (repeatable; numbers parsed), 
 METRIC_MODULE_HELP = ("Module (dotted name) or FILE.py to import first, so that the "
                       "metrics it registers (@finsler.register_metric) can be used "
                       "(repeatable; a file's folder is put on sys.path).")
+#: The two options as parameter types of a command.
+MetricParamOption = Annotated[list[str] | None, typer.Option(
+    "--metric-param", metavar="NAME=VALUE", help=METRIC_PARAM_HELP)]
+MetricModuleOption = Annotated[list[str] | None, typer.Option(
+    "--metric-module", metavar="MODULE", help=METRIC_MODULE_HELP)]
 
 
 def fail(message: str) -> None:
@@ -68,6 +76,18 @@ def metric_or_fail(name: str, params: dict[str, Any] | None = None) -> finsler.M
     except InputError as err:
         fail(str(err))
         raise  # unreachable
+
+
+def metric_from_options(name: str, metric_param: list[str] | None,
+                        metric_module: list[str] | None) -> finsler.Metric:
+    """The metric of a command's ``--metric``, ``--metric-param`` and ``--metric-module``
+    options (modules imported first), or a clear error and exit status 2."""
+    try:
+        import_metric_modules(metric_module)
+        params = parse_metric_params(metric_param)
+    except InputError as err:
+        fail(str(err))
+    return metric_or_fail(name, params)
 
 
 def parse_metric_params(items: list[str] | None) -> dict[str, Any] | None:

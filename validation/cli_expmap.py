@@ -19,7 +19,13 @@ import typer
 
 import solvers
 from finsler.errors import InputError
-from validation.cli_common import fail, metric_or_fail, parse_point
+from validation.cli_common import (
+    MetricModuleOption,
+    MetricParamOption,
+    fail,
+    metric_from_options,
+    parse_point,
+)
 
 __all__ = ["exp_command", "log_command", "register"]
 
@@ -32,9 +38,11 @@ def exp_command(
     samples: Annotated[int, typer.Option(
         help="Also return this many points of the curve on [0, t_end] (0: none).")] = 0,
     as_json: Annotated[bool, typer.Option("--json", help="Print JSON.")] = False,
+    metric_param: MetricParamOption = None,
+    metric_module: MetricModuleOption = None,
 ) -> None:
     """exp(x, v): the end point at time t of the geodesic from x with initial velocity v."""
-    m = metric_or_fail(metric)
+    m = metric_from_options(metric, metric_param, metric_module)
     x = parse_point(start, m.dim, "--start")
     v = parse_point(velocity, m.dim, "--velocity")
     if samples < 0 or samples == 1:
@@ -64,9 +72,11 @@ def log_command(
     goal: Annotated[str, typer.Option(help='Goal point y, e.g. "0.5,0.3".')],
     tol: Annotated[float, typer.Option(help="Tolerance on |exp(x, v) - y| (max norm).")] = 1e-11,
     as_json: Annotated[bool, typer.Option("--json", help="Print JSON.")] = False,
+    metric_param: MetricParamOption = None,
+    metric_module: MetricModuleOption = None,
 ) -> None:
     """log(x, y): the initial velocity v of the shortest geodesic with exp(x, v) = y."""
-    m = metric_or_fail(metric)
+    m = metric_from_options(metric, metric_param, metric_module)
     x = parse_point(start, m.dim, "--start")
     y = parse_point(goal, m.dim, "--goal")
     try:

@@ -31,7 +31,13 @@ import finsler
 import solvers
 from finsler.errors import InputError
 from finsler.pool import PoolInterrupted
-from validation.cli_common import fail, metric_or_fail, parse_point
+from validation.cli_common import (
+    MetricModuleOption,
+    MetricParamOption,
+    fail,
+    metric_from_options,
+    parse_point,
+)
 
 __all__ = ["recheck_flags", "register", "solve_command", "solve_payload"]
 
@@ -143,13 +149,15 @@ def solve_command(
         help="Relative accuracy of the length: double the segments from --segments until "
              "the estimated error (Richardson extrapolation; says when the expected order "
              "is not seen) is below TOL * length, e.g. 1e-7.")] = None,
+    metric_param: MetricParamOption = None,
+    metric_module: MetricModuleOption = None,
 ) -> None:
     """Exact discrete geodesics (globally seeded IPOPT) with min-max refinement.
 
     With --pairs and --out, finished pairs are kept in OUT.parts/ until the JSON is
     written, so running the same command again after an interruption resumes it (also
     across --workers and --ray)."""
-    m = metric_or_fail(metric)
+    m = metric_from_options(metric, metric_param, metric_module)
     if pairs is not None and (start is not None or goal is not None):
         fail("give either --start/--goal or --pairs, not both")
     if pairs is None and (start is None or goal is None):
