@@ -132,7 +132,8 @@ class TrainResult:
 
 def finish_run(run_dir: Path, history: list[dict[str, Any]], best: dict[str, Any],
                stopped_by: str, timesteps: int, iterations: int,
-               extra_final: tuple[str, ...] = ()) -> TrainResult:
+               extra_final: tuple[str, ...] = (),
+               extra_result: dict[str, Any] | None = None) -> TrainResult:
     """Write ``result.json`` (the run is finished) and return its :class:`TrainResult`
     (``final``: the last metrics row's success, lengths, throughput and ``extra_final``).
     ``stopped_by`` a signal name: the run is NOT finished; raise
@@ -140,7 +141,7 @@ def finish_run(run_dir: Path, history: list[dict[str, Any]], best: dict[str, Any
     if stopped_by not in ("timesteps", "minutes"):
         raise TrainingInterrupted(run_dir, stopped_by, timesteps, iterations)
     final = history[-1]
-    write_result(run_dir, final, best, stopped_by)
+    write_result(run_dir, final, best, stopped_by, extra_result)
     return TrainResult(
         run_dir=Path(run_dir),
         timesteps=timesteps,

@@ -105,6 +105,25 @@ class ActorTerm:
         raise NotImplementedError
 
 
+def _path_costs_safe(metric: Any, pts: torch.Tensor) -> torch.Tensor:
+    """``metric.path_costs(pts)`` ``(K, n)`` whose gradient is finite where two consecutive
+    points coincide: C is 0 there, but its derivative is 0/0 for the usual
+    ``F = sqrt(...)`` (the projection into the domain maps neighbouring midpoints onto the
+    same boundary point late in training; one such NaN gradient destroyed a 4e8-evaluation
+    car-like run). Those segments are evaluated at a displaced end, detached, and masked to
+    0; every other segment is computed exactly as before."""
+    a, b = pts[:, :-1], pts[:, 1:]
+    same = (a == b).all(-1, keepdim=True)  # (K, n, 1)
+    if not bool(same.any()):
+        return metric.path_costs(pts)
+    offset = torch.zeros_like(a[:1, :1])
+    offset[..., 0] = 1e-6
+    b = torch.where(same, (a + offset).detach(), b)
+    k, n, dim = a.shape
+    c = metric.cost(a.reshape(-1, dim), b.reshape(-1, dim)).reshape(k, n)
+    return torch.where(same[..., 0], torch.zeros_like(c), c)
+
+
 @dataclass
 class PathEnergy(ActorTerm):
     """Beyond the paper: ``weight * n * sum_i C(x_i, x_i+1)**2``, the discrete energy of the
@@ -126,7 +145,7 @@ class PathEnergy(ActorTerm):
         e = torch.as_tensor(ends, dtype=torch.float32, device=trainer.device)
         pts = build_tree(e[:, 0], e[:, 1], depth,
                          lambda a, b: trainer.actor(a, b, deterministic=True)).double()
-        c = trainer.metric.path_costs(pts)
+        c = _path_costs_safe(trainer.metric, pts)
         return (c.shape[1] * (c**2).sum(1)).float()
 
     def step(self, trainer: Trainer) -> TermOutput:

@@ -167,10 +167,10 @@ def read_metrics(path: Path) -> list[dict[str, Any]]:
 
 
 def write_result(run_dir: Path, final: dict[str, Any], best: dict[str, Any],
-                 stopped_by: str) -> None:
+                 stopped_by: str, extra: dict[str, Any] | None = None) -> None:
     """Mark a run finished: ``result.json`` with the all-inclusive and paper counts of
     evaluations of C, wall time, which bound stopped it, the last metrics row and the best
-    (validation-selected) checkpoint's figures."""
+    (validation-selected) checkpoint's figures, plus a method's ``extra`` entries."""
     doc = {
         "timesteps": int(final["timesteps"]),
         "timesteps_paper": int(final.get("timesteps_paper", final["timesteps"])),
@@ -179,6 +179,7 @@ def write_result(run_dir: Path, final: dict[str, Any], best: dict[str, Any],
         "stopped_by": stopped_by,
         "final": dict(final),
         "best": dict(best),
+        **(extra or {}),
     }
     atomic_write_text(Path(run_dir) / RESULT_FILE, json.dumps(doc, indent=2))
 

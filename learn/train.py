@@ -23,6 +23,7 @@ exactly (all RNG and optimiser states are in the checkpoint).
 
 from __future__ import annotations
 
+import logging
 import math
 import time
 from pathlib import Path
@@ -56,6 +57,8 @@ from learn.storage import (
 from learn.tree import build_tree, level_pairs, mc_targets, td_lambda_targets
 
 __all__ = ["TrainResult", "Trainer", "actor_loss", "resolve_device", "train"]
+
+_LOG = logging.getLogger(__name__)
 
 
 def actor_loss(method: str, v_first: torch.Tensor, v_second: torch.Tensor) -> torch.Tensor:
@@ -112,6 +115,7 @@ class Trainer:
         self.timesteps_derivative = 0  # evaluations of C that were differentiated
         self.trees = 0
         self.updates = 0
+        self.skipped_steps = 0
         self.wall_before = 0.0
         self.best: dict[str, float] = {"success_rate": -1.0, "mean_max_segment_cost": math.inf}
         self.history: list[dict[str, Any]] = []
@@ -162,6 +166,7 @@ class Trainer:
                 "timesteps_derivative": self.timesteps_derivative,
                 "trees": self.trees,
                 "updates": self.updates,
+                "skipped_steps": self.skipped_steps,
                 "wall_seconds": self._wall(),
             },
             "best": dict(self.best),
@@ -181,6 +186,7 @@ class Trainer:
             self.timesteps_paper = int(c["timesteps_paper"])
             self.timesteps_derivative = int(c["timesteps_derivative"])
             self.trees, self.updates = int(c["trees"]), int(c["updates"])
+            self.skipped_steps = int(c.get("skipped_steps", 0))
             self.wall_before = float(c["wall_seconds"])
             self.best = dict(st["best"])
         except (KeyError, RuntimeError, TypeError, ValueError) as err:
@@ -252,7 +258,7 @@ class Trainer:
                 lc = ((self.critic.raw(bs, bg) - target[idx]) ** 2).mean()
                 self.opt_critic.zero_grad(set_to_none=True)
                 lc.backward()
-                self.opt_critic.step()
+                self._step_if_finite(self.opt_critic, self.critic, "critic")
                 # actor step: the method's loss with the critic held fixed, plus the terms
                 self.critic.requires_grad_(False)
                 m = self.actor(bs, bg, generator=self.gen)
@@ -265,13 +271,28 @@ class Trainer:
                         la = la + out.loss
                 self.opt_actor.zero_grad(set_to_none=True)
                 la.backward()
-                self.opt_actor.step()
+                self._step_if_finite(self.opt_actor, self.actor, "actor")
                 self.critic.requires_grad_(True)
                 lc_sum += float(lc.detach())
                 la_sum += float(la.detach())
                 steps += 1
         self.updates += steps
         return lc_sum / max(steps, 1), la_sum / max(steps, 1)
+
+    def _step_if_finite(self, opt: torch.optim.Optimizer, net: torch.nn.Module,
+                        what: str) -> None:
+        """``opt.step()`` unless a gradient is NaN or inf: then the step is skipped (the
+        parameters and the optimiser's moments stay finite), counted in
+        ``skipped_steps`` (``result.json``) and logged. One non-finite gradient would
+        otherwise turn every parameter into NaN for the rest of the run."""
+        grads = [p.grad for p in net.parameters() if p.grad is not None]
+        if grads and not bool(torch.stack([torch.isfinite(g).all() for g in grads]).all()):
+            self.skipped_steps += 1
+            _LOG.warning("%s: non-finite %s gradient at %d evaluations of C; step skipped "
+                         "(%d so far)", self.run_dir, what, self.timesteps, self.skipped_steps)
+            opt.zero_grad(set_to_none=True)
+            return
+        opt.step()
 
     def _set_lr(self) -> float:
         cfg = self.cfg
@@ -384,7 +405,8 @@ class Trainer:
             finally:
                 bar.close()
         return finish_run(self.run_dir, self.history, self.best, stopped_by,
-                          self.timesteps, self.iteration)
+                          self.timesteps, self.iteration,
+                          extra_result={"skipped_steps": self.skipped_steps})
 
 
 def train(cfg: TrainConfig, out: str | Path, resume: bool = False,

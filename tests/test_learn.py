@@ -440,3 +440,46 @@ def test_generate_shapes_and_endpoints(tmp_path) -> None:
     want = pol.metric.domain.project(mean.double()).numpy()
     np.testing.assert_allclose(pol.midpoint(pairs[:, 0], pairs[:, 1]), want, rtol=0,
                                atol=1e-7)
+
+
+def test_path_energy_gradient_is_finite_where_points_coincide() -> None:
+    # two consecutive points projected onto the same boundary point: C = 0 there and its
+    # derivative through sqrt is 0/0; the energy's costs equal path_costs and the gradient
+    # is finite (one such NaN ended a 4e8-evaluation car-like run at 3.7e8)
+    from learn.methods import _path_costs_safe
+
+    m = finsler.get_metric("carlike")
+    pts = torch.tensor([[[0.0, 0.0, 0.0], [0.3, 0.1, 0.2], [0.3, 0.1, 0.2], [0.6, 0.2, 0.1]]],
+                       dtype=torch.float64, requires_grad=True)
+    naive = m.path_costs(pts)
+    (naive**2).sum().backward()
+    assert not torch.isfinite(pts.grad).all()  # the failure this guards against
+    pts.grad = None
+    c = _path_costs_safe(m, pts)
+    assert torch.equal(c.detach(), naive.detach())
+    (c**2).sum().backward()
+    assert torch.isfinite(pts.grad).all()
+    # the same gradient as the path without the repeated point
+    q = pts.detach()[:, [0, 1, 3]].clone().requires_grad_(True)
+    (m.path_costs(q) ** 2).sum().backward()
+    torch.testing.assert_close(pts.grad[:, 0], q.grad[:, 0])
+    torch.testing.assert_close(pts.grad[:, 1] + pts.grad[:, 2], q.grad[:, 1])
+
+
+def test_non_finite_gradient_skips_the_step_and_is_counted(tmp_path) -> None:
+    cfg = learn.default_config("euclidean", depth=2, collection_size=64, minibatch_size=32)
+    tr = Trainer(cfg, tmp_path / "run", progress=False)
+    before = [p.detach().clone() for p in tr.actor.parameters()]
+    for p in tr.actor.parameters():
+        p.grad = torch.zeros_like(p)
+    next(tr.actor.parameters()).grad[0] = float("nan")
+    tr._step_if_finite(tr.opt_actor, tr.actor, "actor")
+    assert tr.skipped_steps == 1
+    assert all(torch.equal(a, b) for a, b in zip(before, tr.actor.parameters()))
+    assert all(torch.isfinite(p).all() for p in tr.actor.parameters())
+    # a finite gradient steps as usual
+    for p in tr.actor.parameters():
+        p.grad = torch.ones_like(p)
+    tr._step_if_finite(tr.opt_actor, tr.actor, "actor")
+    assert tr.skipped_steps == 1
+    assert not all(torch.equal(a, b) for a, b in zip(before, tr.actor.parameters()))
