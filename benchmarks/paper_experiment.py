@@ -102,7 +102,13 @@ def main() -> None:
             print(json.dumps(row))
     if args.sweep is not None:
         for env_dir in sorted(p for p in args.sweep.iterdir() if p.is_dir()):
-            m = finsler.get_metric(env_dir.name)
+            # the metric the runs trained on (parameters and user class from their config)
+            runs = sorted(env_dir.glob("*/seed-*"))
+            m = load_any_policy(runs[0]).metric if runs else finsler.get_metric(env_dir.name)
+            others = {repr(load_any_policy(r).metric) for r in runs[1:]}
+            if others - {repr(m)}:
+                raise SystemExit(f"{env_dir}: the runs trained on different metrics "
+                                 f"({sorted(others | {repr(m)})})")
             pairs = finsler.sample_pairs(m, args.pairs, args.seed)
             exact = (_exact_lengths(m, pairs, args.sweep / f"exact-{env_dir.name}-{args.seed}-"
                                     f"{args.pairs}.npy") if args.exact else None)
