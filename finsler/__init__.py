@@ -4,7 +4,7 @@ evaluator (numpy, torch, IPOPT) derived from that single expression."""
 from finsler.domains import Box, Disk, Domain, JointBox, Product
 from finsler.errors import DomainError, InputError, UnknownMetricError
 from finsler.files import OutputError, atomic_write_bytes, atomic_write_text, check_output_path
-from finsler.metric import Metric, Task
+from finsler.metric import LengthBounds, LengthEstimate, Metric, Task
 from finsler.metrics import (
     MATSUMOTO_CONVEX_RADIUS,
     CarLike,
@@ -40,6 +40,8 @@ __all__ = [
     "Euclidean",
     "InputError",
     "JointBox",
+    "LengthBounds",
+    "LengthEstimate",
     "Matsumoto",
     "Metric",
     "Minkowski",

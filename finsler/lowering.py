@@ -279,6 +279,13 @@ class LoweredFunction:
             result.append(stacked.reshape(*batch, len(full)))
         return tuple(result)
 
+    def run(self, backend: Any, columns: list[list[Any]]) -> tuple[list[Any], ...]:
+        """Run the program on a caller's backend (the operations ``B.exp``, ``B.sqrt``,
+        ... and the arithmetic operators of its values): ``columns[i][j]`` is coordinate
+        ``j`` of input ``i``; returns one list of values per output coordinate. Used by
+        :func:`finsler.intervals.enclose`."""
+        return self._program(backend, columns)
+
 
 def _stack_torch(cols: list[Any], like: Any) -> Any:
     import torch

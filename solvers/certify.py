@@ -20,11 +20,17 @@ its linear interpolant by at most ``Hz R**2 / 2`` (``Hz`` >= the largest eigenva
 ``Hess_z F(., v_k)`` on ``T``, ``R`` the circumradius: ``sum_i lambda_i |z_i - z|**2 <= R**2``),
 and along a chord ``F(z, w(t))`` lies above the chord's linear interpolant minus
 ``Ht / 8`` (``Ht`` >= ``d2/dt2 F(z, w(t))`` on ``T`` x the arc). Neither bound needs
-``F(z, .)`` to be convex. ``Hz`` and ``Ht`` come from the CasADi Hessians of the metric's own
-``F`` at the triangle's vertices, edge midpoints and centroid (chords at t = 0, 1/2, 1),
-inflated by the spread of those samples (``safety``): an ESTIMATE of a second-order bound,
-the one non-exact ingredient (a third-order term); everything else is exact arithmetic on
-float64 values of F. The LP keeps the vertices away from the path inside inner polygons
+``F(z, .)`` to be convex. ``Hz`` and ``Ht`` are PROVEN upper bounds: interval enclosures
+(:mod:`finsler.intervals`, outward rounding) of the CasADi Hessians of the metric's own
+``F`` over the triangle's bounding box (x the chord's box for ``Ht``), the tighter of the
+natural extension and the mean-value form (third derivatives over the box); where a
+direction's correction is above ``SPLIT_FRACTION`` of F and its enclosure overestimates
+(above ``SPLIT_OVERESTIMATE`` times the value at the box's centre, or infinite), the max
+over the 2 x 2 sub-boxes that meet the triangle, recursively (``SPLIT_DEPTH`` levels). The
+values ``F(z_m, v_k)`` are lowered by 16 ulp (numpy's float64 F is within a few ulp of the
+exact one) and the corrections raised by 1e-12 relative: the rows hold in exact
+arithmetic, up to the accuracy of numpy's elementary functions (documented at <= 4 ulp).
+The LP keeps the vertices away from the path inside inner polygons
 of the rows' sets (they can never violate a row) and gives the vertices near the path the
 sampled rows themselves, adding violated directions in rounds; every round's potential is
 checked against ALL rows and divided by the largest ratio ``(grad phi . v_k) / bound``, so
@@ -35,8 +41,10 @@ condition ``dphi(v) <= F(z, v)`` for all ``v`` is the same as for the convexific
 ``F**(z, .)``; the lower bound is valid for the distance (an infimum of lengths, which the
 convexification does not change), and the result says which case applies.
 
-Upper bound: the length of the solver's path (:func:`solvers.solve_geodesic`) by adaptive
-quadrature plus its error estimate (:meth:`finsler.Metric.path_length_error`).
+Upper bound: the length of the solver's path (:func:`solvers.solve_geodesic`), PROVEN by
+interval arithmetic (:meth:`finsler.Metric.path_length_bounds`: midpoint rule plus an
+enclosure of the second derivative along each piece); ``length`` / ``length_error`` also
+give the adaptive-quadrature estimate of the same length.
 
 Refinement: triangles are refined (edge midpoints, Delaunay again) where the LP's dual
 solution says the corrections cost most (``sum_rows y_r c_r``, the bound's sensitivity),
@@ -58,6 +66,7 @@ import numpy as np
 
 from finsler.domains import Box, Disk
 from finsler.errors import InputError
+from finsler.intervals import Interval, enclose, isqrt
 from finsler.lowering import LoweredFunction, lower
 from finsler.metric import Metric
 from solvers.inputs import as_metric
@@ -72,6 +81,12 @@ LP_SOLVER = "CLARABEL"
 TIGHT_DUAL = 1e-7
 #: Refinements of triangles whose corrections exceed half of F, before the first LP.
 MAX_PRE_REFINE = 8
+#: Sub-box splitting (2 x 2 per level) of triangles whose enclosures are infinite or loose.
+SPLIT_DEPTH = 2
+#: A triangle's box is split where its correction exceeds this fraction of F and its
+#: enclosures exceed this multiple of their values at the box's centre.
+SPLIT_FRACTION = 0.25
+SPLIT_OVERESTIMATE = 1.5
 #: Evenly spaced rays of the inner polygons that keep the vertices away from the path safe.
 INITIAL_DIRECTIONS = 8
 
@@ -100,10 +115,8 @@ class MeshSpec:
     """Stop refining before the mesh would exceed this many triangles."""
     max_rounds: int = 8
     """Largest number of refinement rounds (LP solves)."""
-    mark_fraction: float = 0.5
+    mark_fraction: float = 0.9
     """Refine the triangles that carry this fraction of the dual-weighted corrections."""
-    safety: float = 0.5
-    """Second-order bounds: sampled max + ``safety`` x (max - min) of the samples."""
     segments: int | None = None
     """Segments of the solver's path (the upper bound); default: 4 x the task's 2**D."""
 
@@ -113,8 +126,6 @@ class MeshSpec:
             if isinstance(val, bool) or not isinstance(val, (int, float)) or not (
                     math.isfinite(val) and val > 0):
                 raise InputError(f"MeshSpec.{name} must be positive and finite, got {val!r}")
-        if not self.safety >= 0 or not math.isfinite(self.safety):
-            raise InputError(f"MeshSpec.safety must be >= 0, got {self.safety!r}")
         if self.h_path > self.h_far:
             raise InputError(f"MeshSpec.h_path ({self.h_path}) must be <= h_far ({self.h_far})")
         if self.mark_fraction > 1:
@@ -133,8 +144,8 @@ class MeshSpec:
         """``"coarse"`` (gap ~ a few 1e-2, fast), ``"default"`` (target 1e-2) or ``"fine"``
         (target 1e-3, more directions and triangles)."""
         presets = {
-            "coarse": cls(h_path=0.1, h_far=0.3, directions=64, target_gap=5e-2, max_rounds=3,
-                          max_triangles=3000),
+            "coarse": cls(h_path=0.1, h_far=0.3, directions=128, target_gap=5e-2,
+                          max_rounds=3, max_triangles=3000),
             "default": cls(),
             "fine": cls(h_path=0.04, directions=256, target_gap=1e-3, max_rounds=12,
                         max_triangles=40000),
@@ -149,8 +160,10 @@ class MeshSpec:
 class CertifyResult:
     """A certified interval ``lower <= d(start, goal) <= upper``.
 
-    ``gap = (upper - lower) / upper``. ``upper = length + length_error`` of ``path``
-    ``(n+1, 2)`` (adaptive quadrature): the solver's (or the given) path
+    ``gap = (upper - lower) / upper``. ``upper`` is a proven upper bound of the length of
+    ``path`` ``(n+1, 2)`` (:meth:`finsler.Metric.path_length_bounds`; ``length`` and
+    ``length_error`` are the adaptive-quadrature estimate of it): the solver's (or the
+    given) path
     (``upper_source == "path"``) or, where ``F(z, .)`` is not convex, the same path with
     every segment replaced by a zigzag along the two directions of the convexification
     when that is shorter (``"zigzag"``: switchbacks, the curves whose lengths approach the
@@ -219,64 +232,147 @@ class CertifyResult:
 # derivatives of F (CasADi, lowered once per metric)
 # ----------------------------------------------------------------------------------------
 @functools.lru_cache(maxsize=8)
-def _derivatives(metric: Metric) -> LoweredFunction:
-    """Lowered ``(x, v) -> (F, Hess_x F, Hess_v F)``, batch ``(N, 2)`` -> ``(N, 1), (N, 4),
-    (N, 4)``."""
+def _values(metric: Metric) -> LoweredFunction:
+    """Lowered ``(x, v) -> F``, batch ``(N, 2)`` -> ``(N, 1)``."""
     x = ca.SX.sym("x", 2)
     v = ca.SX.sym("v", 2)
+    return lower(ca.Function(f"certify_F_{metric._ident}", [x, v], [metric.F_sx(x, v)]))
+
+
+@functools.lru_cache(maxsize=8)
+def _second_derivatives(metric: Metric) -> tuple[LoweredFunction, ...]:
+    """Lowered functions whose interval enclosures bound the corrections:
+
+    * ``(x, v) -> (h, dh)``: ``h`` the entries ``(H11, H12, H22)`` of ``Hess_x F(x, v)``,
+      ``dh`` their gradients in ``x`` (``dh[2 j + i] = d h_j / d x_i``);
+    * ``(x, v, d) -> (q, dq)``: ``q = d' Hess_v F(x, v) d`` (the second derivative of F
+      along a chord of direction ``d``) and its gradient in ``(x, v)``;
+    * ``(x, v) -> h`` and ``(x, v, d) -> q`` alone (the centres of the mean-value forms).
+    """
+    x = ca.SX.sym("x", 2)
+    v = ca.SX.sym("v", 2)
+    d = ca.SX.sym("d", 2)
     f = metric.F_sx(x, v)
     hx, _ = ca.hessian(f, x)
+    h = ca.vertcat(hx[0, 0], hx[0, 1], hx[1, 1])
+    dh = ca.vertcat(*[ca.gradient(h[j], x) for j in range(3)])
     hv, _ = ca.hessian(f, v)
-    fun = ca.Function(f"certify_{metric._ident}", [x, v],
-                      [f, ca.reshape(ca.densify(hx), 4, 1), ca.reshape(ca.densify(hv), 4, 1)])
-    return lower(fun)
+    q = ca.mtimes([d.T, hv, d])
+    dq = ca.gradient(q, ca.vertcat(x, v))
+    tag = metric._ident
+    return (lower(ca.Function(f"certify_hz_{tag}", [x, v], [ca.densify(h), ca.densify(dh)])),
+            lower(ca.Function(f"certify_ht_{tag}", [x, v, d], [ca.densify(q), ca.densify(dq)])),
+            lower(ca.Function(f"certify_h_{tag}", [x, v], [ca.densify(h)])),
+            lower(ca.Function(f"certify_q_{tag}", [x, v, d], [ca.densify(q)])))
 
 
-def _eval_derivatives(metric: Metric, x: np.ndarray, v: np.ndarray,
-                      chunk: int = 200_000) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    fun = _derivatives(metric)
-    fs, hxs, hvs = [], [], []
+def _eval_values(metric: Metric, x: np.ndarray, v: np.ndarray,
+                 chunk: int = 200_000) -> np.ndarray:
+    fun = _values(metric)
+    fs = []
     for a in range(0, x.shape[0], chunk):
         with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
-            f, hx, hv = fun(x[a:a + chunk], v[a:a + chunk])
+            (f,) = fun(x[a:a + chunk], v[a:a + chunk])
         fs.append(np.asarray(f, float).reshape(-1))
-        hxs.append(np.asarray(hx, float).reshape(-1, 2, 2))
-        hvs.append(np.asarray(hv, float).reshape(-1, 2, 2))
-    out = np.concatenate(fs), np.concatenate(hxs), np.concatenate(hvs)
-    if not all(np.all(np.isfinite(a)) for a in out):
-        raise InputError(f"{metric.name}: F or its Hessians are not finite on the mesh "
-                         "(the polygon covering the domain reaches a singularity of F?)")
+    out = np.concatenate(fs)
+    if not np.all(np.isfinite(out)):
+        raise InputError(f"{metric.name}: F is not finite on the mesh (the polygon covering "
+                         "the domain reaches a singularity of F?)")
+    # a lower bound of the exact value: numpy's float64 F is within a few ulp of it
+    return out - np.abs(out) * (16 * np.finfo(float).eps)
+
+
+def _lam_max_upper(h: list[Interval]) -> np.ndarray:
+    """Upper bound of the largest eigenvalue of every symmetric 2x2 matrix whose entries
+    ``(H11, H12, H22)`` lie in the intervals ``h`` (increasing in H11, H22 and |H12|)."""
+    a, b, c = Interval(h[0].hi), Interval(h[1].magnitude()), Interval(h[2].hi)
+    lam = 0.5 * (a + c) + isqrt(0.25 * (a - c).square() + b.square())
+    return lam.hi
+
+
+def _centered(at_centre: Interval, slopes: list[Interval], offsets: list[Interval]) -> Interval:
+    """Mean-value form ``f(c) + sum_i df/dx_i(X) (X_i - c_i)``."""
+    out = at_centre
+    for s, o in zip(slopes, offsets, strict=True):
+        out = out + s * o
     return out
 
 
-def _lam_max(h: np.ndarray) -> np.ndarray:
-    """Largest eigenvalue of symmetric 2x2 matrices ``(..., 2, 2)``."""
-    a, b, c = h[..., 0, 0], 0.5 * (h[..., 0, 1] + h[..., 1, 0]), h[..., 1, 1]
-    return 0.5 * (a + c) + np.sqrt(0.25 * (a - c) ** 2 + b * b)
+def _bounds_on_boxes(metric: Metric, lo: np.ndarray, hi: np.ndarray, v: np.ndarray,
+                     w: np.ndarray, with_centre: bool = False) -> tuple[np.ndarray, ...]:
+    """Enclosure upper bounds, for boxes ``[lo, hi]`` ``(M, 2)`` of points, each with a
+    sampled direction ``v`` ``(M, 2)`` and the next one ``w``: ``Hz`` ``(M,)`` >=
+    ``lambda_max(Hess_z F(z, v))`` and ``Ht`` ``(M,)`` >= ``d' Hess_v F(z, u) d`` for all
+    ``z`` in the box and ``u`` on the chord from ``v`` to ``w`` (``d = w - v``), both >= 0
+    (``inf`` where an enclosure is not finite). Each is the tighter of the natural interval
+    extension and the mean-value form (interval arithmetic with outward rounding,
+    :mod:`finsler.intervals`). ``with_centre``: also the same two quantities at the box's
+    centre (what the bounds would be without any variation over the box)."""
+    fz, ft, fz_centre, ft_centre = _second_derivatives(metric)
+    xbox = Interval(lo, hi)
+    centre = 0.5 * (lo + hi)
+    dx = [Interval(lo[:, i], hi[:, i]) - Interval(centre[:, i]) for i in range(2)]
+    # Hz: Hess_z F at the sampled direction (an exact float64 vector)
+    h_box, dh_box = enclose(fz, xbox, Interval(v))
+    (h_c,) = enclose(fz_centre, Interval(centre), Interval(v))
+    h = [h_box[j].intersect(_centered(h_c[j], dh_box[2 * j:2 * j + 2], dx)) for j in range(3)]
+    hz = np.maximum(_lam_max_upper(h), 0.0)
+    # Ht: the chord from v to w
+    wl, wh = np.minimum(v, w), np.maximum(v, w)
+    wc = 0.5 * (wl + wh)
+    d = [Interval(w[:, i]) - Interval(v[:, i]) for i in range(2)]
+    dw = [Interval(wl[:, i], wh[:, i]) - Interval(wc[:, i]) for i in range(2)]
+    q_box, dq_box = enclose(ft, xbox, Interval(wl, wh), d)
+    (q_c,) = enclose(ft_centre, Interval(centre), Interval(wc), d)
+    q = q_box[0].intersect(_centered(q_c[0], dq_box, dx + dw))
+    ht = np.maximum(q.hi, 0.0)
+    bad = ~(np.isfinite(hz) & np.isfinite(ht))
+    hz[bad] = np.inf
+    ht[bad] = np.inf
+    if with_centre:
+        return hz, ht, np.maximum(_lam_max_upper(h_c), 0.0), np.maximum(q_c[0].hi, 0.0)
+    return hz, ht
+
+
+def _box_meets_triangle(lo: np.ndarray, hi: np.ndarray, tri: np.ndarray) -> np.ndarray:
+    """Whether the boxes ``[lo, hi]`` ``(M, 2)`` meet the triangles ``tri`` ``(M, 3, 2)``
+    (separating axes: the box's two axes and the triangle's three edge normals; touching
+    counts as meeting)."""
+    meets = np.all(tri.max(axis=1) >= lo, axis=1) & np.all(tri.min(axis=1) <= hi, axis=1)
+    corners = np.stack([lo, np.stack([hi[:, 0], lo[:, 1]], 1), hi,
+                        np.stack([lo[:, 0], hi[:, 1]], 1)], axis=1)  # (M, 4, 2)
+    for a in range(3):
+        p, q, r = tri[:, a], tri[:, (a + 1) % 3], tri[:, (a + 2) % 3]
+        normal = np.stack([q[:, 1] - p[:, 1], p[:, 0] - q[:, 0]], 1)
+        side = np.einsum("mi,mi->m", r - p, normal)  # the third vertex's side
+        proj = np.einsum("mci,mi->mc", corners - p[:, None], normal)
+        beyond = np.where(side[:, None] > 0, proj < 0, proj > 0)  # opposite to the vertex
+        meets &= ~np.all(beyond, axis=1)
+    return meets
 
 
 class _PointData:
-    """Per-point samples, computed once per point and reused across refinement rounds:
-    ``F(p, v_k)`` ``(K,)``, ``lambda_max(Hess_z F(p, v_k))`` ``(K,)`` and the chord
-    curvature ``max_t d2/dt2 F(p, w_j(t))`` over t in {0, 1/2, 1} ``(K,)`` (arc j from v_j
-    to v_{j+1})."""
+    """Per-point values ``F(p, v_k)`` ``(K,)`` (lowered by a few ulp), computed once per
+    point and reused across refinement rounds, and per-triangle second-order bounds
+    (:func:`_bounds_on_boxes` on the triangle's bounding box; where a direction's
+    correction is above ``SPLIT_FRACTION`` of F and its enclosure above
+    ``SPLIT_OVERESTIMATE`` times its centre value (or infinite), on the 2 x 2 sub-boxes
+    that meet the triangle, down to ``SPLIT_DEPTH`` levels), cached by the triangle's
+    vertices."""
 
     def __init__(self, metric: Metric, k: int) -> None:
         self.metric = metric
         ang = 2 * np.pi * np.arange(k) / k
         self.dirs = np.stack([np.cos(ang), np.sin(ang)], 1)
-        mid = ang + np.pi / k
-        self.mids = np.stack([np.cos(mid), np.sin(mid)], 1)  # unit; chord midpoint = cos * mid
-        self.delta = np.roll(self.dirs, -1, axis=0) - self.dirs  # chord j: v_{j+1} - v_j
-        self.cos = math.cos(math.pi / k)
         self.index: dict[bytes, int] = {}
         self.F = np.zeros((0, k))
+        self.tri_index: dict[bytes, int] = {}
         self.Hz = np.zeros((0, k))
         self.Ht = np.zeros((0, k))
         self.seconds = 0.0
 
     def rows(self, pts: np.ndarray) -> np.ndarray:
-        """Row indices of ``pts`` ``(P, 2)``, computing the samples of new points."""
+        """Row indices of ``pts`` ``(P, 2)``, computing the values of new points."""
         keys = [p.tobytes() for p in np.ascontiguousarray(pts)]
         new = []
         for i, key in enumerate(keys):
@@ -285,33 +381,85 @@ class _PointData:
                 new.append(i)
         if new:
             t0 = time.perf_counter()
-            self._compute(pts[new])
+            p = pts[new]
+            k = self.dirs.shape[0]
+            f = _eval_values(self.metric, np.repeat(p, k, axis=0),
+                             np.tile(self.dirs, (len(new), 1)))
+            self.F = np.concatenate([self.F, f.reshape(len(new), k)])
             self.seconds += time.perf_counter() - t0
         return np.fromiter((self.index[key] for key in keys), dtype=np.int64, count=len(keys))
 
-    def _compute(self, p: np.ndarray) -> None:
+    def triangle_bounds(self, corners: np.ndarray, fmin: np.ndarray, r2: np.ndarray,
+                        chunk: int = 32768) -> tuple[np.ndarray, np.ndarray]:
+        """``Hz``, ``Ht`` ``(T, K)`` of the triangles with vertices ``corners`` ``(T, 3, 2)``,
+        circumradii squared ``r2`` ``(T,)`` and smallest vertex values ``fmin`` ``(T, K)``
+        of F."""
+        srt = np.sort(np.ascontiguousarray(corners).view(np.complex128)[..., 0], axis=1)
+        keys = [row.tobytes() for row in srt]
+        new = []
+        for i, key in enumerate(keys):
+            if key not in self.tri_index:
+                self.tri_index[key] = len(self.tri_index)
+                new.append(i)
+        if new:
+            t0 = time.perf_counter()
+            k = self.dirs.shape[0]
+            n = len(new)
+            tri = np.repeat(corners[new], k, axis=0)  # (n K, 3, 2): element = (triangle, k)
+            kidx = np.tile(np.arange(k), n)
+            fm, rr = fmin[new].reshape(-1), np.repeat(r2[new], k)
+            hz = np.empty(n * k)
+            ht = np.empty(n * k)
+            for a in range(0, n * k, chunk):
+                sl = slice(a, a + chunk)
+                hz[sl], ht[sl] = self._split_bounds(tri[sl].min(axis=1), tri[sl].max(axis=1),
+                                                    tri[sl], kidx[sl], fm[sl], rr[sl], 0)
+            self.Hz = np.concatenate([self.Hz, hz.reshape(n, k)])
+            self.Ht = np.concatenate([self.Ht, ht.reshape(n, k)])
+            self.seconds += time.perf_counter() - t0
+        rows = np.fromiter((self.tri_index[key] for key in keys), dtype=np.int64,
+                           count=len(keys))
+        return self.Hz[rows], self.Ht[rows]
+
+    def _split_bounds(self, lo: np.ndarray, hi: np.ndarray, tri: np.ndarray, kidx: np.ndarray,
+                      fmin: np.ndarray, r2: np.ndarray, depth: int
+                      ) -> tuple[np.ndarray, np.ndarray]:
+        """Bounds of elements ``(M,)``: box ``[lo, hi]`` within triangle ``tri``, direction
+        ``kidx``; a loose element is bounded by the max over its sub-boxes meeting the
+        triangle."""
         k = self.dirs.shape[0]
-        n = p.shape[0]
-        xs = np.repeat(p, k, axis=0)
-        f, hx, hv = _eval_derivatives(self.metric, xs, np.tile(self.dirs, (n, 1)))
-        _, _, hvm = _eval_derivatives(self.metric, xs, np.tile(self.mids, (n, 1)))
-        hv = hv.reshape(n, k, 2, 2)
-        hvm = hvm.reshape(n, k, 2, 2) / self.cos  # Hess_v is homogeneous of degree -1
-        d = self.delta
-        at_start = np.einsum("ki,nkij,kj->nk", d, hv, d)  # t = 0: v_j
-        at_end = np.einsum("ki,nkij,kj->nk", d, np.roll(hv, -1, axis=1), d)  # t = 1: v_{j+1}
-        at_mid = np.einsum("ki,nkij,kj->nk", d, hvm, d)
-        self.F = np.concatenate([self.F, f.reshape(n, k)])
-        self.Hz = np.concatenate([self.Hz, _lam_max(hx).reshape(n, k)])
-        self.Ht = np.concatenate([self.Ht, np.maximum(np.maximum(at_start, at_end), at_mid)])
-
-
-def _estimate_bound(samples: np.ndarray, safety: float) -> np.ndarray:
-    """Upper bound estimate from samples ``(T, S, K)`` -> ``(T, K)``: max + safety x spread,
-    positive part."""
-    hi = samples.max(axis=1)
-    lo = samples.min(axis=1)
-    return np.maximum(hi + safety * (hi - lo), 0.0)
+        hz, ht, hz_c, ht_c = _bounds_on_boxes(self.metric, lo, hi, self.dirs[kidx],
+                                              self.dirs[(kidx + 1) % k], with_centre=True)
+        if depth >= SPLIT_DEPTH:
+            return hz, ht
+        with np.errstate(invalid="ignore"):
+            # split where the correction matters AND the enclosure overestimates (where F
+            # truly curves that much, smaller boxes cannot help: the mesh is refined instead)
+            large = ~(0.5 * hz * r2 + ht / 8.0 <= SPLIT_FRACTION * fmin)
+            over = ~((hz <= SPLIT_OVERESTIMATE * hz_c + 1e-12 * fmin)
+                     & (ht <= SPLIT_OVERESTIMATE * ht_c + 1e-12 * fmin))
+            loose = large & over
+        if not np.any(loose):
+            return hz, ht
+        idx = np.flatnonzero(loose)
+        lo_l, hi_l = lo[idx], hi[idx]
+        mid = 0.5 * (lo_l + hi_l)
+        sub_lo, sub_hi, parent = [], [], []
+        for ax, bx in ((lo_l[:, 0], mid[:, 0]), (mid[:, 0], hi_l[:, 0])):
+            for ay, by in ((lo_l[:, 1], mid[:, 1]), (mid[:, 1], hi_l[:, 1])):
+                sl, sh = np.stack([ax, ay], 1), np.stack([bx, by], 1)
+                keep = _box_meets_triangle(sl, sh, tri[idx])
+                sub_lo.append(sl[keep])
+                sub_hi.append(sh[keep])
+                parent.append(idx[keep])
+        par = np.concatenate(parent)
+        shz, sht = self._split_bounds(np.concatenate(sub_lo), np.concatenate(sub_hi),
+                                      tri[par], kidx[par], fmin[par], r2[par], depth + 1)
+        hz[idx] = -np.inf
+        ht[idx] = -np.inf
+        np.maximum.at(hz, par, shz)
+        np.maximum.at(ht, par, sht)
+        return hz, ht
 
 
 def _zigzag(m: Metric, pts: np.ndarray, k: int, teeth: int = 2) -> np.ndarray | None:
@@ -526,19 +674,22 @@ class _Mesh:
 # ----------------------------------------------------------------------------------------
 # the LP
 # ----------------------------------------------------------------------------------------
-def _row_bounds(mesh: _Mesh, data: _PointData, safety: float) -> tuple[np.ndarray, np.ndarray]:
-    """Right-hand sides ``b`` ``(T, 3, K)`` and the corrections ``c`` ``(T, K)``."""
-    nv = mesh.points.shape[0]
+def _row_bounds(mesh: _Mesh, data: _PointData) -> tuple[np.ndarray, np.ndarray]:
+    """Right-hand sides ``b`` ``(T, 3, K)`` and the corrections ``c`` ``(T, K)`` (infinite
+    where the enclosures are)."""
     vert_rows = data.rows(mesh.points)
-    mid_rows = data.rows(mesh.midpoints)
-    cen_rows = data.rows(mesh.centroids)
-    edge_rows = mid_rows[mesh.dofs[:, 3:] - nv]  # (T, 3)
-    samples = np.concatenate([vert_rows[mesh.tri], edge_rows, cen_rows[:, None]], axis=1)
-    hz = _estimate_bound(data.Hz[samples], safety)  # (T, K)
-    ht = _estimate_bound(data.Ht[samples], safety)  # (T, K): arc j from v_j to v_{j+1}
-    corr = 0.5 * hz * mesh.r2[:, None] + np.maximum(ht, np.roll(ht, 1, axis=1)) / 8.0
-    b = data.F[vert_rows[mesh.tri]] - corr[:, None, :]
-    return b, corr
+    f = data.F[vert_rows[mesh.tri]]  # (T, 3, K)
+    hz, ht = data.triangle_bounds(mesh.points[mesh.tri], f.min(axis=1), mesh.r2)
+    with np.errstate(invalid="ignore"):
+        corr = _corrections(hz, ht, mesh.r2)
+    return f - corr[:, None, :], corr
+
+
+def _corrections(hz: np.ndarray, ht: np.ndarray, r2: np.ndarray) -> np.ndarray:
+    """``Hz R**2 / 2 + max(Ht_{k-1}, Ht_k) / 8`` ``(T, K)``, inflated for the float64
+    rounding of this line and of ``R**2``."""
+    corr = 0.5 * hz * r2[:, None] + np.maximum(ht, np.roll(ht, 1, axis=1)) / 8.0
+    return corr * (1.0 + 1e-12)
 
 
 class _Rays:
@@ -796,15 +947,15 @@ def certify(
         m.domain.check(pts, "path")
         solver_status = "given"
     est = m.path_length_error(pts)
-    solver_upper = float(est.value + est.error)
+    solver_upper = m.path_length_bounds(pts).upper
     upper, upper_source, upper_path = solver_upper, "path", pts
     if not m.convex_everywhere:
         zig = _zigzag(m, pts, spec.directions)
         if zig is not None:
-            zest = m.path_length_error(zig)
-            if zest.value + zest.error < upper:
-                est, upper_path = zest, zig
-                upper, upper_source = float(zest.value + zest.error), "zigzag"
+            zig_upper = m.path_length_bounds(zig).upper
+            if zig_upper < upper:
+                est, upper_path = m.path_length_error(zig), zig
+                upper, upper_source = zig_upper, "zigzag"
     t_solve = time.perf_counter() - t0
 
     # lower bound: dual LP on meshes refined where the corrections cost most
@@ -820,16 +971,24 @@ def certify(
         t0 = time.perf_counter()
         msh = _Mesh(points)
         t_mesh += time.perf_counter() - t0
-        b, corr = _row_bounds(msh, data, spec.safety)
+        b, corr = _row_bounds(msh, data)
         # triangles whose corrections eat half of F somewhere are refined before any LP
         for _ in range(MAX_PRE_REFINE):
             bad = np.min(b / data.F[data.rows(msh.points)][msh.tri], axis=(1, 2)) < 0.5
             if not np.any(bad):
                 break
+            if msh.n_tri + 3 * int(bad.sum()) > spec.max_triangles:
+                # the corrections do not shrink with the triangles: the chord term (fixed
+                # by the number of directions) or a singularity of F; stop, do not grow
+                raise InputError(
+                    f"certify: {int(bad.sum())} triangles keep second-order corrections "
+                    f"above half of F, and refining them would exceed max_triangles "
+                    f"({spec.max_triangles}); use more directions (e.g. the default or fine "
+                    "mesh preset) or a smaller h_path / h_far")
             t0 = time.perf_counter()
             msh = _Mesh(msh.refine(np.flatnonzero(bad)))
             t_mesh += time.perf_counter() - t0
-            b, corr = _row_bounds(msh, data, spec.safety)
+            b, corr = _row_bounds(msh, data)
         if np.min(b) <= 0.0:
             raise InputError(f"certify: {int(np.sum(np.min(b, axis=(1, 2)) <= 0))} triangles "
                              "keep second-order corrections above F after "

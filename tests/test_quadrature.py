@@ -126,3 +126,39 @@ def test_cli_cost_accurate_length_and_warning() -> None:
     assert out["segment_length_order"]["value"] == pytest.approx(277.0229, rel=1e-6)
     assert len(out["warnings"]) == 1 and "order 8" in out["warnings"][0]
     assert "warning: Gauss-Legendre order 8" in res.stderr
+
+
+def test_proven_length_bounds_contain_closed_forms() -> None:
+    # the interval bounds (midpoint rule + enclosed second derivative) contain the exact
+    # length: a Poincare diameter (2 atanh a + 2 atanh b, one long segment and a polyline),
+    # Euclidean and Randers straight lines (F constant in x: the bounds are the value)
+    m = finsler.get_metric("poincare")
+    a, b = 0.79, 0.75
+    exact = 2 * np.arctanh(a) + 2 * np.arctanh(b)
+    for pts in (np.array([[-a, 0.0], [b, 0.0]]),
+                np.stack([np.linspace(-a, b, 17), np.zeros(17)], 1)):
+        bd = m.path_length_bounds(pts, rtol=1e-10)
+        assert bd.lower <= exact <= bd.upper
+        assert bd.upper - bd.lower <= 1e-8 * exact and bd.converged
+    for name in ("euclidean", "randers"):
+        mm = finsler.get_metric(name)
+        s, g = np.array([-0.3, 0.2]), np.array([0.5, -0.4])
+        d = float(mm.distance(s, g)[0])  # the straight line is the geodesic
+        bd = mm.path_length_bounds(np.stack([s, g]))
+        assert bd.lower <= d <= bd.upper and bd.upper - bd.lower <= 1e-12
+
+
+def test_proven_length_bounds_enclose_the_quadrature_on_a_curved_path() -> None:
+    # Matsumoto (not closed form): a 64-segment path round the hill; the converged adaptive
+    # quadrature lies inside the proven bounds, which are tight
+    m = finsler.get_metric("matsumoto")
+    t = np.linspace(0.0, np.pi, 65)
+    pts = np.stack([0.6 * np.cos(t), 0.6 * np.sin(t)], 1)
+    bd = m.path_length_bounds(pts)
+    est = m.path_length_error(pts, rtol=1e-12)
+    assert bd.lower <= est.value <= bd.upper
+    assert bd.upper - bd.lower <= 1e-8 * est.value
+    with pytest.raises(InputError, match="shape"):
+        m.path_length_bounds(pts[:, :1])
+    with pytest.raises(InputError, match="rtol"):
+        m.path_length_bounds(pts, rtol=0.0)

@@ -2,7 +2,8 @@
 metric (:func:`solvers.certify`).
 
 JSON keys (``--json``): ``lower``, ``upper``, ``gap`` ((upper - lower) / upper), then
-``length``, ``length_error`` (the upper bound is their sum), ``upper_source`` (``path`` |
+``length``, ``length_error`` (the quadrature estimate of the path's length; ``upper`` is
+the proven bound of it by interval arithmetic), ``upper_source`` (``path`` |
 ``zigzag``), ``path_upper``, ``path_gap`` (the solver's own path), ``triangles``, ``vertices``,
 ``unknowns``, ``directions``, ``lp_rows``, ``lp_rows_total``, ``lp_status``, ``lp_solver``,
 ``convexity`` (``convex`` | ``convexified``), ``convexity_note``, ``solver_status``,
@@ -52,7 +53,8 @@ def certify_command(
     metric_module: MetricModuleOption = None,
 ) -> None:
     """Certified lower and upper bounds of the distance: a dual (potential) lower bound on a
-    refined triangulation and the solver's path length with its quadrature error."""
+    refined triangulation (second-order corrections bounded by interval arithmetic) and the
+    solver's path length (proven upper bound)."""
     import dataclasses
 
     from solvers.certify import MeshSpec, certify
@@ -96,16 +98,16 @@ def certify_command(
     typer.echo(f"metric {m.name}: start {tuple(s.tolist())} goal {tuple(g.tolist())}")
     typer.echo(f"lower  = {res.lower:.10g}   (dual potential, P2 on {res.triangles} triangles, "
                f"{res.directions} directions)")
-    typer.echo(f"upper  = {res.upper:.10g}   (path length {res.length:.10g} + quadrature "
-               f"error {res.length_error:.2g})")
+    typer.echo(f"upper  = {res.upper:.10g}   (path length, proven by interval arithmetic; "
+               f"quadrature: {res.length:.10g} +- {res.length_error:.2g})")
     typer.echo(f"gap    = {res.gap:.3e}   (upper - lower) / upper")
     if res.upper_source == "zigzag":
         typer.echo(f"         upper from the solver's path with switchbacks; the path itself: "
                    f"{res.path_upper:.10g}, gap {res.path_gap:.3e}")
     typer.echo(f"mesh   : {res.vertices} vertices, {res.unknowns} unknowns, {len(res.rounds)} "
                f"LP round(s), last LP {res.lp_rows} rows ({res.lp_status}, {res.lp_solver})")
-    typer.echo(f"time   : {res.times['total']:.2f} s (solve {res.times['solve']:.2f}, LP "
-               f"{res.times['lp']:.2f})")
+    typer.echo(f"time   : {res.times['total']:.2f} s (solve {res.times['solve']:.2f}, "
+               f"bounds {res.times['bounds']:.2f}, LP {res.times['lp']:.2f})")
     typer.echo(f"convexity: {res.convexity}: {res.convexity_note}")
 
 
