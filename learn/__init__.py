@@ -2,7 +2,8 @@
 
 Train with :func:`train` and a :class:`TrainConfig` (:func:`default_config` gives the
 documented per-environment defaults); load a trained or shipped policy with
-:func:`load_policy` and generate paths with ``policy.generate(starts, goals)``.
+:func:`load_policy` and generate paths with ``policy.generate(starts, goals)``, or with
+the policy-guided route search ``policy.search(starts, goals)`` (:mod:`learn.search`).
 The paper's baselines sit beside the midpoint learner (:mod:`learn.seq`, :mod:`learn.pg`);
 :mod:`learn.runs` trains and loads any method and names the paper's variants, and
 :mod:`learn.methods` holds the actor losses and extra terms.
@@ -28,6 +29,7 @@ from learn.policy import (
     shipped_policies,
 )
 from learn.runs import VARIANTS, load_any_policy, make_config, run_one, train_run
+from learn.search import SearchResult, SearchSpec, search_paths
 from learn.storage import CorruptFileError
 from learn.train import Trainer, read_run_config, resolve_device, train
 from learn.tree import build_tree, level_pairs, mc_targets, td_lambda_targets
@@ -40,6 +42,8 @@ __all__ = [
     "Critic",
     "EvalResult",
     "Policy",
+    "SearchResult",
+    "SearchSpec",
     "TrainConfig",
     "TrainResult",
     "Trainer",
@@ -59,6 +63,7 @@ __all__ = [
     "read_run_config",
     "resolve_device",
     "run_one",
+    "search_paths",
     "shipped_policies",
     "td_lambda_targets",
     "train",

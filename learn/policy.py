@@ -7,6 +7,7 @@ or the name of an environment with a shipped policy (``matsumoto``, ``carlike``,
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
@@ -19,6 +20,7 @@ import finsler
 from finsler.errors import InputError
 from learn.config import TrainConfig, check_run_metric
 from learn.networks import Actor, resolve_device
+from learn.search import SearchResult, SearchSpec, search_paths
 from learn.storage import (
     BEST_FILE,
     CONFIG_FILE,
@@ -65,14 +67,22 @@ def generate_paths(
 
     The actor runs in float32; midpoints are cast to float64 and projected into the domain.
     """
+    with torch.no_grad():
+        return build_tree(starts.to(torch.float64), goals.to(torch.float64), depth,
+                          predictor(actor, metric))
+
+
+def predictor(actor: Actor, metric: finsler.Metric
+              ) -> Callable[[torch.Tensor, torch.Tensor], torch.Tensor]:
+    """``(s, g) -> m``: the actor's deterministic mean (float32 network), cast to float64
+    and projected into the domain (call under ``torch.no_grad()``)."""
     param = next(actor.parameters())
 
     def predict(s: torch.Tensor, g: torch.Tensor) -> torch.Tensor:
         m = actor(s.to(param), g.to(param), deterministic=True)
-        return metric.domain.project(m.to(torch.float64))
+        return metric.domain.project(m.to(torch.float64)).to(s.device)
 
-    with torch.no_grad():
-        return build_tree(starts.to(torch.float64), goals.to(torch.float64), depth, predict)
+    return predict
 
 
 @dataclass
@@ -171,18 +181,39 @@ class Policy:
         xn = self.metric.domain.check(x, name)
         return torch.as_tensor(xn, dtype=torch.float64)
 
-    def generate(self, starts: Any, goals: Any, depth: int | None = None) -> np.ndarray:
-        """Paths by recursive midpoint insertion: ``(K, dim)`` x2 -> ``(K, 2**D + 1, dim)``
-        float64 (D = ``depth`` or the task's depth). Endpoints are the given points."""
+    def _depth(self, depth: Any) -> int:
         d = self.depth if depth is None else depth
         if not isinstance(d, (int, np.integer)) or isinstance(d, bool) or d < 0:
             raise InputError(f"depth must be a non-negative integer, got {depth!r}")
+        return int(d)
+
+    def _pair_points(self, starts: Any, goals: Any) -> tuple[torch.Tensor, torch.Tensor]:
         s = self._points(starts, "starts")
         g = self._points(goals, "goals")
         if s.shape != g.shape:
             raise InputError(f"starts and goals differ in shape: {tuple(s.shape)} vs "
                              f"{tuple(g.shape)}")
+        return s, g
+
+    def generate(self, starts: Any, goals: Any, depth: int | None = None) -> np.ndarray:
+        """Paths by recursive midpoint insertion: ``(K, dim)`` x2 -> ``(K, 2**D + 1, dim)``
+        float64 (D = ``depth`` or the task's depth). Endpoints are the given points."""
+        d = self._depth(depth)
+        s, g = self._pair_points(starts, goals)
         return generate_paths(self.actor, self.metric, s, g, int(d)).cpu().numpy()
+
+    def search(self, starts: Any, goals: Any, spec: SearchSpec | None = None,
+               depth: int | None = None, eps: float | None = None) -> SearchResult:
+        """Paths by policy-guided route search (:mod:`learn.search`: candidate midpoints at
+        the top levels chosen by the true cost of the actor's completed paths, then
+        polishing by the actor's midpoints; values of C only). Never longer (sum C) than
+        :meth:`generate`'s path, pair by pair, and successful (every segment cost <= ``eps``,
+        default the task's) wherever that path is. Returns the paths and the evaluations of C
+        the search made."""
+        d = self._depth(depth)
+        s, g = self._pair_points(starts, goals)
+        return search_paths(self.metric, predictor(self.actor, self.metric), s, g, d,
+                            self.eps if eps is None else eps, spec)
 
     def midpoint(self, starts: Any, goals: Any) -> np.ndarray:
         """Predicted midpoints ``(K, dim)`` (the deterministic mean, projected)."""
@@ -191,13 +222,18 @@ class Policy:
         return out[0] if single else out
 
     def evaluate(
-        self, pairs: Any = None, eps: float | None = None, depth: int | None = None
+        self, pairs: Any = None, eps: float | None = None, depth: int | None = None,
+        search: SearchSpec | None = None,
     ) -> EvalResult:
         """Section 5.1 evaluation on ``pairs`` ``(K, 2, dim)`` (default: the environment's
-        default evaluation set, ``finsler.default_pairs``)."""
+        default evaluation set, ``finsler.default_pairs``) of the generated paths, or of the
+        searched ones with ``search`` (:meth:`search`)."""
         p = finsler.default_pairs(self.metric) if pairs is None else check_pairs(
             self.metric, pairs)
-        paths = self.generate(p[:, 0], p[:, 1], depth=depth)
+        if search is not None:
+            paths = self.search(p[:, 0], p[:, 1], search, depth=depth, eps=eps).paths
+        else:
+            paths = self.generate(p[:, 0], p[:, 1], depth=depth)
         return evaluate_paths(self.metric, paths, self.eps if eps is None else eps)
 
 

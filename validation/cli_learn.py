@@ -208,6 +208,10 @@ def evaluate_command(
              "run's own parameters are always used).")] = None,
     metric_module: Annotated[list[str] | None, typer.Option(
         "--metric-module", metavar="MODULE", help=METRIC_MODULE_HELP)] = None,
+    search: Annotated[bool, typer.Option(
+        "--search", help="Evaluate the paths of the route search (learn.search: candidate "
+        "midpoints at the top levels chosen by the cost of the policy's completed paths, "
+        "values of C only) instead of the plain recursive generation.")] = False,
 ) -> None:
     """Evaluate a trained policy (section 5.1): success rate, mean length, max segment cost.
 
@@ -241,13 +245,26 @@ def evaluate_command(
         if depth is not None and depth < 0:
             raise InputError(f"--depth must be a non-negative integer, got {depth}")
         p = finsler.load_pairs(pairs, policy.metric) if pairs is not None else None
-        res = policy.evaluate(p, eps=eps, depth=depth)
+        searched = None
+        if search:
+            if not callable(getattr(policy, "search", None)):
+                raise InputError(f"--search needs a midpoint policy; {policy.source} is a "
+                                 f"{type(policy).__name__}")
+            pp = p if p is not None else finsler.default_pairs(policy.metric)
+            searched = policy.search(pp[:, 0], pp[:, 1], depth=depth, eps=eps)
+            res = learn.evaluate_paths(policy.metric, searched.paths,
+                                       policy.eps if eps is None else eps)
+        else:
+            res = policy.evaluate(p, eps=eps, depth=depth)
     except InputError as err:
         fail(str(err))
         return
     mp = getattr(policy.config, "metric_params", None) or {}
     out = {"env": policy.metric.name, "metric_params": mp, "source": policy.source,
            "checkpoint": policy.checkpoint, **res.to_dict()}
+    if searched is not None:
+        out["search"] = {**learn.SearchSpec().to_dict(),
+                         "evaluations_of_C_per_path": searched.evaluations_per_path}
     if as_json:
         typer.echo(json.dumps(out, indent=2))
         return
@@ -256,6 +273,9 @@ def evaluate_command(
                f"pairs {len(res.success)}")
     if mp:
         typer.echo("parameters  " + ", ".join(f"{k}={v}" for k, v in mp.items()))
+    if searched is not None:
+        typer.echo(f"paths       route search ({searched.evaluations_per_path:.0f} evaluations "
+                   "of C per path, values only)")
     typer.echo(f"success     {res.success_rate:.2%}")
     typer.echo(f"mean length {res.mean_length:.6g}")
     typer.echo(f"mean max segment cost {res.mean_max_segment_cost:.6g}")

@@ -49,6 +49,11 @@ def report_command(
              "run's own parameters are always used).")] = None,
     metric_module: Annotated[list[str] | None, typer.Option(
         "--metric-module", metavar="MODULE", help=METRIC_MODULE_HELP)] = None,
+    search: Annotated[bool, typer.Option(
+        "--search/--no-search",
+        help="Also report the policy with the route search (learn.search: candidate "
+             "midpoints at the top levels chosen by the cost of the policy's completed "
+             "paths; values of C only).")] = True,
 ) -> None:
     """Benchmark a learned policy against exact geodesics and the straight-line baseline:
     success rates, length ratios, midpoint errors, timing, figures."""
@@ -63,7 +68,7 @@ def report_command(
         params = parse_metric_params(metric_param)
         doc = build_report(env, out, run=run, pairs=pairs, quick=quick, continuum=continuum,
                            workers=workers, progress=progress, checkpoint=checkpoint,
-                           metric_params=params)
+                           metric_params=params, search=search)
     except InputError as err:
         fail(str(err))
         return
@@ -78,6 +83,12 @@ def report_command(
     if lr["mean"] is not None:
         typer.echo(f"length learned/exact: mean {lr['mean']:.4f}, median {lr['median']:.4f}, "
                    f"95th pct {lr['p95']:.4f}, max {lr['max']:.4f}")
+    if "searched" in sr:
+        sl = doc["length_ratio"]["searched"]["length"]
+        typer.echo(f"with route search ({doc['search']['evaluations_of_C_per_path']:.0f} "
+                   f"evaluations of C per path): success {sr['searched']:.0%}, length/exact "
+                   f"mean {sl['mean']:.4f}, median {sl['median']:.4f}, 95th pct "
+                   f"{sl['p95']:.4f}, max {sl['max']:.4f}")
     typer.echo(f"figures: {', '.join(doc['figures'])}")
 
 

@@ -390,16 +390,29 @@ class Comparison:
     midpoint: MidpointErrors | None
     policy_source: str = ""
     timing: dict[str, float] = field(default_factory=dict)
+    searched: PathSet | None = None
+    """The policy's paths with the route search (:meth:`learn.Policy.search`), if asked."""
+    search: dict[str, Any] | None = None
+    """The search's settings and its evaluations of C per path."""
+
+    @property
+    def methods(self) -> tuple[str, ...]:
+        """The path sets compared with the exact ones."""
+        return ("learned", "searched", "straight") if self.searched is not None else (
+            "learned", "straight")
 
     def _means(self, attr: str) -> dict[str, float]:
-        """Mean of one per-pair field for the learned, exact and straight paths."""
+        """Mean of one per-pair field for every path set."""
         return {w: float(getattr(getattr(self, w), attr).mean())
-                for w in ("learned", "exact", "straight")}
+                for w in (*self.methods, "exact")}
 
     def ratios(self, which: str, measure: str = "length") -> np.ndarray:
         """Per-pair ratio ``which / exact`` of ``length`` or ``length_quadrature`` ``(K,)``
         (NaN where the exact solve did not converge or the exact length is 0)."""
-        ps = {"learned": self.learned, "straight": self.straight}[which]
+        if which not in self.methods:
+            raise InputError(f"no {which!r} paths in this comparison; have "
+                             f"{', '.join(self.methods)}")
+        ps = getattr(self, which)
         num = getattr(ps, measure)
         den = getattr(self.exact, measure)
         with np.errstate(invalid="ignore", divide="ignore"):
@@ -409,7 +422,7 @@ class Comparison:
     def to_dict(self) -> dict[str, Any]:
         ratios = {
             w: {ms: ratio_stats(self.ratios(w, ms)) for ms in ("length", "length_quadrature")}
-            for w in ("learned", "straight")
+            for w in self.methods
         }
         per_pair = []
         for i in range(len(self.pairs)):
@@ -430,6 +443,10 @@ class Comparison:
                 "exact_status": self.exact.status[i],
                 "exact_seconds": float(self.exact.wall_time[i]),
             }
+            if self.searched is not None:
+                row["searched_success"] = bool(self.searched.success[i])
+                row["searched_length"] = float(self.searched.length[i])
+                row["searched_max_segment_cost"] = float(self.searched.max_segment_cost[i])
             if self.midpoint is not None:
                 row["midpoint_err_start"] = _num(self.midpoint.err_start[i])
                 row["midpoint_err_goal"] = _num(self.midpoint.err_goal[i])
@@ -460,6 +477,9 @@ class Comparison:
             "timing": dict(self.timing),
             "per_pair": per_pair,
         }
+        if self.searched is not None:
+            out["success_rate"]["searched"] = self.searched.success_rate
+            out["search"] = dict(self.search or {})
         if self.midpoint is not None:
             out["midpoint_error"] = self.midpoint.summary()
         return out
@@ -494,12 +514,15 @@ def compare(
     continuum: bool = False,
     workers: int | None = None,
     progress: bool = True,
+    search: Any = None,
 ) -> Comparison:
     """Compare ``policy`` with exact geodesics and the straight baseline on ``pairs``
     ``(K, 2, dim)`` (default: ``finsler.default_pairs``), at depth ``D`` (default: the
     policy's, else the task's) and threshold ``eps`` (default: the policy's, else the
     task's). ``exact`` reuses solved references; ``midpoint`` adds the first-level midpoint
-    error; ``continuum`` adds continuum distances where the metric is Finsler."""
+    error; ``continuum`` adds continuum distances where the metric is Finsler. ``search``
+    (a :class:`learn.SearchSpec`, for a policy with a ``search`` method) adds the paths
+    of the policy-guided route search as a fourth set, ``searched``."""
     m = finsler.get_metric(metric if metric is not None else policy.metric)
     arr = solvers.check_pairs(m, finsler.default_pairs(m) if pairs is None else pairs)
     d = int(depth if depth is not None else getattr(policy, "depth", m.task.depth))
@@ -514,6 +537,19 @@ def compare(
         raise InputError(f"policy.generate returned shape {paths.shape}, expected "
                          f"({len(arr)}, {n + 1}, {m.dim})")
     learned = evaluate_path_set(m, "learned", paths, e, per_path)
+    searched, search_info, search_time = None, None, {}
+    if search is not None:
+        if not callable(getattr(policy, "search", None)):
+            raise InputError(f"the route search needs a midpoint policy with a search "
+                             f"method; {type(policy).__name__} has none")
+        t0 = time.perf_counter()
+        res = policy.search(arr[:, 0], arr[:, 1], search, depth=d, eps=e)
+        sec = (time.perf_counter() - t0) / len(arr)
+        searched = evaluate_path_set(m, "searched", res.paths, e, sec)
+        search_info = {**search.to_dict(), "evaluations_of_C_per_path":
+                       res.evaluations_per_path, "candidates_per_level": search.candidates,
+                       "uses_derivative_of_C": False}
+        search_time = {"searched_seconds_per_path_batched": sec}
     straight_pol = StraightLine(m, d)
     t0 = time.perf_counter()
     spaths = straight_pol.generate(arr[:, 0], arr[:, 1])
@@ -536,6 +572,11 @@ def compare(
         "exact_seconds_per_path": float(exact.wall_time.mean()),
         "speedup_batched": float(exact.wall_time.mean() / per_path),
         "speedup_single": float(exact.wall_time.mean() / single),
+        **search_time,
     }
+    if searched is not None:
+        timing["speedup_searched"] = float(exact.wall_time.mean()
+                                           / timing["searched_seconds_per_path_batched"])
     return Comparison(m.name, e, d, arr, learned, straight, exact, mid,
-                      str(getattr(policy, "source", type(policy).__name__)), timing)
+                      str(getattr(policy, "source", type(policy).__name__)), timing,
+                      searched, search_info)

@@ -58,6 +58,7 @@ __all__ = [
 
 LEARNED_COLOR = "tab:blue"
 EXACT_COLOR = "black"
+SEARCHED_COLOR = "#2ca02c"
 STRAIGHT_COLOR = "tab:orange"
 #: Axis labels of the two x axes of a learning curve (metrics.csv columns).
 X_LABELS = {
@@ -397,17 +398,19 @@ def coordinates_along_path(cmp: Comparison, metric: Metric) -> Figure:
 # report: path quality
 # ----------------------------------------------------------------------------------------
 def length_ratios(cmp: Comparison) -> Figure:
-    """Histograms of the per-pair length ratio to the exact geodesic (learned and
-    straight), by sum of C and by quadrature length."""
+    """Histograms of the per-pair length ratio to the exact geodesic (learned, learned with
+    the route search if the comparison has it, and straight), by sum of C and by
+    quadrature length."""
     fig = new_figure((11, 4))
     axes = fig.subplots(1, 2)
     for ax, ms, lab in ((axes[0], "length", "sum of C (eq. 4)"),
                         (axes[1], "length_quadrature", "quadrature length (eq. 58)")):
         a = cmp.ratios("learned", ms)
         b = cmp.ratios("straight", ms)
-        a, b = a[np.isfinite(a)], b[np.isfinite(b)]
-        hi = max(float(np.max(a, initial=1.0)), float(np.max(b, initial=1.0))) * 1.02
-        lo = min(0.98, float(np.min(a, initial=1.0)), float(np.min(b, initial=1.0)))
+        c = cmp.ratios("searched", ms) if cmp.searched is not None else np.zeros(0)
+        a, b, c = a[np.isfinite(a)], b[np.isfinite(b)], c[np.isfinite(c)]
+        hi = max(float(np.max(x, initial=1.0)) for x in (a, b, c)) * 1.02
+        lo = min(0.98, *(float(np.min(x, initial=1.0)) for x in (a, b, c)))
         if hi / lo > 4:  # long tails (detours): logarithmic ratio axis
             bins = np.geomspace(lo, hi, 50)
             ax.set_xscale("log")
@@ -415,6 +418,9 @@ def length_ratios(cmp: Comparison) -> Figure:
             bins = np.linspace(lo, hi, 40)
         ax.hist(b, bins=bins, alpha=0.55, color=STRAIGHT_COLOR, label="straight / exact")
         ax.hist(a, bins=bins, alpha=0.65, color=LEARNED_COLOR, label="learned / exact")
+        if c.size:
+            ax.hist(c, bins=bins, histtype="step", lw=1.6, color=SEARCHED_COLOR,
+                    label="learned + route search / exact")
         ax.axvline(1.0, color="black", lw=0.8)
         ax.set_xlabel(f"length ratio, {lab} (1 = exact)")
         ax.set_ylabel("number of pairs")

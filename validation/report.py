@@ -193,6 +193,9 @@ def _params_text(metric: Metric) -> str:
     return ", ".join(f"{k} = {v}" for k, v in _params(metric).items()) or "(none)"
 
 
+_LABELS = {"searched": "learned + route search"}
+
+
 def _markdown(doc: dict[str, Any], figures: list[str], metric: Metric) -> str:
     sr = doc["success_rate"]
     lines = [
@@ -210,6 +213,8 @@ def _markdown(doc: dict[str, Any], figures: list[str], metric: Metric) -> str:
         "| method | success |",
         "|---|---|",
         f"| learned policy | {_pct(sr['learned'])} |",
+        *([f"| learned policy + route search | {_pct(sr['searched'])} |"]
+          if "searched" in sr else []),
         f"| exact geodesics, min-max refined (ceiling) | {_pct(sr['exact_ceiling'])} |",
         f"| exact geodesics, energy minimiser as solved | {_pct(sr['exact_energy_path'])} |",
         f"| straight line cut into {doc['segments']} pieces (trivial baseline) | "
@@ -223,10 +228,10 @@ def _markdown(doc: dict[str, Any], figures: list[str], metric: Metric) -> str:
         "| method | measure | mean | median | 95th pct | max | min | pairs |",
         "|---|---|---|---|---|---|---|---|",
     ]
-    for w in ("learned", "straight"):
+    for w in doc["length_ratio"]:
         for ms, lab in (("length", "sum C (eq. 4)"), ("length_quadrature", "quadrature")):
             s = doc["length_ratio"][w][ms]
-            lines.append(f"| {w} | {lab} | {_f(s['mean'])} | {_f(s['median'])} | "
+            lines.append(f"| {_LABELS.get(w, w)} | {lab} | {_f(s['mean'])} | {_f(s['median'])} | "
                          f"{_f(s['p95'])} | {_f(s['max'])} | {_f(s['min'])} | {s['count']} |")
     lines += [
         "",
@@ -238,6 +243,21 @@ def _markdown(doc: dict[str, Any], figures: list[str], metric: Metric) -> str:
         "realises (Proposition 1 fails there).",
         "",
     ]
+    if "search" in doc:
+        sc = doc["search"]
+        lines += [
+            "`learned + route search` (`searched` in `report.json`) is the same policy with "
+            "the route search (`learn.search`): at the "
+            f"top {sc['levels']} levels, {sc['candidates_per_level']} candidate midpoints "
+            "per sub-pair (the policy's, the coordinate midpoint and offsets around both) "
+            "are each completed by the policy's own halves and the cheapest completed path "
+            f"(sum C) is kept, then {sc['polish']} polishing sweeps by the policy's "
+            "midpoints of neighbours. It evaluates C "
+            f"{sc['evaluations_of_C_per_path']:.0f} times per path (values only: no "
+            "derivative of C, like the paper's method) and is never longer than the "
+            "policy's own path.",
+            "",
+        ]
     me = doc.get("midpoint_error")
     if me is not None:
         fl = doc.get("midpoint_error_exact_floor")
@@ -292,10 +312,15 @@ def _markdown(doc: dict[str, Any], figures: list[str], metric: Metric) -> str:
     lines += [
         f"| learned, batch of {doc['pairs']} | {_f(t['learned_seconds_per_path_batched'], 3)} |",
         f"| learned, one pair at a time | {_f(t['learned_seconds_per_path_single'], 3)} |",
+        *([f"| learned + route search, batch of {doc['pairs']} | "
+           f"{_f(t['searched_seconds_per_path_batched'], 3)} |"]
+          if "searched_seconds_per_path_batched" in t else []),
         f"| exact (globally seeded IPOPT + min-max) | {_f(t['exact_seconds_per_path'], 3)} |",
         "",
         f"Speed-up of the learned policy: {t['speedup_batched']:.3g}x (batched), "
-        f"{t['speedup_single']:.3g}x (single pair).",
+        f"{t['speedup_single']:.3g}x (single pair)"
+        + (f"; with the route search {t['speedup_searched']:.3g}x (batched)."
+           if "speedup_searched" in t else "."),
         "",
         f"Exact solver: {doc['exact_solver']['converged']}/{doc['pairs']} converged, status "
         f"counts {doc['exact_solver']['status_counts']}, on average "
@@ -360,6 +385,7 @@ def build_report(
     policy: Any = None,
     checkpoint: str = "best",
     metric_params: dict[str, Any] | None = None,
+    search: Any = True,
 ) -> dict[str, Any]:
     """Write the report for ``env`` (or the run's environment) into ``out``; returns the
     ``report.json`` document. ``policy`` overrides the loaded policy (any object with the
@@ -368,13 +394,16 @@ def build_report(
     :func:`solvers.distance` converges (the metric is Finsler along the path).
     ``checkpoint``: ``best`` (selected on the validation set) or ``latest``.
     ``metric_params``: the metric's parameters; a loaded policy must have been trained
-    with them (its run's own parameters are always the ones reported)."""
+    with them (its run's own parameters are always the ones reported). ``search``: also
+    report the policy-guided route search (:meth:`learn.Policy.search`; True = the default
+    :class:`learn.SearchSpec`, or a spec, or False/None for none), for policies that have
+    it."""
     out = Path(out)
     created = not out.exists()
     try:
         return _build_report(env, out, run=run, pairs=pairs, quick=quick, continuum=continuum,
                              workers=workers, progress=progress, policy=policy,
-                             checkpoint=checkpoint, metric_params=metric_params)
+                             checkpoint=checkpoint, metric_params=metric_params, search=search)
     except BaseException:
         if created and out.is_dir() and not any(out.iterdir()):
             out.rmdir()  # a failed report leaves nothing behind
@@ -384,7 +413,8 @@ def build_report(
 def _build_report(env: str | None, out: Path, *, run: str | Path | None,
                   pairs: str | Path | np.ndarray | None, quick: bool, continuum: bool | None,
                   workers: int | None, progress: bool, policy: Any,
-                  checkpoint: str, metric_params: dict[str, Any] | None) -> dict[str, Any]:
+                  checkpoint: str, metric_params: dict[str, Any] | None,
+                  search: Any = True) -> dict[str, Any]:
     out.mkdir(parents=True, exist_ok=True)
     if policy is None:
         pol, run_dir, note = load_report_policy(env, run, quick, out, progress, checkpoint,
@@ -411,7 +441,15 @@ def _build_report(env: str | None, out: Path, *, run: str | Path | None,
         pairs_note = "the environment's default evaluation set, finsler.default_pairs"
     if continuum is None:
         continuum = not quick
-    cmp = compare(pol, metric, arr, continuum=continuum, workers=workers, progress=progress)
+    spec = None
+    if search is True and callable(getattr(pol, "search", None)):
+        from learn.search import SearchSpec
+
+        spec = SearchSpec()
+    elif search not in (None, False, True):
+        spec = search
+    cmp = compare(pol, metric, arr, continuum=continuum, workers=workers, progress=progress,
+                  search=spec)
 
     class _ExactMid:
         def midpoint(self, s: Any, g: Any) -> np.ndarray:
@@ -438,6 +476,9 @@ def _build_report(env: str | None, out: Path, *, run: str | Path | None,
         "straight_success": doc["success_rate"]["straight"],
         "learned_ratio": ratio_stats(cmp.ratios("learned")),
     }
+    if cmp.searched is not None:
+        doc["summary"]["searched_success"] = doc["success_rate"]["searched"]
+        doc["summary"]["searched_ratio"] = ratio_stats(cmp.ratios("searched"))
     doc = _clean(doc)
     from learn.storage import atomic_write_text
 

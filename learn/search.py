@@ -1,0 +1,230 @@
+"""Policy-guided route search at generation time: values of C only, never worse than the
+policy's own path.
+
+The recursive generation (:meth:`learn.Policy.generate`) commits to the actor's midpoint at
+every level. Where the policy learned a locally shortest route (round the wrong side of
+a hill, a detour on a short pair near the rim of the Matsumoto disk), no later level can
+undo that choice. :func:`search_paths` keeps the actor as the generator and lets C decide
+between routes:
+
+* at each of the top ``levels`` levels, every sub-pair ``(a, b)`` gets candidate midpoints:
+  the actor's mean ``m0``, the coordinate midpoint ``c``, and ``c + r |b - a| u``,
+  ``m0 + r |b - a| u`` for the ``radii`` ``r`` and ``directions`` unit vectors ``u`` (2-D:
+  evenly spaced angles; n-D: seeded random directions orthogonal to ``b - a``, both
+  signs), projected into the domain. Each candidate is completed by the actor's own
+  recursive halves down to the task's depth, and the candidate whose completed path has
+  the smallest ``sum C`` is kept, among those whose largest segment cost is at most
+  ``max(eps, the actor's own completion's)`` (the actor's mean wins ties);
+* then ``polish`` sweeps replace each interior point ``x_i`` by the actor's midpoint of its
+  neighbours ``(x_i-1, x_i+1)`` where that lowers ``C(x_i-1, x_i) + C(x_i, x_i+1)`` without
+  raising the larger of the two above ``eps`` (odd then even indices).
+
+Every step compares the true cost of real paths and keeps the policy's choice as a
+candidate, so the searched path is never longer (in ``sum C``) than the policy's own path,
+pair by pair, and succeeds (every segment cost <= ``eps``) wherever the policy's does.
+The search evaluates C (values only, no derivatives: model-free) and the
+actor; :class:`SearchResult` counts the evaluations of C per path.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import asdict, dataclass
+from typing import Any
+
+import numpy as np
+import torch
+
+import finsler
+from finsler.errors import InputError
+from learn.tree import build_tree
+
+__all__ = ["SearchResult", "SearchSpec", "search_paths"]
+
+Predict = Callable[[torch.Tensor, torch.Tensor], torch.Tensor]
+
+#: Largest number of float64 coordinates held by one chunk's candidate trees.
+CHUNK_FLOATS = 20_000_000
+
+
+@dataclass(frozen=True)
+class SearchSpec:
+    """Settings of :func:`search_paths` (the defaults were measured on tuning pairs, seed
+    4242, never on a reporting set)."""
+
+    levels: int = 3
+    """Top levels of the tree at which candidate midpoints are compared (0: none)."""
+    directions: int = 8
+    """Unit directions of the candidate offsets (2-D: evenly spaced angles; n-D: half as
+    many seeded random directions orthogonal to the pair, both signs)."""
+    radii: tuple[float, ...] = (0.1, 0.25, 0.5, 1.0)
+    """Offsets of the candidates as fractions of the sub-pair's coordinate distance."""
+    polish: int = 2
+    """Sweeps replacing each interior point by the actor's midpoint of its neighbours
+    where that shortens the path (0: none)."""
+    seed: int = 0
+    """Seed of the random directions (n-D only)."""
+
+    def __post_init__(self) -> None:
+        for name, low in (("levels", 0), ("directions", 2), ("polish", 0), ("seed", 0)):
+            val = getattr(self, name)
+            if isinstance(val, bool) or not isinstance(val, (int, np.integer)) or val < low:
+                raise InputError(f"SearchSpec.{name} must be an integer >= {low}, got {val!r}")
+        try:
+            radii = tuple(float(r) for r in self.radii)
+        except (TypeError, ValueError):
+            raise InputError(f"SearchSpec.radii must be a sequence of numbers, got "
+                             f"{self.radii!r}") from None
+        if not all(math.isfinite(r) and r > 0 for r in radii):
+            raise InputError(f"SearchSpec.radii must be positive and finite, got {self.radii!r}")
+        object.__setattr__(self, "radii", radii)
+
+    @property
+    def candidates(self) -> int:
+        """Candidate midpoints per sub-pair at a searched level."""
+        return 2 + 2 * self.directions * len(self.radii)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {**asdict(self), "radii": list(self.radii)}
+
+
+@dataclass
+class SearchResult:
+    """Paths ``(K, 2**D + 1, dim)`` float64 and the evaluations of C the search made."""
+
+    paths: np.ndarray
+    evaluations: int
+    """Evaluations of C (values only) over all pairs."""
+
+    @property
+    def evaluations_per_path(self) -> float:
+        return self.evaluations / max(len(self.paths), 1)
+
+
+def _unit_directions(spec: SearchSpec, d: torch.Tensor) -> list[torch.Tensor]:
+    """Unit offset directions per sub-pair ``(N, dim)`` for sub-pair vectors ``d``."""
+    n, dim = d.shape
+    if dim == 1:
+        return [torch.ones_like(d), -torch.ones_like(d)]
+    if dim == 2:
+        ang = 2 * np.pi * np.arange(spec.directions) / spec.directions
+        return [torch.tensor([[math.cos(a), math.sin(a)]], dtype=d.dtype).expand(n, 2)
+                for a in ang]
+    rng = np.random.default_rng(spec.seed)
+    raw = torch.as_tensor(rng.standard_normal((max(spec.directions // 2, 1), dim)), dtype=d.dtype)
+    dd = (d * d).sum(1, keepdim=True).clamp_min(1e-300)
+    out = []
+    for r in raw:
+        u = r[None] - (d @ r)[:, None] * d / dd  # orthogonal to the pair
+        u = u / u.norm(dim=1, keepdim=True).clamp_min(1e-300)
+        out += [u, -u]
+    return out
+
+
+def _candidates(metric: finsler.Metric, predict: Predict, a: torch.Tensor, b: torch.Tensor,
+                spec: SearchSpec) -> torch.Tensor:
+    """Candidate midpoints ``(N, R, dim)`` of sub-pairs ``a``, ``b`` ``(N, dim)``; the
+    actor's mean first."""
+    m0 = predict(a, b)
+    mid = 0.5 * (a + b)
+    dist = (b - a).norm(dim=1, keepdim=True)
+    cs = [m0, mid]
+    for u in _unit_directions(spec, b - a):
+        for r in spec.radii:
+            step = r * dist * u
+            cs += [metric.domain.project(mid + step), metric.domain.project(m0 + step)]
+    return torch.stack(cs, 1)
+
+
+def _costs(metric: finsler.Metric, paths: torch.Tensor) -> tuple[np.ndarray, np.ndarray]:
+    """``sum C`` and ``max C`` per path of ``(N, n+1, dim)`` float64 paths."""
+    c = np.asarray(metric.path_costs(paths.cpu().numpy(), check=False))
+    return c.sum(axis=1), c.max(axis=1)
+
+
+def _keep(total: np.ndarray, worst: np.ndarray, eps: float) -> np.ndarray:
+    """Index per row of ``(N, R)`` costs of the shortest candidate whose largest segment
+    cost is at most ``max(eps, that of candidate 0)`` (the policy's own): the search never
+    turns a successful path (every segment <= eps) into a failed one. Candidate 0 always
+    qualifies; the first minimum wins ties."""
+    bound = np.maximum(eps, worst[:, :1])
+    return np.argmin(np.where(worst <= bound, total, np.inf), axis=1)
+
+
+def _search_chunk(metric: finsler.Metric, predict: Predict, s: torch.Tensor, g: torch.Tensor,
+                  depth: int, eps: float, spec: SearchSpec) -> tuple[torch.Tensor, int]:
+    b, dim = s.shape
+    evals = 0
+    pts = torch.stack([s, g], 1)  # points chosen so far: (B, 2**l + 1, dim)
+    for level in range(min(spec.levels, depth)):
+        rest = depth - level - 1  # depth of each half's completion
+        a = pts[:, :-1].reshape(-1, dim)
+        z = pts[:, 1:].reshape(-1, dim)
+        cs = _candidates(metric, predict, a, z, spec)  # (N, R, dim)
+        n, r, _ = cs.shape
+        aa = a[:, None].expand(n, r, dim).reshape(-1, dim)
+        zz = z[:, None].expand(n, r, dim).reshape(-1, dim)
+        mm = cs.reshape(-1, dim)
+        full = torch.cat([build_tree(aa, mm, rest, predict),
+                          build_tree(mm, zz, rest, predict)[:, 1:]], 1)
+        evals += full.shape[0] * (full.shape[1] - 1)
+        total, worst = _costs(metric, full)
+        best = torch.as_tensor(_keep(total.reshape(n, r), worst.reshape(n, r), eps))
+        chosen = cs[torch.arange(n), best].reshape(b, -1, dim)
+        new = pts.new_empty((b, 2 * pts.shape[1] - 1, dim))
+        new[:, 0::2] = pts
+        new[:, 1::2] = chosen
+        pts = new
+    # complete every sub-pair with the actor's recursive halves
+    lev = pts.shape[1] - 1
+    rest = depth - (lev.bit_length() - 1)
+    sub = build_tree(pts[:, :-1].reshape(-1, dim), pts[:, 1:].reshape(-1, dim), rest, predict)
+    sub = sub.reshape(b, lev, 2**rest + 1, dim)
+    paths = torch.cat([sub[:, :, :-1].reshape(b, -1, dim), pts[:, -1:]], 1)
+    for _ in range(spec.polish):
+        for first in (1, 2):
+            idx = torch.arange(first, paths.shape[1] - 1, 2)
+            if idx.numel() == 0:
+                continue
+            lo, x, hi = paths[:, idx - 1], paths[:, idx], paths[:, idx + 1]
+            k = idx.numel()
+            flat = [t.reshape(-1, dim) for t in (lo, x, hi)]
+            xn = predict(flat[0], flat[2])
+            trip_old = torch.stack([flat[0], flat[1], flat[2]], 1)
+            trip_new = torch.stack([flat[0], xn, flat[2]], 1)
+            old, old_worst = _costs(metric, trip_old)
+            new, new_worst = _costs(metric, trip_new)
+            evals += 4 * flat[0].shape[0]
+            ok = (new < old) & (new_worst <= np.maximum(eps, old_worst))
+            take = torch.as_tensor(ok).reshape(b, k, 1)
+            paths[:, idx] = torch.where(take, xn.reshape(b, k, dim), x)
+    return paths, evals
+
+
+def search_paths(metric: finsler.Metric, predict: Predict, starts: torch.Tensor,
+                 goals: torch.Tensor, depth: int, eps: float,
+                 spec: SearchSpec | None = None) -> SearchResult:
+    """Policy-guided search (module docstring): ``starts``, ``goals`` ``(K, dim)`` float64
+    tensors in the domain, ``predict(a, b)`` the actor's projected float64 midpoints, the
+    task's success threshold ``eps`` -> paths ``(K, 2**depth + 1, dim)`` and the
+    evaluations of C made."""
+    if not (isinstance(eps, (int, float)) and math.isfinite(eps) and eps > 0):
+        raise InputError(f"eps must be positive and finite, got {eps!r}")
+    spec = spec or SearchSpec()
+    if not isinstance(spec, SearchSpec):
+        raise InputError(f"search must be a SearchSpec, got {type(spec).__name__}")
+    k, dim = starts.shape
+    # the candidate trees of one level: R candidates x (2**depth + 2**level + 1) points,
+    # a few copies in build_tree
+    per_pair = 3 * spec.candidates * (2**depth + 2 ** min(spec.levels, depth) + 1) * dim
+    chunk = max(1, CHUNK_FLOATS // max(per_pair, 1))
+    out, evals = [], 0
+    with torch.no_grad():
+        for i in range(0, k, chunk):
+            p, e = _search_chunk(metric, predict, starts[i:i + chunk].to(torch.float64),
+                                 goals[i:i + chunk].to(torch.float64), depth, float(eps),
+                                 spec)
+            out.append(p)
+            evals += e
+    return SearchResult(torch.cat(out).cpu().numpy(), evals)
