@@ -89,6 +89,13 @@ SPLIT_FRACTION = 0.25
 SPLIT_OVERESTIMATE = 1.5
 #: Evenly spaced rays of the inner polygons that keep the vertices away from the path safe.
 INITIAL_DIRECTIONS = 8
+#: Directions an exact vertex starts with around the path's (or a tight edge's) direction:
+#: this fraction of the K sampled directions on each side (violated ones are added later).
+WINDOW_FRACTION = 1 / 64
+
+
+def _window(k: int) -> int:
+    return max(1, int(k * WINDOW_FRACTION))
 
 
 @dataclass(frozen=True)
@@ -107,7 +114,7 @@ class MeshSpec:
     """Growth of the spacing per unit distance outside the band."""
     h_far: float = 0.25
     """Largest spacing (far from the path)."""
-    directions: int = 128
+    directions: int = 256
     """Number K of sampled unit directions per triangle (>= 8)."""
     target_gap: float = 1e-2
     """Stop refining once the relative gap (upper - lower) / upper is at most this."""
@@ -147,8 +154,8 @@ class MeshSpec:
             "coarse": cls(h_path=0.1, h_far=0.3, directions=128, target_gap=5e-2,
                           max_rounds=3, max_triangles=3000),
             "default": cls(),
-            "fine": cls(h_path=0.04, directions=256, target_gap=1e-3, max_rounds=12,
-                        max_triangles=40000),
+            "fine": cls(h_path=0.04, directions=512, target_gap=1e-3, max_rounds=12,
+                        max_triangles=40000, mark_fraction=0.99),
         }
         if name not in presets:
             raise InputError(f"unknown mesh preset {name!r}; choose one of "
@@ -820,7 +827,7 @@ def _solve_lp(mesh: _Mesh, b: np.ndarray, dirs: np.ndarray, s_idx: int, g_idx: i
             pv = s_vid[tight_safe]
             ang = np.arctan2(s_normal[tight_safe, 1], s_normal[tight_safe, 0])
             kc = np.rint(ang / (2 * np.pi / k)).astype(np.int64)
-            for off in range(-(k // 16), k // 16 + 1):
+            for off in range(-_window(k), _window(k) + 1):
                 active[pv, (kc + off) % k] = True
             active[promote] |= coarse
             exact |= promote
@@ -859,7 +866,7 @@ def _initial_modes(mesh: _Mesh, k: int, previous: tuple[_Mesh, dict[str, Any]] |
         act = np.zeros((int(near.sum()), k), bool)
         act[:, :: max(1, k // 16)] = True
         rows = np.arange(act.shape[0])
-        for off in range(-(k // 16), k // 16 + 1):
+        for off in range(-_window(k), _window(k) + 1):
             act[rows, (kc + off) % k] = True
         tri_exact = near
         exact = np.repeat(tri_exact, 3)
