@@ -339,6 +339,33 @@ def test_report_gives_the_route_search_beside_the_policy(report_dir: Path) -> No
     assert "learned policy + route search" in md and "evaluates C" in md
 
 
+def test_report_certifies_a_few_pairs(report_dir: Path) -> None:
+    """Quick reports on 2-D metrics certify 2 pairs: every curve from s to g (the exact
+    path, the learned one) is at least as long as the certified lower bound, the upper bound
+    is the exact path's proven length, and the excess bounds follow from the learned
+    paths' proven lengths (recomputed here)."""
+    import learn
+
+    doc = json.loads((report_dir / "out" / "report.json").read_text())
+    md = (report_dir / "out" / "report.md").read_text()
+    cert = doc["certified"]
+    assert cert["mesh"] == "coarse" and len(cert["pairs"]) == 2
+    m = finsler.get_metric("matsumoto")
+    pairs = np.load(report_dir / "pairs.npy")
+    pol = learn.load_policy("matsumoto")
+    paths = pol.generate(pairs[:, 0], pairs[:, 1])  # the batch the report generated
+    for r in cert["pairs"]:
+        row = doc["per_pair"][r["pair"]]
+        assert 0 < r["lower"] <= r["upper"]
+        assert r["lower"] <= row["exact_length_quadrature"] * (1 + 1e-9)
+        assert r["lower"] <= row["learned_length_quadrature"] * (1 + 1e-9)
+        assert r["upper"] == pytest.approx(r["exact_length_proven_upper"], rel=1e-12)
+        up = m.path_length_bounds(paths[r["pair"]]).upper
+        assert r["learned_excess_bound"] == pytest.approx(up / r["lower"] - 1, rel=1e-9)
+        assert r["searched_excess_bound"] <= r["learned_excess_bound"] + 1e-9
+    assert "## Certified distances" in md
+
+
 def test_report_names_its_checkpoint_and_running_mean_times(report_dir: Path) -> None:
     doc = json.loads((report_dir / "out" / "report.json").read_text())
     assert "policy.pt" in doc["policy_note"] or "checkpoint_best.pt" in doc["policy_note"]

@@ -54,6 +54,11 @@ def report_command(
         help="Also report the policy with the route search (learn.search: candidate "
              "midpoints at the top levels chosen by the cost of the policy's completed "
              "paths; values of C only).")] = True,
+    certify: Annotated[int | None, typer.Option(
+        help="Certified intervals lower <= d <= upper (solvers.certify) for this many pairs "
+             "on 2-D metrics, with proven bounds on the learned paths' excess length "
+             "(default: 2 with --quick on the coarse mesh, else 5 on the default mesh; 0: "
+             "none).")] = None,
 ) -> None:
     """Benchmark a learned policy against exact geodesics and the straight-line baseline:
     success rates, length ratios, midpoint errors, timing, figures."""
@@ -68,7 +73,7 @@ def report_command(
         params = parse_metric_params(metric_param)
         doc = build_report(env, out, run=run, pairs=pairs, quick=quick, continuum=continuum,
                            workers=workers, progress=progress, checkpoint=checkpoint,
-                           metric_params=params, search=search)
+                           metric_params=params, search=search, certify=certify)
     except InputError as err:
         fail(str(err))
         return
@@ -89,6 +94,12 @@ def report_command(
                    f"evaluations of C per path): success {sr['searched']:.0%}, length/exact "
                    f"mean {sl['mean']:.4f}, median {sl['median']:.4f}, 95th pct "
                    f"{sl['p95']:.4f}, max {sl['max']:.4f}")
+    for r in (doc.get("certified") or {}).get("pairs", []):
+        typer.echo(f"certified pair {r['pair']}: {r['lower']:.6f} <= d <= {r['upper']:.6f} "
+                   f"(gap {r['gap']:.1e}); learned path at most "
+                   f"{100 * r['learned_excess_bound']:.2f}% longer than d"
+                   + (f", with route search {100 * r['searched_excess_bound']:.2f}%"
+                      if "searched_excess_bound" in r else ""))
     typer.echo(f"figures: {', '.join(doc['figures'])}")
 
 

@@ -295,6 +295,30 @@ def _markdown(doc: dict[str, Any], figures: list[str], metric: Metric) -> str:
                               "continuum distance is that of the convexified metric and "
                               "discrete lengths depend on the resolution.")
         lines.append("")
+    cert = doc.get("certified")
+    if cert:
+        has_s = any("searched_excess_bound" in r for r in cert["pairs"])
+        lines += [
+            "## Certified distances",
+            "",
+            f"For the first {len(cert['pairs'])} pairs, `solvers.certify` ({cert['mesh']} "
+            "mesh) proves lower <= d(s, g) <= upper (a dual potential for the lower bound, "
+            "the exact path's proven length for the upper). The last columns are PROVEN "
+            "bounds on how much longer than the true distance the learned paths are: their "
+            "proven length over the certified lower bound, minus 1.",
+            "",
+            "| pair | lower | upper | gap | learned: excess <= |"
+            + (" learned + route search: excess <= |" if has_s else "") + " seconds |",
+            "|---|---|---|---|---|" + ("---|" if has_s else "") + "---|",
+        ]
+        for r in cert["pairs"]:
+            lines.append(f"| {r['pair']} | {r['lower']:.6f} | {r['upper']:.6f} | "
+                         f"{r['gap']:.2e} | {100 * r['learned_excess_bound']:.2f}% |"
+                         + (f" {100 * r['searched_excess_bound']:.2f}% |" if has_s else "")
+                         + f" {r['seconds']:.0f} |")
+        lines += ["", f"Convexity: {cert['pairs'][0]['convexity']} (where F(x, .) is not "
+                  "convex the bound holds for the distance, that of the convexified metric)."
+                  , ""]
     nc = doc["nonconvex_point_fraction"]
     lines += [
         "## Where the metric is Finsler",
@@ -386,6 +410,7 @@ def build_report(
     checkpoint: str = "best",
     metric_params: dict[str, Any] | None = None,
     search: Any = True,
+    certify: int | None = None,
 ) -> dict[str, Any]:
     """Write the report for ``env`` (or the run's environment) into ``out``; returns the
     ``report.json`` document. ``policy`` overrides the loaded policy (any object with the
@@ -397,13 +422,18 @@ def build_report(
     with them (its run's own parameters are always the ones reported). ``search``: also
     report the policy-guided route search (:meth:`learn.Policy.search`; True = the default
     :class:`learn.SearchSpec`, or a spec, or False/None for none), for policies that have
-    it."""
+    it. ``certify``: certified intervals for this many pairs on 2-D metrics (default: 2
+    with ``quick``, on the coarse mesh, else 5 on the default mesh; 0: none)."""
+    if certify is not None and (isinstance(certify, bool) or not isinstance(certify, int)
+                                or certify < 0):
+        raise InputError(f"certify must be a number of pairs >= 0, got {certify!r}")
     out = Path(out)
     created = not out.exists()
     try:
         return _build_report(env, out, run=run, pairs=pairs, quick=quick, continuum=continuum,
                              workers=workers, progress=progress, policy=policy,
-                             checkpoint=checkpoint, metric_params=metric_params, search=search)
+                             checkpoint=checkpoint, metric_params=metric_params, search=search,
+                             certify=certify)
     except BaseException:
         if created and out.is_dir() and not any(out.iterdir()):
             out.rmdir()  # a failed report leaves nothing behind
@@ -414,7 +444,7 @@ def _build_report(env: str | None, out: Path, *, run: str | Path | None,
                   pairs: str | Path | np.ndarray | None, quick: bool, continuum: bool | None,
                   workers: int | None, progress: bool, policy: Any,
                   checkpoint: str, metric_params: dict[str, Any] | None,
-                  search: Any = True) -> dict[str, Any]:
+                  search: Any = True, certify: int | None = None) -> dict[str, Any]:
     out.mkdir(parents=True, exist_ok=True)
     if policy is None:
         pol, run_dir, note = load_report_policy(env, run, quick, out, progress, checkpoint,
@@ -467,6 +497,10 @@ def _build_report(env: str | None, out: Path, *, run: str | Path | None,
     doc["time_to_success"] = time_to_success(doc["learning_curve"])
     doc["learned_length_ratio_per_pair"] = [
         None if not np.isfinite(x) else float(x) for x in cmp.ratios("learned")]
+    cert = certified_intervals(cmp, metric, 2 if quick else 5 if certify is None
+                               else int(certify), quick)
+    if cert is not None:
+        doc["certified"] = cert
     figures = write_figures(cmp, metric, out, doc["learning_curve"], floor,
                             doc["learning_curve_pairs"])
     doc["figures"] = figures
@@ -485,6 +519,40 @@ def _build_report(env: str | None, out: Path, *, run: str | Path | None,
     atomic_write_text(out / "report.json", json.dumps(doc, indent=2, allow_nan=False))
     atomic_write_text(out / "report.md", _markdown(doc, figures, metric))
     return doc
+
+
+def certified_intervals(cmp: Comparison, metric: Metric, count: int, quick: bool
+                        ) -> dict[str, Any] | None:
+    """Certified intervals ``lower <= d <= upper`` (:func:`solvers.certify`) for the first
+    ``count`` pairs of a 2-D comparison, with the exact path as the curve of the upper
+    bound (no second solve), and per pair a PROVEN bound on how much longer than the
+    distance the learned path (and the route search's) is: its proven length
+    (:meth:`Metric.path_length_bounds`) over the certified lower bound. ``quick``: the
+    coarse mesh with at most 20 s of refinement per pair, else the default mesh. None where
+    the metric is not 2-D or ``count`` is 0."""
+    import time
+
+    import solvers
+
+    if metric.dim != 2 or count <= 0:
+        return None
+    mesh, limit = ("coarse", 20.0) if quick else ("default", None)
+    rows = []
+    for i in range(min(count, len(cmp.pairs))):
+        t0 = time.perf_counter()
+        c = solvers.certify(metric, cmp.pairs[i, 0], cmp.pairs[i, 1], mesh,
+                            path=cmp.exact.paths[i], time_limit=limit)
+        row = {"pair": i, "lower": c.lower, "upper": c.upper, "gap": c.gap,
+               "exact_length_proven_upper": c.path_upper, "convexity": c.convexity,
+               "triangles": c.triangles, "seconds": time.perf_counter() - t0}
+        for w in ("learned", "searched"):
+            ps = getattr(cmp, w, None)
+            if ps is not None:
+                up = metric.path_length_bounds(ps.paths[i]).upper
+                row[f"{w}_length_proven_upper"] = up
+                row[f"{w}_excess_bound"] = up / c.lower - 1.0
+        rows.append(row)
+    return {"mesh": mesh, "time_limit_per_pair": limit, "pairs": rows}
 
 
 def _clean(o: Any) -> Any:
