@@ -24,9 +24,11 @@ extra pair before timing and printed apart.
 Usage::
 
     python benchmarks/warm_start.py [--pairs 100] [--metrics matsumoto,carlike,panda-pole]
-        [--seed 777] [--recheck-above 1.05,1.3] [--json out.json]
+        [--seed 777] [--recheck-above 1.05,1.3] [--search] [--json out.json]
 
-Pass ``--pairs`` per task as ``--pairs carlike=30`` (repeatable) to shorten a slow task.
+``--search``: the warm starts are the route search's paths (:meth:`learn.Policy.search`,
+``geodesics solve --warm-search``; its time is included). Pass ``--pairs`` per task as
+``--pairs carlike=30`` (repeatable) to shorten a slow task.
 """
 
 from __future__ import annotations
@@ -50,21 +52,22 @@ RTOL = 1e-6
 GAPS = (1e-6, 1e-4, 1e-3, 1e-2)
 
 
-def run_task(name: str, k: int, seed: int, recheck: tuple[float, ...] = ()) -> dict:
+def run_task(name: str, k: int, seed: int, recheck: tuple[float, ...] = (),
+             search: bool = False) -> dict:
     m = finsler.get_metric(name)
     n = TASKS[name]
     pairs = finsler.sample_pairs(m, k + 1, seed)
     setup_pair, pairs = pairs[:1], pairs[1:]
 
     t0 = time.perf_counter()  # one-off: policy, NLP, seeding graph
-    p0, _ = warm_start_paths(name, m, setup_pair)
+    p0, _ = warm_start_paths(name, m, setup_pair, search=search)
     solve_geodesic(m, setup_pair[0, 0], setup_pair[0, 1], n, initial=(p0[0],),
                    global_seeds=False)
     solve_geodesic(m, setup_pair[0, 0], setup_pair[0, 1], n)
     setup = time.perf_counter() - t0
 
     t0 = time.perf_counter()
-    paths, pol = warm_start_paths(name, m, pairs)
+    paths, pol = warm_start_paths(name, m, pairs, search=search)
     gen = (time.perf_counter() - t0) / k
     warm_t, glob_t, warm_e, glob_e, warm_ok, glob_ok = [], [], [], [], [], []
     warm_res = []
@@ -146,6 +149,8 @@ def main() -> None:
     ap.add_argument("--metrics", default=",".join(TASKS))
     ap.add_argument("--seed", type=int, default=777)
     ap.add_argument("--json", default=None, help="also write the rows to this file")
+    ap.add_argument("--search", action="store_true",
+                    help="warm starts from the route search's paths")
     ap.add_argument("--recheck-above", default="1.05,1.3",
                     help="comma-separated ratios R of `geodesics solve --recheck-above R`")
     args = ap.parse_args()
@@ -154,7 +159,7 @@ def main() -> None:
     rows = []
     for name in [t.strip() for t in args.metrics.split(",") if t.strip()]:
         ratios = tuple(float(x) for x in args.recheck_above.split(",") if x.strip())
-        r = run_task(name, per.get(name, default), args.seed, ratios)
+        r = run_task(name, per.get(name, default), args.seed, ratios, args.search)
         rows.append(r)
         print(f"{name} (n={r['segments']}, {r['pairs']} fresh pairs, seed {r['seed']}; "
               f"policy {r['policy']})")

@@ -149,13 +149,14 @@ def load_any_policy(run: str | Path, checkpoint: str = "best", device: str = "cp
 
 
 def warm_start_paths(source: str | Path, metric: Any, pairs: Any,
-                     checkpoint: str = "best") -> tuple[Any, Any]:
+                     checkpoint: str = "best", search: bool = False) -> tuple[Any, Any]:
     """Learned paths to seed exact solves: ``(paths (K, 2**D + 1, dim) float64, policy)``.
 
     ``source`` is a run directory (any method) or the name of an environment with a shipped
     policy; ``metric`` (a :class:`finsler.Metric`) is the metric of the solve and must be
     the policy's: the same registered metric with the same parameters, else
-    :class:`InputError` naming the difference. ``pairs`` ``(K, 2, dim)``.
+    :class:`InputError` naming the difference. ``pairs`` ``(K, 2, dim)``. ``search``: the
+    route search's paths (:meth:`learn.Policy.search`) instead of the plain generation.
     """
     import dataclasses
 
@@ -190,6 +191,11 @@ def warm_start_paths(source: str | Path, metric: Any, pairs: Any,
                          if a.get(k) != b.get(k)) or f"class {type(pm)} vs {type(metric)}"
         raise InputError(f"--warm-start {src} was trained on {pm.name} with other parameters "
                          f"than the solve's metric: {diff}")
+    if search:
+        if not callable(getattr(pol, "search", None)):
+            raise InputError(f"the route search needs a midpoint policy; {src} is a "
+                             f"{type(pol).__name__}")
+        return pol.search(pairs[:, 0], pairs[:, 1]).paths, pol
     paths = pol.generate(pairs[:, 0], pairs[:, 1])
     return paths, pol
 

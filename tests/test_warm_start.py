@@ -81,6 +81,27 @@ def test_cli_warm_start_matches_the_python_api(tmp_path: Path, easy_pairs: np.nd
     assert "initial0" in both.seed_energies and len(both.seed_energies) > 1
 
 
+def test_warm_search_seeds_with_the_route_search(tmp_path: Path,
+                                                 easy_pairs: np.ndarray) -> None:
+    """--warm-search: the initial paths are the route search's (as the API gives them) and
+    the solves reach the globally seeded optima."""
+    m = finsler.get_metric("matsumoto")
+    paths, pol = warm_start_paths("matsumoto", m, easy_pairs, search=True)
+    np.testing.assert_array_equal(paths, pol.search(easy_pairs[:, 0], easy_pairs[:, 1]).paths)
+    pfile = tmp_path / "pairs.npy"
+    np.save(pfile, easy_pairs)
+    res = CliRunner().invoke(app, ["solve", "--metric", "matsumoto", "--pairs", str(pfile),
+                                   "--warm-start", "matsumoto", "--warm-search", "--workers",
+                                   "1", "--no-progress", "--json"])
+    assert res.exit_code == 0, res.output
+    doc = json.loads(res.output)
+    assert doc["warm_start"]["route_search"] is True
+    glob = solvers.solve_batch(m, easy_pairs, workers=1, progress=False)
+    for row, g in zip(doc["results"], glob):
+        assert row["seeds_tried"] == 1
+        assert row["energy"] == pytest.approx(g.energy, rel=1e-6)
+
+
 def test_bad_warm_start_is_refused_clearly(tmp_path: Path) -> None:
     r = CliRunner()
     base = ["solve", "--metric", "matsumoto", "--start", "0.1,0.2", "--goal", "-0.3,0.1"]
@@ -90,6 +111,7 @@ def test_bad_warm_start_is_refused_clearly(tmp_path: Path) -> None:
         (["--warm-start", "carlike"], "policy for 'carlike', not for 'matsumoto'"),
         (["--keep-global-seeds"], "apply to --warm-start"),
         (["--recheck-above", "1.1"], "apply to --warm-start"),
+        (["--warm-search"], "apply to --warm-start"),
         (["--warm-start", "matsumoto", "--keep-global-seeds", "--recheck-above", "1.1"],
          "without --keep-global-seeds"),
     ]

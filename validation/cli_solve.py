@@ -73,7 +73,8 @@ def _pairs_or_fail(path: Path, metric: finsler.Metric) -> np.ndarray:
 
 
 def _warm_start(source: str | None, metric: finsler.Metric, pairs: np.ndarray,
-                keep_global_seeds: bool) -> tuple[np.ndarray | None, dict[str, Any] | None]:
+                keep_global_seeds: bool, search: bool = False
+                ) -> tuple[np.ndarray | None, dict[str, Any] | None]:
     """Learned initial paths ``(K, 2**D + 1, dim)`` for ``--warm-start`` (None without it)
     and the payload's ``warm_start`` entry. solvers never imports learn: the joining is
     done here (:func:`learn.runs.warm_start_paths`)."""
@@ -81,9 +82,9 @@ def _warm_start(source: str | None, metric: finsler.Metric, pairs: np.ndarray,
         return None, None
     from learn.runs import warm_start_paths
 
-    paths, pol = warm_start_paths(source, metric, pairs)
+    paths, pol = warm_start_paths(source, metric, pairs, search=search)
     return paths, {"policy": str(pol.source), "checkpoint": str(pol.checkpoint),
-                   "segments": int(paths.shape[1] - 1),
+                   "segments": int(paths.shape[1] - 1), "route_search": bool(search),
                    "global_seeds": bool(keep_global_seeds)}
 
 
@@ -140,6 +141,9 @@ def solve_command(
         "--keep-global-seeds",
         help="With --warm-start: also solve the global seeds and keep the lowest energy "
              "(a check of the learned start; as slow as without --warm-start).")] = False,
+    warm_search: Annotated[bool, typer.Option(
+        "--warm-search", help="With --warm-start: seed with the route search's paths "
+        "(learn.search; values of C only) instead of the policy's plain paths.")] = False,
     recheck_above: Annotated[float | None, typer.Option(
         "--recheck-above", metavar="RATIO",
         help="With --warm-start: solve again with the global seeds (the warm result as one "
@@ -170,8 +174,8 @@ def solve_command(
         fail(f"--chunk-size must be >= 1, got {chunk_size}")
     if tol is not None and not (np.isfinite(tol) and 0 < tol < 1):
         fail(f"--tol must be a relative tolerance in (0, 1), e.g. 1e-7, got {tol:g}")
-    if (keep_global_seeds or recheck_above is not None) and warm_start is None:
-        fail("--keep-global-seeds and --recheck-above apply to --warm-start")
+    if (keep_global_seeds or recheck_above is not None or warm_search) and warm_start is None:
+        fail("--keep-global-seeds, --recheck-above and --warm-search apply to --warm-start")
     if recheck_above is not None and (keep_global_seeds or not recheck_above >= 1.0):
         fail("--recheck-above needs a ratio >= 1, without --keep-global-seeds (which "
              f"already solves every pair with the global seeds); got {recheck_above}")
@@ -198,7 +202,7 @@ def solve_command(
             m.domain.check(arr[0, 0], "--start")
             m.domain.check(arr[0, 1], "--goal")
         n = solvers.check_segments(m, segments)
-        inits, warm = _warm_start(warm_start, m, arr, keep_global_seeds)
+        inits, warm = _warm_start(warm_start, m, arr, keep_global_seeds, warm_search)
         # With --out, finished pairs are kept beside it (parts) until the JSON is written,
         # so an interrupted run resumes where it stopped when the same command is run again.
         results = solvers.solve_batch(
