@@ -12,7 +12,7 @@ the global optimum: the count of such pairs is printed.
 
 Usage::
 
-    python benchmarks/certify.py [--pairs 20] [--seed 31337] [--fine-time-limit 900]
+    python benchmarks/certify.py [--pairs 20] [--seed 31337] [--fine-time-limit 1800]
                                  [--skip-fine | --skip-default] [--only 4,8,10]
                                  [--json out.json]
 
@@ -73,7 +73,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--pairs", type=int, default=20)
     ap.add_argument("--seed", type=int, default=31337)
-    ap.add_argument("--fine-time-limit", type=float, default=900.0)
+    ap.add_argument("--fine-time-limit", type=float, default=1800.0)
     ap.add_argument("--skip-fine", action="store_true")
     ap.add_argument("--skip-default", action="store_true")
     ap.add_argument("--only", default=None, help="comma-separated pair numbers")
