@@ -197,6 +197,13 @@ def _contains_point(x: Interval, phase: float) -> np.ndarray:
         x.hi - x.lo >= two_pi)
 
 
+def _certainly(x: Any) -> tuple[np.ndarray, np.ndarray]:
+    """Where the truth value ``x`` (an interval; nonzero = true) is certainly true (0 not
+    in it) and certainly false (exactly 0)."""
+    x = _iv(x)
+    return (x.lo > 0.0) | (x.hi < 0.0), (x.lo == 0.0) & (x.hi == 0.0)
+
+
 class _IntervalBackend:
     """Operations of the lowered programs on :class:`Interval` values."""
 
@@ -364,23 +371,18 @@ class _IntervalBackend:
 
     @staticmethod
     def logical_and(a: Any, b: Any) -> Interval:
-        a, b = _iv(a), _iv(b)
-        ta, tb = (a.lo > 0.0) | (a.hi < 0.0), (b.lo > 0.0) | (b.hi < 0.0)
-        fa, fb = (a.lo == 0.0) & (a.hi == 0.0), (b.lo == 0.0) & (b.hi == 0.0)
+        (ta, fa), (tb, fb) = _certainly(a), _certainly(b)
         return _IntervalBackend._truth(ta & tb, fa | fb)
 
     @staticmethod
     def logical_or(a: Any, b: Any) -> Interval:
-        a, b = _iv(a), _iv(b)
-        ta, tb = (a.lo > 0.0) | (a.hi < 0.0), (b.lo > 0.0) | (b.hi < 0.0)
-        fa, fb = (a.lo == 0.0) & (a.hi == 0.0), (b.lo == 0.0) & (b.hi == 0.0)
+        (ta, fa), (tb, fb) = _certainly(a), _certainly(b)
         return _IntervalBackend._truth(ta | tb, fa & fb)
 
     @staticmethod
     def if_else_zero(c: Any, a: Any) -> Interval:
-        c, a = _iv(c), _iv(a)
-        true = (c.lo > 0.0) | (c.hi < 0.0)
-        false = (c.lo == 0.0) & (c.hi == 0.0)
+        a = _iv(a)
+        true, false = _certainly(c)
         lo = np.where(true, a.lo, np.where(false, 0.0, np.minimum(a.lo, 0.0)))
         hi = np.where(true, a.hi, np.where(false, 0.0, np.maximum(a.hi, 0.0)))
         return Interval(lo, hi)

@@ -358,6 +358,17 @@ def _box_meets_triangle(lo: np.ndarray, hi: np.ndarray, tri: np.ndarray) -> np.n
     return meets
 
 
+def _index_new(keys: list[bytes], index: dict[bytes, int]) -> list[int]:
+    """Give the keys not yet in ``index`` the next row numbers; their positions in
+    ``keys`` (in order, each key once)."""
+    new = []
+    for i, key in enumerate(keys):
+        if key not in index:
+            index[key] = len(index)
+            new.append(i)
+    return new
+
+
 class _PointData:
     """Per-point values ``F(p, v_k)`` ``(K,)`` (lowered by a few ulp), computed once per
     point and reused across refinement rounds, and per-triangle second-order bounds
@@ -381,11 +392,7 @@ class _PointData:
     def rows(self, pts: np.ndarray) -> np.ndarray:
         """Row indices of ``pts`` ``(P, 2)``, computing the values of new points."""
         keys = [p.tobytes() for p in np.ascontiguousarray(pts)]
-        new = []
-        for i, key in enumerate(keys):
-            if key not in self.index:
-                self.index[key] = len(self.index)
-                new.append(i)
+        new = _index_new(keys, self.index)
         if new:
             t0 = time.perf_counter()
             p = pts[new]
@@ -403,11 +410,7 @@ class _PointData:
         of F."""
         srt = np.sort(np.ascontiguousarray(corners).view(np.complex128)[..., 0], axis=1)
         keys = [row.tobytes() for row in srt]
-        new = []
-        for i, key in enumerate(keys):
-            if key not in self.tri_index:
-                self.tri_index[key] = len(self.tri_index)
-                new.append(i)
+        new = _index_new(keys, self.tri_index)
         if new:
             t0 = time.perf_counter()
             k = self.dirs.shape[0]

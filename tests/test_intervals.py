@@ -138,3 +138,17 @@ def test_bad_boxes_are_refused() -> None:
         enclose(fn, Interval(np.zeros((3, 2))))
     with pytest.raises(TypeError, match="expected 1 inputs"):
         enclose(fn, Interval(np.zeros((3, 1))), Interval(np.zeros((3, 1))))
+
+
+def test_logical_operations_are_certain_only_where_the_truth_is() -> None:
+    from finsler.intervals import _IntervalBackend as B
+
+    t, f, u = Interval(np.array([1.0]), np.array([2.0])), Interval(np.zeros(1), np.zeros(1)), \
+        Interval(np.array([-1.0]), np.array([1.0]))
+    a = Interval(np.array([2.0]), np.array([3.0]))
+    for got, lo, hi in [(B.logical_and(t, t), 1, 1), (B.logical_and(f, u), 0, 0),
+                        (B.logical_and(u, t), 0, 1), (B.logical_or(f, f), 0, 0),
+                        (B.logical_or(u, t), 1, 1), (B.logical_or(u, f), 0, 1),
+                        (B.if_else_zero(t, a), 2, 3), (B.if_else_zero(f, a), 0, 0),
+                        (B.if_else_zero(u, a), 0, 3)]:
+        assert (got.lo[0], got.hi[0]) == (lo, hi)
