@@ -140,8 +140,13 @@ class Interval:
 
     def reciprocal(self) -> Interval:
         straddles = (self.lo <= 0.0) & (self.hi >= 0.0)
-        with np.errstate(divide="ignore", invalid="ignore"):
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
             lo, hi = 1.0 / self.hi, 1.0 / self.lo
+        # 1 / (a subnormal) overflows: the true value lies beyond the largest float, which is
+        # then the bound on the side towards 0 (inf would exclude the true value)
+        big = np.finfo(float).max
+        lo = np.where(np.isposinf(lo) & (self.hi != 0.0), big, lo)
+        hi = np.where(np.isneginf(hi) & (self.lo != 0.0), -big, hi)
         out = Interval._rounded(lo, hi)
         return Interval(np.where(straddles, -np.inf, out.lo), np.where(straddles, np.inf, out.hi))
 

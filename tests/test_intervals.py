@@ -152,3 +152,14 @@ def test_logical_operations_are_certain_only_where_the_truth_is() -> None:
                         (B.if_else_zero(t, a), 2, 3), (B.if_else_zero(f, a), 0, 0),
                         (B.if_else_zero(u, a), 0, 3)]:
         assert (got.lo[0], got.hi[0]) == (lo, hi)
+
+
+def test_reciprocal_of_subnormals_keeps_the_true_value() -> None:
+    """1 / x on tiny intervals overflows float64: the bound towards 0 is the largest float,
+    not inf (found by hypothesis: [0, 2.2e-313] raised an overflow warning)."""
+    pos = Interval(np.array([1e-320]), np.array([2.2250738585e-313])).reciprocal()
+    assert np.isfinite(pos.lo[0]) and pos.lo[0] >= 1e308 and pos.hi[0] == np.inf
+    neg = Interval(np.array([-2.2250738585e-313]), np.array([-1e-320])).reciprocal()
+    assert neg.lo[0] == -np.inf and np.isfinite(neg.hi[0]) and neg.hi[0] <= -1e308
+    zero = Interval(np.array([0.0]), np.array([2.2250738585e-313])).reciprocal()
+    assert (zero.lo[0], zero.hi[0]) == (-np.inf, np.inf)
