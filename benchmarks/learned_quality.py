@@ -1,5 +1,5 @@
-"""Learned paths against exact geodesics on fresh pairs: the policy alone and with the
-route search (issue 11 bars).
+"""Learned paths against exact geodesics on fresh pairs: the policy alone, with its segments
+equalized, and with the route search (issue 11 bars).
 
 For each environment, ``--pairs`` pairs drawn with ``--seed`` (default 777: neither the
 default evaluation set's seed nor the validation set's; no setting was chosen on it), the
@@ -8,7 +8,9 @@ seeded, cached in ``--cache`` so an interrupted run resumes), and for every poli
 shipped one, or ``--runs ENV=DIR[,DIR...]``, e.g. one run per training seed):
 
 * success (every segment cost <= eps; several eps for Panda) of the plain recursive
-  generation and of :meth:`learn.Policy.search`;
+  generation (``plain``), of the same paths with equalized segments only
+  (``equalize``: :func:`learn.equalize_paths`, ``SearchSpec(levels=0, polish=0)``) and of
+  :meth:`learn.Policy.search` with its default settings (``search``);
 * the per-pair length ratio learned / exact (sum of C), mean, median, 95th percentile, max;
 * time per path (batched) and evaluations of C per path.
 
@@ -42,6 +44,7 @@ from finsler.files import atomic_write_text
 from learn.runs import load_any_policy
 
 EPS = {"panda-pole": (20.0, 10.0, 5.0)}
+HOWS = ("plain", "equalize", "search")
 
 
 def exact_reference(metric: finsler.Metric, pairs: np.ndarray, cache: Path,
@@ -72,13 +75,14 @@ def measure(pol: learn.Policy, pairs: np.ndarray, exact: np.ndarray, eps: tuple[
     m = pol.metric
     out = {}
     pol.generate(pairs[:1, 0], pairs[:1, 1])  # warm up
-    for how in ("plain", "search"):
+    for how in HOWS:
         t0 = time.perf_counter()
         if how == "plain":
             paths = pol.generate(pairs[:, 0], pairs[:, 1])
             evals = float(2**pol.depth)
         else:
-            res = pol.search(pairs[:, 0], pairs[:, 1])
+            spec = learn.SearchSpec(levels=0, polish=0) if how == "equalize" else None
+            res = pol.search(pairs[:, 0], pairs[:, 1], spec)
             paths, evals = res.paths, res.evaluations_per_path
         sec = (time.perf_counter() - t0) / len(pairs)
         costs = m.path_costs(paths)
@@ -138,10 +142,10 @@ def main() -> None:
                 raise SystemExit(f"{src}: the route search needs a midpoint policy")
             row = measure(pol, pairs, exact, eps)
             rows.append({"source": str(src), "checkpoint": pol.checkpoint, **row})
-            for how in ("plain", "search"):
+            for how in HOWS:
                 print(line(f"{Path(src).name} ({pol.checkpoint}) {how}", row[how]), flush=True)
         if len(rows) > 1:
-            for how in ("plain", "search"):
+            for how in HOWS:
                 for key in ("mean", "p95", "max"):
                     v = np.array([r[how]["ratio"][key] for r in rows])
                     print(f"  {how:6s} ratio {key:6s} over {len(rows)} runs: {v.mean():.4f} +- "

@@ -29,7 +29,7 @@ from learn.policy import (
     shipped_policies,
 )
 from learn.runs import VARIANTS, load_any_policy, make_config, run_one, train_run
-from learn.search import SearchResult, SearchSpec, search_paths
+from learn.search import SearchResult, SearchSpec, equalize_paths, search_paths
 from learn.storage import CorruptFileError
 from learn.train import Trainer, read_run_config, resolve_device, train
 from learn.tree import build_tree, level_pairs, mc_targets, td_lambda_targets
@@ -50,6 +50,7 @@ __all__ = [
     "beyond_paper",
     "build_tree",
     "default_config",
+    "equalize_paths",
     "evaluate_paths",
     "evaluate_policy",
     "export_policy",

@@ -1,6 +1,8 @@
-"""Policy-guided route search (learn.search): never longer than the policy's own path,
-finds the route the policy misses (checked against the exact solver), counts every
-evaluation of C, and rejects impossible settings."""
+"""Policy-guided route search (learn.search): never longer than the policy's own path
+before equalizing, equalizing never raises the largest segment or the energy (exactly
+equal segments on the Euclidean metric), finds the route the policy misses (checked
+against the exact solver), counts every evaluation of C, and rejects impossible
+settings."""
 
 from __future__ import annotations
 
@@ -14,7 +16,7 @@ import finsler
 import learn
 import solvers
 from finsler.errors import InputError
-from learn.search import SearchSpec
+from learn.search import SearchSpec, equalize_paths
 from validation.cli import app
 
 
@@ -27,7 +29,7 @@ def test_search_is_never_longer_than_the_policys_path(matsumoto) -> None:
     m = matsumoto.metric
     pairs = finsler.sample_pairs(m, 40, 2024)
     plain = matsumoto.generate(pairs[:, 0], pairs[:, 1])
-    res = matsumoto.search(pairs[:, 0], pairs[:, 1])
+    res = matsumoto.search(pairs[:, 0], pairs[:, 1], SearchSpec(equalize=0))
     assert res.paths.shape == plain.shape == (40, 65, 2)
     assert res.paths.dtype == np.float64
     np.testing.assert_array_equal(res.paths[:, 0], pairs[:, 0])
@@ -41,7 +43,7 @@ def test_search_is_never_longer_than_the_policys_path(matsumoto) -> None:
     # meets is still met
     eps = float(np.quantile(m.path_costs(plain).max(1), 0.5))
     plain_ok = m.path_costs(plain).max(1) <= eps
-    tight = matsumoto.search(pairs[:, 0], pairs[:, 1], eps=eps).paths
+    tight = matsumoto.search(pairs[:, 0], pairs[:, 1], SearchSpec(equalize=0), eps=eps).paths
     tight_cost = m.path_costs(tight)
     assert 0 < plain_ok.sum() < len(pairs)
     assert np.all(tight_cost.max(1)[plain_ok] <= eps)
@@ -75,17 +77,18 @@ def test_search_counts_every_evaluation_of_c(matsumoto, monkeypatch) -> None:
         return original(self, points, check=check)
 
     monkeypatch.setattr(type(m), "path_costs", spy)
-    spec = SearchSpec(levels=2, directions=4, radii=(0.5,), polish=1)
+    spec = SearchSpec(levels=2, directions=4, radii=(0.5,), polish=1, equalize=2)
     res = matsumoto.search(pairs[:, 0], pairs[:, 1], spec)
     assert res.evaluations == sum(counted)
-    # by hand: 2 levels x 10 candidates x 64 segments, + 1 sweep x 4 costs x 63 points
+    # by hand: 2 levels x 10 candidates x 64 segments, + 1 sweep x 4 costs x 63 points,
+    # + the path's 64 costs and 64 per equalizing round
     assert spec.candidates == 10
-    assert res.evaluations_per_path == 2 * 10 * 64 + 4 * 63
+    assert res.evaluations_per_path == 2 * 10 * 64 + 4 * 63 + 3 * 64
 
 
 def test_search_without_levels_or_polish_is_the_policy(matsumoto) -> None:
     pairs = finsler.sample_pairs(matsumoto.metric, 10, 3)
-    res = matsumoto.search(pairs[:, 0], pairs[:, 1], SearchSpec(levels=0, polish=0))
+    res = matsumoto.search(pairs[:, 0], pairs[:, 1], SearchSpec(levels=0, polish=0, equalize=0))
     np.testing.assert_array_equal(res.paths, matsumoto.generate(pairs[:, 0], pairs[:, 1]))
     assert res.evaluations == 0
 
@@ -94,22 +97,75 @@ def test_search_in_seven_dimensions() -> None:
     pol = learn.load_policy("panda-pole")
     m = pol.metric
     pairs = finsler.default_pairs(m)[:4]
-    res = pol.search(pairs[:, 0], pairs[:, 1], SearchSpec(levels=1, radii=(0.25, 0.5)))
+    spec = SearchSpec(levels=1, radii=(0.25, 0.5), equalize=0)
+    res = pol.search(pairs[:, 0], pairs[:, 1], spec)
     assert res.paths.shape == (4, 2**pol.depth + 1, 7)
     m.domain.check(res.paths.reshape(-1, 7), "searched path points")
     plain = pol.generate(pairs[:, 0], pairs[:, 1])
     assert np.all(m.path_costs(res.paths).sum(1) <= m.path_costs(plain).sum(1) * (1 + 1e-12))
-    again = pol.search(pairs[:, 0], pairs[:, 1], SearchSpec(levels=1, radii=(0.25, 0.5)))
+    again = pol.search(pairs[:, 0], pairs[:, 1], spec)
     np.testing.assert_array_equal(again.paths, res.paths)  # same seed, same result
 
 
 @pytest.mark.parametrize("bad", [
     dict(levels=-1), dict(directions=1), dict(polish=1.5), dict(radii=(0.0,)),
     dict(radii=("a",)), dict(radii=(float("nan"),)), dict(levels=True), dict(seed=-2),
+    dict(equalize=-1), dict(equalize=0.5),
 ])
 def test_search_spec_rejects_impossible_settings(bad) -> None:
     with pytest.raises(InputError, match="SearchSpec"):
         SearchSpec(**bad)
+
+
+def test_equalize_gives_equal_segments_on_a_straight_euclidean_path() -> None:
+    """Euclidean C is additive along straight pieces: one round puts the points of an
+    unevenly spaced straight path exactly at i/n of the way (closed form)."""
+    m = finsler.get_metric("euclidean")
+    rng = np.random.default_rng(5)
+    s, g = np.array([-0.7, 0.2]), np.array([0.6, -0.4])
+    t = np.sort(np.concatenate([[0.0, 1.0], rng.uniform(0, 1, 15)]))
+    path = (s + t[:, None] * (g - s))[None]
+    out, evals = equalize_paths(m, path, rounds=1)
+    want = s + (np.arange(17) / 16)[:, None] * (g - s)
+    np.testing.assert_allclose(out[0], want, atol=1e-14)
+    assert evals == 2 * 16
+    c = m.path_costs(out)[0]
+    np.testing.assert_allclose(c, np.linalg.norm(g - s) / 16, rtol=1e-12)
+
+
+def test_equalize_never_raises_the_largest_segment_or_the_energy() -> None:
+    """Panda (7-D, curved): the policy's paths split unevenly; equalizing keeps the ends,
+    stays in the domain, never raises a path's largest segment cost or its energy, keeps
+    the length within sqrt(n sum C**2), and evens the split out."""
+    pol = learn.load_policy("panda-pole")
+    m = pol.metric
+    pairs = finsler.sample_pairs(m, 24, 99)
+    plain = pol.generate(pairs[:, 0], pairs[:, 1])
+    out, evals = equalize_paths(m, plain, rounds=3)
+    assert evals == 24 * 32 * 4
+    np.testing.assert_array_equal(out[:, [0, -1]], plain[:, [0, -1]])
+    m.domain.check(out.reshape(-1, 7), "equalized path points")
+    c0, c1 = m.path_costs(plain), m.path_costs(out)
+    n = c0.shape[1]
+    assert np.all(c1.max(1) <= c0.max(1))
+    assert np.all((c1**2).sum(1) <= (c0**2).sum(1))
+    assert np.all(c1.sum(1) <= np.sqrt(n * (c0**2).sum(1)) * (1 + 1e-12))
+    spread0 = c0.max(1) / c0.mean(1)
+    spread1 = c1.max(1) / c1.mean(1)
+    assert spread0.mean() > 1.2 and spread1.mean() < 1.1
+    # the search applies it by default: its paths are the equalized ones
+    res = pol.search(pairs[:, 0], pairs[:, 1], SearchSpec(levels=0, polish=0))
+    np.testing.assert_array_equal(res.paths, out)
+
+
+@pytest.mark.parametrize("bad, match", [
+    (np.zeros((2, 5, 3)), "shape"), (np.full((1, 5, 2), np.nan), "NaN"),
+])
+def test_equalize_rejects_bad_paths(bad, match) -> None:
+    with pytest.raises(InputError, match=match):
+        equalize_paths(finsler.get_metric("euclidean"), bad)
+    with pytest.raises(InputError, match="rounds"):
+        equalize_paths(finsler.get_metric("euclidean"), np.zeros((1, 3, 2)), rounds=-1)
 
 
 def test_evaluate_cli_search(matsumoto, tmp_path) -> None:
