@@ -16,7 +16,7 @@ import finsler
 import learn
 import solvers
 from finsler.errors import InputError
-from learn.search import SearchSpec, equalize_paths
+from learn.search import SearchSpec, _regenerate_windows, equalize_paths
 from validation.cli import app
 
 
@@ -77,18 +77,21 @@ def test_search_counts_every_evaluation_of_c(matsumoto, monkeypatch) -> None:
         return original(self, points, check=check)
 
     monkeypatch.setattr(type(m), "path_costs", spy)
-    spec = SearchSpec(levels=2, directions=4, radii=(0.5,), polish=1, equalize=2)
+    spec = SearchSpec(levels=2, directions=4, radii=(0.5,), polish=1, windows=1, equalize=2)
     res = matsumoto.search(pairs[:, 0], pairs[:, 1], spec)
     assert res.evaluations == sum(counted)
     # by hand: 2 levels x 10 candidates x 64 segments, + 1 sweep x 4 costs x 63 points,
-    # + the path's 64 costs and 64 per equalizing round
+    # + windows of w = 32..2 segments (64/w at offset 0, 64/w - 1 at w/2; old and new
+    # costs), + the path's 64 costs and 64 per equalizing round
     assert spec.candidates == 10
-    assert res.evaluations_per_path == 2 * 10 * 64 + 4 * 63 + 3 * 64
+    windows = sum(2 * w * (2 * (64 // w) - 1) for w in (32, 16, 8, 4, 2))
+    assert res.evaluations_per_path == 2 * 10 * 64 + 4 * 63 + windows + 3 * 64
 
 
 def test_search_without_levels_or_polish_is_the_policy(matsumoto) -> None:
     pairs = finsler.sample_pairs(matsumoto.metric, 10, 3)
-    res = matsumoto.search(pairs[:, 0], pairs[:, 1], SearchSpec(levels=0, polish=0, equalize=0))
+    spec = SearchSpec(levels=0, polish=0, windows=0, equalize=0)
+    res = matsumoto.search(pairs[:, 0], pairs[:, 1], spec)
     np.testing.assert_array_equal(res.paths, matsumoto.generate(pairs[:, 0], pairs[:, 1]))
     assert res.evaluations == 0
 
@@ -97,7 +100,7 @@ def test_search_in_seven_dimensions() -> None:
     pol = learn.load_policy("panda-pole")
     m = pol.metric
     pairs = finsler.default_pairs(m)[:4]
-    spec = SearchSpec(levels=1, radii=(0.25, 0.5), equalize=0)
+    spec = SearchSpec(levels=1, radii=(0.25, 0.5), windows=1, equalize=0)
     res = pol.search(pairs[:, 0], pairs[:, 1], spec)
     assert res.paths.shape == (4, 2**pol.depth + 1, 7)
     m.domain.check(res.paths.reshape(-1, 7), "searched path points")
@@ -110,11 +113,33 @@ def test_search_in_seven_dimensions() -> None:
 @pytest.mark.parametrize("bad", [
     dict(levels=-1), dict(directions=1), dict(polish=1.5), dict(radii=(0.0,)),
     dict(radii=("a",)), dict(radii=(float("nan"),)), dict(levels=True), dict(seed=-2),
-    dict(equalize=-1), dict(equalize=0.5),
+    dict(equalize=-1), dict(equalize=0.5), dict(windows=-1), dict(windows="2"),
 ])
 def test_search_spec_rejects_impossible_settings(bad) -> None:
     with pytest.raises(InputError, match="SearchSpec"):
         SearchSpec(**bad)
+
+
+def test_windows_straighten_a_zigzag_euclidean_path() -> None:
+    """With the exact Euclidean midpoint as the 'actor', re-generating windows turns a path
+    that zigzags at its odd points into the evenly spaced straight path (closed form): the
+    two half-path windows are replaced (shorter), the middle one is not (no shorter)."""
+    import torch
+
+    m = finsler.get_metric("euclidean")
+    s, g = np.array([-0.6, -0.3]), np.array([0.5, 0.4])
+    t = np.arange(65) / 64
+    straight = s + t[:, None] * (g - s)
+    normal = np.array([-(g - s)[1], (g - s)[0]]) / np.linalg.norm(g - s)
+    zig = straight + 0.01 * (np.arange(65) % 2)[:, None] * normal
+    paths = torch.as_tensor(np.stack([zig, straight]))
+
+    def exact_midpoint(a, b):
+        return 0.5 * (a + b)
+
+    out, evals = _regenerate_windows(m, exact_midpoint, paths, 5, eps=1.0)
+    np.testing.assert_allclose(out.numpy(), np.stack([straight, straight]), atol=1e-15)
+    assert evals == 2 * (2 * 2 * 32 + 1 * 2 * 32)
 
 
 def test_equalize_gives_equal_segments_on_a_straight_euclidean_path() -> None:
@@ -154,7 +179,7 @@ def test_equalize_never_raises_the_largest_segment_or_the_energy() -> None:
     spread1 = c1.max(1) / c1.mean(1)
     assert spread0.mean() > 1.2 and spread1.mean() < 1.1
     # the search applies it by default: its paths are the equalized ones
-    res = pol.search(pairs[:, 0], pairs[:, 1], SearchSpec(levels=0, polish=0))
+    res = pol.search(pairs[:, 0], pairs[:, 1], SearchSpec(levels=0, polish=0, windows=0))
     np.testing.assert_array_equal(res.paths, out)
 
 

@@ -252,10 +252,15 @@ def _markdown(doc: dict[str, Any], figures: list[str], metric: Metric) -> str:
             "per sub-pair (the policy's, the coordinate midpoint and offsets around both) "
             "are each completed by the policy's own halves and the cheapest completed path "
             f"(sum C) is kept, then {sc['polish']} polishing sweeps by the policy's "
-            "midpoints of neighbours. It evaluates C "
+            f"midpoints of neighbours, {sc.get('windows', 0)} sweeps re-generating windows "
+            "of the path by the policy's own trees where that is shorter, and "
+            f"{sc.get('equalize', 0)} rounds moving the points along the path towards "
+            "equal segment costs. It evaluates C "
             f"{sc['evaluations_of_C_per_path']:.0f} times per path (values only: no "
-            "derivative of C, like the paper's method) and is never longer than the "
-            "policy's own path.",
+            "derivative of C, like the paper's method); before the equalizing rounds it is "
+            "never longer than the policy's own path, and no step raises the largest "
+            "segment cost above eps or the policy's own, so it never fails where the "
+            "policy succeeds.",
             "",
         ]
     me = doc.get("midpoint_error")
