@@ -24,7 +24,7 @@ between routes:
   points replaces the window where that lowers its cost without raising its largest
   segment above ``eps``. The tree was built from fixed anchors; a window whose ends sit
   elsewhere gets a fresh, often shorter completion (car-like: length ratio on tuning
-  pairs 1.088 -> 1.062 for 1.8e4 evaluations);
+  pairs 1.088 -> 1.064 for 2e4 more evaluations of C per path);
 * then ``equalize`` rounds of :func:`equalize_paths` move the interior points along the
   path so that its segments cost the same: the success criterion bounds the *largest*
   segment cost, and a recursive tree that is off by a little at every level splits the
@@ -83,9 +83,10 @@ class SearchSpec:
     where that shortens the path (0: none)."""
     windows: int = 3
     """Sweeps of window re-generation after the polish (0: none); each sweep goes through
-    window sizes ``2**(D-1)`` down to 2 segments. Chosen on tuning pairs (seed 4242,
-    car-like shipped policy): length ratio mean 1.0877 -> 1.0720 / 1.0618 / 1.0610 with
-    windows up to 32 segments x 1 sweep / all sizes x 3 / x 6."""
+    window sizes ``2**(D-1)`` down to 2 segments. Chosen on tuning pairs (seed 4242, the
+    shipped policies): car-like length ratio mean 1.0877 / 1.0640 / 1.0632 with 0 / 3 / 6
+    sweeps (20 ms per path more for 3), Matsumoto 1.0016 -> 1.0012, Panda paths 0.7%
+    shorter (one pair in 200 fewer within eps 5)."""
     equalize: int = 3
     """Rounds of :func:`equalize_paths` after the polish (0: none). Chosen on tuning pairs
     (seed 4242; shipped policies with the search): Panda's share of paths within eps 5
@@ -96,8 +97,7 @@ class SearchSpec:
 
     def __post_init__(self) -> None:
         for name, low in (("levels", 0), ("directions", 2), ("polish", 0), ("windows", 0),
-                          ("equalize", 0),
-                          ("seed", 0)):
+                          ("equalize", 0), ("seed", 0)):
             val = getattr(self, name)
             if isinstance(val, bool) or not isinstance(val, (int, np.integer)) or val < low:
                 raise InputError(f"SearchSpec.{name} must be an integer >= {low}, got {val!r}")
@@ -257,7 +257,7 @@ def _regenerate_windows(metric: finsler.Metric, predict: Predict, paths: torch.T
         t_new, m_new = _costs(metric, new.reshape(-1, w + 1, dim))
         evals += 2 * b * nw * w
         ok = (t_new < t_old) & (m_new <= np.maximum(eps, m_old))
-        take = torch.as_tensor(ok).reshape(b, nw, 1, 1)
+        take = torch.as_tensor(ok, device=paths.device).reshape(b, nw, 1, 1)
         chosen = torch.where(take, new, old)
         paths = paths.clone()
         paths[:, idx[:, 1:-1].reshape(-1)] = chosen[:, :, 1:-1].reshape(b, -1, dim)
@@ -282,8 +282,9 @@ def _search_chunk(metric: finsler.Metric, predict: Predict, s: torch.Tensor, g: 
                           build_tree(mm, zz, rest, predict)[:, 1:]], 1)
         evals += full.shape[0] * (full.shape[1] - 1)
         total, worst = _costs(metric, full)
-        best = torch.as_tensor(_keep(total.reshape(n, r), worst.reshape(n, r), eps))
-        chosen = cs[torch.arange(n), best].reshape(b, -1, dim)
+        best = torch.as_tensor(_keep(total.reshape(n, r), worst.reshape(n, r), eps),
+                               device=cs.device)
+        chosen = cs[torch.arange(n, device=cs.device), best].reshape(b, -1, dim)
         new = pts.new_empty((b, 2 * pts.shape[1] - 1, dim))
         new[:, 0::2] = pts
         new[:, 1::2] = chosen
@@ -309,7 +310,7 @@ def _search_chunk(metric: finsler.Metric, predict: Predict, s: torch.Tensor, g: 
             new, new_worst = _costs(metric, trip_new)
             evals += 4 * flat[0].shape[0]
             ok = (new < old) & (new_worst <= np.maximum(eps, old_worst))
-            take = torch.as_tensor(ok).reshape(b, k, 1)
+            take = torch.as_tensor(ok, device=paths.device).reshape(b, k, 1)
             paths[:, idx] = torch.where(take, xn.reshape(b, k, dim), x)
     for _ in range(spec.windows):
         for size in range(depth - 1, 0, -1):  # window of 2**size segments
@@ -317,7 +318,7 @@ def _search_chunk(metric: finsler.Metric, predict: Predict, s: torch.Tensor, g: 
             evals += e
     if spec.equalize:
         eq, e = equalize_paths(metric, paths.cpu().numpy(), spec.equalize)
-        paths = torch.as_tensor(eq)
+        paths = torch.as_tensor(eq, device=paths.device)
         evals += e
     return paths, evals
 
