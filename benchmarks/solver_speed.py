@@ -36,6 +36,9 @@ Usage::
     python benchmarks/solver_speed.py --metrics none --fresh 100 --fresh-cache fresh.npz
     python benchmarks/solver_speed.py --metrics none --scale 5
 
+Learned warm starts against global seeding (issue 11: time per exact geodesic, pairs
+within 1e-6 of the globally seeded energy) are measured by ``benchmarks/warm_start.py``.
+
 Timings are single-process (one pair at a time, as a user calling ``solve_geodesic``);
 one-off setup (building the NLPs and the seeding graph) is timed separately.
 """
