@@ -10,6 +10,8 @@ import json
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 from typer.testing import CliRunner
 
 import finsler
@@ -208,3 +210,24 @@ def test_evaluate_cli_search(matsumoto, tmp_path) -> None:
     for row, c in zip(b["per_pair"], want):
         assert row["length"] == pytest.approx(c.sum(), rel=1e-12)
         assert row["length"] <= a["per_pair"][b["per_pair"].index(row)]["length"] * (1 + 1e-12)
+
+
+@settings(max_examples=30, deadline=None, derandomize=True,
+          suppress_health_check=[HealthCheck.too_slow])
+@given(name=st.sampled_from(["matsumoto", "carlike", "randers", "poincare", "sphere"]),
+       seed=st.integers(0, 2**31 - 1), n=st.sampled_from([2, 3, 8, 17]),
+       rounds=st.integers(1, 4))
+def test_equalize_invariants_on_random_paths(name, seed, n, rounds) -> None:
+    """Any metric, any path through the domain (random points, uneven steps): equalizing
+    keeps the ends, stays in the domain, never raises a path's largest segment cost or its
+    energy, and counts its evaluations of C exactly."""
+    m = finsler.get_metric(name)
+    rng = np.random.default_rng(seed)
+    paths = m.domain.sample(4 * (n + 1), rng).reshape(4, n + 1, m.dim)
+    out, evals = equalize_paths(m, paths, rounds)
+    np.testing.assert_array_equal(out[:, [0, -1]], paths[:, [0, -1]])
+    assert np.all(m.domain.contains(out.reshape(-1, m.dim)))
+    c0, c1 = m.path_costs(paths), m.path_costs(out)
+    assert np.all(c1.max(1) <= c0.max(1))
+    assert np.all((c1**2).sum(1) <= (c0**2).sum(1))
+    assert evals == (0 if n < 2 else 4 * n * (rounds + 1))
