@@ -46,6 +46,7 @@ _SCHEDULES = ("paper", "full")
 _LR_SCHEDULES = ("constant", "linear", "cosine")
 _TRANSFORMS = ("none", "log1p")
 _ACTIVATIONS = ("relu", "tanh")
+_ENERGY_SCALES = ("none", "straight")
 
 
 # ----------------------------------------------------------------------------------------
@@ -319,6 +320,11 @@ class TrainConfig(MetricConfig):
     midpoints."""
     path_energy_pairs: int = 256
     """Pairs (whole trees) per path-energy step; one step per epoch."""
+    path_energy_scale: str = "none"
+    """How the path-energy term is scaled per pair: ``none`` (the energy as it is) or
+    ``straight`` (divided by the energy of the straight coordinate path between the same
+    pair, a constant: scale-free, about 1 for every pair and metric; for metrics whose
+    energies are 1e5-1e6, e.g. Panda, where the plain term swamps the critic's)."""
     route_candidates: int = 0
     """Beyond the paper (0 = off): per collection, for ``route_pairs`` fresh uniform pairs,
     try this many uniform candidate midpoints ``m`` and stitch the actor's deterministic
@@ -352,6 +358,7 @@ class TrainConfig(MetricConfig):
         check_choice("lr_schedule", self.lr_schedule, _LR_SCHEDULES)
         check_choice("critic_transform", self.critic_transform, _TRANSFORMS)
         check_choice("activation", self.activation, _ACTIVATIONS)
+        check_choice("path_energy_scale", self.path_energy_scale, _ENERGY_SCALES)
         for name in ("timesteps", "minibatch_size", "collection_size", "epochs", "threads",
                      "eval_every", "eval_pairs", "path_energy_pairs", "route_pairs"):
             v = getattr(self, name)

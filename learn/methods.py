@@ -134,23 +134,39 @@ class PathEnergy(ActorTerm):
 
     weight: float
     pairs: int
+    scale: str = "none"
+    """``none`` or ``straight``: each pair's energy divided by that of the straight
+    coordinate path between its ends (a constant; ``pairs * 2**D`` more evaluations of C,
+    values only)."""
     name: ClassVar[str] = "path_energy"
     uses_derivative_of_C: ClassVar[bool] = True
 
     def energy(self, trainer: Trainer) -> torch.Tensor:
         """Energies ``(pairs,)`` of the actor's paths between fresh pairs drawn from the
-        run's generator, differentiable in the actor's parameters."""
+        run's generator (scaled per :attr:`scale`), differentiable in the actor's
+        parameters."""
         k, dim, depth = self.pairs, trainer.dim, trainer.depth_max
         ends = trainer.metric.domain.sample(2 * k, trainer.np_rng).reshape(k, 2, dim)
         e = torch.as_tensor(ends, dtype=torch.float32, device=trainer.device)
         pts = build_tree(e[:, 0], e[:, 1], depth,
                          lambda a, b: trainer.actor(a, b, deterministic=True)).double()
         c = _path_costs_safe(trainer.metric, pts)
-        return (c.shape[1] * (c**2).sum(1)).float()
+        energy = c.shape[1] * (c**2).sum(1)
+        if self.scale == "straight":
+            with torch.no_grad():
+                t = torch.linspace(0.0, 1.0, c.shape[1] + 1, dtype=torch.float64,
+                                   device=pts.device)[None, :, None]
+                e64 = e.double()
+                line = e64[:, :1] + t * (e64[:, 1:] - e64[:, :1])
+                cs = _path_costs_safe(trainer.metric, line)
+                ref = (c.shape[1] * (cs**2).sum(1)).clamp_min(1e-300)
+            energy = energy / ref
+        return energy.float()
 
     def step(self, trainer: Trainer) -> TermOutput:
         n = self.pairs * 2**trainer.depth_max
-        return TermOutput(self.weight * self.energy(trainer).mean(), evaluations=n,
+        evals = 2 * n if self.scale == "straight" else n
+        return TermOutput(self.weight * self.energy(trainer).mean(), evaluations=evals,
                           derivative=n)
 
 
@@ -211,7 +227,8 @@ def actor_terms(cfg: TrainConfig) -> list[ActorTerm]:
     """The extra actor terms a config switches on, in the order they are added."""
     terms: list[ActorTerm] = []
     if cfg.path_energy_weight > 0:
-        terms.append(PathEnergy(cfg.path_energy_weight, cfg.path_energy_pairs))
+        terms.append(PathEnergy(cfg.path_energy_weight, cfg.path_energy_pairs,
+                                cfg.path_energy_scale))
     if cfg.route_candidates > 0:
         terms.append(RouteSearch(cfg.route_candidates, cfg.route_pairs, cfg.route_weight))
     return terms

@@ -123,6 +123,29 @@ def test_path_energy_of_exact_midpoints_is_squared_distance() -> None:
     assert tr.actor.net[-1].bias.grad[:2].abs().min() > 0
 
 
+def test_scale_free_path_energy_is_one_for_exact_midpoints() -> None:
+    """``path_energy_scale="straight"`` divides by the straight path's energy: on the
+    Euclidean plane exact midpoints give exactly 1 per pair whatever the pair's size, a
+    perturbed actor more than 1 with a gradient, and a step counts the straight paths'
+    evaluations of C (values only) beside the tree's."""
+    cfg = learn.default_config("euclidean", depth=3, path_energy_weight=1.0,
+                               path_energy_pairs=6, path_energy_scale="straight")
+    tr = Trainer(cfg, _tmp_run_dir(), progress=False)
+    _exact_midpoint_actor(tr)
+    term = PathEnergy(weight=1.0, pairs=6, scale="straight")
+    np.testing.assert_allclose(term.energy(tr).detach().numpy(), np.ones(6), rtol=1e-5)
+    with torch.no_grad():
+        tr.actor.net[-1].bias[:2] = 0.05
+    e2 = term.energy(tr)
+    assert (e2.detach().numpy() > 1.0).all()
+    e2.mean().backward()
+    assert tr.actor.net[-1].bias.grad[:2].abs().min() > 0
+    out = term.step(tr)
+    assert out.evaluations == 2 * 6 * 8 and out.derivative == 6 * 8
+    with pytest.raises(finsler.InputError, match="path_energy_scale"):
+        learn.default_config("euclidean", path_energy_scale="log")
+
+
 def test_path_energy_term_alone_learns_euclidean_midpoints(tmp_path) -> None:
     """The energy term is a training signal of its own: weighted 10x, it dominates the
     actor's gradient, and a 4e4-timestep run must bring midpoints within 0.02 of
