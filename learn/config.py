@@ -452,7 +452,11 @@ _OURS: dict[str, dict[str, Any]] = {
     "carlike": dict(timesteps=400_000_000, hidden=(128, 128), epochs=1, fused_adam=True,
                     path_energy_weight=1.0, path_energy_pairs=16),
     # path energy at weight 1 was tried here and failed (1% success at 7.5e6 timesteps:
-    # the joint-space energy dwarfs the critic's term); Panda keeps Algorithm 1 alone
+    # the joint-space energy dwarfs the critic's term). Scale-free (path_energy_scale=
+    # "straight", weight 1, seed 0, 1e7 all-inclusive) trains, but loses on 500 fresh pairs
+    # (seed 777) against Algorithm 1 alone at the same budget (95.8/83.4/43.6% at eps
+    # 20/10/5, ratio 1.067): 4 pairs per step 83.2/48.8/9.0%, ratio 1.41 (10.5 min); 1 pair
+    # per step 82.4/57.6/13.4%, 1.40 (21 min). Panda keeps Algorithm 1 alone
     "panda-pole": dict(timesteps=10_000_000, hidden=(128, 128), symmetric_critic=True,
                        eval_every=25),
     "euclidean": dict(timesteps=400_000, lr=3e-3, collection_size=4096, minibatch_size=512,
