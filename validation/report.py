@@ -24,12 +24,14 @@ from __future__ import annotations
 
 import json
 import math
+import time
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 import finsler
+import solvers
 from finsler import Metric, load_pairs
 from finsler.errors import InputError
 from validation.comparison import Comparison, compare, midpoint_error, ratio_stats
@@ -535,10 +537,6 @@ def certified_intervals(cmp: Comparison, metric: Metric, count: int, quick: bool
     (:meth:`Metric.path_length_bounds`) over the certified lower bound. ``quick``: the
     coarse mesh with at most 20 s of refinement per pair, else the default mesh. None where
     the metric is not 2-D or ``count`` is 0."""
-    import time
-
-    import solvers
-
     if metric.dim != 2 or count <= 0:
         return None
     mesh, limit = ("coarse", 20.0) if quick else ("default", None)
