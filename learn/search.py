@@ -24,7 +24,7 @@ between routes:
   points replaces the window where that lowers its cost without raising its largest
   segment above ``eps``. The tree was built from fixed anchors; a window whose ends sit
   elsewhere gets a fresh, often shorter completion (car-like: length ratio on tuning
-  pairs 1.088 -> 1.064 for 2e4 more evaluations of C per path);
+  pairs 1.088 -> 1.064 for 1e4 more evaluations of C per path);
 * then ``equalize`` rounds of :func:`equalize_paths` move the interior points along the
   path so that its segments cost the same: the success criterion bounds the *largest*
   segment cost, and a recursive tree that is off by a little at every level splits the
@@ -207,10 +207,18 @@ def equalize_paths(metric: finsler.Metric, paths: Any,
         raise InputError("paths contain NaN or inf")
     if rounds == 0 or p.shape[1] < 3 or p.shape[0] == 0:
         return p.numpy(), 0
+    c = torch.tensor(np.asarray(metric.path_costs(p.numpy(), check=False)), dtype=torch.float64)
+    q, evals = _equalize(metric, p, c, rounds)
+    return q.numpy(), p.shape[0] * (p.shape[1] - 1) + evals
+
+
+def _equalize(metric: finsler.Metric, p: torch.Tensor, c: torch.Tensor,
+              rounds: int) -> tuple[torch.Tensor, int]:
+    """:func:`equalize_paths` on float64 CPU paths ``p`` whose segment costs ``c`` are
+    known; returns the paths and the evaluations of C made (``K * n * rounds``)."""
     k, n1, dim = p.shape
     n = n1 - 1
-    c = torch.tensor(np.asarray(metric.path_costs(p.numpy(), check=False)), dtype=torch.float64)
-    evals = k * n
+    evals = 0
     frac = torch.arange(1, n, dtype=torch.float64) / n
     for _ in range(rounds):
         cum = torch.cat([torch.zeros((k, 1), dtype=torch.float64), c.cumsum(1)], 1)
@@ -232,36 +240,44 @@ def equalize_paths(metric: finsler.Metric, paths: Any,
               & ((cn**2).sum(1) <= (c**2).sum(1)) & (cn.max(1).values <= c.max(1).values))
         p = torch.where(ok[:, None, None], q, p)
         c = torch.where(ok[:, None], cn, c)
-    return p.numpy(), evals
+    return p, evals
 
 
 def _regenerate_windows(metric: finsler.Metric, predict: Predict, paths: torch.Tensor,
-                        size: int, eps: float) -> tuple[torch.Tensor, int]:
+                        costs: torch.Tensor, size: int, eps: float
+                        ) -> tuple[torch.Tensor, torch.Tensor, int]:
     """Replace windows of ``2**size`` segments (starting at multiples of ``2**size``, then
     half a window later) by the actor's depth-``size`` tree between their end points where
     that is shorter and keeps the window's largest segment cost within ``max(eps, its
-    old one)``; returns the paths and the evaluations of C made."""
+    old one)``. ``costs`` ``(B, n)`` are the path's segment costs (kept up to date, so a
+    window's old cost is never evaluated again); returns the paths, their costs and the
+    evaluations of C made (the new trees' segments)."""
     b, n1, dim = paths.shape
     w = 2**size
     evals = 0
     for offset in (0, w // 2):
-        first = torch.arange(offset, n1 - w, w)
+        first = torch.arange(offset, n1 - w, w, device=paths.device)
         if first.numel() == 0:
             continue
         nw = first.numel()
-        idx = first[:, None] + torch.arange(w + 1)[None]  # (W, w + 1)
+        idx = first[:, None] + torch.arange(w + 1, device=paths.device)[None]  # (W, w + 1)
         old = paths[:, idx]  # (B, W, w + 1, dim)
-        ends = old[:, :, [0, -1]].reshape(-1, 2, dim)
-        new = build_tree(ends[:, 0], ends[:, 1], size, predict).reshape(b, nw, w + 1, dim)
-        t_old, m_old = _costs(metric, old.reshape(-1, w + 1, dim))
-        t_new, m_new = _costs(metric, new.reshape(-1, w + 1, dim))
-        evals += 2 * b * nw * w
-        ok = (t_new < t_old) & (m_new <= np.maximum(eps, m_old))
-        take = torch.as_tensor(ok, device=paths.device).reshape(b, nw, 1, 1)
-        chosen = torch.where(take, new, old)
+        c_old = costs[:, idx[:, :-1]]  # (B, W, w)
+        new = build_tree(old[:, :, 0].reshape(-1, dim), old[:, :, -1].reshape(-1, dim), size,
+                         predict).reshape(b, nw, w + 1, dim)
+        c_new = torch.tensor(np.asarray(metric.path_costs(
+            new.reshape(-1, w + 1, dim).cpu().numpy(), check=False)),
+            dtype=costs.dtype, device=costs.device).reshape(b, nw, w)
+        evals += b * nw * w
+        ok = ((c_new.sum(-1) < c_old.sum(-1))
+              & (c_new.max(-1).values <= torch.clamp(c_old.max(-1).values, min=eps)))
         paths = paths.clone()
-        paths[:, idx[:, 1:-1].reshape(-1)] = chosen[:, :, 1:-1].reshape(b, -1, dim)
-    return paths, evals
+        paths[:, idx[:, 1:-1].reshape(-1)] = torch.where(
+            ok[..., None, None], new, old)[:, :, 1:-1].reshape(b, -1, dim)
+        costs = costs.clone()
+        costs[:, idx[:, :-1].reshape(-1)] = torch.where(
+            ok[..., None], c_new, c_old).reshape(b, -1)
+    return paths, costs, evals
 
 
 def _search_chunk(metric: finsler.Metric, predict: Predict, s: torch.Tensor, g: torch.Tensor,
@@ -312,13 +328,19 @@ def _search_chunk(metric: finsler.Metric, predict: Predict, s: torch.Tensor, g: 
             ok = (new < old) & (new_worst <= np.maximum(eps, old_worst))
             take = torch.as_tensor(ok, device=paths.device).reshape(b, k, 1)
             paths[:, idx] = torch.where(take, xn.reshape(b, k, dim), x)
+    if not (spec.windows or spec.equalize):
+        return paths, evals
+    # segment costs of the path, kept up to date by the windows and the equalizing rounds
+    costs = torch.tensor(np.asarray(metric.path_costs(paths.cpu().numpy(), check=False)),
+                         dtype=torch.float64, device=paths.device)
+    evals += b * (paths.shape[1] - 1)
     for _ in range(spec.windows):
         for size in range(depth - 1, 0, -1):  # window of 2**size segments
-            paths, e = _regenerate_windows(metric, predict, paths, size, eps)
+            paths, costs, e = _regenerate_windows(metric, predict, paths, costs, size, eps)
             evals += e
     if spec.equalize:
-        eq, e = equalize_paths(metric, paths.cpu().numpy(), spec.equalize)
-        paths = torch.as_tensor(eq, device=paths.device)
+        eq, e = _equalize(metric, paths.cpu(), costs.cpu(), spec.equalize)
+        paths = eq.to(paths.device)
         evals += e
     return paths, evals
 

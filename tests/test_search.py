@@ -83,11 +83,12 @@ def test_search_counts_every_evaluation_of_c(matsumoto, monkeypatch) -> None:
     res = matsumoto.search(pairs[:, 0], pairs[:, 1], spec)
     assert res.evaluations == sum(counted)
     # by hand: 2 levels x 10 candidates x 64 segments, + 1 sweep x 4 costs x 63 points,
-    # + windows of w = 32..2 segments (64/w at offset 0, 64/w - 1 at w/2; old and new
-    # costs), + the path's 64 costs and 64 per equalizing round
+    # + the path's 64 segment costs (kept up to date from then on), + windows of w = 32..2
+    # segments (64/w at offset 0, 64/w - 1 at w/2; the new trees' costs only), + 64 per
+    # equalizing round
     assert spec.candidates == 10
-    windows = sum(2 * w * (2 * (64 // w) - 1) for w in (32, 16, 8, 4, 2))
-    assert res.evaluations_per_path == 2 * 10 * 64 + 4 * 63 + windows + 3 * 64
+    windows = sum(w * (2 * (64 // w) - 1) for w in (32, 16, 8, 4, 2))
+    assert res.evaluations_per_path == 2 * 10 * 64 + 4 * 63 + 64 + windows + 2 * 64
 
 
 def test_search_without_levels_or_polish_is_the_policy(matsumoto) -> None:
@@ -139,9 +140,12 @@ def test_windows_straighten_a_zigzag_euclidean_path() -> None:
     def exact_midpoint(a, b):
         return 0.5 * (a + b)
 
-    out, evals = _regenerate_windows(m, exact_midpoint, paths, 5, eps=1.0)
+    costs = torch.tensor(m.path_costs(paths.numpy()))
+    out, out_costs, evals = _regenerate_windows(m, exact_midpoint, paths, costs, 5, eps=1.0)
     np.testing.assert_allclose(out.numpy(), np.stack([straight, straight]), atol=1e-15)
-    assert evals == 2 * (2 * 2 * 32 + 1 * 2 * 32)
+    # the costs it carries are the new path's
+    np.testing.assert_allclose(out_costs.numpy(), m.path_costs(out.numpy()), rtol=1e-12)
+    assert evals == 2 * (2 * 32 + 1 * 32)  # the new trees' segments only
 
 
 def test_equalize_gives_equal_segments_on_a_straight_euclidean_path() -> None:
