@@ -24,7 +24,7 @@ from finsler.errors import InputError
 __all__ = ["RAY_MISSING", "connect_ray", "require_ray", "solve_chunks_ray"]
 
 
-def _solve_chunk(worker: Callable[[tuple], tuple[int, Any]], spec: tuple, ks: list[int],
+def _solve_chunk(worker: Callable[[tuple], tuple[int, Any]], spec: Any, ks: list[int],
                  pairs: np.ndarray, n: int, plan: Any, minmax: bool,
                  inits: np.ndarray | None = None, global_seeds: bool = True,
                  tol: float | None = None) -> list[tuple[int, Any]]:
@@ -35,7 +35,7 @@ def _solve_chunk(worker: Callable[[tuple], tuple[int, Any]], spec: tuple, ks: li
             for i, (k, p) in enumerate(zip(ks, pairs))]
 
 
-def solve_chunks_ray(address: str, worker: Callable[[tuple], tuple[int, Any]], spec: tuple,
+def solve_chunks_ray(address: str, worker: Callable[[tuple], tuple[int, Any]], spec: Any,
                      pairs: np.ndarray, todo: list[int], n: int, plan: Any, minmax: bool,
                      chunk_size: int | None = None,
                      num_cpus: int | None = None,

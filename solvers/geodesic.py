@@ -25,6 +25,7 @@ from finsler.errors import InputError
 from finsler.files import OutputError, atomic_write_bytes
 from finsler.metric import Metric
 from finsler.pool import ProcessPool
+from finsler.spec import MetricSpec
 from solvers.inputs import (
     as_metric,
     check_pairs,
@@ -550,27 +551,27 @@ def midpoint(
 # ----------------------------------------------------------------------------------------
 # batches
 # ----------------------------------------------------------------------------------------
-def _metric_spec(m: Metric) -> tuple[type, dict[str, Any]]:
-    return type(m), {f.name: getattr(m, f.name) for f in dataclasses.fields(m)}
+def _metric_spec(m: Metric) -> MetricSpec:
+    """What a worker process rebuilds the metric from (finsler's identity of a metric)."""
+    return MetricSpec.of(m)
 
 
 def _batch_worker(args: tuple) -> tuple[int, GeodesicResult]:
-    (cls, params), k, s, g, n, plan, minmax, init, global_seeds, *rest = args
+    spec, k, s, g, n, plan, minmax, init, global_seeds, *rest = args
     tol = rest[0] if rest else None
-    m = _cached_metric(cls, tuple(sorted(params.items())))
+    m = _cached_metric(spec)
     initial = () if init is None else (init,)
     return k, solve_geodesic(m, s, g, n, seeds=plan, minmax=minmax, initial=initial,
                              global_seeds=global_seeds, tol=tol)
 
 
-_METRICS: dict[tuple, Metric] = {}
+_METRICS: dict[MetricSpec, Metric] = {}
 
 
-def _cached_metric(cls: type, items: tuple) -> Metric:
-    key = (cls, items)
-    if key not in _METRICS:
-        _METRICS[key] = cls(**dict(items))
-    return _METRICS[key]
+def _cached_metric(spec: MetricSpec) -> Metric:
+    if spec not in _METRICS:
+        _METRICS[spec] = spec.build()
+    return _METRICS[spec]
 
 
 class _BatchStore:

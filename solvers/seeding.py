@@ -102,7 +102,8 @@ class SeedPlan:
     def default(metric: Metric) -> SeedPlan:
         """The plan for ``metric``, chosen by what the metric can do, never by its name.
 
-        A metric may define ``seed_plan()`` returning a :class:`SeedPlan` (a hook); else:
+        A metric may return a :class:`SeedPlan` from its ``seed_plan()`` hook
+        (:mod:`finsler.hooks`); else (the hook's default ``None``):
         high dimension (> 3) -> a few random curves and the roadmap, coarse size 32; not
         smooth (e.g. car-like: kinks that the energy penalises in one long segment) ->
         four bulge amplitudes and four random curves, coarse size 256; not convex
@@ -114,9 +115,8 @@ class SeedPlan:
         measured in
         ``benchmarks/solver_speed.py``.
         """
-        hook = getattr(metric, "seed_plan", None)
-        if callable(hook):
-            plan = hook()
+        plan = metric.seed_plan()
+        if plan is not None:
             if not isinstance(plan, SeedPlan):
                 from finsler.errors import InputError
 
