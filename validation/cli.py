@@ -36,12 +36,13 @@ app = typer.Typer(
 def metrics_command(
     as_json: Annotated[bool, typer.Option("--json", help="Print JSON instead of a table.")] = False,
 ) -> None:
-    """List the registered metrics with their domains and task defaults."""
+    """List the registered metrics with their domains, task defaults and the optional
+    hooks each provides (finsler.hooks)."""
     rows = [finsler.get_metric(n).info() for n in finsler.list_metrics()]
     if as_json:
         typer.echo(json.dumps(rows, indent=2))
         return
-    head = ("name", "dim", "domain", "D", "eps", "reversible", "convexity")
+    head = ("name", "dim", "domain", "D", "eps", "reversible", "hooks", "convexity")
     table = [head] + [
         (
             r["name"],
@@ -50,6 +51,7 @@ def metrics_command(
             str(r["depth"]),
             f"{r['eps']:g}",
             "yes" if r["reversible"] else "no",
+            ",".join(r["hooks"]) or "-",
             r["convexity"],
         )
         for r in rows

@@ -3,10 +3,7 @@ point parsing and metric look-up. The command modules import this, never ``cli``
 
 from __future__ import annotations
 
-import importlib
 import json
-import sys
-from pathlib import Path
 from typing import Annotated, Any
 
 import numpy as np
@@ -14,8 +11,10 @@ import typer
 
 import finsler
 from finsler.errors import InputError
+from finsler.plugins import import_module_or_file
 
 __all__ = [
+    "METHOD_MODULE_HELP",
     "METRIC_MODULE_HELP",
     "METRIC_PARAM_HELP",
     "MetricModuleOption",
@@ -36,6 +35,11 @@ METRIC_PARAM_HELP = ("Metric parameter NAME=VALUE (repeatable; numbers parsed), 
 METRIC_MODULE_HELP = ("Module (dotted name) or FILE.py to import first, so that the "
                       "metrics it registers (@finsler.register_metric) can be used "
                       "(repeatable; a file's folder is put on sys.path).")
+#: Help of the ``--method-module`` option (``train``, ``evaluate``, ``sweep``).
+METHOD_MODULE_HELP = ("Module (dotted name) or FILE.py to import first, so that the "
+                      "learning methods it registers (learn.registry.register_method) can "
+                      "be used (repeatable; a file's folder is put on sys.path, so sweep "
+                      "workers import it too).")
 #: The two options as parameter types of a command.
 MetricParamOption = Annotated[list[str] | None, typer.Option(
     "--metric-param", metavar="NAME=VALUE", help=METRIC_PARAM_HELP)]
@@ -69,10 +73,7 @@ def metric_or_fail(name: str, params: dict[str, Any] | None = None) -> finsler.M
     try:
         if params is None:
             return finsler.get_metric(name)
-        from learn.config import build_metric, resolve_metric  # torch: only when needed
-
-        full, _ = resolve_metric(name, params)
-        return build_metric(name, full)
+        return finsler.MetricSpec.resolve(name, params, what="metric").build()
     except InputError as err:
         fail(str(err))
         raise  # unreachable
@@ -93,7 +94,7 @@ def metric_from_options(name: str, metric_param: list[str] | None,
 def parse_metric_params(items: list[str] | None) -> dict[str, Any] | None:
     """``["name=value", ...]`` (``--metric-param``) -> ``{name: value}``; values are
     parsed as JSON (numbers, true/false, lists), else kept as strings. None if no item.
-    Which names exist is checked against the metric (``learn.config.resolve_metric``)."""
+    Which names exist is checked against the metric (``finsler.MetricSpec.resolve``)."""
     if not items:
         return None
     out: dict[str, Any] = {}
@@ -117,27 +118,7 @@ def import_metric_modules(items: list[str] | None) -> None:
     folder is put first on ``sys.path`` and it is imported by its stem, so that the
     recorded ``module:qualname`` of its metrics imports again, also in worker processes)."""
     for item in items or []:
-        name = item
-        if item.endswith(".py") or "/" in item:
-            path = Path(item).expanduser().resolve()
-            if not path.is_file():
-                raise InputError(f"--metric-module: file {item} does not exist")
-            if not path.stem.isidentifier():
-                raise InputError(f"--metric-module: {path.name} is not a valid module name")
-            folder = str(path.parent)
-            if folder not in sys.path:
-                sys.path.insert(0, folder)
-            name = path.stem
-            loaded = sys.modules.get(name)
-            if loaded is not None and Path(getattr(loaded, "__file__", "") or "").resolve() \
-                    != path:
-                raise InputError(f"--metric-module: a different module {name!r} is already "
-                                 f"imported ({getattr(loaded, '__file__', None)}); rename "
-                                 f"{path.name}")
-        try:
-            importlib.import_module(name)
-        except ImportError as err:
-            raise InputError(f"--metric-module: cannot import {item!r}: {err}") from err
+        import_module_or_file(item, "--metric-module")
 
 
 def parse_overrides(items: list[str]) -> dict[str, Any]:
