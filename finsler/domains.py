@@ -170,7 +170,8 @@ class Disk(Domain):
 
     def contains(self, x: Any, tol: float = 1e-12) -> np.ndarray:
         x = np.asarray(x, float).reshape(-1, 2)
-        return np.linalg.norm(x - np.asarray(self.center), axis=1) <= self.radius + tol
+        u, w = x[:, 0] - self.center[0], x[:, 1] - self.center[1]
+        return u * u + w * w <= (self.radius + tol) ** 2
 
     def sample(self, n: int, rng: np.random.Generator) -> np.ndarray:
         self._sample_check(n)
