@@ -147,6 +147,10 @@ class _Numpy:
     def stack_cols(cols: list[Any]) -> np.ndarray:
         return np.stack(cols, 1)
 
+    @staticmethod
+    def clip(a: np.ndarray, lo: float, hi: float) -> np.ndarray:
+        return np.clip(a, lo, hi)
+
     sqrt = staticmethod(np.sqrt)
     abs = staticmethod(np.abs)
     where = staticmethod(np.where)
@@ -198,6 +202,9 @@ class _Torch:
 
     def stack_cols(self, cols: list[Any]) -> Any:
         return self.torch.stack(cols, 1)
+
+    def clip(self, a: Any, lo: float, hi: float) -> Any:
+        return self.torch.clamp(a, lo, hi)
 
     def sqrt(self, a: Any) -> Any:
         return self.torch.sqrt(a)
@@ -744,6 +751,13 @@ class NewtonState:
         self.m, self.ops, self.opt, self.scale = metric, ops, options, float(scale)
         self.local = bool(local)
         self.domain = metric.domain
+        # a box domain is handled by projected Newton (Bertsekas): coordinates at a bound
+        # that the gradient pushes out are held there, the others take the Newton step
+        # of the reduced system, and trial points are projected (clamped) onto the box
+        self.box = bool(self.domain.is_box)
+        lo, hi = self.domain.bounds()
+        self.lo, self.hi = [float(v) for v in lo], [float(v) for v in hi]
+        self.bound_eps = 1e-9 * float(scale)
         self.points = _to_field(ops, paths)
         b = self.points[0].shape[0]
         self.status = np.zeros(b, dtype=np.int64)
@@ -758,7 +772,7 @@ class NewtonState:
         self.active = np.arange(b)
         self.terms = self._terms(self.points)  # of the active problems, in their order
         finite = self._finite(self.terms)
-        self._update(self.active, self.terms)
+        self._update(self.active, self.terms, self.points)
         self.status[~finite] = NewtonStatus.NOT_FINITE
         self._retire()
 
@@ -785,10 +799,28 @@ class NewtonState:
             ok = ok & _all_rows(ops, ops.isfinite(a))
         return ops.to_numpy(ok).astype(bool)
 
-    def _update(self, idx: np.ndarray, t: EnergyTerms) -> None:
+    def _held(self, pts: Vec, grad: Vec) -> list[Any] | None:
+        """Box domains: per coordinate, ``(K, n-1)`` masks of the interior coordinates at
+        a bound (within ``bound_eps``) that the gradient pushes outwards; else ``None``."""
+        if not self.box:
+            return None
+        out = []
+        for i, (p, g) in enumerate(zip(pts, grad, strict=True)):
+            x = p[:, 1:-1]
+            out.append(((x <= self.lo[i] + self.bound_eps) & (g > 0))
+                       | ((x >= self.hi[i] - self.bound_eps) & (g < 0)))
+        return out
+
+    def _update(self, idx: np.ndarray, t: EnergyTerms, pts: Vec | None = None) -> None:
+        """Energies and residuals (the largest entry of the projected gradient, relative)
+        of the problems ``idx`` from their terms (``pts``: their points, for box
+        domains)."""
         ops = self.ops
+        held = self._held(pts, t.grad) if pts is not None else None
+        grads = t.grad if held is None else [ops.where(h, 0.0, g)
+                                             for g, h in zip(t.grad, held, strict=True)]
         g = None
-        for a in t.grad:
+        for a in grads:
             m = ops.abs(a).max(1)
             m = m.values if hasattr(m, "values") else m
             g = m if g is None else ops.maximum(g, m)
@@ -801,6 +833,8 @@ class NewtonState:
         """Paths of a field whose points all lie in the domain (to ``1e-12`` of its size:
         points projected onto its boundary count as inside) -> numpy ``(K,)``."""
         ops = self.ops
+        if self.box:  # trial points are projected onto the box
+            return np.ones(p[0].shape[0], dtype=bool)
         tol = 1e-12 * self.scale
         if ops.name == "numpy":
             flat = np.stack(p, -1).reshape(-1, len(p))
@@ -847,15 +881,26 @@ class NewtonState:
         dscale = ops.to_numpy(dsum)
         dscale = np.where(np.isfinite(dscale) & (dscale > 0), dscale, 1.0)
         neg = [-g for g in t.grad]
+        diag_f, off_f = t.diag, t.off
+        held = self._held([p[ops.index(idx)] for p in self.points], t.grad)
+        if held is not None:  # the reduced system: held coordinates decoupled, step 0
+            one = ops.asarray(dscale)[:, None]
+            neg = [ops.where(h, 0.0, g) for g, h in zip(neg, held, strict=True)]
+            diag_f = [[ops.where(held[i], one, t.diag[i][i]) if i == k else
+                       ops.where(held[i] | held[k], 0.0, t.diag[i][k]) for k in range(d)]
+                      for i in range(d)]
+            nxt = [ops.cat([h[:, 1:], h[:, :1] & False], 1) for h in held]
+            off_f = [[ops.where(held[i] | nxt[k], 0.0, t.off[i][k]) for k in range(d)]
+                     for i in range(d)]
         if self.local:
             # block-wise modification where needed, plus the problem's shift (raised when
             # no step is acceptable)
             sc = ops.asarray(dscale)[:, None]
             shift = ops.asarray(self.delta[idx] * dscale)[:, None]
-            dg = [[t.diag[i][k] + shift if i == k else t.diag[i][k] for k in range(d)]
+            dg = [[diag_f[i][k] + shift if i == k else diag_f[i][k] for k in range(d)]
                   for i in range(d)]
             with np.errstate(all="ignore"):
-                sol, ok = block_tridiagonal_solve(ops, dg, t.off, neg, sc, local=True)
+                sol, ok = block_tridiagonal_solve(ops, dg, off_f, neg, sc, local=True)
             fin = ops.to_numpy(ok).astype(bool)
             for s in sol:
                 fin &= ops.to_numpy(_all_rows(ops, ops.isfinite(s))).astype(bool)
@@ -870,10 +915,10 @@ class NewtonState:
                 sub = ops.index(todo)
                 sc = ops.asarray(dscale[todo])[:, None]
                 shift = ops.asarray(delta[todo] * dscale[todo])[:, None]
-                dg = [[t.diag[i][k][sub] + shift if i == k else t.diag[i][k][sub]
+                dg = [[diag_f[i][k][sub] + shift if i == k else diag_f[i][k][sub]
                        for k in range(d)] for i in range(d)]
                 sol, ok = block_tridiagonal_solve(
-                    ops, dg, [[x[sub] for x in r] for r in t.off], [g[sub] for g in neg], sc)
+                    ops, dg, [[x[sub] for x in r] for r in off_f], [g[sub] for g in neg], sc)
                 ok = ops.to_numpy(ok).astype(bool)
                 for s in sol:
                     ok &= ops.to_numpy(_all_rows(ops, ops.isfinite(s))).astype(bool)
@@ -911,18 +956,30 @@ class NewtonState:
         def trial(rows: np.ndarray, a: float) -> Vec:
             kr = ops.index(rows)
             out = []
-            for p, s in zip(base, direction):
+            for i, (p, s) in enumerate(zip(base, direction)):
                 q = p[kr].clone() if ops.name == "torch" else p[kr].copy()
                 q[:, 1:-1] = q[:, 1:-1] + a * s[kr]
+                if self.box:  # projected onto the box (held coordinates do not move)
+                    q[:, 1:-1] = ops.clip(q[:, 1:-1], self.lo[i], self.hi[i])
                 out.append(q)
             return out
+
+        def decrease(rows: np.ndarray, pts: Vec, a: Any) -> np.ndarray:
+            """The Armijo model's decrease: ``a * slope``, or along the projection arc (box
+            domains) the gradient times the actual displacement."""
+            if not self.box:
+                return a * slope[rows]
+            kr = ops.index(rows)
+            dot = sum_(((q[:, 1:-1] - p[kr][:, 1:-1]) * g[kr]).sum(1)
+                       for q, p, g in zip(pts, base, t.grad, strict=True))
+            return ops.to_numpy(dot)
 
         def accept(rows: np.ndarray, pts: Vec, new: EnergyTerms, a: Any) -> None:
             kk = ops.index(idx[rows])
             for dst, src in zip(self.points, pts):
                 dst[kk] = src
             t.put(ops, rows, new)
-            self._update(idx[rows], new)
+            self._update(idx[rows], new, pts)
             moved[rows] = True
             alpha[rows] = a
 
@@ -940,7 +997,8 @@ class NewtonState:
                 fin = self._finite(new)
                 e1 = ops.to_numpy(new.energy)
                 ev = try_full[sel]
-                ok = fin & (slope[ev] < 0) & (e1 <= e0[ev] + opt.armijo * slope[ev])
+                dec = decrease(ev, pin, 1.0)
+                ok = fin & (slope[ev] < 0) & (e1 <= e0[ev] + opt.armijo * dec)
                 ok |= fin & (np.abs(e1 - e0[ev]) <= 1e-15 * np.abs(e0[ev]))  # round-off tie
                 if ok.any():
                     good = np.flatnonzero(ok)
@@ -959,8 +1017,8 @@ class NewtonState:
                 ki = ops.index(ins)
                 e[ins] = self._energies([p[ki] for p in allp])
             e = e.reshape(len(steps), ls.size)
-            good = (np.isfinite(e) & (e <= e0[ls][None] + opt.armijo
-                                      * np.asarray(steps)[:, None] * slope[ls][None]))
+            dec = np.stack([decrease(ls, tr, a) for tr, a in zip(trials, steps, strict=True)])
+            good = np.isfinite(e) & (e <= e0[ls][None] + opt.armijo * dec)
             left[ls[~inside.reshape(len(steps), ls.size)[0]]] = True
             has = good.any(0)
             if has.any():

@@ -183,8 +183,11 @@ def test_torch_device_path_equals_numpy() -> None:
 
 @dataclass(frozen=True)
 class _Cheaper(finsler.Metric):
-    """``F = exp(-3 x_0) |v|`` on ``[-1, 1]**2``: travel is cheaper to the right, so a
-    geodesic between two points near the right edge presses against it."""
+    """``F = exp(-3 x_0) |v|``: travel is cheaper to the right, so a geodesic between two
+    points near the domain's right side presses against it. On the box ``[-1, 1]**2``
+    or, with ``disk``, the unit disk."""
+
+    disk: bool = False
 
     name: ClassVar[str] = "test-cheaper-right"
     task: ClassVar[finsler.Task] = finsler.Task(depth=4, eps=0.5)
@@ -192,33 +195,46 @@ class _Cheaper(finsler.Metric):
 
     @property
     def domain(self) -> finsler.Domain:
-        return finsler.Box((-1.0, -1.0), (1.0, 1.0))
+        return finsler.Disk(1.0) if self.disk else finsler.Box((-1.0, -1.0), (1.0, 1.0))
 
     def F_sx(self, x: ca.SX, v: ca.SX) -> ca.SX:
         return ca.exp(-3.0 * x[0]) * ca.sqrt(ca.dot(v, v))
 
 
-def test_active_domain_constraint_is_finished_by_ipopt() -> None:
-    """A geodesic pressed against the domain's edge: the Newton steps keep leaving the
-    domain (status BOUNDARY), IPOPT finishes the pair: a converged result named ``ipopt``
-    with points on the edge, the same energy as IPOPT alone, and a small residual (the
-    projected gradient: the outward part at the edge dropped)."""
+def test_active_box_bound_projected_newton() -> None:
+    """A geodesic pressed against a box's edge (as a Panda path against a joint limit):
+    projected Newton holds the coordinates at the bound that the gradient pushes out and
+    converges by itself, to IPOPT's energy, with points on the edge and a residual (the
+    projected gradient) below 1e-10 where the plain gradient is O(1)."""
     m = _Cheaper()
     s, g = np.array([0.9, -0.8]), np.array([0.9, 0.8])
     ref = solvers.solve_geodesic(m, s, g, 16, method="ipopt")
     assert np.max(ref.points[:, 0]) > 1 - 1e-6  # the constraint is active
+    r = solvers.solve_geodesic(m, s, g, 16)
+    assert r.converged and r.method == "newton" and r.residual <= 1e-10
+    assert r.energy == pytest.approx(ref.energy, rel=1e-8)
+    assert np.sum(r.points[:, 0] == 1.0) >= 3
+    terms = energy_terms(m, _NUMPY_OPS, _to_field(_NUMPY_OPS, r.points[None]), hessian=False)
+    assert np.max(np.abs(np.stack(terms.grad, -1))) * 2.0 / r.energy > 1e-3
+    assert energy_residual(m, r.points[None], 2.0)[0] <= 1e-8
+
+
+def test_active_disk_constraint_is_finished_by_ipopt() -> None:
+    """The same pressed against the unit disk's rim: the Newton steps keep leaving the
+    disk (status BOUNDARY), IPOPT finishes the pair: a converged result named ``ipopt``
+    with points on the rim, IPOPT's energy, and a small projected residual."""
+    m = _Cheaper(disk=True)
+    s, g = np.array([0.8, -0.55]), np.array([0.8, 0.55])
+    ref = solvers.solve_geodesic(m, s, g, 16, method="ipopt")
+    assert np.max(np.linalg.norm(ref.points, axis=1)) > 1 - 1e-6  # the rim is active
     t = np.linspace(0, 1, 17)[:, None]
     alone = newton_energy(m, (s + t * (g - s))[None], scale=2.0)
     assert alone.status[0] == NewtonStatus.BOUNDARY
     r = solvers.solve_geodesic(m, s, g, 16)
     assert r.converged and r.method == "ipopt"
     assert r.energy == pytest.approx(ref.energy, rel=1e-8)
-    assert np.max(r.points[:, 0]) > 1 - 1e-6
     assert r.residual <= 1e-6
     assert energy_residual(m, r.points[None], 2.0)[0] == pytest.approx(r.residual)
-    # the plain gradient is far from zero there: only the projection makes it small
-    terms = energy_terms(m, _NUMPY_OPS, _to_field(_NUMPY_OPS, r.points[None]), hessian=False)
-    assert np.max(np.abs(np.stack(terms.grad, -1))) * 2.0 / r.energy > 1e-3
 
 
 def test_statuses_and_bad_input() -> None:
