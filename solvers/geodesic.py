@@ -25,14 +25,14 @@ from finsler.errors import InputError
 from finsler.files import OutputError, atomic_write_bytes
 from finsler.metric import Metric
 from finsler.pool import ProcessPool
-from solvers.batched import BatchOptions, PairSolution, covers, residuals, solve_pairs_batched
+from solvers.batched import BatchOptions, BatchSolution, covers, residuals, solve_pairs_batched
 from solvers.inputs import (
+    SHORT_PAIR,
     as_metric,
     check_pairs,
     check_point,
     check_segments,
     domain_scale,
-    is_short_pair,
 )
 from solvers.newton import backend_for
 from solvers.result import (
@@ -103,7 +103,12 @@ def _finish_many(metric: Metric, paths: np.ndarray) -> list[dict[str, Any]]:
     everywhere), first-order residual."""
     k, n1, dim = paths.shape
     costs = metric.path_costs(paths, check=False)
-    quad = metric.path_length_error(paths, check=False)  # adaptive, with its error
+    # adaptive quadrature with its error, in parts whose worst case fits the memory limit
+    step = max(1, QUAD_SEGMENTS // (n1 - 1))
+    parts = [metric.path_length_error(paths[a:a + step], check=False)
+             for a in range(0, k, step)]
+    quad_value = np.concatenate([np.atleast_1d(q.value) for q in parts])
+    quad_error = np.concatenate([np.atleast_1d(q.error) for q in parts])
     nonconvex = np.zeros(k, dtype=np.int64)
     if not metric.convex_everywhere:
         nonconvex = np.sum(metric.convexity(paths.reshape(-1, dim)).reshape(k, n1) < 0.0, 1)
@@ -112,8 +117,8 @@ def _finish_many(metric: Metric, paths: np.ndarray) -> list[dict[str, Any]]:
         "segment_costs": costs[i],
         "energy": float(np.sum(costs[i] ** 2)),
         "length": float(np.sum(costs[i])),
-        "length_quadrature": float(quad.value[i]),
-        "length_quadrature_error": float(quad.error[i]),
+        "length_quadrature": float(quad_value[i]),
+        "length_quadrature_error": float(quad_error[i]),
         "max_segment_cost": float(np.max(costs[i])),
         "nonconvex_points": int(nonconvex[i]),
         "residual": float(res[i]),
@@ -410,18 +415,15 @@ def _solve_pairs(m: Metric, pairs: np.ndarray, n: int, plan: SeedPlan,
     t0 = time.perf_counter()
     K = pairs.shape[0]
     out: list[GeodesicResult | None] = [None] * K
-    long_ = []
-    for k in range(K):
-        s, g = pairs[k, 0], pairs[k, 1]
-        if is_short_pair(m, s, g):
-            out[k] = _short_result(m, s, g, n, minmax)
-        else:
-            long_.append(k)
+    short = np.max(np.abs(pairs[:, 1] - pairs[:, 0]), axis=1) <= SHORT_PAIR * domain_scale(m)
+    long_ = [int(k) for k in np.flatnonzero(~short)]
+    for k in np.flatnonzero(short):
+        out[k] = _short_result(m, pairs[k, 0], pairs[k, 1], n, minmax)
     if long_ and method == "newton":
         opts = options or BatchOptions(device=device)
-        sols, _ = solve_pairs_batched(m, pairs[long_], n, plan, opts,
-                                      [given[k] for k in long_], global_seeds)
-        for k, r in zip(long_, _from_batch(m, sols, global_seeds), strict=True):
+        sol = solve_pairs_batched(m, pairs[long_], n, plan, opts, [given[k] for k in long_],
+                                  global_seeds)
+        for k, r in zip(long_, _from_batch(m, sol, global_seeds), strict=True):
             out[k] = r
     elif long_:
         for k in long_:
@@ -438,60 +440,78 @@ def _solve_pairs(m: Metric, pairs: np.ndarray, n: int, plan: SeedPlan,
     return res
 
 
-def _pick(m: Metric, sol: PairSolution, global_seeds: bool
-          ) -> tuple[_Solve, list[_Solve], int, int]:
-    """The answer for one pair of a batch: the lowest energy among the Newton-converged
-    candidates; candidates the Newton method could not finish (an active domain
-    constraint, a stall, the iteration cap) are finished by IPOPT when they could be
-    lower than that (or when none converged). Returns (best, every candidate's solve,
-    IPOPT iterations, candidates agreeing with the best)."""
-    cands = sol.final
-    best_ok = min((c.energy for c in cands if c.ok), default=np.inf)
-    solves: list[_Solve] = []
-    for c in cands:
-        if c.ok:
-            solves.append(_Solve(c.name, _onto_domain(m, c.points), Status.SUCCESS,
-                                 c.iterations, c.energy, True, "newton"))
-    unfinished = sorted((c for c in cands if not c.ok and np.isfinite(c.energy)
-                         and c.energy < best_ok), key=lambda c: c.energy)
-    if not solves and not unfinished:  # nothing finite: IPOPT from the raw candidates
-        unfinished = sorted(cands, key=lambda c: c.energy)
-    ipopt_its = 0
-    for c in unfinished[:3]:
-        r = _solve_warm(m, c.name, _onto_domain(m, c.points))
-        ipopt_its += max(r.iterations, 0)
-        solves.append(r)
-    ok = [r for r in solves if r.ok]
-    pool = ok or [r for r in solves if r.feasible and np.isfinite(r.energy)] or solves
-    best = min(pool, key=lambda r: r.energy)
-    agree = sol.seeds_agreeing
-    if not global_seeds:
-        agree = sum(1 for r in ok if abs(r.energy - best.energy)
-                    <= AGREE_RTOL * max(best.energy, 1e-300))
-    return best, solves, ipopt_its, agree
-
-
-def _from_batch(m: Metric, sols: list[PairSolution], global_seeds: bool
+def _from_batch(m: Metric, sol: BatchSolution, global_seeds: bool
                 ) -> list[GeodesicResult]:
-    """The results of a batch's pairs (:func:`_pick`), their figures computed at once."""
-    picks = [_pick(m, sol, global_seeds) for sol in sols]
-    figures = _finish_many(m, np.stack([p[0].points for p in picks]))
-    return [GeodesicResult(
-        metric=m.name,
-        points=best.points,
-        status=best.status,
-        iterations=sol.iterations + ipopt_its,
-        wall_time=0.0,
-        seeds_tried=sol.seeds_tried,
-        seeds_agreeing=agree,
-        seed_energies={r.name: (r.energy if r.status.converged else float("nan"))
-                       for r in solves},
-        best_seed=best.name,
-        levels=sol.levels,
-        method=best.method,
-        **fig,
-    ) for sol, (best, solves, ipopt_its, agree), fig in zip(sols, picks, figures,
-                                                           strict=True)]
+    """The results of a batch's pairs: per pair the lowest energy among its Newton-
+    converged rows; rows the Newton method could not finish (an active domain constraint,
+    a stall, the iteration cap) are finished by IPOPT when they could be lower than that
+    (or when none converged), from the three lowest. Figures computed for all pairs at
+    once."""
+    rows = sol.final
+    K = len(sol.best)
+    ok = rows.ok
+    per = sol.rows_of()
+    best_ok = np.full(K, np.inf)
+    np.minimum.at(best_ok, rows.pair[ok], rows.energy[ok])
+    lower = ~ok & np.isfinite(rows.energy) & (rows.energy < best_ok[rows.pair])
+    needs = np.zeros(K, bool)
+    needs[rows.pair[lower]] = True
+    needs |= ~np.isfinite(best_ok)
+    picked: list[_Solve | None] = [None] * K
+    extra: list[list[_Solve]] = [[] for _ in range(K)]
+    ipopt_its = np.zeros(K, dtype=np.int64)
+    for k in np.flatnonzero(needs):
+        mine = per[k]
+        cand = mine[lower[mine]] if lower[mine].any() else mine
+        cand = cand[np.argsort(rows.energy[cand])][:3]
+        for i in cand:
+            r = _solve_warm(m, rows.names[i], _onto_domain(m, rows.points[i]))
+            ipopt_its[k] += max(r.iterations, 0)
+            extra[k].append(r)
+        pool = ([r for r in extra[k] if r.ok and r.energy < best_ok[k]]
+                or ([] if np.isfinite(best_ok[k]) else
+                    [r for r in extra[k] if r.feasible and np.isfinite(r.energy)] or extra[k]))
+        if pool:
+            picked[k] = min(pool, key=lambda r: r.energy)
+    # the Newton answers: their points are in the domain up to 1e-12 of its size
+    newton = [k for k in range(K) if picked[k] is None]
+    if newton:
+        idx = sol.best[newton]
+        pts = np.asarray(m.domain.project(rows.points[idx].reshape(-1, m.dim)),
+                         dtype=np.float64).reshape(len(newton), -1, m.dim)
+        pts[:, 0], pts[:, -1] = rows.points[idx, 0], rows.points[idx, -1]
+        for j, k in enumerate(newton):
+            i = idx[j]
+            picked[k] = _Solve(rows.names[i], pts[j], Status.SUCCESS if ok[i] else
+                               Status.MAX_ITERATIONS, int(rows.iterations[i]),
+                               float(rows.energy[i]), True, "newton")
+    figures = _finish_many(m, np.stack([picked[k].points for k in range(K)]))
+    out = []
+    for k in range(K):
+        best = picked[k]
+        energies = {rows.names[i]: (float(rows.energy[i]) if ok[i] else float("nan"))
+                    for i in per[k]}
+        energies.update({r.name + ("~ipopt" if r.name in energies else ""):
+                         (r.energy if r.status.converged else float("nan")) for r in extra[k]})
+        agree = int(sol.seeds_agreeing[k])
+        if not global_seeds:
+            agree = sum(1 for e in energies.values() if np.isfinite(e) and abs(
+                e - best.energy) <= AGREE_RTOL * max(best.energy, 1e-300))
+        out.append(GeodesicResult(
+            metric=m.name,
+            points=best.points,
+            status=best.status,
+            iterations=int(sol.iterations[k] + ipopt_its[k]),
+            wall_time=0.0,
+            seeds_tried=int(sol.seeds_tried[k]),
+            seeds_agreeing=agree,
+            seed_energies=energies,
+            best_seed=best.name,
+            levels=sol.levels_of(k),
+            method=best.method,
+            **figures[k],
+        ))
+    return out
 
 
 def _solve_ipopt(m: Metric, s: np.ndarray, g: np.ndarray, n: int, plan: SeedPlan,
@@ -733,10 +753,21 @@ def _cached_metric(cls: type, items: tuple) -> Metric:
     return _METRICS[key]
 
 
-#: Pairs per batched Newton solve of :func:`solve_batch` (and per saved chunk): large
-#: enough that array operations dominate Python overhead (measured: time per pair flat
-#: from about 50 pairs on, ``benchmarks/peers.py --throughput``).
-NEWTON_CHUNK = 128
+#: Rows (pair x seed problems) per batched Newton solve of :func:`solve_batch`: enough
+#: that array operations dominate Python overhead (measured with ``benchmarks/peers.py
+#: --throughput``: Randers, 3 seeds per pair, 0.53 / 0.35 / 0.27 ms per pair with 192 /
+#: 384 / 1536 rows); the pairs of a chunk are saved together.
+NEWTON_ROWS = 16384
+#: Segments per call of the adaptive quadrature of the reported lengths (its worst-case
+#: memory is checked against the limit).
+QUAD_SEGMENTS = 4096
+
+
+def _chunk_pairs(plan: SeedPlan, global_seeds: bool) -> int:
+    """Pairs per batched chunk: :data:`NEWTON_ROWS` over the plan's seeds per pair."""
+    seeds = (1 + 2 * len(plan.bulges) + plan.random + int(plan.graph) + plan.restarts
+             if global_seeds else 1)
+    return int(np.clip(NEWTON_ROWS // max(seeds, 1), 16, 4096))
 #: ``solve_batch`` with the Newton method uses worker processes by default only from this
 #: many pairs on (starting a process costs seconds of imports).
 NEWTON_POOL_MIN = 1024
@@ -835,8 +866,8 @@ def solve_batch(
     (:func:`solve_geodesic`).
 
     ``method`` / ``device``: as in :func:`solve_geodesic`. With the batched Newton method
-    (the default where it covers the metric) the pairs are solved in chunks of
-    :data:`NEWTON_CHUNK` pairs, every (pair, seed) problem of a chunk in one batch; the
+    (the default where it covers the metric) the pairs are solved in chunks of about
+    :data:`NEWTON_ROWS` (pair, seed) problems, every problem of a chunk in one batch; the
     default ``workers`` is then 1 below :data:`NEWTON_POOL_MIN` pairs (the batch is
     vectorised; processes pay off only for many chunks), else the CPU count.
     """
@@ -885,7 +916,11 @@ def solve_batch(
         for k in range(arr.shape[0]):
             results[k] = store.load(k, arr[k], init_of(k))
     todo = [k for k in range(arr.shape[0]) if results[k] is None]
-    size = NEWTON_CHUNK if how == "newton" else 1
+    size = 1
+    if how == "newton":
+        size = _chunk_pairs(plan, bool(global_seeds))
+        if workers > 1:  # several chunks per worker: balanced, and finished work is kept
+            size = max(1, min(size, -(-len(todo) // (4 * workers))))
     chunks = [todo[i:i + size] for i in range(0, len(todo), size)]
     workers = int(min(workers, max(len(chunks), 1)))
     spec = _metric_spec(m)
