@@ -80,7 +80,8 @@ against the exact distance (Randers), failures. On the first ``--quality-pairs``
 pairs the reference is stricter: the lowest energy of every run, including the project's
 IPOPT default of the landed code (``method="ipopt"``) and ``--reference-rounds`` wide
 Newton multistarts (78 starts at the full size and 30 restarts each, seeds 0, 1, ...).
-Last, the project's time per pair against the batch size.
+Last, the project's time per pair against the batch size. Every time is the median of
+``--repeats`` runs.
 
 A peer whose interpreter is missing or fails to import is skipped with the reason printed.
 The same file is the peers' worker (``--worker geomstats|finslerax``, JSON on stdin): only
@@ -302,11 +303,15 @@ def _finslerax_throughput(job: dict, metric: Any, jax: Any, eqx: Any, gn_cls: An
         lambda u, w: solver.solve(m, u, w, n_steps=n, train_mode=False).xs)(a, b))
     xs, ys = pairs[:, 0], pairs[:, 1]
     _, setup, _ = _timed(lambda: batched(metric, xs, ys).block_until_ready())
-    c0 = time.process_time()
-    out, sec, err = _timed(lambda: np.asarray(batched(metric, xs, ys).block_until_ready()))
-    cpu = time.process_time() - c0
+    secs, cpus = [], []
+    for _ in range(int(job.get("repeats", 1))):
+        c0 = time.process_time()
+        out, sec, err = _timed(lambda: np.asarray(batched(metric, xs, ys)
+                                                  .block_until_ready()))
+        secs.append(sec)
+        cpus.append(time.process_time() - c0)
     return {"peer": "finslerax", "version": version, "check": check, "setup": setup,
-            "seconds": sec, "cpu": cpu, "error": err,
+            "seconds": float(np.median(secs)), "cpu": float(np.median(cpus)), "error": err,
             "paths": None if out is None else out.tolist()}
 
 
@@ -620,6 +625,8 @@ def summarise(name: str, rows: list[dict], exact: bool | None) -> list[str]:
 
 
 def _ms(sec: float) -> str:
+    if sec < 1e-3:
+        return f"{sec * 1e3:.3f} ms"
     return f"{sec * 1e3:.1f} ms" if sec < 1 else f"{sec:.2f} s"
 
 
@@ -657,8 +664,8 @@ def throughput(args: Any, ap: Any) -> None:
     from solvers.seeding import SeedPlan
 
     K, Q = args.throughput_pairs, min(args.quality_pairs, args.throughput_pairs)
-    if K < 1 or args.reference_rounds < 0:
-        ap.error("--throughput-pairs must be >= 1 and --reference-rounds >= 0")
+    if K < 1 or args.reference_rounds < 0 or args.repeats < 1:
+        ap.error("--throughput-pairs and --repeats must be >= 1, --reference-rounds >= 0")
     sizes = sorted({int(x) for x in args.batch_sizes.split(",") if x.strip()})
     head = (f"{'method':<44} {'pairs':>5} {'wall/pair':>10} {'CPU/pair':>9} {'setup':>8} "
             f"{'<=1e-4':>6} {'<=1e-6':>5} {'>1e-3':>5} {'fail':>4}")
@@ -667,15 +674,18 @@ def throughput(args: Any, ap: Any) -> None:
         pairs = make_pairs(name, m, K, args.seed)
         warm = make_pairs(name, m, 2, args.seed + 99)
         solvers.solve_batch(m, warm, n, workers=1, progress=False)  # lowering, graph
-        res, wall, cpu = _timed_solve(lambda m=m, pairs=pairs, n=n: solvers.solve_batch(
-            m, pairs, n, workers=1, progress=False))
+        runs = [_timed_solve(lambda m=m, pairs=pairs, n=n: solvers.solve_batch(
+            m, pairs, n, workers=1, progress=False)) for _ in range(args.repeats)]
+        res = runs[0][0]
+        wall = float(np.median([r[1] for r in runs]))
+        cpu = float(np.median([r[2] for r in runs]))
         ours = np.array([r.energy for r in res])
         methods = {k: sum(r.method == k for r in res) for k in ("newton", "ipopt", "none")}
         rows = [("project solve_batch (batched Newton)", K, wall, cpu, 0.0, ours)]
         check = np.stack([make_pairs(name, m, 8, args.seed + 2)[:, 0],
                           np.random.default_rng(args.seed + 1).normal(size=(8, 2))], 1)
         job = {"metric": name, "task": "throughput", "pairs": pairs.tolist(), "segments": n,
-               "check": check.tolist(),
+               "check": check.tolist(), "repeats": args.repeats,
                "params": {"randers": {"wind": list(WIND)},
                           "matsumoto": {"height": HEIGHT}}[name]}
         fx = run_peer("finslerax", args.finslerax_python, job)
@@ -743,8 +753,10 @@ def throughput(args: Any, ap: Any) -> None:
         for b in sizes:
             if b > K:
                 continue
-            _, w, c = _timed_solve(lambda m=m, pairs=pairs, n=n, b=b: solvers.solve_batch(
-                m, pairs[:b], n, workers=1, progress=False))
+            reps = [_timed_solve(lambda m=m, pairs=pairs, n=n, b=b: solvers.solve_batch(
+                m, pairs[:b], n, workers=1, progress=False)) for _ in range(args.repeats)]
+            w = float(np.median([r[1] for r in reps]))
+            c = float(np.median([r[2] for r in reps]))
             print(f"   batch {b:>5}: {_ms(w / b):>9} wall, {_ms(c / b):>9} CPU per pair")
         print(flush=True)
 
@@ -769,6 +781,8 @@ def main() -> None:
     ap.add_argument("--reference-rounds", type=int, default=3,
                     help="wide multistarts in the Matsumoto reference (default 3)")
     ap.add_argument("--batch-sizes", default="1,10,100,1000")
+    ap.add_argument("--repeats", type=int, default=3,
+                    help="timed runs per throughput row; the median is printed (default 3)")
     ap.add_argument("--json", type=Path, help="also write every per-pair record here")
     args = ap.parse_args()
     if args.worker:
