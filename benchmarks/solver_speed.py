@@ -137,14 +137,17 @@ FRESH_SEED = 8123
 SCALE_SEED = 1411
 
 
-def fresh_plans(m: finsler.Metric) -> dict[str, SeedPlan]:
-    """The plans compared on fresh pairs: the default, the previous default (8 seeds at
-    the full size) and the 50-seed reference (all at the full size)."""
+def fresh_plans(m: finsler.Metric) -> dict[str, tuple[SeedPlan, str]]:
+    """The plans (and methods) compared on fresh pairs: the default (the batched Newton
+    method), IPOPT with its default plan, an older default (8 seeds at the full size) and
+    the 50-seed reference (all at the full size)."""
     return {
-        "default": SeedPlan.default(m),
-        "8 seeds, full size (previous default)": SeedPlan(bulges=(0.25, 0.6), random=2),
-        "50 seeds, full size (reference)": SeedPlan(
-            bulges=(0.1, 0.2, 0.3, 0.45, 0.6, 0.8), random=36),
+        "default (batched Newton)": (SeedPlan.default(m), "auto"),
+        "IPOPT default plan": (SeedPlan.default(m, "ipopt"), "ipopt"),
+        "8 seeds, full size (older default)": (SeedPlan(bulges=(0.25, 0.6), random=2),
+                                               "auto"),
+        "50 seeds, full size (reference)": (SeedPlan(
+            bulges=(0.1, 0.2, 0.3, 0.45, 0.6, 0.8), random=36), "auto"),
     }
 
 
@@ -161,14 +164,16 @@ def run_fresh(k: int, cache: str | None, seed: int = FRESH_SEED) -> None:
             if np.array_equal(z["pairs"], pairs):
                 stored = {key[2:]: z[key] for key in z.files if key.startswith("e:")}
     rows = []
-    for name, plan in fresh_plans(m).items():
-        key = repr(plan)
+    for name, (plan, method) in fresh_plans(m).items():
+        key = repr((plan, method))
         if key in stored and "t:" + key in stored:
             e, times = stored[key], stored["t:" + key]
         else:
-            solve_batch(m, pairs[:2], n, seeds=plan, workers=2, progress=False)  # warm-up
+            solve_batch(m, pairs[:2], n, seeds=plan, workers=2, progress=False,
+                        method=method)  # warm-up
             t0 = time.perf_counter()
-            res = solve_batch(m, pairs, n, seeds=plan, workers=2, progress=False)
+            res = solve_batch(m, pairs, n, seeds=plan, workers=2, progress=False,
+                              method=method)
             wall = time.perf_counter() - t0
             e = np.array([r.energy for r in res])
             times = np.array([wall / k, float(np.median([r.wall_time for r in res]))])
