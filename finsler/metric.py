@@ -164,7 +164,11 @@ class Metric(ABC):
     * ``smooth``: ``F`` is smooth on ``TM \\ 0``;
     * ``convex_everywhere``: ``F(x, .)`` is convex at every point of the domain
       (for ``smooth`` metrics: strongly convex, i.e. Finsler);
-    * ``convexity_note``: a sentence for docs and the CLI.
+    * ``convexity_note``: a sentence for docs and the CLI;
+    * ``unique_geodesics``: every two points of the domain are joined by exactly one
+      geodesic, which is the shortest curve (e.g. a constant norm, a Hadamard manifold, a
+      cap smaller than a hemisphere): solvers then need no global seeding (the straight
+      line converges to it). Declare it only where it is a theorem for every parameter.
     """
 
     name: ClassVar[str]
@@ -173,6 +177,7 @@ class Metric(ABC):
     smooth: ClassVar[bool] = True
     convex_everywhere: ClassVar[bool] = True
     convexity_note: ClassVar[str] = "Finsler (strongly convex) on the whole domain"
+    unique_geodesics: ClassVar[bool] = False
 
     # -- to implement -------------------------------------------------------------------
     @property

@@ -96,11 +96,12 @@ def _finish(metric: Metric, points: np.ndarray) -> dict[str, Any]:
     return _finish_many(metric, points[None])[0]
 
 
-def _finish_many(metric: Metric, paths: np.ndarray) -> list[dict[str, Any]]:
+def _finish_many(metric: Metric, paths: np.ndarray, residual: np.ndarray | None = None
+                 ) -> list[dict[str, Any]]:
     """The reported figures of paths ``(K, n+1, dim)``, all evaluated at once: segment
     costs, energy, length, the polyline's length by adaptive quadrature with its error,
     largest segment cost, points where ``F`` is not convex (metrics not convex
-    everywhere), first-order residual."""
+    everywhere), first-order residual (``residual``: known ones, NaN where unknown)."""
     k, n1, dim = paths.shape
     costs = metric.path_costs(paths, check=False)
     # adaptive quadrature with its error, in parts whose worst case fits the memory limit
@@ -112,17 +113,17 @@ def _finish_many(metric: Metric, paths: np.ndarray) -> list[dict[str, Any]]:
     nonconvex = np.zeros(k, dtype=np.int64)
     if not metric.convex_everywhere:
         nonconvex = np.sum(metric.convexity(paths.reshape(-1, dim)).reshape(k, n1) < 0.0, 1)
-    res = residuals(metric, paths)
-    return [{
-        "segment_costs": costs[i],
-        "energy": float(np.sum(costs[i] ** 2)),
-        "length": float(np.sum(costs[i])),
-        "length_quadrature": float(quad_value[i]),
-        "length_quadrature_error": float(quad_error[i]),
-        "max_segment_cost": float(np.max(costs[i])),
-        "nonconvex_points": int(nonconvex[i]),
-        "residual": float(res[i]),
-    } for i in range(k)]
+    res = np.full(k, np.nan) if residual is None else np.asarray(residual, dtype=float)
+    unknown = np.flatnonzero(~np.isfinite(res))
+    if unknown.size:
+        res[unknown] = residuals(metric, paths[unknown])
+    columns = zip(np.sum(costs**2, 1).tolist(), np.sum(costs, 1).tolist(),
+                  quad_value.tolist(), quad_error.tolist(), np.max(costs, 1).tolist(),
+                  np.asarray(nonconvex).tolist(), res.tolist(), strict=True)
+    return [{"segment_costs": costs[i], "energy": e, "length": length,
+             "length_quadrature": qv, "length_quadrature_error": qe, "max_segment_cost": mx,
+             "nonconvex_points": nc, "residual": r}
+            for i, (e, length, qv, qe, mx, nc, r) in enumerate(columns)]
 
 
 def _onto_domain(m: Metric, pts: np.ndarray) -> np.ndarray:
@@ -485,7 +486,11 @@ def _from_batch(m: Metric, sol: BatchSolution, global_seeds: bool
             picked[k] = _Solve(rows.names[i], pts[j], Status.SUCCESS if ok[i] else
                                Status.MAX_ITERATIONS, int(rows.iterations[i]),
                                float(rows.energy[i]), True, "newton")
-    figures = _finish_many(m, np.stack([picked[k].points for k in range(K)]))
+    # the Newton method's residual is the same measure (at points in the domain to 1e-12)
+    known = np.full(K, np.nan)
+    if newton:
+        known[newton] = rows.residual[sol.best[newton]]
+    figures = _finish_many(m, np.stack([picked[k].points for k in range(K)]), known)
     out = []
     for k in range(K):
         best = picked[k]

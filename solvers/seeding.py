@@ -116,7 +116,8 @@ class SeedPlan:
         the metric can do, never by its name.
 
         A metric may define ``seed_plan()`` returning a :class:`SeedPlan` (a hook); else:
-        high dimension (> 3) -> a few random curves and the roadmap, coarse size 32; not
+        a metric that declares ``unique_geodesics`` -> the straight line alone; high
+        dimension (> 3) -> a few random curves and the roadmap, coarse size 32; not
         smooth (e.g. car-like: kinks that the energy penalises in one long segment) ->
         four bulge amplitudes and four random curves, coarse size 256 (IPOPT only); not
         convex everywhere (e.g. Matsumoto: local minima round the hill, near-equal discrete
@@ -139,6 +140,9 @@ class SeedPlan:
                                  f"SeedPlan, got {type(plan).__name__}")
             return plan
         newton = method == "newton" or (method == "auto" and metric.smooth)
+        if metric.unique_geodesics:
+            # one geodesic joins every two points: the straight line converges to it
+            return SeedPlan(bulges=(), random=0, graph=False)
         if metric.dim > 3:
             # measured on 10 Panda pairs (n = 32): coarse 8 missed the best energy by up to
             # 6.6% on 2 pairs and saved no time; 32 keeps the task size exact

@@ -111,6 +111,12 @@ class RenamedPoincare(Poincare):
 
 
 @dataclasses.dataclass(frozen=True)
+class NotUniquePoincare(Poincare):
+    name: ClassVar[str] = "poincare-no-claim"
+    unique_geodesics: ClassVar[bool] = False
+
+
+@dataclasses.dataclass(frozen=True)
 class HookedPoincare(Poincare):
     name: ClassVar[str] = "hooked"
 
@@ -127,6 +133,15 @@ def test_default_plan_follows_capabilities_not_names() -> None:
     car, panda = finsler.get_metric("carlike"), finsler.get_metric("panda-pole")
     assert not car.smooth and len(SeedPlan.default(car).bulges) == 4
     assert panda.dim > 3 and SeedPlan.default(panda).coarse == 32
+    # one geodesic between any two points: the straight line alone; without that
+    # declaration the same F gets the convex-smooth plan (a bulge each side)
+    assert poin.unique_geodesics and SeedPlan.default(poin) == SeedPlan(
+        bulges=(), random=0, graph=False)
+    assert SeedPlan.default(NotUniquePoincare()).bulges == (0.3,)
+    # the batched Newton method and IPOPT each have their plan for non-convex metrics
+    assert SeedPlan.default(mats, "newton") != SeedPlan.default(mats, "ipopt")
+    assert SeedPlan.default(mats) == SeedPlan.default(mats, "newton")  # auto: smooth F
+    assert SeedPlan.default(car) == SeedPlan.default(car, "ipopt")
     import inspect
 
     import solvers.seeding
