@@ -336,6 +336,26 @@ class TrainConfig(MetricConfig):
     """Pairs searched per collection when ``route_candidates > 0``."""
     route_weight: float = 1.0
     """Weight of the squared distance of the actor's mean to a better route's midpoint."""
+    # -- expert iteration (learn.expert): the policy learns what the route search finds --
+    expert_weight: float = 0.0
+    """Beyond the paper, model-free (values of C only; 0 = off): weight of the actor's
+    imitation of the route search's paths (``learn.expert.SearchImitation``): every
+    ``expert_every`` collections ``expert_pairs`` fresh pairs are searched from the
+    policy's own paths; the searched paths' tree midpoints are the actor's targets, their
+    sub-path costs the critic's (every evaluation of C the search makes is counted)."""
+    expert_pairs: int = 64
+    """Pairs searched per expert-iteration round."""
+    expert_every: int = 1
+    """Collections between expert-iteration rounds."""
+    expert_search: str = "local"
+    """The teacher: ``local`` (the route search's windows and equalizing rounds only) or
+    ``full`` (the whole route search, ``learn.SearchSpec()``)."""
+    expert_levels: int = 0
+    """Top levels of the searched paths' midpoint trees used as actor targets (0: all)."""
+    expert_keep: int = 4
+    """Rounds of targets kept (a replay buffer)."""
+    expert_critic: bool = True
+    """Add the searched sub-paths' costs to the critic's data."""
     eval_every: int = 50
     """Iterations (collections) between evaluations on the validation pair set; each
     evaluation also writes the latest checkpoint (deterministic resume points)."""
@@ -360,7 +380,8 @@ class TrainConfig(MetricConfig):
         check_choice("activation", self.activation, _ACTIVATIONS)
         check_choice("path_energy_scale", self.path_energy_scale, _ENERGY_SCALES)
         for name in ("timesteps", "minibatch_size", "collection_size", "epochs", "threads",
-                     "eval_every", "eval_pairs", "path_energy_pairs", "route_pairs"):
+                     "eval_every", "eval_pairs", "path_energy_pairs", "route_pairs",
+                     "expert_pairs", "expert_every", "expert_keep"):
             v = getattr(self, name)
             if not isinstance(v, int) or isinstance(v, bool) or v < 1:
                 raise InputError(f"{name} must be a positive integer, got {v!r}")
@@ -382,6 +403,14 @@ class TrainConfig(MetricConfig):
             raise InputError(f"route_weight must be finite and >= 0, got {self.route_weight!r}")
         if not (0.0 <= self.explore_std < float("inf")):
             raise InputError(f"explore_std must be finite and >= 0, got {self.explore_std!r}")
+        check_choice("expert_search", self.expert_search, ("local", "full"))
+        if not (0.0 <= self.expert_weight < float("inf")):
+            raise InputError(f"expert_weight must be finite and >= 0, got "
+                             f"{self.expert_weight!r}")
+        if not isinstance(self.expert_levels, int) or isinstance(
+                self.expert_levels, bool) or self.expert_levels < 0:
+            raise InputError(f"expert_levels must be an integer >= 0, got "
+                             f"{self.expert_levels!r}")
         if not (0.0 <= self.path_energy_weight < float("inf")):
             raise InputError("path_energy_weight must be finite and >= 0, got "
                              f"{self.path_energy_weight!r}")

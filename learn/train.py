@@ -171,6 +171,7 @@ class Trainer:
             },
             "best": dict(self.best),
             "history": [dict(r) for r in self.history],
+            "terms": {t.name: st for t in self.terms if (st := t.state()) is not None},
         }
 
     def _load_state(self, st: dict[str, Any]) -> None:
@@ -189,6 +190,9 @@ class Trainer:
             self.skipped_steps = int(c.get("skipped_steps", 0))
             self.wall_before = float(c["wall_seconds"])
             self.best = dict(st["best"])
+            for t in self.terms:
+                if t.name in st.get("terms", {}):
+                    t.load(st["terms"][t.name], self.device)
         except (KeyError, RuntimeError, TypeError, ValueError) as err:
             raise CorruptFileError(
                 f"checkpoint {self.run_dir / LATEST_FILE} does not match the run: {err}"
@@ -241,10 +245,16 @@ class Trainer:
         """``epochs`` passes of minibatch updates: critic (eq. 5), then actor (the method's
         loss, eq. 6 / 17 / 18, plus the extra terms of :mod:`learn.methods`). Adds the
         terms' evaluations of C to the counters."""
-        s32, g32 = s.float(), g.float()
-        target = self.critic.to_raw(c).float()
         for term in self.terms:
             self.timesteps += term.prepare(self)
+        # terms may add critic data of their own (expert iteration: searched sub-paths)
+        extra = [d for d in (term.critic_data(self) for term in self.terms) if d is not None]
+        if extra:
+            s = torch.cat([s, *(d[0] for d in extra)])
+            g = torch.cat([g, *(d[1] for d in extra)])
+            c = torch.cat([c, *(d[2] for d in extra)])
+        s32, g32 = s.float(), g.float()
+        target = self.critic.to_raw(c).float()
         n = s.shape[0]
         mb = self.cfg.minibatch_size
         lc_sum = la_sum = 0.0
