@@ -7,7 +7,6 @@ Every command calls public functions of ``finsler``, ``solvers``, ``learn`` or
 from __future__ import annotations
 
 import importlib
-import json
 import sys
 from typing import Annotated
 
@@ -19,6 +18,7 @@ from validation.cli_common import (
     MetricModuleOption,
     MetricParamOption,
     fail,
+    json_text,
     metric_from_options,
     parse_point,
 )
@@ -39,7 +39,7 @@ def metrics_command(
     """List the registered metrics with their domains and task defaults."""
     rows = [finsler.get_metric(n).info() for n in finsler.list_metrics()]
     if as_json:
-        typer.echo(json.dumps(rows, indent=2))
+        typer.echo(json_text(rows))
         return
     head = ("name", "dim", "domain", "D", "eps", "reversible", "convexity")
     table = [head] + [
@@ -116,7 +116,7 @@ def cost_command(
     for w in warnings:
         typer.echo(f"warning: {w}", err=True)
     if as_json:
-        typer.echo(json.dumps(out, indent=2))
+        typer.echo(json_text(out))
     else:
         typer.echo(f"C(start, goal)           = {out['cost']:.12g}")
         typer.echo(f"symmetric C (eq. 59)     = {out['cost_symmetric']:.12g}")
