@@ -398,6 +398,32 @@ def test_all_inclusive_count_equals_a_hand_count(tmp_path, monkeypatch) -> None:
     assert result["timesteps"] == 3912 and result["stopped_by"] == "timesteps"
 
 
+def test_hand_count_with_two_epochs_counts_the_terms_in_every_epoch(tmp_path,
+                                                                     monkeypatch) -> None:
+    """As above with epochs=2: the collection (trees 344, route search 640, made once per
+    iteration) is counted once, the path-energy term at each of its 2 x 5 steps:
+    10 * 8 pairs * 8 segments = 640. Per iteration 344 + 640 + 640 = 1624; the budget
+    3000 stops after 2 iterations at 3248. A count made in the first epoch only (320)
+    would give 1304 per iteration; the spy sees every torch evaluation of C."""
+    seen = [0]
+    real = finsler.Metric.path_costs
+
+    def spy(self, points, check=None):
+        if isinstance(points, torch.Tensor):
+            seen[0] += points.shape[0] * (points.shape[1] - 1)
+        return real(self, points, check=check)
+
+    monkeypatch.setattr(finsler.Metric, "path_costs", spy)
+    cfg = _small(timesteps=3000, epochs=2, eval_every=1, path_energy_weight=1.0,
+                 path_energy_pairs=8, route_candidates=4, route_pairs=16)
+    res = learn.train(cfg, tmp_path / "r", progress=False)
+    rows = res.history
+    assert [r["timesteps"] for r in rows] == [0, 1624, 3248]
+    assert [r["timesteps_paper"] for r in rows] == [0, 344, 688]
+    assert [r["timesteps_derivative"] for r in rows] == [0, 640, 1280]
+    assert seen[0] == 3248
+
+
 def test_best_checkpoint_is_chosen_on_the_validation_set(tmp_path, monkeypatch) -> None:
     """Training never touches the default evaluation set; checkpoint_best's recorded
     success is the success of that checkpoint on the validation pairs."""
