@@ -37,7 +37,12 @@ def metrics_command(
     as_json: Annotated[bool, typer.Option("--json", help="Print JSON instead of a table.")] = False,
 ) -> None:
     """List the registered metrics with their domains and task defaults."""
-    rows = [finsler.get_metric(n).info() for n in finsler.list_metrics()]
+    rows = []
+    for n in finsler.list_metrics():
+        try:
+            rows.append(finsler.get_metric(n).info())
+        except Exception as err:  # a user's metric (registered by a module) may be broken
+            fail(f"metric {n!r} cannot be described: {type(err).__name__}: {err}")
     if as_json:
         typer.echo(json_text(rows))
         return
