@@ -12,6 +12,7 @@ import typer
 import finsler
 from finsler.errors import InputError, short
 from finsler.modules import import_user_module
+from validation.jsonout import jsonable
 
 __all__ = [
     "METRIC_MODULE_HELP",
@@ -63,26 +64,10 @@ def fail(message: str, code: int = 2) -> None:
     raise typer.Exit(code=code)
 
 
-def _finite(o: Any) -> Any:
-    if isinstance(o, dict):
-        return {str(k): _finite(v) for k, v in o.items()}
-    if isinstance(o, (list, tuple)):
-        return [_finite(v) for v in o]
-    if isinstance(o, np.ndarray):
-        return _finite(o.tolist())
-    if isinstance(o, (bool, np.bool_)):
-        return bool(o)
-    if isinstance(o, (int, np.integer)):
-        return int(o)
-    if isinstance(o, (float, np.floating)):
-        return float(o) if np.isfinite(o) else None
-    return o
-
-
 def json_text(doc: Any, indent: int | None = 2) -> str:
     """Standard JSON of a command's result: numpy values as Python ones, and NaN or
     infinite numbers (which JSON cannot hold) as ``null``."""
-    return json.dumps(_finite(doc), indent=indent, allow_nan=False)
+    return json.dumps(jsonable(doc), indent=indent, allow_nan=False)
 
 
 def parse_point(text: str, dim: int, what: str) -> np.ndarray:

@@ -35,6 +35,7 @@ import solvers
 from finsler import Metric, load_pairs
 from finsler.errors import InputError
 from validation.comparison import Comparison, compare, midpoint_error, ratio_stats
+from validation.jsonout import jsonable
 
 __all__ = ["build_report", "load_report_policy", "read_learning_curve", "write_figures"]
 
@@ -529,7 +530,7 @@ def _build_report(env: str | None, out: Path, *, run: str | Path | None,
     if cmp.searched is not None:
         doc["summary"]["searched_success"] = doc["success_rate"]["searched"]
         doc["summary"]["searched_ratio"] = ratio_stats(cmp.ratios("searched"))
-    doc = _clean(doc)
+    doc = jsonable(doc)
     from learn.storage import atomic_write_text
 
     atomic_write_text(out / "report.json", json.dumps(doc, indent=2, allow_nan=False))
@@ -572,20 +573,3 @@ def certified_intervals(cmp: Comparison, metric: Metric, count: int, quick: bool
                 row[f"{w}_excess_bound"] = up / c.lower - 1.0
         rows.append(row)
     return {"mesh": mesh, "pairs": rows}
-
-
-def _clean(o: Any) -> Any:
-    """JSON-ready copy: numpy scalars/arrays to Python, non-finite floats to ``None``."""
-    if isinstance(o, dict):
-        return {str(k): _clean(v) for k, v in o.items()}
-    if isinstance(o, (list, tuple)):
-        return [_clean(v) for v in o]
-    if isinstance(o, np.ndarray):
-        return _clean(o.tolist())
-    if isinstance(o, (np.bool_, bool)):
-        return bool(o)
-    if isinstance(o, (np.integer, int)):
-        return int(o)
-    if isinstance(o, (np.floating, float)):
-        return float(o) if math.isfinite(float(o)) else None
-    return o
