@@ -145,7 +145,7 @@ def invocations(draw: st.DrawFn) -> list[str]:
 def declared_outputs(args: list[str]) -> list[str]:
     outs = [args[i + 1] for i, a in enumerate(args[:-1]) if a in OUTPUT_OPTIONS]
     if args[0] == "plot-curves":  # the figure's numbers go beside it
-        outs += [str(Path(o).with_suffix(".csv")) for o in outs if o]
+        outs += [str(Path(o).with_suffix(".csv")) for o in outs if Path(o).name]
     return outs
 
 
