@@ -85,11 +85,14 @@ class Domain(ABC):
         """Validate shape and finiteness, and raise :class:`DomainError` if outside."""
         xb = _as_batch(x, self.dim, name)
         xn = xb.detach().cpu().numpy() if is_torch(xb) else xb
-        inside = self.contains(xn, tol=tol)
+        with np.errstate(over="ignore", invalid="ignore"):  # huge coordinates are outside
+            inside = self.contains(xn, tol=tol)
         if not np.all(inside):
             bad = int(np.flatnonzero(~inside)[0])
             point = "(" + ", ".join(repr(float(v)) for v in xn[bad]) + ")"  # full precision
             where = f"{name} row {bad}" if xn.shape[0] > 1 else name
+            if len(point) > 160:  # many coordinates: the first few
+                point = point[:150] + "...)"
             raise DomainError(f"{where} = {point} lies outside the domain {self.describe()}")
         return xn
 

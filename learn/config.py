@@ -10,7 +10,6 @@ with the toolkit (chosen to reach the issue's bars on a 2-core CPU);
 from __future__ import annotations
 
 import dataclasses
-import importlib
 import json
 import math
 import platform
@@ -19,7 +18,8 @@ from typing import Any
 
 import finsler
 from finsler.errors import InputError
-from learn.base import RunConfig, check_choice
+from finsler.modules import import_user_module
+from learn.base import RunConfig, check_choice, check_hidden
 from learn.methods import derivative_terms, describe
 
 __all__ = [
@@ -79,10 +79,9 @@ def _import_metric_class(env: str, path: str) -> None:
             "cannot be re-imported: register it (run the code defining it) before loading "
             "the run, or move the class into a module")
     try:
-        mod = importlib.import_module(module)
-    except ImportError as err:
-        raise InputError(f"metric {env!r} is class {path}, whose module cannot be imported "
-                         f"({err}); {advice}") from err
+        mod = import_user_module(module, f"metric {env!r}: module")
+    except InputError as err:
+        raise InputError(f"{err}; {advice}") from err
     obj: Any = mod
     for part in qualname.split("."):
         obj = getattr(obj, part, None)
@@ -249,8 +248,9 @@ class TrainConfig(MetricConfig):
     """Actor loss: ``midpoint`` (eq. 6), ``inter`` (eq. 17) or ``two-to-one`` (eq. 18)."""
     timesteps: int = 20_000_000
     """Budget T of evaluations of C, all-inclusive: the collected trees (the paper's
-    timesteps) and every evaluation an extra actor term makes; also the horizon of the
-    learning-rate schedule and of the paper's depth schedule."""
+    timesteps) and every evaluation an extra actor term makes, in every epoch; also the
+    horizon of the learning-rate schedule and of the paper's depth schedule. The
+    evaluations of the validation set that select checkpoints are not counted."""
     minutes: float | None = None
     """Optional wall-clock limit; training stops at whichever limit comes first."""
     seed: int = 0
@@ -391,8 +391,7 @@ class TrainConfig(MetricConfig):
             raise InputError(f"depth must be a positive integer, got {self.depth!r}")
         if self.eps is not None and not (self.eps > 0 and self.eps < float("inf")):
             raise InputError(f"eps must be positive and finite, got {self.eps!r}")
-        if not self.hidden or any(h < 1 for h in self.hidden):
-            raise InputError(f"hidden sizes must be positive, got {self.hidden!r}")
+        check_hidden(self.hidden)
         if not (self.lr > 0 and self.lr < 1):
             raise InputError(f"lr must be in (0, 1), got {self.lr!r}")
         if not (0 < self.lr_final_fraction <= 1):
@@ -554,7 +553,9 @@ def config_json(cfg: TrainConfig) -> str:
         "metric": metric_info(cfg),
         "task": {"depth": cfg.max_depth, "eps": cfg.eval_eps, "segments": 2**cfg.max_depth},
         **describe(cfg),
-        "counts": "timesteps = every evaluation of C made in training (all-inclusive); "
+        "counts": "timesteps = every evaluation of C made to learn (all-inclusive: trees "
+                  "and every extra term, in every epoch; the validation evaluations that "
+                  "select checkpoints are not counted); "
                   "timesteps_paper = evaluations in collected trees (the paper's count); "
                   "timesteps_derivative = evaluations whose derivative was used",
         "selection": f"checkpoint_best by success on finsler.validation_pairs (seed "

@@ -58,7 +58,7 @@ from stable_baselines3.common.vec_env.base_vec_env import VecEnv
 
 import finsler
 from finsler.errors import InputError
-from learn.base import StopOnSignal, TrainResult, finish_run
+from learn.base import StopOnSignal, TrainResult, check_hidden, finish_run
 from learn.config import (
     MetricConfig,
     check_run_metric,
@@ -579,8 +579,7 @@ class SeqConfig(MetricConfig):
         if not (0 < self.max_grad_norm < math.inf):
             raise InputError(f"max_grad_norm must be positive and finite, got "
                              f"{self.max_grad_norm!r}")
-        if not self.hidden or any(h < 1 for h in self.hidden):
-            raise InputError(f"hidden sizes must be positive, got {self.hidden!r}")
+        check_hidden(self.hidden)
         if self.activation not in ("tanh", "relu"):
             raise InputError(f"activation must be one of tanh, relu; got {self.activation!r}")
         if self.n_envs * self.n_steps < 2:

@@ -626,7 +626,7 @@ def _solve_to_tol(m: Metric, start: Any, goal: Any, n: int, tol: Any, max_segmen
     while True:
         le = m.path_length_error(res.points, rtol=0.05 * float(tol))
         levels.append({"segments": res.segments, "length": float(le.value),
-                       "quadrature_error": float(le.error), "status": res.status.value,
+                       "quadrature_error": float(le.error), "status": res.status.label,
                        "nonconvex_points": res.nonconvex_points})
         est = _tol_estimate(levels, res.nonconvex_points > 0)
         done = len(levels) >= 3 and est["error_estimate"] <= tol * abs(est["length"])

@@ -79,6 +79,13 @@ class Status(enum.Enum):
         """Only a full IPOPT success, or a trivial / short pair, counts as converged."""
         return self in (Status.SUCCESS, Status.TRIVIAL, Status.SHORT)
 
+    @property
+    def label(self) -> str:
+        """The toolkit's name of the status, as the API spells it (``Status.SUCCESS`` ->
+        ``"success"``); what JSON results and the command line print (``value`` is IPOPT's
+        return status, kept as ``ipopt_status``)."""
+        return self.name.lower()
+
 
 class DistanceStatus(enum.Enum):
     """Outcome of :func:`solvers.distance`."""
@@ -207,7 +214,11 @@ class GeodesicResult:
         return bool(m <= eps)
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready summary (the schema of ``geodesics solve``)."""
+        """JSON-ready summary (the schema of ``geodesics solve``): ``length`` is always the
+        sum of the costs C; a solve with ``tol`` adds ``length_estimate`` (the continuum
+        length) and ``error_estimate`` (None where no estimate exists, e.g. a single
+        size). ``status`` is :attr:`Status.label`, ``ipopt_status`` IPOPT's own word."""
+        est = self.error_estimate
         out: dict[str, Any] = {
             "points": self.points.tolist(),
             "energy": self.energy,
@@ -215,7 +226,8 @@ class GeodesicResult:
             "length_quadrature": self.length_quadrature,
             "length_quadrature_error": self.length_quadrature_error,
             "max_segment_cost": self.max_segment_cost,
-            "status": self.status.value,
+            "status": self.status.label,
+            "ipopt_status": self.status.value,
             "iterations": self.iterations,
             "wall_time": self.wall_time,
             "seeds_tried": self.seeds_tried,
@@ -225,11 +237,10 @@ class GeodesicResult:
             "residual": self.residual,
         }
         out["segments"] = self.segments
-        if self.error_estimate is not None:
-            # accuracy on request: "length" is the estimate of the continuum length
-            out["length_sum_costs"] = self.length
-            out["length"] = self.length_estimate
-            out["error_estimate"] = self.error_estimate
+        if est is not None:
+            # accuracy on request: the continuum length, with its error if there is one
+            out["length_estimate"] = self.length_estimate
+            out["error_estimate"] = est if np.isfinite(est) else None
             out["order"] = self.order
             out["order_seen"] = self.order_seen
             out["tol"] = self.tol
@@ -237,7 +248,7 @@ class GeodesicResult:
             out["tol_levels"] = self.tol_levels
         if self.minmax is not None:
             out["minmax_max_segment_cost"] = self.minmax.max_segment_cost
-            out["minmax_status"] = self.minmax.status.value
+            out["minmax_status"] = self.minmax.status.label
         return out
 
 

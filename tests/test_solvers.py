@@ -348,7 +348,7 @@ def test_cli_solve(tmp_path) -> None:
                 "minmax_max_segment_cost", "success", "status"):
         assert key in row
     assert np.asarray(row["points"]).shape == (17, 2)
-    assert row["status"] == "Solve_Succeeded"
+    assert row["status"] == "success" and row["ipopt_status"] == "Solve_Succeeded"
     assert row["success"] == (row["minmax_max_segment_cost"] <= doc["eps"])
 
     m = finsler.get_metric("matsumoto")

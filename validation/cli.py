@@ -7,7 +7,6 @@ Every command calls public functions of ``finsler``, ``solvers``, ``learn`` or
 from __future__ import annotations
 
 import importlib
-import json
 import sys
 from typing import Annotated
 
@@ -19,6 +18,7 @@ from validation.cli_common import (
     MetricModuleOption,
     MetricParamOption,
     fail,
+    json_text,
     metric_from_options,
     parse_point,
 )
@@ -37,9 +37,14 @@ def metrics_command(
     as_json: Annotated[bool, typer.Option("--json", help="Print JSON instead of a table.")] = False,
 ) -> None:
     """List the registered metrics with their domains and task defaults."""
-    rows = [finsler.get_metric(n).info() for n in finsler.list_metrics()]
+    rows = []
+    for n in finsler.list_metrics():
+        try:
+            rows.append(finsler.get_metric(n).info())
+        except Exception as err:  # a user's metric (registered by a module) may be broken
+            fail(f"metric {n!r} cannot be described: {type(err).__name__}: {err}")
     if as_json:
-        typer.echo(json.dumps(rows, indent=2))
+        typer.echo(json_text(rows))
         return
     head = ("name", "dim", "domain", "D", "eps", "reversible", "convexity")
     table = [head] + [
@@ -116,7 +121,7 @@ def cost_command(
     for w in warnings:
         typer.echo(f"warning: {w}", err=True)
     if as_json:
-        typer.echo(json.dumps(out, indent=2))
+        typer.echo(json_text(out))
     else:
         typer.echo(f"C(start, goal)           = {out['cost']:.12g}")
         typer.echo(f"symmetric C (eq. 59)     = {out['cost_symmetric']:.12g}")

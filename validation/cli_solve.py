@@ -8,10 +8,15 @@ JSON schema (one pair with ``--json``, or ``--pairs``)::
                   "minmax_max_segment_cost",
                   "success" (min-max cost <= eps), "status", "segments", ...}]}
 
-With ``--tol`` each result also has ``error_estimate`` (absolute), ``order`` (observed
-order of the polyline lengths), ``order_seen``, ``tol_reached`` and ``tol_levels``, its
-``segments`` is the size the refinement stopped at, and ``length`` is the estimate of the
-continuum length (the discrete sum of costs is then ``length_sum_costs``).
+``length`` is always the sum of the costs C of the returned path. ``status`` is the
+toolkit's name of the solver status (``success``, ``acceptable``, ``max_iterations``, ...:
+:attr:`solvers.Status.label`), ``ipopt_status`` IPOPT's own return status.
+
+With ``--tol`` each result also has ``length_estimate`` (the estimate of the continuum
+length), ``error_estimate`` (absolute; ``null`` where no estimate exists, e.g. when the
+solve could not refine), ``order`` (observed order of the polyline lengths),
+``order_seen``, ``tol_reached`` and ``tol_levels``, and its ``segments`` is the size the
+refinement stopped at. JSON never holds NaN or Infinity: such numbers are ``null``.
 
 ``success_rate`` is the fraction of pairs whose min-max refined discrete geodesic has every
 segment cost ``<= eps``: the exact ceiling of the paper's task.
@@ -19,7 +24,6 @@ segment cost ``<= eps``: the exact ceiling of the paper's task.
 
 from __future__ import annotations
 
-import json
 import shutil
 from pathlib import Path
 from typing import Annotated, Any
@@ -35,6 +39,7 @@ from validation.cli_common import (
     MetricModuleOption,
     MetricParamOption,
     fail,
+    json_text,
     metric_from_options,
     parse_point,
 )
@@ -66,9 +71,9 @@ def solve_payload(metric: Any, results: list[solvers.GeodesicResult], n: int) ->
 
 def _pairs_or_fail(path: Path, metric: finsler.Metric) -> np.ndarray:
     try:
-        return finsler.load_pairs(path, metric)
+        return finsler.load_pairs(path, metric, "--pairs")
     except InputError as err:
-        fail(f"--pairs: {err}")
+        fail(str(err))
         raise  # unreachable
 
 
@@ -245,7 +250,7 @@ def solve_command(
     payload = solve_payload(m, results, n)
     if warm is not None:
         payload["warm_start"] = warm
-    text = json.dumps(payload, indent=None if pairs is not None else 2)
+    text = json_text(payload, indent=None if pairs is not None else 2)
     if out is not None:
         try:
             finsler.atomic_write_text(out, text, "--out")
@@ -259,7 +264,7 @@ def solve_command(
     elif pairs is None:
         r = results[0]
         row = payload["results"][0]
-        typer.echo(f"status                    {r.status.value}")
+        typer.echo(f"status                    {r.status.label}")
         typer.echo(f"segments                  {r.segments}")
         typer.echo(f"length (sum C)            {r.length:.12g}")
         err = ("" if r.length_quadrature_error is None
@@ -275,8 +280,10 @@ def solve_command(
             order = ("not seen" if not r.order_seen else f"{r.order:.2f}") + (
                 f" (observed {r.order:.2f})" if r.order is not None and not r.order_seen
                 else "")
-            typer.echo(f"length (continuum est.)   {r.length_estimate:.15g} +- "
-                       f"{r.error_estimate:.2e} at {r.segments} segments, order {order}"
+            pm = (f"+- {r.error_estimate:.2e}" if np.isfinite(r.error_estimate)
+                  else "(no error estimate: the solve could not refine)")
+            typer.echo(f"length (continuum est.)   {r.length_estimate:.15g} {pm} at "
+                       f"{r.segments} segments, order {order}"
                        + ("" if r.tol_reached else f"  (tol {tol:g} NOT reached)"))
         nr = r.segments  # --tol may refine beyond --segments
         mid = (f"midpoint p_{nr // 2}          " if nr % 2 == 0 else

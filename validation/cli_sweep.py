@@ -3,19 +3,20 @@ local process pool or on a Ray cluster; a thin CLI over :mod:`learn.sweep`."""
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Annotated, Any
 
 import typer
 
 from finsler.errors import InputError
+from finsler.files import check_output_dir
 from finsler.pool import PoolInterrupted
 from validation.cli_common import (
     METRIC_MODULE_HELP,
     METRIC_PARAM_HELP,
     fail,
     import_metric_modules,
+    json_text,
     parse_metric_params,
     parse_overrides,
 )
@@ -126,6 +127,7 @@ def sweep_command(
     try:
         if workers is not None and workers < 1:
             raise InputError(f"--workers must be a positive integer, got {workers}")
+        check_output_dir(out, "--out")
         import_metric_modules(metric_module)
         overrides = parse_overrides(settings or [])
         for key, option in (("metric_params", "--metric-param"),
@@ -147,7 +149,7 @@ def sweep_command(
         raise typer.Exit(code=130) from None
     rows = result.rows()
     if as_json:
-        typer.echo(json.dumps(rows, indent=2))
+        typer.echo(json_text(rows))
     else:
         typer.echo(format_table(rows))
         typer.echo(f"{len(rows)} runs in {result.seconds:.1f} s ({result.backend}); "
