@@ -1,0 +1,445 @@
+"""Properties of the metric's distance as the solver computes it: ``d(x, x) = 0``,
+``d >= 0`` (``> 0`` for ``x != y``), the triangle inequality, the straight segment's
+length as an upper bound, symmetry for reversible metrics, a closed-form distance or
+geodesic the user supplies against the solved one, the certified interval containing the
+solved distance (2-D), and the midpoint of a solved geodesic splitting its length in
+halves -- each within the solver's stated errors.
+
+Distances come from an *oracle*, a strategy object (``solve(metric, x, y) ->``
+:class:`Solved`): :class:`DiscreteDistance` (default: the task's discrete geodesic refined
+to a relative tolerance by :func:`solvers.solve_geodesic` with ``tol``, from few segments,
+fast, valid through non-convex regions) or :class:`ContinuumDistance` (the pseudospectral
+:func:`solvers.distance`, accurate to ``1e-8`` for smooth Finsler metrics; a curve through a
+non-convex region is reported ``not_convex`` and its examples are mapped). Every property of
+one check draws its examples from the same seeded stream of triples ``(x, y, z)`` and the
+solves are cached, so the properties share their solves.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+import numpy as np
+from hypothesis import strategies as st
+
+from finsler import ClosedFormMetric, Metric
+from finsler.errors import InputError
+from validation import strategies as vs
+from validation.testing.engine import SKIPPED, PropertyResult, Verdict, search, seeded
+
+__all__ = [
+    "ContinuumDistance",
+    "DiscreteDistance",
+    "DistanceOracle",
+    "Solved",
+    "SolvedDistances",
+    "check_certificate",
+    "check_closed_form",
+    "check_distance_positive",
+    "check_distance_symmetry",
+    "check_distance_zero",
+    "check_midpoint_halves",
+    "check_segment_bound",
+    "check_triangle_inequality",
+    "closed_form_of",
+    "distance_properties",
+]
+
+#: The mesh of the certificate property: the ``coarse`` preset of :func:`solvers.certify`.
+CERTIFY_MESH = "coarse"
+
+
+@dataclass
+class Solved:
+    """One solved distance ``d(x, y)``: ``value`` with the solver's stated ``error``
+    (absolute), its ``status``; ``usable``: a value with a stated error (a converged
+    solve); ``mapped``: the solve crossed a region where ``F(x, .)`` is not convex and the
+    oracle does not resolve it. ``path`` ``(n+1, dim)`` is the solved curve, ``midpoint``
+    its point at half the length, within ``midpoint_slack`` (in length) of it."""
+
+    value: float
+    error: float
+    status: str
+    usable: bool
+    mapped: bool = False
+    path: np.ndarray | None = None
+    midpoint: np.ndarray | None = None
+    midpoint_slack: float = math.inf
+    extra: dict[str, Any] = field(default_factory=dict)
+
+
+class DistanceOracle(Protocol):
+    """How a property gets ``d(x, y)``: any object with ``solve(metric, x, y) -> Solved``
+    and a ``name`` for reports."""
+
+    name: str
+
+    def solve(self, metric: Metric, x: np.ndarray, y: np.ndarray) -> Solved: ...
+
+
+@dataclass(frozen=True)
+class DiscreteDistance:
+    """The discrete geodesic of :func:`solvers.solve_geodesic`, globally seeded at
+    ``segments`` and doubled (warm started) until the estimated error of the continuum
+    length is below ``tol`` relative or ``max_segments`` is reached; the stated error is
+    the solver's ``error_estimate`` (Richardson extrapolation of the polyline lengths). The
+    midpoint is the path's point ``p_{n/2}``, within ``d / n`` of half the length (the
+    discrete midpoint's first-order error)."""
+
+    tol: float = 1e-4
+    segments: int = 8
+    max_segments: int = 64
+
+    @property
+    def name(self) -> str:
+        return (f"discrete geodesic, tol {self.tol:g}, {self.segments} to "
+                f"{self.max_segments} segments")
+
+    def solve(self, metric: Metric, x: np.ndarray, y: np.ndarray) -> Solved:
+        import solvers
+
+        r = solvers.solve_geodesic(metric, x, y, self.segments, tol=self.tol,
+                                   max_segments=self.max_segments)
+        value = float(r.length_estimate if r.length_estimate is not None else r.length)
+        err = float(r.error_estimate if r.error_estimate is not None else math.inf)
+        n = r.segments
+        return Solved(value, err, r.status.value, bool(r.converged), False, r.points,
+                      r.points[n // 2].copy() if n % 2 == 0 else None, value / n,
+                      {"segments": n, "tol_reached": r.tol_reached})
+
+
+@dataclass(frozen=True)
+class ContinuumDistance:
+    """The pseudospectral distance of :func:`solvers.distance` (``rtol``: None for its
+    default, 1e-8 for smooth metrics); converged solves are usable, a curve through a
+    non-convex region is mapped, anything else is a failure. The midpoint is the constant
+    speed curve at ``t = 1/2``, within the stated error plus ``1e-10 d``."""
+
+    rtol: float | None = None
+
+    @property
+    def name(self) -> str:
+        return f"pseudospectral distance, rtol {self.rtol if self.rtol else 'default'}"
+
+    def solve(self, metric: Metric, x: np.ndarray, y: np.ndarray) -> Solved:
+        import solvers
+        from solvers import DistanceStatus
+
+        r = solvers.distance(metric, x, y, rtol=self.rtol)
+        path = r.curve(np.linspace(0.0, 1.0, 65))
+        return Solved(float(r.distance), float(r.error_estimate), r.status.value,
+                      bool(r.converged), r.status is DistanceStatus.NOT_CONVEX, path,
+                      path[32].copy(), float(r.error_estimate) + 1e-10 * float(r.distance),
+                      {"degrees": r.degrees})
+
+
+class SolvedDistances:
+    """Cache of ``oracle.solve`` for one metric: each ``(x, y)`` is solved once."""
+
+    def __init__(self, metric: Metric, oracle: DistanceOracle) -> None:
+        self.metric, self.oracle = metric, oracle
+        self._cache: dict[tuple[bytes, bytes], Solved] = {}
+        self.solves = 0
+
+    def __call__(self, x: np.ndarray, y: np.ndarray) -> Solved:
+        k = (np.asarray(x, float).tobytes(), np.asarray(y, float).tobytes())
+        if k not in self._cache:
+            self._cache[k] = self.oracle.solve(self.metric, np.asarray(x, float),
+                                               np.asarray(y, float))
+            self.solves += 1
+        return self._cache[k]
+
+
+def _unusable(what: str, s: Solved) -> Verdict:
+    if s.mapped:
+        return Verdict(True, note=f"{what}: the solved curve crosses a region where F(x, .) "
+                                  "is not convex", mapped=True)
+    return Verdict(False, note=f"{what}: the solver did not converge (status {s.status})")
+
+
+def _vec(x: np.ndarray) -> list[float]:
+    return [float(a) for a in np.asarray(x).reshape(-1)]
+
+
+def closed_form_of(metric: Metric) -> tuple[Callable[..., Any] | None, Callable[..., Any] | None]:
+    """The closed-form ``(distance, geodesic)`` a metric supplies (a
+    :class:`finsler.ClosedFormMetric` implements ``distance(x, y)`` and ``geodesic(x, y,
+    t)``), or ``(None, None)``."""
+    if isinstance(metric, ClosedFormMetric):
+        return metric.distance, metric.geodesic
+    return None, None
+
+
+@dataclass
+class DistanceSuite:
+    """The shared state of one check's distance properties: the metric, the cached
+    oracle, the seed (one stream of triples) and the region (``shrink``)."""
+
+    metric: Metric
+    solved: SolvedDistances
+    seed: int = 0
+    shrink: float = 1.0
+    shrink_limit: int = 6
+
+    @classmethod
+    def make(cls, metric: Metric, oracle: DistanceOracle | None = None, seed: int = 0,
+             shrink: float = 1.0, shrink_limit: int = 6) -> DistanceSuite:
+        if not 0.0 < shrink <= 1.0:
+            raise InputError(f"the distance region (shrink) must be in (0, 1], got {shrink!r}")
+        return cls(metric, SolvedDistances(metric, oracle or DiscreteDistance()), int(seed),
+                   float(shrink), int(shrink_limit))
+
+    def triples(self) -> st.SearchStrategy[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+        return vs.triples(self.metric, self.shrink)
+
+    def run(self, name: str, claim: str, check: Callable[[Any], Verdict], examples: int,
+            keys: str = "xyz") -> PropertyResult:
+        def describe(t: tuple[np.ndarray, ...]) -> dict[str, Any]:
+            return {k: _vec(p) for k, p in zip("xyz", t) if k in keys}
+
+        res = search(name, claim, self.triples(), check, describe, examples=examples,
+                     rng=seeded(self.seed, "distances"), shrink_limit=self.shrink_limit)
+        if res.status == "mapped":
+            res.note = (f"{res.mapped} of {res.tried} examples crossed a region where "
+                        f"F(x, .) is not convex ({self.metric.convexity_note}): mapped")
+        return res
+
+
+def check_distance_zero(suite: DistanceSuite, examples: int = 20) -> PropertyResult:
+    """``d(x, x) = 0`` exactly."""
+
+    def check(t: tuple[np.ndarray, ...]) -> Verdict:
+        s = suite.solved(t[0], t[0])
+        if not s.usable:
+            return _unusable("d(x, x)", s)
+        return Verdict.compare(("d(x, x)", s.value), "==", ("0", 0.0), s.value == 0.0)
+
+    return suite.run("distance-zero", "d(x, x) = 0", check, examples, keys="x")
+
+
+def check_distance_positive(suite: DistanceSuite, examples: int = 3) -> PropertyResult:
+    """``d(x, y) >= 0``, and ``d(x, y) > 0`` for ``x != y``."""
+
+    def check(t: tuple[np.ndarray, ...]) -> Verdict:
+        x, y = t[0], t[1]
+        s = suite.solved(x, y)
+        if not s.usable:
+            return _unusable("d(x, y)", s)
+        distinct = not np.array_equal(x, y)
+        ok = s.value > 0 if distinct else s.value >= 0
+        return Verdict.compare(("d(x, y)", s.value), ">" if distinct else ">=", ("0", 0.0), ok,
+                               f"solved with status {s.status}")
+
+    return suite.run("distance-positive", "d(x, y) >= 0, and > 0 for x != y", check, examples,
+                     keys="xy")
+
+
+def check_triangle_inequality(suite: DistanceSuite, examples: int = 3) -> PropertyResult:
+    """``d(x, z) <= d(x, y) + d(y, z)`` within the sum of the three stated errors."""
+
+    def check(t: tuple[np.ndarray, ...]) -> Verdict:
+        x, y, z = t
+        parts = {"d(x, z)": suite.solved(x, z), "d(x, y)": suite.solved(x, y),
+                 "d(y, z)": suite.solved(y, z)}
+        for what, s in parts.items():
+            if not s.usable:
+                return _unusable(what, s)
+        xz, xy, yz = parts.values()
+        slack = xz.error + xy.error + yz.error + 1e-12 * (1.0 + xz.value)
+        return Verdict.compare(("d(x, z)", xz.value), "<=", ("d(x, y) + d(y, z)",
+                                                             xy.value + yz.value),
+                               xz.value <= xy.value + yz.value + slack,
+                               f"stated errors {xz.error:.2g}, {xy.error:.2g}, {yz.error:.2g}")
+
+    return suite.run("triangle-inequality", "d(x, z) <= d(x, y) + d(y, z) (within the "
+                     "stated errors)", check, examples)
+
+
+def check_distance_symmetry(suite: DistanceSuite, examples: int = 3) -> PropertyResult:
+    """For a reversible metric: ``d(x, y) = d(y, x)`` within the stated errors."""
+    m = suite.metric
+    name, claim = "distance-symmetry", "d(x, y) = d(y, x) for a reversible metric"
+    if not m.reversible:
+        return PropertyResult(name, claim, SKIPPED,
+                              note=f"{m.name} is not declared reversible")
+
+    def check(t: tuple[np.ndarray, ...]) -> Verdict:
+        x, y = t[0], t[1]
+        a, b = suite.solved(x, y), suite.solved(y, x)
+        for what, s in (("d(x, y)", a), ("d(y, x)", b)):
+            if not s.usable:
+                return _unusable(what, s)
+        slack = a.error + b.error + 1e-10 * max(a.value, 1.0)
+        return Verdict.compare(("d(x, y)", a.value), "==", ("d(y, x)", b.value),
+                               abs(a.value - b.value) <= slack,
+                               f"stated errors {a.error:.2g}, {b.error:.2g}")
+
+    return suite.run(name, claim, check, examples, keys="xy")
+
+
+def check_closed_form(suite: DistanceSuite, examples: int = 3,
+                      distance: Callable[..., Any] | None = None,
+                      geodesic: Callable[..., Any] | None = None) -> PropertyResult:
+    """A closed-form distance ``distance(x (N, dim), y (N, dim)) -> (N,)`` (and optionally
+    geodesic ``geodesic(x, y, t (T,)) -> (N, T, dim)``, at arc-length fractions) the user
+    supplies -- by default the metric's own, if it is a :class:`finsler.ClosedFormMetric`
+    -- against the solved one: ``|d_solved - d_closed| <=`` the stated error (plus
+    ``1e-12 (1 + d)``), and the solved curve within ``1e-6 + sqrt(error / d)`` (of the
+    domain's size) of the closed-form geodesic at ``t = 1/4, 1/2, 3/4``."""
+    m = suite.metric
+    name, claim = "closed-form-distance", "the supplied closed-form distance equals the solved one"
+    if distance is None and geodesic is None:
+        distance, geodesic = closed_form_of(m)
+    if distance is None:
+        return PropertyResult(name, claim, SKIPPED, note=(
+            f"{m.name} supplies no closed-form distance (subclass finsler.ClosedFormMetric, "
+            "or pass distance=...)"))
+    lo, hi = m.domain.bounds()
+    size = float(np.max(np.where(np.isfinite(hi - lo), hi - lo, 1.0)))
+
+    def check(t: tuple[np.ndarray, ...]) -> Verdict:
+        x, y = t[0], t[1]
+        # both directions for a metric that is not reversible: the asymmetry is the true one
+        for a, b, what in ((x, y, "d(x, y)"), (y, x, "d(y, x)"))[:1 if m.reversible else 2]:
+            s = suite.solved(a, b)
+            if not s.usable:
+                return _unusable(what, s)
+            ref = float(np.asarray(distance(a[None], b[None]), float).reshape(-1)[0])
+            if not abs(s.value - ref) <= s.error + 1e-12 * (1.0 + abs(ref)):
+                return Verdict.compare((f"{what} solved", s.value), "==", ("closed form", ref),
+                                       False, f"stated error {s.error:.2g} "
+                                              f"({suite.solved.oracle.name})")
+        s = suite.solved(x, y)
+        if geodesic is None or s.path is None or s.value == 0.0:
+            return Verdict(True)
+        ts = np.array([0.25, 0.5, 0.75])
+        want = np.asarray(geodesic(x[None], y[None], ts), float).reshape(len(ts), m.dim)
+        got = _at_fractions(m, s.path, ts)
+        dev = float(np.max(np.abs(got - want)))
+        tol = size * (1e-6 + math.sqrt(max(s.error, 0.0) / max(s.value, 1e-300)))
+        return Verdict.compare(("solved curve at t = 1/4, 1/2, 3/4", _vec(got)), "==",
+                               ("closed-form geodesic", _vec(want)), dev <= tol,
+                               f"largest deviation {dev:.3g} (tolerance {tol:.3g})")
+
+    return suite.run(name, claim, check, examples, keys="xy")
+
+
+def _at_fractions(m: Metric, path: np.ndarray, ts: np.ndarray) -> np.ndarray:
+    """Points of a polyline ``(n+1, dim)`` at fractions ``ts`` of its length (sum of C)."""
+    costs = np.asarray(m.path_costs(path[None], check=False))[0]
+    s = np.concatenate([[0.0], np.cumsum(costs)])
+    s = s / s[-1] if s[-1] > 0 else np.linspace(0.0, 1.0, len(path))
+    return np.stack([np.interp(ts, s, path[:, k]) for k in range(m.dim)], 1)
+
+
+def check_segment_bound(suite: DistanceSuite, examples: int = 3) -> PropertyResult:
+    """``d(x, y)`` is at most the length of the straight coordinate segment (eq. 58, by
+    adaptive quadrature with its error), a curve from ``x`` to ``y`` (checked where the
+    segment lies in the domain)."""
+    m = suite.metric
+
+    def check(t: tuple[np.ndarray, ...]) -> Verdict:
+        x, y = t[0], t[1]
+        s = suite.solved(x, y)
+        if not s.usable:
+            return _unusable("d(x, y)", s)
+        along = x + np.linspace(0.0, 1.0, 17)[:, None] * (y - x)
+        if not bool(np.all(m.domain.contains(along, tol=1e-9))):
+            return Verdict(True, note="the segment leaves the domain")
+        seg = m.segment_length_error(x, y, check=False)
+        bound = float(seg.value) + float(seg.error)
+        return Verdict.compare(("d(x, y)", s.value), "<=", ("straight segment's length", bound),
+                               s.value <= bound + s.error + 1e-12 * (1.0 + bound),
+                               f"stated error {s.error:.2g}")
+
+    return suite.run("segment-bound", "d(x, y) <= the length of the straight segment x -> y",
+                     check, examples, keys="xy")
+
+
+def check_certificate(suite: DistanceSuite, examples: int = 2, mesh: Any = CERTIFY_MESH
+                      ) -> PropertyResult:
+    """On a 2-D metric, the certified interval of :func:`solvers.certify` (a dual lower
+    bound, and the proven length of the solved curve as upper bound) contains the solved
+    distance within its stated error: ``lower <= d + error`` and ``d - error <= upper``."""
+    m = suite.metric
+    name = "certificate"
+    claim = "certify's interval [lower, upper] contains the solved distance"
+    if m.dim != 2:
+        return PropertyResult(name, claim, SKIPPED,
+                              note=f"certified intervals are for 2-D metrics; {m.name} is "
+                                   f"{m.dim}-D")
+
+    def check(t: tuple[np.ndarray, ...]) -> Verdict:
+        import solvers
+
+        x, y = t[0], t[1]
+        s = suite.solved(x, y)
+        if not s.usable:
+            return _unusable("d(x, y)", s)
+        if np.array_equal(x, y):
+            return Verdict(True)
+        c = solvers.certify(m, x, y, mesh, path=s.path)
+        if c.lower > s.value + s.error:
+            return Verdict.compare(("certified lower bound", c.lower), "<=",
+                                   ("d(x, y) + error", s.value + s.error), False)
+        return Verdict.compare(("d(x, y) - error", s.value - s.error), "<=",
+                               ("certified upper bound", c.upper),
+                               s.value - s.error <= c.upper,
+                               f"interval [{c.lower:.8g}, {c.upper:.8g}], gap {c.gap:.2g}")
+
+    return suite.run(name, claim, check, examples, keys="xy")
+
+
+def check_midpoint_halves(suite: DistanceSuite, examples: int = 2) -> PropertyResult:
+    """The midpoint ``m`` of the solved geodesic from ``x`` to ``y`` splits it in halves:
+    ``|d(x, m) - d(x, y)/2|`` and ``|d(m, y) - d(x, y)/2|`` within the oracle's stated
+    midpoint accuracy plus the stated errors."""
+
+    def check(t: tuple[np.ndarray, ...]) -> Verdict:
+        x, y = t[0], t[1]
+        s = suite.solved(x, y)
+        if not s.usable:
+            return _unusable("d(x, y)", s)
+        if s.value == 0.0 or s.midpoint is None:
+            return Verdict(True)
+        mid = suite.metric.domain.project(s.midpoint[None])[0]
+        half = 0.5 * s.value
+        for what, h in (("d(x, m)", suite.solved(x, mid)), ("d(m, y)", suite.solved(mid, y))):
+            if not h.usable:
+                return _unusable(what, h)
+            slack = s.midpoint_slack + h.error + 0.5 * s.error + 1e-12 * (1.0 + s.value)
+            if abs(h.value - half) > slack:
+                return Verdict.compare((what, h.value), "==", ("d(x, y) / 2", half), False,
+                                       f"difference {h.value - half:.3g}, allowed {slack:.3g}"
+                                       f" (midpoint m = {tuple(round(v, 6) for v in mid)})")
+        return Verdict(True)
+
+    return suite.run("midpoint-halves", "the midpoint m of a solved geodesic has "
+                     "d(x, m) = d(m, y) = d(x, y)/2", check, examples, keys="xy")
+
+
+def distance_properties(metric: Metric, *, examples: int = 3, seed: int = 0,
+                        oracle: DistanceOracle | None = None, shrink: float = 1.0,
+                        closed_form: Callable[..., Any] | None = None,
+                        closed_form_geodesic: Callable[..., Any] | None = None,
+                        certify_examples: int | None = None, zero_examples: int = 20,
+                        shrink_limit: int = 6) -> list[PropertyResult]:
+    """Every distance property, sharing one cache of solves. ``examples``: triples per
+    property (the first one hypothesis draws is degenerate, x = y = z);
+    ``certify_examples``: pairs for the certificate (default ``examples - 1``, at least 2);
+    ``shrink_limit``: new solves allowed while shrinking a counterexample."""
+    suite = DistanceSuite.make(metric, oracle, seed, shrink, shrink_limit)
+    cert = max(2, examples - 1) if certify_examples is None else certify_examples
+    return [
+        check_distance_zero(suite, zero_examples),
+        check_distance_positive(suite, examples),
+        check_triangle_inequality(suite, examples),
+        check_segment_bound(suite, examples),
+        check_distance_symmetry(suite, examples),
+        check_closed_form(suite, examples, closed_form, closed_form_geodesic),
+        check_certificate(suite, cert),
+        check_midpoint_halves(suite, max(2, examples - 1)),
+    ]
