@@ -3,17 +3,20 @@ policy), as a table of property, examples tried, passed, result and counterexamp
 
 Exit status 0 when every property holds (or is mapped: a non-convex region the metric
 documents, or skipped: does not apply), 1 when one fails, 2 for bad input. The same
-``--seed`` gives the same examples and results. ``--json`` prints
-:meth:`validation.testing.CheckReport.to_dict`: ``metric``, ``params``, ``policy``,
-``seed``, ``examples``, ``ok``, ``failed`` (names), ``seconds`` and ``properties``, one
-dict per property (``name``, ``claim``, ``status``, ``tried``, ``passed``, ``mapped``,
-``counterexample``, ``lhs`` / ``rhs`` (``label``, ``value``), ``relation``, ``note``,
-``shrink_evaluations``, ``seconds``).
+``--seed`` (with the same code loaded) gives the same examples and results. Nothing is
+written: hypothesis's caches go to a temporary folder, removed at the end.
+
+``--json`` prints :meth:`validation.testing.CheckReport.to_dict`: ``metric``, ``params``,
+``policy``, ``seed``, ``examples``, ``ok``, ``failed`` (names), ``seconds`` and
+``properties``, one dict per property (``name``, ``claim``, ``status``, ``tried``,
+``passed``, ``mapped``, ``counterexample``, ``lhs`` / ``rhs`` (``label``, ``value``),
+``relation``, ``note``, ``shrink_evaluations``, ``seconds``).
 """
 
 from __future__ import annotations
 
 import json
+import tempfile
 from typing import Annotated
 
 import typer
@@ -93,14 +96,22 @@ def check_command(
     if not as_json:
         typer.echo(f"checking {m.name} (seed {seed}, {examples} examples per property)"
                    + (f" and the policy {run}" if run else ""), err=True)
+    # hypothesis caches what it reads of the loaded modules under ./.hypothesis: keep the
+    # user's folder clean (nothing written outside the declared outputs)
+    from hypothesis.configuration import set_hypothesis_home_dir
+
     try:
-        report = check(m, policy=policy, examples=examples, seed=seed,
-                       midpoint_rtol=midpoint_tol, symmetry_rtol=midpoint_tol,
-                       min_success=min_success, max_length_ratio=max_length_ratio,
-                       progress=progress)
+        with tempfile.TemporaryDirectory(prefix="geodesics-check-") as home:
+            set_hypothesis_home_dir(home)
+            report = check(m, policy=policy, examples=examples, seed=seed,
+                           midpoint_rtol=midpoint_tol, symmetry_rtol=midpoint_tol,
+                           min_success=min_success, max_length_ratio=max_length_ratio,
+                           progress=progress)
     except InputError as err:
         fail(str(err))
         return
+    finally:
+        set_hypothesis_home_dir(None)
     if as_json:
         typer.echo(json.dumps(report.to_dict(), indent=2))
     else:

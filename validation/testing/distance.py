@@ -57,8 +57,9 @@ class Solved:
     """One solved distance ``d(x, y)``: ``value`` with the solver's stated ``error``
     (absolute), its ``status``; ``usable``: a value with a stated error (a converged
     solve); ``mapped``: the solve crossed a region where ``F(x, .)`` is not convex and the
-    oracle does not resolve it. ``path`` ``(n+1, dim)`` is the solved curve, ``midpoint``
-    its point at half the length, within ``midpoint_slack`` (in length) of it."""
+    oracle does not resolve it. ``path`` ``(n+1, dim)`` is the solved curve, ``curve(t)``
+    its points ``(T, dim)`` at fractions ``t`` of its length, ``midpoint`` its point at half
+    the length, within ``midpoint_slack`` (in length) of it."""
 
     value: float
     error: float
@@ -68,6 +69,7 @@ class Solved:
     path: np.ndarray | None = None
     midpoint: np.ndarray | None = None
     midpoint_slack: float = math.inf
+    curve: Callable[[np.ndarray], np.ndarray] | None = None
     extra: dict[str, Any] = field(default_factory=dict)
 
 
@@ -108,6 +110,7 @@ class DiscreteDistance:
         n = r.segments
         return Solved(value, err, r.status.value, bool(r.converged), False, r.points,
                       r.points[n // 2].copy() if n % 2 == 0 else None, value / n,
+                      lambda t: _at_fractions(metric, r.points, t),
                       {"segments": n, "tol_reached": r.tol_reached})
 
 
@@ -133,7 +136,7 @@ class ContinuumDistance:
         return Solved(float(r.distance), float(r.error_estimate), r.status.value,
                       bool(r.converged), r.status is DistanceStatus.NOT_CONVEX, path,
                       path[32].copy(), float(r.error_estimate) + 1e-10 * float(r.distance),
-                      {"degrees": r.degrees})
+                      r.curve, {"degrees": r.degrees})
 
 
 class SolvedDistances:
@@ -313,11 +316,11 @@ def check_closed_form(suite: DistanceSuite, examples: int = 3,
                                        False, f"stated error {s.error:.2g} "
                                               f"({suite.solved.oracle.name})")
         s = suite.solved(x, y)
-        if geodesic is None or s.path is None or s.value == 0.0:
+        if geodesic is None or s.curve is None or s.value == 0.0:
             return Verdict(True)
         ts = np.array([0.25, 0.5, 0.75])
         want = np.asarray(geodesic(x[None], y[None], ts), float).reshape(len(ts), m.dim)
-        got = _at_fractions(m, s.path, ts)
+        got = np.asarray(s.curve(ts), float).reshape(len(ts), m.dim)
         dev = float(np.max(np.abs(got - want)))
         tol = size * (1e-6 + math.sqrt(max(s.error, 0.0) / max(s.value, 1e-300)))
         return Verdict.compare(("solved curve at t = 1/4, 1/2, 3/4", _vec(got)), "==",

@@ -357,5 +357,5 @@ def combine(name: str, claim: str, parts: Sequence[PropertyResult]) -> PropertyR
                          shrink_evaluations=sum(r.shrink_evaluations for r in parts),
                          shrink_limited=any(r.shrink_limited for r in parts),
                          seconds=sum(r.seconds for r in parts))
-    out.note = "; ".join(r.note for r in parts if r.note)
+    out.note = " ".join(r.note for r in parts if r.note)
     return out

@@ -210,7 +210,7 @@ def _mapped_search(m: Metric, name: str, claim: str, build: Any, check: Any, des
     if region is not None:
         inside = search(name, claim, build(region), check, describe, examples=examples,
                         rng=rng)
-        inside.note = (f"holds on {which} ({inside.tried} examples)" if inside.ok else
+        inside.note = (f"Holds on {which} ({inside.tried} examples)." if inside.ok else
                        f"FAILS on {which}, where it must hold. {inside.note}".strip())
         parts.append(inside)
     whole = search(name, claim, build(1.0), check, describe, examples=examples, rng=rng)

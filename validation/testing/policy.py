@@ -10,7 +10,10 @@ midpoint of ``(x, y)``, ``max(|d(x, m) - d(x, y)/2|, |d(m, y) - d(x, y)/2|) / d(
 midpoint, and its proof needs Proposition 1 (``C/d -> 1``), which holds where ``F(x, .)``
 is convex: where the exact geodesic crosses a non-convex region the example is mapped.
 Tolerances are the caller's: a learned policy is approximate, and the defaults
-(:data:`MIDPOINT_RTOL`, ...) are a floor the shipped policies pass, not a goal.
+(:data:`MIDPOINT_RTOL`, ...) are a sanity floor, not a goal (measured on 8 random pairs
+each, the shipped policies' midpoint errors reach 0.06 on Matsumoto, 0.28 on Panda and 0.7
+on the car-like metric, whose first-level midpoints are far from exact although 96% of
+its paths succeed).
 """
 
 from __future__ import annotations
@@ -114,11 +117,16 @@ def check_policy_midpoint(policy: Any, metric: Metric, *, examples: int = 3, see
             return Verdict(True)
         err = [abs(h.length - 0.5 * d) / d for h in halves]
         k = int(np.argmax(err))
+        exact = whole.points[n // 2]
+        offset = max(float(m.cost(exact, mid, check=False)),
+                     float(m.cost(mid, exact, check=False))) / d
         return Verdict.compare((["d(x, m)", "d(m, y)"][k], halves[k].length), "==",
                                ("d(x, y) / 2", 0.5 * d), err[k] <= rtol,
-                               f"midpoint error {err[k]:.3g} (allowed {rtol:g}); predicted "
-                               f"m = {tuple(round(v, 6) for v in mid)}, exact discrete "
-                               f"lengths at {n} segments")
+                               f"midpoint error {err[k]:.3g} (allowed {rtol:g}), exact discrete "
+                               f"lengths at {n} segments; predicted m = "
+                               f"{tuple(round(v, 6) for v in mid)}, exact midpoint "
+                               f"{tuple(round(float(v), 6) for v in exact)}, offset C/d "
+                               f"{offset:.3g}")
 
     return search(name, claim, _pair_strategy(m, shrink), check,
                   lambda p: {"x": _vec(p[0]), "y": _vec(p[1])}, examples=examples,
