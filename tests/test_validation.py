@@ -88,6 +88,16 @@ def test_solver_distance_of_nearly_coincident_points(name: str, gap: float, x) -
     assert r.distance == pytest.approx(ref, rel=1e-6)
 
 
+@pytest.mark.parametrize("name", ["carlike", "panda-pole"])
+class TestDiscreteDistances(DistanceTests):
+    """The paper's car and arm through the suite with the oracle ``geodesics check`` uses
+    by default (discrete geodesics refined to 1e-4 from 8 to 64 segments)."""
+
+    @pytest.fixture(autouse=True)
+    def _metric(self, name: str) -> None:
+        self.metric = finsler.get_metric(name)
+
+
 class TestMatsumotoDistancesWhereFinsler(DistanceTests):
     """The same suite on Matsumoto's convex disk (well inside it: short pairs whose
     geodesics stay where F is convex), including the straight segment's length as an upper

@@ -29,6 +29,8 @@ from hypothesis import HealthCheck, Phase, Verbosity, find, settings
 from hypothesis.errors import NoSuchExample, Unsatisfiable
 from hypothesis.strategies import SearchStrategy
 
+from finsler.errors import InputError
+
 __all__ = [
     "FAILED",
     "MAPPED",
@@ -290,7 +292,7 @@ def search(
     Deterministic for a given ``rng`` state."""
     t0 = time.perf_counter()
     if isinstance(examples, bool) or not isinstance(examples, (int, np.integer)) or examples < 1:
-        raise ValueError(f"examples must be a positive integer, got {examples!r}")
+        raise InputError(f"examples must be a positive integer, got {examples!r}")
     cache: dict[Any, Verdict] = {}
     state = {"tried": 0, "passed": 0, "mapped": 0, "shrinks": 0, "failed": False,
              "limited": False}

@@ -331,6 +331,11 @@ def check_subadditivity(metric: Metric, *, examples: int = 100, seed: int = 0,
         convex_shrink)
 
 
+def _not_smooth(m: Metric, name: str, claim: str, why: str) -> PropertyResult:
+    return PropertyResult(name, claim, SKIPPED, note=(
+        f"{m.name} is declared not smooth ({m.convexity_note}): {why}"))
+
+
 def check_strong_convexity(metric: Metric, *, examples: int = 100, seed: int = 0,
                            convex_shrink: float | None = None, directions: int = 64
                            ) -> PropertyResult:
@@ -342,9 +347,8 @@ def check_strong_convexity(metric: Metric, *, examples: int = 100, seed: int = 0
     name = "strong-convexity"
     claim = "the fundamental tensor Hess_v F^2/2 is positive definite"
     if not m.smooth:
-        return PropertyResult(name, claim, SKIPPED, note=(
-            f"{m.name} is declared not smooth ({m.convexity_note}): its fundamental tensor "
-            "is not defined everywhere; convexity is checked by subadditivity"))
+        return _not_smooth(m, name, claim, "its fundamental tensor is not defined "
+                                           "everywhere; convexity is checked by subadditivity")
 
     def check(x: np.ndarray) -> Verdict:
         lam = float(m.convexity(x[None], n_directions=directions)[0])
@@ -468,9 +472,8 @@ def check_smoothness(metric: Metric, *, examples: int = 100, seed: int = 0,
     name = "smoothness"
     claim = "F^2 is C^2 in (x, v) for v != 0 (symbolic Hessian = second differences)"
     if not m.smooth:
-        return PropertyResult(name, claim, SKIPPED, note=(
-            f"{m.name} is declared not smooth ({m.convexity_note}): exp/log refuse it and the "
-            "solver uses its smooth reformulation"))
+        return _not_smooth(m, name, claim, "exp/log refuse it and the solver uses its smooth "
+                                           "reformulation")
     try:
         fn = _joint_second_derivative(m)
     except TypeError:
