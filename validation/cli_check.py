@@ -53,7 +53,8 @@ def check_command(
         help="--run: largest mean length ratio learned/exact on fresh pairs.")] = 1.3,
     midpoint_tol: Annotated[float, typer.Option(
         help="--run: largest first-level midpoint error (relative to d) per pair, and "
-             "largest C(pi(x,y), pi(y,x)) / C(x,y) on reversible metrics.")] = 0.25,
+             "largest L(pi(x,y), pi(y,x)) / L(x,y) (segment lengths) on reversible "
+             "metrics.")] = 0.25,
     as_json: Annotated[bool, typer.Option("--json", help="Print JSON instead of a table.")
                        ] = False,
     metric_param: MetricParamOption = None,

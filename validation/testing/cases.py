@@ -111,8 +111,10 @@ class DistanceTests(_Case):
     distance_oracle: Any = None
     """How distances are solved: a :class:`DiscreteDistance` (the default) or
     :class:`ContinuumDistance`, or any object with ``solve(metric, x, y) -> Solved``."""
-    distance_shrink: float = 1.0
-    """Draw points from the domain scaled by this about its centre."""
+    distance_shrink: float | None = None
+    """Draw points from the domain scaled by this about its centre; None: the whole domain,
+    or for a metric documented not convex everywhere its convex region (as ``geodesics
+    check`` does)."""
     closed_form_distance: Callable[..., Any] | None = None
     """A closed-form ``distance(x (N, dim), y (N, dim)) -> (N,)`` to check the solver
     against (default: the metric's own, for a :class:`finsler.ClosedFormMetric`)."""
@@ -126,14 +128,16 @@ class DistanceTests(_Case):
         configuration (solves cached across the test methods)."""
         m = self.get_metric()
         oracle = self.option("distance_oracle") or _d.DiscreteDistance()
-        key = (type(self).__qualname__, m, oracle, self.seed, self.distance_shrink)
+        shrink = self.distance_shrink
+        if shrink is None:
+            shrink = _m.solve_region(m, self.convex_shrink, self.seed)
+        key = (type(self).__qualname__, m, oracle, self.seed, shrink)
         try:
             if key not in _SUITES:
-                _SUITES[key] = _d.DistanceSuite.make(m, oracle, self.seed,
-                                                     self.distance_shrink)
+                _SUITES[key] = _d.DistanceSuite.make(m, oracle, self.seed, shrink)
             return _SUITES[key]
         except TypeError:  # unhashable metric or oracle: no sharing
-            return _d.DistanceSuite.make(m, oracle, self.seed, self.distance_shrink)
+            return _d.DistanceSuite.make(m, oracle, self.seed, shrink)
 
     def test_distance_zero(self) -> None:
         _outcome(_d.check_distance_zero(self.suite(), max(self.solved_examples, 20)))
@@ -182,8 +186,9 @@ class PolicyTests(_Case):
     symmetry_rtol: float = _p.SYMMETRY_RTOL
     min_success: float = _p.MIN_SUCCESS
     max_length_ratio: float = _p.MAX_LENGTH_RATIO
-    policy_shrink: float = 1.0
-    """Draw the midpoint pairs from the domain scaled by this (e.g. a convex region)."""
+    policy_shrink: float | None = None
+    """Draw the midpoint pairs from the domain scaled by this; None: as ``distance_shrink``
+    (the convex region of a metric documented not convex everywhere)."""
     _loaded: ClassVar[dict[str, Any]] = {}
 
     def get_policy(self) -> Any:
@@ -202,9 +207,13 @@ class PolicyTests(_Case):
         return super().get_metric() if self.metric is not None else self.get_policy().metric
 
     def test_policy_midpoint(self) -> None:
-        _outcome(_p.check_policy_midpoint(self.get_policy(), self.get_metric(),
-                                          examples=self.solved_examples, seed=self.seed,
-                                          rtol=self.midpoint_rtol, shrink=self.policy_shrink))
+        m = self.get_metric()
+        shrink = self.policy_shrink
+        if shrink is None:
+            shrink = _m.solve_region(m, self.convex_shrink, self.seed)
+        _outcome(_p.check_policy_midpoint(self.get_policy(), m, examples=self.solved_examples,
+                                          seed=self.seed, rtol=self.midpoint_rtol,
+                                          shrink=shrink))
 
     def test_policy_symmetry(self) -> None:
         _outcome(_p.check_policy_symmetry(self.get_policy(), self.get_metric(),

@@ -197,6 +197,16 @@ def convex_region(metric: Metric, convex_shrink: float | None, seed: int = 0
     return s, f"the convex core found by the map (the domain scaled by {s:.4g})"
 
 
+def solve_region(metric: Metric, convex_shrink: float | None = None, seed: int = 0) -> float:
+    """Where solved distances are checked: the whole domain (1) for a metric convex
+    everywhere, else its convex region (:func:`convex_region`; 1 if it has none) -- through
+    a non-convex region discrete lengths converge to the distance slower than their stated
+    errors say."""
+    if metric.convex_everywhere:
+        return 1.0
+    return convex_region(metric, convex_shrink, seed)[0] or 1.0
+
+
 def _mapped_search(m: Metric, name: str, claim: str, build: Any, check: Any, describe: Any,
                    examples: int, seed: int, convex_shrink: float | None) -> PropertyResult:
     """A convexity-type property: on a metric convex everywhere a failure is a failure; on

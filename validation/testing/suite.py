@@ -19,7 +19,7 @@ from validation.testing.metric import (
     check_smoothness,
     check_strong_convexity,
     check_subadditivity,
-    convex_region,
+    solve_region,
 )
 from validation.testing.policy import (
     MAX_LENGTH_RATIO,
@@ -109,9 +109,7 @@ def check(
     broken = [r.name for r in report.results if r.name in PREREQUISITES and not r.ok]
     # where F(x, .) is documented not convex, solved lengths are not distances with
     # reliable errors: distances (and policies' midpoints) are checked on the convex region
-    region = 1.0
-    if not metric.convex_everywhere and not broken:
-        region = convex_region(metric, convex_shrink, seed)[0] or 1.0
+    region = 1.0 if broken else solve_region(metric, convex_shrink, seed)
     later: list[tuple[str, Callable[[], list[PropertyResult]]]] = [
         ("distance", lambda: distance_properties(
             metric, examples=solved, seed=seed, oracle=oracle, shrink=region,
