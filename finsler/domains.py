@@ -51,6 +51,13 @@ class Domain(ABC):
     dim: int
     names: tuple[str, ...]
 
+    @property
+    def is_box(self) -> bool:
+        """True if the domain is exactly its bounding box (:meth:`bounds`): every
+        coordinate bounded on its own, so a solver may treat the constraints coordinate by
+        coordinate (projected Newton); False for the disk."""
+        return False
+
     @abstractmethod
     def contains(self, x: Any, tol: float = 1e-12) -> np.ndarray:
         """Membership of each row of ``x`` ``(N, dim)`` -> bool ``(N,)``."""
@@ -109,6 +116,10 @@ class Box(Domain):
     @property
     def dim(self) -> int:  # type: ignore[override]
         return len(self.low)
+
+    @property
+    def is_box(self) -> bool:
+        return True
 
     def describe(self) -> str:
         return "box " + " x ".join(f"[{a:g}, {b:g}]" for a, b in zip(self.low, self.high))
@@ -170,7 +181,8 @@ class Disk(Domain):
 
     def contains(self, x: Any, tol: float = 1e-12) -> np.ndarray:
         x = np.asarray(x, float).reshape(-1, 2)
-        return np.linalg.norm(x - np.asarray(self.center), axis=1) <= self.radius + tol
+        u, w = x[:, 0] - self.center[0], x[:, 1] - self.center[1]
+        return u * u + w * w <= (self.radius + tol) ** 2
 
     def sample(self, n: int, rng: np.random.Generator) -> np.ndarray:
         self._sample_check(n)
@@ -218,6 +230,10 @@ class Product(Domain):
     @property
     def dim(self) -> int:  # type: ignore[override]
         return sum(f.dim for f in self.factors)
+
+    @property
+    def is_box(self) -> bool:
+        return all(f.is_box for f in self.factors)
 
     @property
     def names(self) -> tuple[str, ...]:  # type: ignore[override]

@@ -147,7 +147,13 @@ class GeodesicResult:
     order of the polyline lengths, None if not measurable) and ``order_seen`` (the expected
     order 2 observed; False e.g. through non-convex regions, where the estimate is the
     plain difference of the last two sizes), ``tol_reached`` and ``tol_levels`` (one
-    dict per size: ``segments``, ``length``, ``quadrature_error``, ...).
+    dict per size: ``segments``, ``length``, ``quadrature_error``, ...). ``method`` names
+    what produced ``points``: ``"newton"`` (the batched Newton solve of
+    :mod:`solvers.batched`), ``"ipopt"``, or ``"none"`` (trivial and short pairs);
+    ``residual`` is the path's first-order optimality residual: the largest entry of the
+    projected gradient of ``sum C**2`` in the interior points, times the domain's size,
+    over ``sum C**2`` (:func:`solvers.newton.energy_residual`; ``1e-10`` is this package's
+    convergence tolerance). For a batch, ``wall_time`` is the batch's time over its pairs.
     """
 
     metric: str
@@ -175,6 +181,8 @@ class GeodesicResult:
     tol_reached: bool | None = None
     tol_levels: list[dict[str, Any]] = field(default_factory=list)
     length_quadrature_error: float | None = None
+    method: str = "ipopt"
+    residual: float | None = None
 
     @property
     def segments(self) -> int:
@@ -213,6 +221,8 @@ class GeodesicResult:
             "seeds_tried": self.seeds_tried,
             "seeds_agreeing": self.seeds_agreeing,
             "nonconvex_points": self.nonconvex_points,
+            "method": self.method,
+            "residual": self.residual,
         }
         out["segments"] = self.segments
         if self.error_estimate is not None:

@@ -163,7 +163,8 @@ class ExactSet(PathSet):
 
     ``minmax_max_segment_cost (K,)``: largest segment cost after the min-max refinement;
     ``ceiling (K,)``: the task is solvable at this resolution (that cost ``<= eps``);
-    ``status``: IPOPT status per pair; ``converged (K,)``; ``seeds_tried``/``seeds_agreeing``.
+    ``status``: the solver's status per pair; ``converged (K,)``;
+    ``seeds_tried``/``seeds_agreeing``.
     """
 
     minmax_max_segment_cost: np.ndarray = field(default_factory=lambda: np.zeros(0))
