@@ -141,6 +141,7 @@ def _register_optional_commands() -> None:
         module.register(app)
     importlib.import_module("validation.cli_expmap").register(app)
     importlib.import_module("validation.cli_certify").register(app)
+    importlib.import_module("validation.cli_check").register(app)
 
 
 _register_optional_commands()
