@@ -27,9 +27,11 @@ the file and the problem (missing, a folder, unreadable, too large, not the form
 
 from __future__ import annotations
 
+import contextlib
 import os
 import stat
 import tempfile
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -46,6 +48,7 @@ __all__ = [
     "check_input_file",
     "check_output_dir",
     "check_output_path",
+    "made_folders",
     "read_npy",
     "read_text",
 ]
@@ -128,6 +131,28 @@ def check_output_dir(path: str | os.PathLike[str], what: str = "output folder") 
         raise OutputError(f"{what} {short(str(path))!r} exists and is not a folder")
     _existing_folder(p, path, what)
     return p
+
+
+@contextlib.contextmanager
+def made_folders(path: str | os.PathLike[str]) -> Iterator[Path]:
+    """Run a job that writes into the folder ``path`` (created by the job, parents and
+    all): if the job fails, every folder of ``path`` that did not exist before and is
+    still empty is removed, so a failed command leaves nothing behind."""
+    p = Path(path)
+    new: list[Path] = []
+    q = p
+    while not q.exists() and q != q.parent:
+        new.append(q)
+        q = q.parent
+    try:
+        yield p
+    except BaseException:
+        for folder in new:  # deepest first
+            try:
+                folder.rmdir()
+            except OSError:
+                break  # not empty (the job wrote something) or gone
+        raise
 
 
 def check_output_path(path: str | os.PathLike[str], what: str = "output file",

@@ -71,20 +71,23 @@ OPTIONS: dict[str, dict[str, list[str]]] = {
               "--seeds": ["0", "-1", "x"], "--out": PATHS, "--timesteps": ["0", "-3"],
               "--workers": ["0", "-2"], "--set": SETS, "--metric-module": MODULES},
     "plot-curves": {"--out": [*PATHS, "fig.png", "fig.gif"], "--column": ["nosuch", ""]},
+    "check": {"--metric": METRICS, "--metric-module": MODULES, "--run": PATHS,
+              "--examples": ["0", "-1", "x", "2147483648"], "--seed": ["-1", "x", "1e23"],
+              "--metric-param": ["a=1", "height=nan", "x", "=1"], "--json": []},
 }
 #: Options each command needs (drawn from the candidates above) and its positional args.
 REQUIRED = {"cost": ["--metric", "--start", "--goal"], "exp": ["--metric", "--start",
             "--velocity"], "log": ["--metric", "--start", "--goal"],
             "certify": ["--metric", "--start", "--goal"], "train": ["--env", "--out"],
             "sweep": ["--envs", "--methods", "--seeds", "--out"], "report": ["--out"],
-            "plot-curves": ["--out"], "solve": ["--metric"]}
+            "plot-curves": ["--out"], "solve": ["--metric"], "check": ["--metric"]}
 POSITIONAL = {"plot-curves": PATHS}
 #: Hostile values guaranteed in long-running commands: one option gets one of these.
 POISON = {"--start": "nan,0", "--goal": "2,0", "--metric": "nosuch", "--env": "nosuch",
           "--out": "x" * 300, "--envs": "nosuch", "--pairs": "huge.npy", "--run": "folder",
           "--timesteps": "-5", "--seeds": "-1", "--tol": "nan", "--h": "1e23",
           "--metric-module": "raises.py", "--set": "hidden=[100000000]"}
-HEAVY = {"train", "sweep", "report", "certify", "log", "evaluate"}
+HEAVY = {"train", "sweep", "report", "certify", "log", "evaluate", "check"}
 #: Outputs a command may write (any path given to these options, and what hangs off it).
 OUTPUT_OPTIONS = ("--out",)
 
@@ -130,6 +133,10 @@ def invocations(draw: st.DrawFn) -> list[str]:
     values = {o: (draw(st.sampled_from(opts[o])) if opts[o] else None) for o in chosen}
     if cmd in HEAVY:
         poisonable = [o for o in chosen if o in POISON]
+        if not poisonable:  # none of the drawn options can be poisoned: add one that can
+            o = draw(st.sampled_from([o for o in opts if o in POISON]))
+            chosen.append(o)
+            poisonable = [o]
         o = draw(st.sampled_from(poisonable))
         values[o] = POISON[o]
     args = [cmd]
@@ -157,6 +164,8 @@ def check_outcome(root: Path, args: list[str], code: int, stderr: str,
     assert "Traceback" not in stderr, (shown, stderr[-3000:])
     if code != 0:
         lines = [ln for ln in stderr.splitlines() if ln.strip()]
+        # a result that is not the answer (exit 1) says so on stderr, not only its status
+        assert lines, (shown, code, "exit code without a message on stderr")
         errors = [ln for ln in lines if ln.startswith("error: ")]
         if code == 2 and errors:
             # bad input: the one error line, nothing before it (no warnings)
@@ -217,3 +226,29 @@ def test_every_command_holds_under_hostile_input_as_a_process(workdir: Path,
                           capture_output=True, text=True, timeout=600, env=env,
                           stdin=subprocess.DEVNULL)
     check_outcome(workdir, args, proc.returncode, proc.stderr, before)
+
+
+def test_a_failed_report_leaves_no_new_folders(tmp_path: Path,
+                                                monkeypatch: pytest.MonkeyPatch) -> None:
+    """Found by the tour: `report --out missing/deep/f.json --run folder` (a folder that is
+    no run) left `missing/deep/` behind."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "folder").mkdir()
+    res = CliRunner().invoke(app, ["report", "--out", "missing/deep/f.json", "--run",
+                                   "folder"])
+    assert res.exit_code == 2 and "config.json" in res.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["folder"]
+
+
+@pytest.mark.parametrize(("velocity", "status"), [("-0.3,0.4", "not_convex"),
+                                                   ("1.0,0.0", "not_convex")])
+def test_exp_that_stops_early_says_so_on_stderr(velocity: str, status: str) -> None:
+    """exit 1 with the stopped curve on stdout and one line on stderr (the tour found exit
+    1 without a word where the Matsumoto geodesic reaches the non-convex region)."""
+    res = CliRunner().invoke(app, ["exp", "--metric", "matsumoto", "--start", "0.1,0.2",
+                                   "--velocity", velocity])
+    assert res.exit_code == 1
+    assert f"status        {status}" in res.stdout
+    lines = [ln for ln in res.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1 and lines[0].startswith("note: the geodesic stopped") \
+        and status in lines[0]

@@ -27,6 +27,7 @@ from validation.cli_common import (
     MetricParamOption,
     fail,
     metric_from_options,
+    one_line,
     parse_metric_params,
 )
 from validation.testing.engine import PropertyResult
@@ -125,6 +126,8 @@ def check_command(
                    f"FAILED: {', '.join(r.name for r in report.failed)}")
         typer.echo(f"\n{verdict} ({report.seconds:.1f} s)")
     if not report.ok:
+        typer.echo(one_line(f"note: {len(report.failed)} of {len(report.results)} properties "
+                            f"failed: {', '.join(r.name for r in report.failed)}"), err=True)
         raise typer.Exit(code=1)
 
 

@@ -25,6 +25,7 @@ from validation.cli_common import (
     fail,
     json_text,
     metric_from_options,
+    one_line,
     parse_point,
 )
 
@@ -70,8 +71,9 @@ def exp_command(
         typer.echo(f"length        {r.speed * r.t_end:.12g}")
         typer.echo(f"speed drift   {r.speed_drift:.2e}")
         typer.echo(f"wall time     {r.wall_time:.3f} s")
-    if not r.converged:
-        raise typer.Exit(code=1)
+    if not r.converged:  # the result above says why; stderr says that it is not the answer
+        stopped(f"the geodesic stopped at t = {r.t_end:.6g} before t = {t:.6g}: "
+                f"{r.status.value}")
 
 
 def log_command(
@@ -106,7 +108,14 @@ def log_command(
         typer.echo(f"Newton steps   {r.iterations}")
         typer.echo(f"wall time      {r.wall_time:.3f} s")
     if not r.converged:
-        raise typer.Exit(code=1)
+        stopped(f"log did not converge: {r.status.value} (residual {r.residual:.2e})")
+
+
+def stopped(message: str) -> None:
+    """A result that is not the answer asked for: one line on stderr, exit code 1 (the
+    result itself, with its status, is on stdout)."""
+    typer.echo(f"note: {one_line(message)}", err=True)
+    raise typer.Exit(code=1)
 
 
 def register(app: typer.Typer) -> None:

@@ -34,6 +34,7 @@ import finsler
 import solvers
 from finsler import Metric, load_pairs
 from finsler.errors import InputError
+from finsler.files import made_folders
 from validation.comparison import Comparison, compare, midpoint_error, ratio_stats
 from validation.jsonout import jsonable
 
@@ -445,17 +446,11 @@ def build_report(
     if certify is not None and (isinstance(certify, bool) or not isinstance(certify, int)
                                 or certify < 0):
         raise InputError(f"certify must be a number of pairs >= 0, got {certify!r}")
-    out = Path(out)
-    created = not out.exists()
-    try:
-        return _build_report(env, out, run=run, pairs=pairs, quick=quick, continuum=continuum,
-                             workers=workers, progress=progress, policy=policy,
-                             checkpoint=checkpoint, metric_params=metric_params, search=search,
-                             certify=certify)
-    except BaseException:
-        if created and out.is_dir() and not any(out.iterdir()):
-            out.rmdir()  # a failed report leaves nothing behind
-        raise
+    with made_folders(out) as folder:  # a failed report leaves no new empty folders
+        return _build_report(env, folder, run=run, pairs=pairs, quick=quick,
+                             continuum=continuum, workers=workers, progress=progress,
+                             policy=policy, checkpoint=checkpoint, metric_params=metric_params,
+                             search=search, certify=certify)
 
 
 def _build_report(env: str | None, out: Path, *, run: str | Path | None,
