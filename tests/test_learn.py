@@ -285,7 +285,11 @@ def test_short_euclidean_training_learns_true_midpoints(tmp_path) -> None:
     assert np.median(rel) < 0.1, np.median(rel)
 
 
-@pytest.mark.parametrize("extras", [{}, _EXTRAS])
+# expert iteration (learn.expert): its rounds, replay buffer and call count are checkpointed
+_EXPERT = {"expert_weight": 1.0, "expert_pairs": 8, "expert_every": 2, "expert_keep": 2}
+
+
+@pytest.mark.parametrize("extras", [{}, _EXTRAS, _EXPERT])
 def test_resume_equals_uninterrupted(tmp_path, monkeypatch, extras) -> None:
     cfg = _small(timesteps=12_000, eval_every=3, **extras)
     full = learn.train(cfg, tmp_path / "full", progress=False)

@@ -22,6 +22,7 @@ from validation.cli_common import (
     metric_from_options,
     parse_point,
 )
+from validation.text import text_table
 
 app = typer.Typer(
     name="geodesics",
@@ -59,11 +60,7 @@ def metrics_command(
         )
         for r in rows
     ]
-    widths = [max(len(row[i]) for row in table) for i in range(len(head))]
-    for k, row in enumerate(table):
-        typer.echo("  ".join(c.ljust(w) for c, w in zip(row, widths)).rstrip())
-        if k == 0:
-            typer.echo("  ".join("-" * w for w in widths))
+    typer.echo(text_table(table))
 
 
 @app.command("cost")

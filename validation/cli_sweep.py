@@ -20,6 +20,7 @@ from validation.cli_common import (
     parse_metric_params,
     parse_overrides,
 )
+from validation.text import text_table
 
 __all__ = ["format_table", "register", "sweep_command"]
 
@@ -46,13 +47,7 @@ def format_table(rows: list[dict[str, Any]]) -> str:
     head = ("env", "variant", "seed", "action", "stopped by", "timesteps", "wall s",
             "val. success")
     table = [head] + [tuple(_cell(r[k], k) for k in keys) for r in rows]
-    widths = [max(len(row[i]) for row in table) for i in range(len(head))]
-    lines = []
-    for k, row in enumerate(table):
-        lines.append("  ".join(c.ljust(w) for c, w in zip(row, widths)).rstrip())
-        if k == 0:
-            lines.append("  ".join("-" * w for w in widths))
-    return "\n".join(lines)
+    return text_table(table)
 
 
 def metric_overrides(envs: list[str], params: dict[str, Any] | None) -> dict[str, Any]:

@@ -30,6 +30,7 @@ from hypothesis.errors import NoSuchExample, Unsatisfiable
 from hypothesis.strategies import SearchStrategy
 
 from finsler.errors import InputError
+from validation.text import text_table
 
 __all__ = [
     "FAILED",
@@ -192,12 +193,7 @@ class CheckReport:
         head = ("property", "tried", "passed", "result", "counterexample")
         rows = [head] + [(r.name, str(r.tried), str(r.passed), r.status, r.short_example())
                          for r in self.results]
-        widths = [max(len(row[i]) for row in rows) for i in range(len(head))]
-        lines = []
-        for k, row in enumerate(rows):
-            lines.append("  ".join(c.ljust(w) for c, w in zip(row, widths)).rstrip())
-            if k == 0:
-                lines.append("  ".join("-" * w for w in widths))
+        lines = [text_table(rows)]
         details = [r.describe() for r in self.results if r.status in (FAILED, MAPPED)]
         reasons: dict[str, list[str]] = {}
         for r in self.results:
