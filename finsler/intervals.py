@@ -204,7 +204,10 @@ def _contains_point(x: Interval, phase: float) -> np.ndarray:
     """Whether ``[lo, hi]`` contains ``phase + 2 pi k`` for some integer ``k`` (in doubt:
     yes)."""
     two_pi = 2.0 * math.pi
-    k = np.ceil((x.lo - phase) / two_pi - 1e-9)
+    # the first candidate at or above lo, with the same slack as on the hi side: the rounding
+    # of (lo - phase) / two_pi grows with |lo| (near 1e9 a fixed 1e-9 in k once skipped an
+    # extremum 2e-7 above lo, and sin's upper bound came out 4e-15 below 1)
+    k = np.ceil((x.lo - phase - 1e-9 * (1.0 + np.abs(x.lo))) / two_pi)
     return (phase + two_pi * k <= x.hi + 1e-9 * (1.0 + np.abs(x.hi))) | (
         x.hi - x.lo >= two_pi)
 
