@@ -370,3 +370,17 @@ def test_reciprocal_of_a_box_ending_at_zero() -> None:
 def test_unknown_operation_error_names_it() -> None:
     with pytest.raises(NotImplementedError, match=r"'fmod' is not implemented"):
         _BACKEND.fmod  # noqa: B018
+
+
+@pytest.mark.parametrize("n", [3, 4, 5, 7, 16, 33, 64, 65])
+def test_integer_powers_contain_the_exact_value(n: int) -> None:
+    """The proof property itself, against exact rational arithmetic: x ** n of a float x
+    (a Fraction, no rounding) lies in the enclosure of the point box [x, x]."""
+    from fractions import Fraction
+
+    rng = np.random.default_rng(RNG_SEED + 6)
+    x = rng.uniform(-1.6, 1.6, 60)
+    enc = Interval(x, x).power(float(n))
+    for xi, lo, hi in zip(x, enc.lo, enc.hi, strict=True):
+        exact = Fraction(float(xi)) ** n
+        assert Fraction(float(lo)) <= exact <= Fraction(float(hi)), (n, xi)
