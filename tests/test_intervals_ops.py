@@ -211,6 +211,8 @@ def test_undefined_and_overflowing_operations_warn_nothing() -> None:
         assert pos.reciprocal().hi == np.inf  # 1 / 0
         assert _BACKEND.log(neg).lo == -np.inf  # log of negatives: undefined
         assert _BACKEND.log(pos).lo == -np.inf  # log 0
+        assert _BACKEND.log(Interval(0.0)).lo == -np.inf  # both ends -inf, rounded up
+        assert _BACKEND.sinh(Interval(-np.inf)).hi == np.inf  # (the true value is unbounded)
         assert _BACKEND.log1p(Interval(-2.0, 1.0)).lo == -np.inf  # log1p below -1
         assert _BACKEND.log1p(Interval(-1.0, 1.0)).lo == -np.inf  # log1p(-1)
         for name in ("exp", "sinh", "cosh", "expm1"):  # overflow: an infinite bound
