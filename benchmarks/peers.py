@@ -54,17 +54,34 @@ Peer environments (each peer in its own venv, driven by subprocess with JSON on 
 stdout; no peer is a dependency of the project; geomstats 2.8 imports ``numpy.trapz`` and
 needs ``numpy<2`` and ``autograd``)::
 
-    python3.11 -m venv /work/peers/geomstats
-    /work/peers/geomstats/bin/pip install "numpy<2" autograd geomstats==2.8.0 scipy
-    python3.11 -m venv /work/peers/finslerax
-    /work/peers/finslerax/bin/pip install "jax[cpu]" finslerax==1.1.0
+    python3.11 -m venv PEERS/geomstats
+    PEERS/geomstats/bin/pip install "numpy<2" autograd geomstats==2.8.0 scipy
+    python3.11 -m venv PEERS/finslerax
+    PEERS/finslerax/bin/pip install "jax[cpu]" finslerax==1.1.0
 
-Usage (from the project's venv)::
+(``PEERS`` any folder outside the project.) Usage (from the project's venv)::
 
     python benchmarks/peers.py [--pairs 10] [--seed 0]
         [--metrics poincare,bump,randers,matsumoto,exp]
-        [--geomstats-python /work/peers/geomstats/bin/python]
-        [--finslerax-python /work/peers/finslerax/bin/python] [--json OUT.json]
+        [--geomstats-python PEERS/geomstats/bin/python]
+        [--finslerax-python PEERS/finslerax/bin/python] [--json OUT.json]
+    python benchmarks/peers.py --throughput [--throughput-pairs 1000] [--quality-pairs 100]
+        [--batch-sizes 1,10,100,1000] [--seed 1124] --finslerax-python ...
+
+The interpreters default to the environment variables ``GEOMSTATS_PYTHON`` and
+``FINSLERAX_PYTHON``.
+
+Throughput (``--throughput``, issue 21): on ``--throughput-pairs`` fresh Matsumoto pairs
+(64 segments) and Randers pairs (16 segments), the project's ``solve_batch`` (the batched
+Newton path, ``workers=1``) against finslerax's Gauss-Newton batched with ``jax.vmap``
+(compiled first; its compile time reported apart): wall and CPU time per pair, energy
+against the lowest energy found on each pair (Matsumoto) or the error of the length
+against the exact distance (Randers), failures. On the first ``--quality-pairs`` Matsumoto
+pairs the reference is stricter: the lowest energy of every run, including the project's
+IPOPT default of the landed code (``method="ipopt"``) and ``--reference-rounds`` wide
+Newton multistarts (78 starts at the full size and 30 restarts each, seeds 0, 1, ...).
+Last, the project's time per pair against the batch size. Every time is the median of
+``--repeats`` runs.
 
 A peer whose interpreter is missing or fails to import is skipped with the reason printed.
 The same file is the peers' worker (``--worker geomstats|finslerax``, JSON on stdin): only
@@ -85,10 +102,9 @@ from typing import Any
 
 import numpy as np
 
-DEFAULT_PEERS = {
-    "geomstats": "/work/peers/geomstats/bin/python",
-    "finslerax": "/work/peers/finslerax/bin/python",
-}
+#: Interpreters of the peers' venvs: ``--geomstats-python`` / ``--finslerax-python``, else
+#: these environment variables (a peer with neither is skipped, with the reason printed).
+PEER_ENV = {"geomstats": "GEOMSTATS_PYTHON", "finslerax": "FINSLERAX_PYTHON"}
 
 #: Parameters of the conformal "bump" metric (shared by the project's and geomstats' side).
 BUMP = {"amplitude": 2.0, "cx": 0.15, "cy": 0.05, "sigma": 0.25, "radius": 0.8}
@@ -247,6 +263,9 @@ def _finslerax_worker(job: dict) -> dict:
     pairs = jnp.asarray(np.asarray(job["pairs"], dtype=np.float64))
     x0, y0, xs, ys = pairs[0, 0], pairs[0, 1], pairs[:, 0], pairs[:, 1]
     rows = []
+    if job.get("task") == "throughput":
+        return _finslerax_throughput(job, metric, jax, eqx, GaussNewtonGeodesic, pairs, n,
+                                     check, fx.__version__)
     for method, label, solver in (
             ("GaussNewtonGeodesic", "defaults", GaussNewtonGeodesic()),
             ("AVBDSolver", "defaults", AVBDSolver()),
@@ -273,6 +292,27 @@ def _finslerax_worker(job: dict) -> dict:
         rows.append({"method": method, "setting": f"{label}, {n} segments, batched (vmap)",
                      "kind": "path", "setup": bsetup, "per_pair": per})
     return {"peer": "finslerax", "version": fx.__version__, "check": check, "rows": rows}
+
+
+def _finslerax_throughput(job: dict, metric: Any, jax: Any, eqx: Any, gn_cls: Any,
+                          pairs: Any, n: int, check: list, version: str) -> dict:
+    """Gauss-Newton batched with ``jax.vmap`` over all pairs: compiled on the batch's shape
+    first (reported as ``setup``), then timed (wall and CPU)."""
+    solver = gn_cls()
+    batched = eqx.filter_jit(lambda m, a, b: jax.vmap(
+        lambda u, w: solver.solve(m, u, w, n_steps=n, train_mode=False).xs)(a, b))
+    xs, ys = pairs[:, 0], pairs[:, 1]
+    _, setup, _ = _timed(lambda: batched(metric, xs, ys).block_until_ready())
+    secs, cpus = [], []
+    for _ in range(int(job.get("repeats", 1))):
+        c0 = time.process_time()
+        out, sec, err = _timed(lambda: np.asarray(batched(metric, xs, ys)
+                                                  .block_until_ready()))
+        secs.append(sec)
+        cpus.append(time.process_time() - c0)
+    return {"peer": "finslerax", "version": version, "check": check, "setup": setup,
+            "seconds": float(np.median(secs)), "cpu": float(np.median(cpus)), "error": err,
+            "paths": None if out is None else out.tolist()}
 
 
 def _finslerax_exp(job: dict, fx: Any, jax: Any, jnp: Any, eqx: Any, space: Any) -> dict:
@@ -376,8 +416,9 @@ def make_pairs(name: str, m: Any, k: int, seed: int) -> np.ndarray:
 
 def run_peer(peer: str, python: str | None, job: dict) -> dict:
     """Run the worker in the peer's interpreter; ``{"skipped": reason}`` if it cannot."""
+    python = python or os.environ.get(PEER_ENV[peer])
     if not python:
-        return {"skipped": f"no interpreter given (--{peer}-python)"}
+        return {"skipped": f"no interpreter given (--{peer}-python or ${PEER_ENV[peer]})"}
     if not Path(python).exists():
         return {"skipped": f"interpreter {python} does not exist (create the venv as the "
                 f"docstring of benchmarks/peers.py says)"}
@@ -584,7 +625,140 @@ def summarise(name: str, rows: list[dict], exact: bool | None) -> list[str]:
 
 
 def _ms(sec: float) -> str:
+    if sec < 1e-3:
+        return f"{sec * 1e3:.3f} ms"
     return f"{sec * 1e3:.1f} ms" if sec < 1 else f"{sec:.2f} s"
+
+
+# ----------------------------------------------------------------------------------------
+# throughput (issue 21)
+# ----------------------------------------------------------------------------------------
+def _energies(m: Any, paths: np.ndarray) -> np.ndarray:
+    """``sum C**2`` of paths ``(K, n+1, 2)``; infinite where a path is not finite, leaves
+    the domain (1e-9) or misses its pair."""
+    out = np.full(len(paths), np.inf)
+    for k, p in enumerate(paths):
+        if np.all(np.isfinite(p)) and np.all(m.domain.contains(p, tol=1e-9)):
+            out[k] = float(np.sum(m.cost(p[:-1], p[1:], check=False) ** 2))
+    return out
+
+
+def _timed_solve(fn: Any) -> tuple[Any, float, float]:
+    c0, w0 = time.process_time(), time.perf_counter()
+    out = fn()
+    return out, time.perf_counter() - w0, time.process_time() - c0
+
+
+def _quality(e: np.ndarray, best: np.ndarray) -> str:
+    rel = (e - best) / best
+    ok = np.isfinite(rel)
+    worst = f"{np.max(rel[ok]):.1e}" if ok.any() else "-"
+    return (f"{np.sum(rel <= 1e-4):>5} {np.sum(rel <= 1e-6):>5} {np.sum(rel > 1e-3):>5} "
+            f"{np.sum(~ok):>4}  worst {worst}")
+
+
+def throughput(args: Any, ap: Any) -> None:
+    """The throughput section: see the module docstring."""
+    import finsler
+    import solvers
+    from solvers.seeding import SeedPlan
+
+    K, Q = args.throughput_pairs, min(args.quality_pairs, args.throughput_pairs)
+    if K < 1 or args.reference_rounds < 0 or args.repeats < 1:
+        ap.error("--throughput-pairs and --repeats must be >= 1, --reference-rounds >= 0")
+    sizes = sorted({int(x) for x in args.batch_sizes.split(",") if x.strip()})
+    head = (f"{'method':<44} {'pairs':>5} {'wall/pair':>10} {'CPU/pair':>9} {'setup':>8} "
+            f"{'<=1e-4':>6} {'<=1e-6':>5} {'>1e-3':>5} {'fail':>4}")
+    for name, n in (("matsumoto", 64), ("randers", 16)):
+        m = finsler.get_metric(name)
+        pairs = make_pairs(name, m, K, args.seed)
+        warm = make_pairs(name, m, 2, args.seed + 99)
+        solvers.solve_batch(m, warm, n, workers=1, progress=False)  # lowering, graph
+        runs = [_timed_solve(lambda m=m, pairs=pairs, n=n: solvers.solve_batch(
+            m, pairs, n, workers=1, progress=False)) for _ in range(args.repeats)]
+        res = runs[0][0]
+        wall = float(np.median([r[1] for r in runs]))
+        cpu = float(np.median([r[2] for r in runs]))
+        ours = np.array([r.energy for r in res])
+        methods = {k: sum(r.method == k for r in res) for k in ("newton", "ipopt", "none")}
+        rows = [("project solve_batch (batched Newton)", K, wall, cpu, 0.0, ours)]
+        check = np.stack([make_pairs(name, m, 8, args.seed + 2)[:, 0],
+                          np.random.default_rng(args.seed + 1).normal(size=(8, 2))], 1)
+        job = {"metric": name, "task": "throughput", "pairs": pairs.tolist(), "segments": n,
+               "check": check.tolist(), "repeats": args.repeats,
+               "params": {"randers": {"wind": list(WIND)},
+                          "matsumoto": {"height": HEIGHT}}[name]}
+        fx = run_peer("finslerax", args.finslerax_python, job)
+        notes = [f"project: {methods['newton']} pairs by Newton, {methods['ipopt']} finished "
+                 f"by IPOPT; largest residual {max(r.residual for r in res):.1e}"]
+        if "skipped" in fx:
+            notes.append(f"finslerax skipped: {fx['skipped']}")
+        else:
+            fe = (_energies(m, np.asarray(fx["paths"])) if fx.get("paths") is not None
+                  else np.full(K, np.inf))
+            rows.append(("finslerax GaussNewton, vmap over the batch", K, fx["seconds"],
+                         fx["cpu"], fx["setup"], fe))
+            truth = m.F(check[:, 0], check[:, 1])
+            gap = float(np.max(np.abs(np.asarray(fx["check"]) - truth) / truth))
+            notes.append(f"finslerax {fx['version']}: its F equals the project's to "
+                         f"{gap:.1e}; compile time in 'setup'")
+        print(f"== throughput: {name}, {n} segments, {K} fresh pairs (seed {args.seed}), "
+              "one thread")
+        if name == "randers":
+            d = m.distance(pairs[:, 0], pairs[:, 1])
+            print(f"{'method':<44} {'pairs':>5} {'wall/pair':>10} {'CPU/pair':>9} "
+                  f"{'setup':>8} {'max |L-d|/d':>12} {'fail':>4}")
+            for label, k, w, c, st, e in rows:
+                lengths = np.full(K, np.inf)
+                if label.startswith("project"):
+                    lengths = np.array([r.length for r in res])
+                elif not np.all(np.isinf(e)):
+                    p = np.asarray(fx["paths"])
+                    lengths = np.array([np.sum(m.cost(q[:-1], q[1:], check=False))
+                                        if np.isfinite(ei) else np.inf
+                                        for q, ei in zip(p, e, strict=True)])
+                err = np.abs(lengths - d) / d
+                fin = np.isfinite(err)
+                print(f"{label:<44} {k:>5} {_ms(w / k):>10} {_ms(c / k):>9} {_ms(st):>8} "
+                      f"{np.max(err[fin]) if fin.any() else float('nan'):>12.1e} "
+                      f"{np.sum(~fin):>4}")
+        else:
+            best = np.min(np.stack([r[5] for r in rows]), 0)
+            print(head)
+            for label, k, w, c, st, e in rows:
+                print(f"{label:<44} {k:>5} {_ms(w / k):>10} {_ms(c / k):>9} {_ms(st):>8} "
+                      f"{_quality(e, best)}")
+            print(f"-- the first {Q} pairs, against the best of every run below:")
+            sub = pairs[:Q]
+            ref_rows = [(label, e[:Q]) for label, _, _, _, _, e in rows]
+            old, w_old, c_old = _timed_solve(lambda m=m, sub=sub, n=n: solvers.solve_batch(
+                m, sub, n, workers=1, progress=False, method="ipopt"))
+            ref_rows.append(("project IPOPT default (landed code)", np.array(
+                [r.energy for r in old])))
+            notes.append(f"IPOPT default: {_ms(w_old / Q)} wall, {_ms(c_old / Q)} CPU per "
+                         "pair")
+            for seed in range(args.reference_rounds):
+                plan = SeedPlan(bulges=(0.05, 0.1, 0.2, 0.3, 0.45, 0.6, 0.8, 1.0), random=60,
+                                graph=True, seed=seed, coarse=None, polish=30,
+                                polish_scale=0.03 * (1 + seed % 3))
+                wide = solvers.solve_batch(m, sub, n, seeds=plan, workers=1, progress=False)
+                ref_rows.append((f"wide multistart {seed} (reference)",
+                                 np.array([r.energy for r in wide])))
+            best_q = np.min(np.stack([e for _, e in ref_rows]), 0)
+            for label, e in ref_rows:
+                print(f"{label:<44} {Q:>5} {'':>10} {'':>9} {'':>8} {_quality(e, best_q)}")
+        for t in notes:
+            print(f"   {t}")
+        print(f"-- project time per pair against the batch size ({name}, {n} segments)")
+        for b in sizes:
+            if b > K:
+                continue
+            reps = [_timed_solve(lambda m=m, pairs=pairs, n=n, b=b: solvers.solve_batch(
+                m, pairs[:b], n, workers=1, progress=False)) for _ in range(args.repeats)]
+            w = float(np.median([r[1] for r in reps]))
+            c = float(np.median([r[2] for r in reps]))
+            print(f"   batch {b:>5}: {_ms(w / b):>9} wall, {_ms(c / b):>9} CPU per pair")
+        print(flush=True)
 
 
 def main() -> None:
@@ -594,10 +768,21 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--metrics", default=",".join(SECTIONS),
                     help="sections to run (default all): " + ",".join(SECTIONS))
-    ap.add_argument("--geomstats-python", default=DEFAULT_PEERS["geomstats"],
-                    help="python of a venv with geomstats 2.8 (numpy<2, autograd)")
-    ap.add_argument("--finslerax-python", default=DEFAULT_PEERS["finslerax"],
-                    help="python of a venv with finslerax 1.1 and jax[cpu]")
+    ap.add_argument("--geomstats-python", default=None,
+                    help="python of a venv with geomstats 2.8 (numpy<2, autograd); default "
+                         "$GEOMSTATS_PYTHON (see this file's docstring to create it)")
+    ap.add_argument("--finslerax-python", default=None,
+                    help="python of a venv with finslerax 1.1 and jax[cpu]; default "
+                         "$FINSLERAX_PYTHON")
+    ap.add_argument("--throughput", action="store_true",
+                    help="the throughput section instead (see the docstring)")
+    ap.add_argument("--throughput-pairs", type=int, default=1000)
+    ap.add_argument("--quality-pairs", type=int, default=100)
+    ap.add_argument("--reference-rounds", type=int, default=3,
+                    help="wide multistarts in the Matsumoto reference (default 3)")
+    ap.add_argument("--batch-sizes", default="1,10,100,1000")
+    ap.add_argument("--repeats", type=int, default=3,
+                    help="timed runs per throughput row; the median is printed (default 3)")
     ap.add_argument("--json", type=Path, help="also write every per-pair record here")
     args = ap.parse_args()
     if args.worker:
@@ -612,6 +797,9 @@ def main() -> None:
     import finsler
 
     torch.set_num_threads(1)
+    if args.throughput:
+        throughput(args, ap)
+        return
     names = [s.strip() for s in args.metrics.split(",") if s.strip()]
     unknown = set(names) - set(SECTIONS)
     if unknown:

@@ -35,6 +35,7 @@ Usage::
     python benchmarks/solver_speed.py [--pairs 100] [--metrics matsumoto,carlike,panda-pole]
     python benchmarks/solver_speed.py --metrics none --fresh 100 --fresh-cache fresh.npz
     python benchmarks/solver_speed.py --metrics none --scale 5
+    python benchmarks/solver_speed.py --metrics none --linear   # Thomas vs cyclic reduction
 
 Learned warm starts against global seeding (issue 11: time per exact geodesic, pairs
 within 1e-6 of the globally seeded energy) are measured by ``benchmarks/warm_start.py``.
@@ -137,14 +138,17 @@ FRESH_SEED = 8123
 SCALE_SEED = 1411
 
 
-def fresh_plans(m: finsler.Metric) -> dict[str, SeedPlan]:
-    """The plans compared on fresh pairs: the default, the previous default (8 seeds at
-    the full size) and the 50-seed reference (all at the full size)."""
+def fresh_plans(m: finsler.Metric) -> dict[str, tuple[SeedPlan, str]]:
+    """The plans (and methods) compared on fresh pairs: the default (the batched Newton
+    method), IPOPT with its default plan, an older default (8 seeds at the full size) and
+    the 50-seed reference (all at the full size)."""
     return {
-        "default": SeedPlan.default(m),
-        "8 seeds, full size (previous default)": SeedPlan(bulges=(0.25, 0.6), random=2),
-        "50 seeds, full size (reference)": SeedPlan(
-            bulges=(0.1, 0.2, 0.3, 0.45, 0.6, 0.8), random=36),
+        "default (batched Newton)": (SeedPlan.default(m), "auto"),
+        "IPOPT default plan": (SeedPlan.default(m, "ipopt"), "ipopt"),
+        "8 seeds, full size (older default)": (SeedPlan(bulges=(0.25, 0.6), random=2),
+                                               "auto"),
+        "50 seeds, full size (reference)": (SeedPlan(
+            bulges=(0.1, 0.2, 0.3, 0.45, 0.6, 0.8), random=36), "auto"),
     }
 
 
@@ -161,14 +165,16 @@ def run_fresh(k: int, cache: str | None, seed: int = FRESH_SEED) -> None:
             if np.array_equal(z["pairs"], pairs):
                 stored = {key[2:]: z[key] for key in z.files if key.startswith("e:")}
     rows = []
-    for name, plan in fresh_plans(m).items():
-        key = repr(plan)
+    for name, (plan, method) in fresh_plans(m).items():
+        key = repr((plan, method))
         if key in stored and "t:" + key in stored:
             e, times = stored[key], stored["t:" + key]
         else:
-            solve_batch(m, pairs[:2], n, seeds=plan, workers=2, progress=False)  # warm-up
+            solve_batch(m, pairs[:2], n, seeds=plan, workers=2, progress=False,
+                        method=method)  # warm-up
             t0 = time.perf_counter()
-            res = solve_batch(m, pairs, n, seeds=plan, workers=2, progress=False)
+            res = solve_batch(m, pairs, n, seeds=plan, workers=2, progress=False,
+                              method=method)
             wall = time.perf_counter() - t0
             e = np.array([r.energy for r in res])
             times = np.array([wall / k, float(np.median([r.wall_time for r in res]))])
@@ -241,6 +247,39 @@ def run_scale(k: int, sizes: list[int], full_max: int) -> None:
                       f"max {gap.max():.2e}, min {gap.min():.2e}")
 
 
+def run_linear() -> None:
+    """Block Thomas against cyclic reduction (solvers.newton.block_tridiagonal_solve) on
+    random positive definite systems of the shapes the batched solve meets: many short
+    paths (the seeding levels) to a few long ones (4096 segments); CPU ms per solve, the
+    median of 5, with the local modification on (as the solver runs them)."""
+    from solvers.newton import _NUMPY_OPS, THOMAS_MAX_BLOCKS, block_tridiagonal_solve
+
+    rng = np.random.default_rng(0)
+    print(f"\n== block-tridiagonal solves, 2x2 blocks: CPU ms per solve (auto picks Thomas "
+          f"up to {THOMAS_MAX_BLOCKS} blocks: by the size alone, so that a problem's "
+          "arithmetic does not depend on its batch)")
+    print(f"{'problems':>8s} {'blocks':>6s} {'thomas':>9s} {'cyclic':>9s}  auto")
+    for b, m in [(16384, 15), (3400, 31), (1000, 63), (200, 63), (100, 255), (12, 255),
+                 (4, 1023), (4, 4095), (1, 4095)]:
+        a = rng.normal(size=(b, m, 2, 2))
+        a = a @ np.swapaxes(a, -1, -2) + 5 * np.eye(2)
+        o = rng.normal(size=(b, m, 2, 2)) * 0.5
+        r = rng.normal(size=(b, m, 2))
+        diag = [[np.ascontiguousarray(a[..., i, k]) for k in range(2)] for i in range(2)]
+        off = [[np.ascontiguousarray(o[..., i, k]) for k in range(2)] for i in range(2)]
+        rhs = [np.ascontiguousarray(r[..., i]) for i in range(2)]
+        out = []
+        for method in ("thomas", "cyclic"):
+            times = []
+            for _ in range(5):
+                c0 = time.process_time()
+                block_tridiagonal_solve(_NUMPY_OPS, diag, off, rhs, method=method, local=True)
+                times.append(time.process_time() - c0)
+            out.append(float(np.median(times)) * 1e3)
+        auto = "thomas" if m <= THOMAS_MAX_BLOCKS else "cyclic"
+        print(f"{b:8d} {m:6d} {out[0]:9.2f} {out[1]:9.2f}  {auto}")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--pairs", type=int, default=100)
@@ -255,6 +294,8 @@ def main() -> None:
     ap.add_argument("--sizes", default="64,256,1024,4096")
     ap.add_argument("--full-max", type=int, default=1024,
                     help="largest N for the all-seeds-at-full-N plan")
+    ap.add_argument("--linear", action="store_true",
+                    help="the batched Newton solve's block-tridiagonal factorisations")
     args = ap.parse_args()
     torch.set_num_threads(1)
     if args.metrics != "none":
@@ -269,6 +310,8 @@ def main() -> None:
         run_fresh(args.fresh, args.fresh_cache, args.fresh_seed)
     if args.scale:
         run_scale(args.scale, [int(v) for v in args.sizes.split(",")], args.full_max)
+    if args.linear:
+        run_linear()
 
 
 if __name__ == "__main__":

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-__all__ = ["DomainError", "InputError", "UnknownMetricError"]
+__all__ = ["DomainError", "InputError", "UnknownMetricError", "short"]
 
 
 class InputError(ValueError):
@@ -18,3 +18,16 @@ class UnknownMetricError(InputError, KeyError):
 
     def __str__(self) -> str:  # KeyError would quote the message
         return str(self.args[0]) if self.args else ""
+
+
+def short(text: str, limit: int = 48) -> str:
+    """``text`` for an error message: at most ``limit`` characters (the middle replaced by
+    ``...``), newlines and other control characters escaped, so that echoing a user's input
+    keeps the message on one short line."""
+    text = str(text)
+    if not text.isprintable():
+        text = text.encode("unicode_escape", "backslashreplace").decode("ascii")
+    if len(text) <= limit:
+        return text
+    keep = max(limit - 3, 2)
+    return text[: keep - keep // 3] + "..." + text[len(text) - keep // 3:]

@@ -159,19 +159,26 @@ class Interval:
     def power(self, p: float) -> Interval:
         if p == 2.0:
             return self.square()
-        if p == round(p) and abs(p) <= 64:
+        # an integer exponent, however large: x ** n is defined for negative x too (a cap
+        # here once sent x ** 65 to the x >= 0 route below, a wrong enclosure for x < 0)
+        if math.isfinite(p) and p == round(p):
             n = round(p)
             if n == 0:
                 return Interval(np.ones_like(self.lo))
             if n < 0:
                 return self.power(-n).reciprocal()
+            e = float(n)  # (a Python int beyond int64 would not convert)
             if n % 2 == 0:
                 mag = self.magnitude()
                 straddles = (self.lo < 0.0) & (self.hi > 0.0)
                 small = np.where(straddles, 0.0, np.minimum(np.abs(self.lo), np.abs(self.hi)))
-                return Interval(np.maximum(_down(small**n, n * _ULP_EXACT), 0.0),
-                                _up(mag**n, n * _ULP_EXACT))
-            return Interval._rounded(self.lo**n, self.hi**n, n * _ULP_EXACT)
+                with np.errstate(over="ignore"):  # beyond the largest float: inf, soundly
+                    small, mag = small**e, mag**e
+                return Interval(np.maximum(_down(small, n * _ULP_EXACT), 0.0),
+                                _up(mag, n * _ULP_EXACT))
+            with np.errstate(over="ignore"):
+                a, b = self.lo**e, self.hi**e
+            return Interval._rounded(a, b, n * _ULP_EXACT)
         # non-integer power: on the part of the box where x >= 0
         lo = np.maximum(self.lo, 0.0)
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -197,7 +204,10 @@ def _contains_point(x: Interval, phase: float) -> np.ndarray:
     """Whether ``[lo, hi]`` contains ``phase + 2 pi k`` for some integer ``k`` (in doubt:
     yes)."""
     two_pi = 2.0 * math.pi
-    k = np.ceil((x.lo - phase) / two_pi - 1e-9)
+    # the first candidate at or above lo, with the same slack as on the hi side: the rounding
+    # of (lo - phase) / two_pi grows with |lo| (near 1e9 a fixed 1e-9 in k once skipped an
+    # extremum 2e-7 above lo, and sin's upper bound came out 4e-15 below 1)
+    k = np.ceil((x.lo - phase - 1e-9 * (1.0 + np.abs(x.lo))) / two_pi)
     return (phase + two_pi * k <= x.hi + 1e-9 * (1.0 + np.abs(x.hi))) | (
         x.hi - x.lo >= two_pi)
 
@@ -242,7 +252,8 @@ class _IntervalBackend:
 
     @staticmethod
     def _periodic(fn: Any, x: Interval, at_max: float, at_min: float) -> Interval:
-        a, b = fn(x.lo), fn(x.hi)
+        with np.errstate(invalid="ignore"):  # sin(inf): NaN, the box gets [-1, 1] below
+            a, b = fn(x.lo), fn(x.hi)
         out = Interval._rounded(np.minimum(a, b), np.maximum(a, b), _ULP_LIBM)
         lo = np.where(_contains_point(x, at_min), -1.0, np.maximum(out.lo, -1.0))
         hi = np.where(_contains_point(x, at_max), 1.0, np.minimum(out.hi, 1.0))

@@ -249,12 +249,9 @@ class LoweredFunction:
         if len(args) != self.n_in:
             raise TypeError(f"{self.name}: expected {self.n_in} inputs, got {len(args)}")
         first = args[0]
-        try:
-            import torch
-
-            is_torch = isinstance(first, torch.Tensor)
-        except ImportError:  # pragma: no cover - torch is a dependency
-            is_torch = False
+        # by the type's module, not isinstance: importing torch to ask costs ~1.5 s of a
+        # cold start in numpy-only callers (the CLI's exact solves)
+        is_torch = type(first).__module__.startswith("torch")
         for k, (a, n) in enumerate(zip(args, self.in_sizes, strict=True)):
             if a.shape[-1] != n:
                 raise ValueError(
@@ -262,6 +259,8 @@ class LoweredFunction:
                     f"{tuple(a.shape)}"
                 )
         if is_torch:
+            import torch
+
             cols = [list(a.reshape(-1, a.shape[-1]).unbind(-1)) for a in args]
             outs = self._program(_torch_backend(), cols)
             batch = torch.broadcast_shapes(*(a.shape[:-1] for a in args))

@@ -173,7 +173,11 @@ class Metric(MetricHooks, ABC):
     * ``smooth``: ``F`` is smooth on ``TM \\ 0``;
     * ``convex_everywhere``: ``F(x, .)`` is convex at every point of the domain
       (for ``smooth`` metrics: strongly convex, i.e. Finsler);
-    * ``convexity_note``: a sentence for docs and the CLI.
+    * ``convexity_note``: a sentence for docs and the CLI;
+    * ``unique_geodesics``: every two points of the domain are joined by exactly one
+      geodesic, which is the shortest curve (e.g. a constant norm, a Hadamard manifold, a
+      cap smaller than a hemisphere): solvers then need no global seeding (the straight
+      line converges to it). Declare it only where it is a theorem for every parameter.
     """
 
     name: ClassVar[str]
@@ -182,6 +186,7 @@ class Metric(MetricHooks, ABC):
     smooth: ClassVar[bool] = True
     convex_everywhere: ClassVar[bool] = True
     convexity_note: ClassVar[str] = "Finsler (strongly convex) on the whole domain"
+    unique_geodesics: ClassVar[bool] = False
 
     # -- to implement -------------------------------------------------------------------
     @property
@@ -234,6 +239,25 @@ class Metric(MetricHooks, ABC):
     @functools.cached_property
     def lowered_hessian(self) -> LoweredFunction:
         return lower(self.casadi_hessian)
+
+    @functools.cached_property
+    def segment_derivatives(self) -> LoweredFunction:
+        """Vectorised program ``(x, y) -> (phi, grad, hess)`` of one segment's squared cost
+        ``phi = C(x, y)**2 = F(x, y - x)**2`` (the summand of the discrete energy, eq. 7):
+        ``grad`` ``(2 dim,)`` its gradient in ``(x, y)``, ``hess`` the upper triangle of its
+        Hessian in ``(x, y)``, row by row (entries ``(i, j)``, ``i <= j``). Derived
+        symbolically from :meth:`F_sx` and lowered once (the batched Newton solver of
+        :mod:`solvers.newton` evaluates it for every segment of every problem at once)."""
+        x = ca.SX.sym("x", self.dim)
+        y = ca.SX.sym("y", self.dim)
+        z = ca.vertcat(x, y)
+        phi = self.F_sx(x, y - x) ** 2
+        grad = ca.gradient(phi, z)
+        hess, _ = ca.hessian(phi, z)
+        upper = [hess[i, j] for i in range(2 * self.dim) for j in range(i, 2 * self.dim)]
+        return lower(ca.Function(f"seg_{self._ident}", [x, y],
+                                 [ca.densify(phi), ca.densify(grad),
+                                  ca.densify(ca.vertcat(*upper))]))
 
     # -- numeric batch methods ------------------------------------------------------------
     # Points given to the numeric methods below are checked (finite, inside the domain up
@@ -495,7 +519,11 @@ class Metric(MetricHooks, ABC):
         vs = np.tile(dirs, (n, 1))
         (h,) = self.lowered_hessian(xs, vs)
         h = h.reshape(-1, self.dim, self.dim).transpose(0, 2, 1)  # CasADi is column-major
-        lam = np.linalg.eigvalsh(0.5 * (h + h.transpose(0, 2, 1)))[:, 0]
+        if self.dim == 2:  # closed form of the smaller eigenvalue (10x LAPACK's batch)
+            a, b, c = h[:, 0, 0], 0.5 * (h[:, 0, 1] + h[:, 1, 0]), h[:, 1, 1]
+            lam = 0.5 * (a + c) - np.hypot(0.5 * (a - c), b)
+        else:
+            lam = np.linalg.eigvalsh(0.5 * (h + h.transpose(0, 2, 1)))[:, 0]
         return lam.reshape(n, len(dirs)).min(axis=1)
 
     def midpoint_convexity_gap(self, x: Any, v: Any, w: Any) -> np.ndarray:

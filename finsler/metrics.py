@@ -261,6 +261,7 @@ class Euclidean(ClosedFormMetric):
     n: int = 2
 
     name: ClassVar[str] = "euclidean"
+    unique_geodesics: ClassVar[bool] = True  # straight lines
     task: ClassVar[Task] = Task(depth=4, eps=0.2)
     reversible: ClassVar[bool] = True
 
@@ -292,6 +293,7 @@ class Minkowski(ClosedFormMetric):
     b2: float = -0.2
 
     name: ClassVar[str] = "minkowski"
+    unique_geodesics: ClassVar[bool] = True  # a constant norm: straight lines
     task: ClassVar[Task] = Task(depth=4, eps=0.3)
     reversible: ClassVar[bool] = False
 
@@ -331,6 +333,7 @@ class Randers(ClosedFormMetric):
     wind_y: float = 0.2
 
     name: ClassVar[str] = "randers"
+    unique_geodesics: ClassVar[bool] = True  # constant wind: straight lines
     task: ClassVar[Task] = Task(depth=4, eps=0.4)
     reversible: ClassVar[bool] = False
 
@@ -369,6 +372,7 @@ class Poincare(ClosedFormMetric):
     radius: float = 0.8
 
     name: ClassVar[str] = "poincare"
+    unique_geodesics: ClassVar[bool] = True  # a Hadamard manifold (curvature -1)
     task: ClassVar[Task] = Task(depth=5, eps=0.3)
     reversible: ClassVar[bool] = True
     convexity_note: ClassVar[str] = "Riemannian: Finsler everywhere"
@@ -411,6 +415,7 @@ class Sphere(ClosedFormMetric):
     radius: float = 0.8
 
     name: ClassVar[str] = "sphere"
+    unique_geodesics: ClassVar[bool] = True  # a cap smaller than a hemisphere
     task: ClassVar[Task] = Task(depth=5, eps=0.2)
     reversible: ClassVar[bool] = True
     convexity_note: ClassVar[str] = "Riemannian: Finsler everywhere"

@@ -7,7 +7,8 @@ from pathlib import Path
 
 import numpy as np
 
-from finsler.errors import InputError
+from finsler.errors import InputError, short
+from finsler.files import read_npy
 from finsler.metric import Metric
 
 __all__ = [
@@ -51,33 +52,26 @@ def validation_pairs(metric: Metric, k: int = 100) -> np.ndarray:
     return sample_pairs(metric, k, VALIDATION_SEED)
 
 
-def load_pairs(path: str | os.PathLike[str], metric: Metric) -> np.ndarray:
+def load_pairs(path: str | os.PathLike[str], metric: Metric,
+               what: str = "pairs file") -> np.ndarray:
     """Read a ``.npy`` file of start/goal pairs for ``metric`` -> float64 ``(K, 2, dim)``.
 
     Raises :class:`InputError` (or :class:`DomainError`) naming the problem if the file is
     missing or unreadable, is not a numeric array of that shape, holds NaN/inf, or holds a
-    point outside the metric's domain.
+    point outside the metric's domain; messages start with ``what`` (a command passes its
+    option, ``--pairs``).
     """
     p = Path(path)
-    if not p.is_file():
-        raise InputError(f"pairs file {str(p)!r} does not exist")
-    try:
-        arr = np.load(p, allow_pickle=False)
-    except (ValueError, OSError, EOFError) as err:
-        why = ("it holds pickled Python objects or is not a .npy file at all (a text file "
-               "renamed .npy?); write it with numpy.save(path, array)"
-               if "pickle" in str(err) else str(err))
-        raise InputError(f"pairs file {str(p)!r} is not a readable .npy array: {why}") from err
-    if not isinstance(arr, np.ndarray) or arr.dtype.kind not in "fiu":
-        raise InputError(f"pairs file {str(p)!r} must hold a numeric array")
+    name = f"{what} {short(str(p))}"
+    arr = read_npy(p, what)
     if arr.ndim != 3 or arr.shape[1] != 2 or arr.shape[2] != metric.dim or arr.shape[0] < 1:
         raise InputError(
-            f"pairs file {str(p)!r} must hold an array of shape (K, 2, {metric.dim}) with "
+            f"{name} must hold an array of shape (K, 2, {metric.dim}) with "
             f"K >= 1 pairs for {metric.name}, got {arr.shape}"
         )
     arr = arr.astype(np.float64)
     if not np.all(np.isfinite(arr)):
-        raise InputError(f"pairs file {str(p)!r} contains NaN or inf")
-    metric.domain.check(arr[:, 0], f"{p} starts")
-    metric.domain.check(arr[:, 1], f"{p} goals")
+        raise InputError(f"{name} contains NaN or inf")
+    metric.domain.check(arr[:, 0], f"{name} starts")
+    metric.domain.check(arr[:, 1], f"{name} goals")
     return arr

@@ -20,7 +20,6 @@ registered (a run saved in one process, loaded in another). Nothing here imports
 from __future__ import annotations
 
 import dataclasses
-import importlib
 import json
 import math
 from collections.abc import Mapping
@@ -30,6 +29,7 @@ from typing import Any
 from finsler import registry
 from finsler.errors import InputError
 from finsler.metric import Metric
+from finsler.modules import import_user_module
 
 __all__ = ["MetricSpec", "class_path", "ensure_registered", "metric_spec"]
 
@@ -60,10 +60,9 @@ def _import_metric_class(name: str, path: str) -> None:
             "cannot be re-imported: register it (run the code defining it) before loading "
             "the run, or move the class into a module")
     try:
-        mod = importlib.import_module(module)
-    except ImportError as err:
-        raise InputError(f"metric {name!r} is class {path}, whose module cannot be imported "
-                         f"({err}); {advice}") from err
+        mod = import_user_module(module, f"metric {name!r}: module")
+    except InputError as err:
+        raise InputError(f"{err}; {advice}") from err
     obj: Any = mod
     for part in qualname.split("."):
         obj = getattr(obj, part, None)

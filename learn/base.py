@@ -13,6 +13,7 @@ resumable checkpoint and raises :class:`TrainingInterrupted`.
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import signal
 import threading
 from dataclasses import dataclass, field
@@ -21,6 +22,7 @@ from typing import Any, TypeVar
 
 import finsler
 from finsler.errors import InputError
+from finsler.limits import check_memory
 from learn.storage import write_result
 
 __all__ = [
@@ -40,6 +42,18 @@ def check_choice(name: str, value: str, allowed: tuple[str, ...]) -> None:
     """Raise :class:`InputError` unless ``value`` is one of ``allowed``."""
     if value not in allowed:
         raise InputError(f"{name} must be one of {', '.join(allowed)}; got {value!r}")
+
+
+def check_hidden(hidden: tuple[int, ...], dim: int = 8) -> None:
+    """Raise :class:`InputError` unless ``hidden`` are positive layer widths whose MLPs
+    (inputs ~ ``2 * dim`` + a few) fit in memory (:func:`finsler.limits.check_memory`,
+    before any network is built)."""
+    if not hidden or any(h < 1 for h in hidden):
+        raise InputError(f"hidden sizes must be positive, got {hidden!r}")
+    widths = [2 * dim + 4, *hidden, 2 * dim]
+    weights = sum((a + 1) * b for a, b in itertools.pairwise(widths))
+    check_memory((weights,), f"hidden {list(hidden)} (about {weights:.3g} weights per "
+                 "network)", hint="choose smaller layers", itemsize=4, copies=4)
 
 
 class RunConfig:

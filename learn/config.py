@@ -17,7 +17,7 @@ from typing import Any
 import finsler
 from finsler.errors import InputError
 from finsler.spec import MetricSpec, class_path, ensure_registered
-from learn.base import RunConfig, check_choice
+from learn.base import RunConfig, check_choice, check_hidden
 from learn.methods import derivative_terms, describe
 
 __all__ = [
@@ -145,8 +145,9 @@ class TrainConfig(MetricConfig):
     """Actor loss: ``midpoint`` (eq. 6), ``inter`` (eq. 17) or ``two-to-one`` (eq. 18)."""
     timesteps: int = 20_000_000
     """Budget T of evaluations of C, all-inclusive: the collected trees (the paper's
-    timesteps) and every evaluation an extra actor term makes; also the horizon of the
-    learning-rate schedule and of the paper's depth schedule."""
+    timesteps) and every evaluation an extra actor term makes, in every epoch; also the
+    horizon of the learning-rate schedule and of the paper's depth schedule. The
+    evaluations of the validation set that select checkpoints are not counted."""
     minutes: float | None = None
     """Optional wall-clock limit; training stops at whichever limit comes first."""
     seed: int = 0
@@ -232,6 +233,26 @@ class TrainConfig(MetricConfig):
     """Pairs searched per collection when ``route_candidates > 0``."""
     route_weight: float = 1.0
     """Weight of the squared distance of the actor's mean to a better route's midpoint."""
+    # -- expert iteration (learn.expert): the policy learns what the route search finds --
+    expert_weight: float = 0.0
+    """Beyond the paper, model-free (values of C only; 0 = off): weight of the actor's
+    imitation of the route search's paths (``learn.expert.SearchImitation``): every
+    ``expert_every`` collections ``expert_pairs`` fresh pairs are searched from the
+    policy's own paths; the searched paths' tree midpoints are the actor's targets, their
+    sub-path costs the critic's (every evaluation of C the search makes is counted)."""
+    expert_pairs: int = 64
+    """Pairs searched per expert-iteration round."""
+    expert_every: int = 1
+    """Collections between expert-iteration rounds."""
+    expert_search: str = "local"
+    """The teacher: ``local`` (the route search's windows and equalizing rounds only) or
+    ``full`` (the whole route search, ``learn.SearchSpec()``)."""
+    expert_levels: int = 0
+    """Top levels of the searched paths' midpoint trees used as actor targets (0: all)."""
+    expert_keep: int = 4
+    """Rounds of targets kept (a replay buffer)."""
+    expert_critic: bool = True
+    """Add the searched sub-paths' costs to the critic's data."""
     eval_every: int = 50
     """Iterations (collections) between evaluations on the validation pair set; each
     evaluation also writes the latest checkpoint (deterministic resume points)."""
@@ -256,7 +277,8 @@ class TrainConfig(MetricConfig):
         check_choice("activation", self.activation, _ACTIVATIONS)
         check_choice("path_energy_scale", self.path_energy_scale, _ENERGY_SCALES)
         for name in ("timesteps", "minibatch_size", "collection_size", "epochs", "threads",
-                     "eval_every", "eval_pairs", "path_energy_pairs", "route_pairs"):
+                     "eval_every", "eval_pairs", "path_energy_pairs", "route_pairs",
+                     "expert_pairs", "expert_every", "expert_keep"):
             v = getattr(self, name)
             if not isinstance(v, int) or isinstance(v, bool) or v < 1:
                 raise InputError(f"{name} must be a positive integer, got {v!r}")
@@ -266,8 +288,7 @@ class TrainConfig(MetricConfig):
             raise InputError(f"depth must be a positive integer, got {self.depth!r}")
         if self.eps is not None and not (self.eps > 0 and self.eps < float("inf")):
             raise InputError(f"eps must be positive and finite, got {self.eps!r}")
-        if not self.hidden or any(h < 1 for h in self.hidden):
-            raise InputError(f"hidden sizes must be positive, got {self.hidden!r}")
+        check_hidden(self.hidden)
         if not (self.lr > 0 and self.lr < 1):
             raise InputError(f"lr must be in (0, 1), got {self.lr!r}")
         if not (0 < self.lr_final_fraction <= 1):
@@ -278,6 +299,14 @@ class TrainConfig(MetricConfig):
             raise InputError(f"route_weight must be finite and >= 0, got {self.route_weight!r}")
         if not (0.0 <= self.explore_std < float("inf")):
             raise InputError(f"explore_std must be finite and >= 0, got {self.explore_std!r}")
+        check_choice("expert_search", self.expert_search, ("local", "full"))
+        if not (0.0 <= self.expert_weight < float("inf")):
+            raise InputError(f"expert_weight must be finite and >= 0, got "
+                             f"{self.expert_weight!r}")
+        if not isinstance(self.expert_levels, int) or isinstance(
+                self.expert_levels, bool) or self.expert_levels < 0:
+            raise InputError(f"expert_levels must be an integer >= 0, got "
+                             f"{self.expert_levels!r}")
         if not (0.0 <= self.path_energy_weight < float("inf")):
             raise InputError("path_energy_weight must be finite and >= 0, got "
                              f"{self.path_energy_weight!r}")
@@ -427,7 +456,9 @@ def run_document(cfg: TrainConfig) -> dict[str, Any]:
     of choices beyond the paper."""
     return {
         **describe(cfg),
-        "counts": "timesteps = every evaluation of C made in training (all-inclusive); "
+        "counts": "timesteps = every evaluation of C made to learn (all-inclusive: trees "
+                  "and every extra term, in every epoch; the validation evaluations that "
+                  "select checkpoints are not counted); "
                   "timesteps_paper = evaluations in collected trees (the paper's count); "
                   "timesteps_derivative = evaluations whose derivative was used",
         "selection": f"checkpoint_best by success on finsler.validation_pairs (seed "

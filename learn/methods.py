@@ -16,24 +16,12 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, ClassVar, Protocol
 
-import numpy as np
 import torch
 
-import finsler
 from finsler.errors import InputError
-from learn.networks import Actor
+from learn.expert import SearchImitation, search_spec
+from learn.term import ActorTerm, TermOutput, Trainer
 from learn.tree import build_tree
-
-
-class Trainer(Protocol):
-    """What a term reads of the trainer running it (:class:`learn.Trainer`)."""
-
-    actor: Actor
-    metric: finsler.Metric
-    np_rng: np.random.Generator
-    device: torch.device
-    dim: int
-    depth_max: int
 
 
 class TrainConfig(Protocol):
@@ -45,6 +33,14 @@ class TrainConfig(Protocol):
     route_candidates: int
     route_pairs: int
     route_weight: float
+    expert_weight: float
+    expert_pairs: int
+    expert_every: int
+    expert_search: str
+    expert_levels: int
+    expert_keep: int
+    expert_critic: bool
+
 
 __all__ = [
     "ACTOR_LOSSES",
@@ -78,31 +74,6 @@ ACTOR_LOSSES: dict[str, ActorLoss] = {
     "inter": ActorLoss("inter", "eq. (17)", lambda a, b: a + b),
     "two-to-one": ActorLoss("two-to-one", "eq. (18)", lambda a, b: a**2 + 2.0 * b**2),
 }
-
-
-@dataclass
-class TermOutput:
-    """One actor step's contribution of a term: its weighted loss and the evaluations of
-    C it made (``derivative``: how many of them were differentiated)."""
-
-    loss: torch.Tensor | None
-    evaluations: int = 0
-    derivative: int = 0
-
-
-class ActorTerm:
-    """An extra actor term: :meth:`prepare` runs once per collection, :meth:`step` once
-    per actor step; both return the evaluations of C they made."""
-
-    name: ClassVar[str] = ""
-    uses_derivative_of_C: ClassVar[bool] = False
-
-    def prepare(self, trainer: Trainer) -> int:
-        """Work done once per collection (before its updates); returns C evaluations."""
-        return 0
-
-    def step(self, trainer: Trainer) -> TermOutput:
-        raise NotImplementedError
 
 
 def _path_costs_safe(metric: Any, pts: torch.Tensor) -> torch.Tensor:
@@ -231,6 +202,10 @@ def actor_terms(cfg: TrainConfig) -> list[ActorTerm]:
                                 cfg.path_energy_scale))
     if cfg.route_candidates > 0:
         terms.append(RouteSearch(cfg.route_candidates, cfg.route_pairs, cfg.route_weight))
+    if cfg.expert_weight > 0:  # expert iteration (learn.expert): values of C only
+        terms.append(SearchImitation(cfg.expert_weight, cfg.expert_pairs, cfg.expert_every,
+                                     search_spec(cfg.expert_search), cfg.expert_levels,
+                                     cfg.expert_keep, cfg.expert_critic))
     return terms
 
 

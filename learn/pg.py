@@ -57,7 +57,7 @@ from torch import nn
 
 import finsler
 from finsler.errors import InputError
-from learn.base import TrainResult, check_choice
+from learn.base import TrainResult, check_choice, check_hidden
 from learn.config import MetricConfig, ensure_registered
 from learn.loop import RunLoop, best_record, eval_columns, load_run, load_weights
 from learn.networks import mlp, resolve_device
@@ -203,8 +203,7 @@ class PGConfig(MetricConfig):
         if self.samples_per_pair < 2:
             raise InputError("samples_per_pair must be at least 2 (the baseline is the mean "
                              f"of the pair's samples), got {self.samples_per_pair!r}")
-        if not self.hidden or any(h < 1 for h in self.hidden):
-            raise InputError(f"hidden sizes must be positive, got {self.hidden!r}")
+        check_hidden(self.hidden)
         _real("lr", self.lr, 0.0, 1.0)
         _real("clip", self.clip, 0.0, 1.0)
         _real("base_std", self.base_std, 0.0, math.inf)

@@ -22,7 +22,7 @@ from pathlib import Path
 from typing import Any
 
 from finsler.errors import InputError
-from finsler.plugins import import_module_or_file
+from finsler.modules import import_user_module
 
 __all__ = [
     "Method",
@@ -183,8 +183,8 @@ def method_of_run(run_dir: str | Path, section: Mapping[str, Any]) -> Method:
         module = read_json(Path(run_dir) / CONFIG_FILE).get("method_module")
         if name not in _METHODS and isinstance(module, str):
             try:
-                importlib.import_module(module)
-            except ImportError as err:
+                import_user_module(module, f"method {name!r}: module")
+            except InputError as err:
                 raise InputError(
                     f"run {run_dir} was trained by method {name!r} of module {module!r}, "
                     f"which cannot be imported ({err}): pass --method-module FILE.py (or "
@@ -196,4 +196,4 @@ def import_method_modules(items: Iterable[str] | None) -> list[str]:
     """Import every ``--method-module`` (a dotted module name, or a ``.py`` file whose
     folder is put first on ``sys.path`` and which is imported by its stem, so that worker
     processes and later loads import it by that name too); returns the module names."""
-    return [import_module_or_file(item, "--method-module") for item in items or []]
+    return [import_user_module(item, "--method-module").__name__ for item in items or []]

@@ -38,7 +38,7 @@ import torch
 
 import finsler
 from finsler.errors import InputError
-from learn.base import TrainResult
+from learn.base import TrainResult, check_hidden
 from learn.config import MetricConfig, ensure_registered, package_versions
 from learn.env import (
     TIME_LIMITS,
@@ -203,8 +203,7 @@ class SeqConfig(MetricConfig):
         if not (0 < self.max_grad_norm < math.inf):
             raise InputError(f"max_grad_norm must be positive and finite, got "
                              f"{self.max_grad_norm!r}")
-        if not self.hidden or any(h < 1 for h in self.hidden):
-            raise InputError(f"hidden sizes must be positive, got {self.hidden!r}")
+        check_hidden(self.hidden)
         if self.activation not in ("tanh", "relu"):
             raise InputError(f"activation must be one of tanh, relu; got {self.activation!r}")
         if self.n_envs * self.n_steps < 2:

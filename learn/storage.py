@@ -54,8 +54,8 @@ def check_run_dir(run_dir: Path, resume: bool) -> Path:
     absent or an empty folder (its parent a folder); to resume, a folder. Raises
     :class:`InputError` naming the problem."""
     p = Path(run_dir)
-    if p.exists() and not p.is_dir():
-        raise InputError(f"run directory {p} exists and is not a folder; choose another --out")
+    # names that fit, a folder that takes files; checked here, created once the work starts
+    files.check_output_dir(p, "run directory")
     if resume:
         if not p.is_dir():
             raise InputError(f"cannot resume: run directory {p} does not exist")
@@ -63,7 +63,6 @@ def check_run_dir(run_dir: Path, resume: bool) -> Path:
     if p.exists() and any(p.iterdir()):
         raise InputError(f"run directory {p} exists and is not empty; pass --resume to "
                          "continue it or choose a new --out")
-    files.check_output_path(p / CONFIG_FILE, "run directory")
     return p
 
 

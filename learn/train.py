@@ -127,6 +127,7 @@ class Trainer(RunLoop):
             "torch_rng": self.gen.get_state(),
             "counters": {"trees": self.trees, "updates": self.updates,
                          "skipped_steps": self.skipped_steps},
+            "terms": {t.name: st for t in self.terms if (st := t.state()) is not None},
         }
 
     def load_state_dict(self, st: dict[str, Any]) -> None:
@@ -139,6 +140,9 @@ class Trainer(RunLoop):
         c = st["counters"]
         self.trees, self.updates = int(c["trees"]), int(c["updates"])
         self.skipped_steps = int(c.get("skipped_steps", 0))
+        for t in self.terms:  # extra actor terms with state (expert iteration's buffer)
+            if t.name in st.get("terms", {}):
+                t.load(st["terms"][t.name], self.device)
 
     def policy_state(self) -> dict[str, Any]:
         return {"actor": self.actor.state_dict(), "critic": self.critic.state_dict()}
@@ -195,10 +199,16 @@ class Trainer(RunLoop):
         """``epochs`` passes of minibatch updates: critic (eq. 5), then actor (the method's
         loss, eq. 6 / 17 / 18, plus the extra terms of :mod:`learn.methods`). Adds the
         terms' evaluations of C to the counters."""
-        s32, g32 = s.float(), g.float()
-        target = self.critic.to_raw(c).float()
         for term in self.terms:
             self.timesteps += term.prepare(self)
+        # terms may add critic data of their own (expert iteration: searched sub-paths)
+        extra = [d for d in (term.critic_data(self) for term in self.terms) if d is not None]
+        if extra:
+            s = torch.cat([s, *(d[0] for d in extra)])
+            g = torch.cat([g, *(d[1] for d in extra)])
+            c = torch.cat([c, *(d[2] for d in extra)])
+        s32, g32 = s.float(), g.float()
+        target = self.critic.to_raw(c).float()
         n = s.shape[0]
         mb = self.cfg.minibatch_size
         lc_sum = la_sum = 0.0

@@ -67,9 +67,10 @@ import numpy as np
 from finsler.domains import Box, Disk
 from finsler.errors import InputError
 from finsler.intervals import Interval, enclose, isqrt
+from finsler.limits import check_memory
 from finsler.lowering import LoweredFunction, lower
 from finsler.metric import Metric
-from solvers.inputs import as_metric
+from solvers.inputs import SHORT_PAIR, as_metric, domain_scale, is_short_pair
 
 __all__ = ["CertifyResult", "MeshSpec", "certify"]
 
@@ -141,6 +142,9 @@ class MeshSpec:
             val = getattr(self, name)
             if isinstance(val, bool) or not isinstance(val, (int, np.integer)) or val < low:
                 raise InputError(f"MeshSpec.{name} must be an integer >= {low}, got {val!r}")
+        # per mesh point and direction: F, and per triangle: two bounds (float64 each)
+        check_memory((3 * self.max_triangles, self.directions), "MeshSpec.directions x "
+                     "max_triangles", hint="fewer directions or triangles", copies=4)
         if self.segments is not None and (isinstance(self.segments, bool) or not isinstance(
                 self.segments, (int, np.integer)) or self.segments < 2):
             raise InputError(f"MeshSpec.segments must be an integer >= 2, got "
@@ -186,7 +190,11 @@ class CertifyResult:
     of the last potential before the final check (``<= 1`` up to the LP solver's
     feasibility tolerance; the potential is divided by it when above 1). ``lp_rows`` counts
     the rows of the last LP (edges of the inner polygons), ``lp_rows_total`` the sampled
-    rows they imply (3 x triangles x directions).
+    rows they imply (3 x triangles x directions). ``stopped_by`` says what ended the
+    refinement: ``target_gap`` (reached), ``max_rounds`` or ``max_triangles`` (the work
+    budgets of :class:`MeshSpec`), ``no_refinement`` (no triangle left to refine), or
+    ``time_limit`` (the caller's wall-clock limit: only then can the result depend on the
+    machine's speed).
     """
 
     metric: str
@@ -216,6 +224,7 @@ class CertifyResult:
     times: dict[str, float]
     rounds: list[dict[str, Any]] = field(default_factory=list)
     path: np.ndarray | None = None
+    stopped_by: str = "target_gap"
 
     @property
     def certified(self) -> bool:
@@ -621,10 +630,14 @@ class _Mesh:
     """Delaunay triangulation with P2 unknowns: vertices, then one per edge (midpoint)."""
 
     def __init__(self, points: np.ndarray) -> None:
-        from scipy.spatial import Delaunay
+        from scipy.spatial import Delaunay, QhullError
 
         self.points = points
-        self.delaunay = Delaunay(points)
+        try:
+            self.delaunay = Delaunay(points)
+        except QhullError as err:  # e.g. fewer than 3 distinct points
+            raise InputError(f"certify: the mesh of {points.shape[0]} points cannot be "
+                             "triangulated (is the spacing larger than the domain?)") from err
         tri = self.delaunay.simplices
         z = points[tri]
         area2 = ((z[:, 1, 0] - z[:, 0, 0]) * (z[:, 2, 1] - z[:, 0, 1])
@@ -937,6 +950,16 @@ def certify(
     g = m.domain.check(np.asarray(goal, float), "goal")[0]
     if np.array_equal(s, g):
         raise InputError("start equals goal: the distance is 0, nothing to certify")
+    scale = domain_scale(m)
+    if is_short_pair(m, s, g):
+        raise InputError(f"start and goal are {float(np.max(np.abs(g - s))):.3g} apart, below "
+                         f"{SHORT_PAIR:g} x the domain's size: too close for a mesh to "
+                         "separate them, nothing to certify (their distance is "
+                         "F(start, goal - start) to within O(|goal - start|**2))")
+    for name in ("h_path", "h_far", "corridor"):
+        if getattr(spec, name) > scale:
+            raise InputError(f"mesh {name} = {getattr(spec, name):g} is larger than the "
+                             f"domain (size {scale:g}); give at most {scale:g}")
 
     # upper bound: a curve's length with its quadrature error
     t0 = time.perf_counter()
@@ -977,6 +1000,7 @@ def certify(
     best: dict[str, Any] | None = None
     rounds: list[dict[str, Any]] = []
     previous = None
+    stopped_by = "max_rounds"
     for _ in range(spec.max_rounds):
         t0 = time.perf_counter()
         msh = _Mesh(points)
@@ -1016,8 +1040,10 @@ def certify(
         if best is None or lp["lower"] > best["lower"]:
             best = {**lp, "mesh": msh}
         if gap <= spec.target_gap:
+            stopped_by = "target_gap"
             break
         if time_limit is not None and time.perf_counter() - t_start > time_limit:
+            stopped_by = "time_limit"
             break
         # Doerfler marking by the dual-weighted corrections sum_r y_r c_r per triangle
         rows, y = lp["rows"], np.maximum(lp["duals"], 0.0)
@@ -1026,9 +1052,11 @@ def certify(
         order = np.argsort(-weight)
         cum = np.cumsum(weight[order])
         if cum[-1] <= 0:
+            stopped_by = "no_refinement"
             break
         n_mark = int(np.searchsorted(cum, spec.mark_fraction * cum[-1]) + 1)
         if msh.n_tri + 3 * n_mark > spec.max_triangles:
+            stopped_by = "max_triangles"
             break
         t0 = time.perf_counter()
         points = msh.refine(order[:n_mark])
@@ -1051,5 +1079,5 @@ def certify(
         mesh={**asdict(spec), "element": "P2", "domain_polygon_vertices": int(poly.shape[0])},
         times={"solve": t_solve, "mesh": t_mesh, "bounds": data.seconds,
                "lp": t_lp, "total": total},
-        rounds=rounds, path=upper_path,
+        rounds=rounds, path=upper_path, stopped_by=stopped_by,
     )

@@ -37,7 +37,8 @@ import casadi as ca
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from finsler.errors import InputError
+from finsler.errors import InputError, short
+from finsler.limits import check_memory
 from finsler.metric import Metric
 from solvers.chebyshev import differentiation_matrix
 from solvers.inputs import as_metric, check_point, is_short_pair
@@ -286,6 +287,17 @@ def _vector(m: Metric, v: Any, name: str) -> np.ndarray:
     return arr
 
 
+def _check_speed(m: Metric, x: np.ndarray, v: np.ndarray, names: tuple[str, str]) -> None:
+    """Refuse a velocity whose speed ``F(x, v)`` (or ``F(x, v)**2``, which the geodesic
+    equation differentiates) overflows float64."""
+    with np.errstate(all="ignore"):
+        speed = float(m.F(x, v, check=False))
+    if not (math.isfinite(speed) and math.isfinite(speed * speed)):
+        raise InputError(f"{names[1]} = {short(str(v.tolist()), 60)} is too large: the speed "
+                         f"F({names[0]}, {names[1]}) overflows float64; scale it down (the "
+                         "curve of c v at time t / c is the same)")
+
+
 def _check_convex_at(m: Metric, sp: Spray, x: np.ndarray, v: np.ndarray | None,
                      name: str) -> None:
     """Refuse (InputError) a point where ``F(x, .)`` is not strongly convex."""
@@ -293,13 +305,15 @@ def _check_convex_at(m: Metric, sp: Spray, x: np.ndarray, v: np.ndarray | None,
         lam = float(m.convexity(x[None])[0])
         if not lam > 0:
             raise InputError(
-                f"{m.name}: F(x, .) is not strongly convex at {name} = {x.tolist()} (smallest "
+                f"{m.name}: F(x, .) is not strongly convex at {name} = "
+                f"{short(str(x.tolist()), 60)} (smallest "
                 f"eigenvalue of the fundamental tensor {lam:.3g} <= 0; {m.convexity_note}): "
                 "the geodesic equation does not describe shortest curves there, so exp/log "
                 "are refused")
     if v is not None and np.any(v != 0) and not sp.pd_ratio(x, v) > PD_RATIO:
         raise InputError(f"{m.name}: the fundamental tensor g({name}, v) is not positive "
-                         f"definite at {name} = {x.tolist()}, v = {v.tolist()}")
+                         f"definite at {name} = {short(str(x.tolist()), 60)}, v = "
+                         f"{short(str(v.tolist()), 60)}")
 
 
 def _integrate(m: Metric, sp: Spray, x: np.ndarray, v: np.ndarray, t: float, *,
@@ -372,7 +386,8 @@ def _integrate(m: Metric, sp: Spray, x: np.ndarray, v: np.ndarray, t: float, *,
     if speed > 0 and len(pts):
         fs = m.F(pts[:, :d], pts[:, d:], check=False)
         drift = float(np.max(np.abs(fs - speed)) / speed)
-    if status is ExpStatus.SUCCESS and not m.convex_everywhere and len(pts):
+    if status in (ExpStatus.SUCCESS, ExpStatus.LEFT_DOMAIN) and not m.convex_everywhere \
+            and len(pts):
         # g(x, x') positive definite is what the equation needs; for a metric that is not
         # convex everywhere also refuse points where F(x, .) fails convexity in some
         # direction (the curve is then not locally shortest among all curves)
@@ -423,6 +438,7 @@ def exp_map(
     rtol: float = RTOL,
     atol: float = ATOL,
     strict: bool = False,
+    names: tuple[str, str] = ("x", "v"),
 ) -> ExpResult:
     """Exponential map: the point ``gamma(t)`` of the geodesic with ``gamma(0) = x`` ``(dim,)``
     and ``gamma'(0) = v`` ``(dim,)``, for ``t >= 0``.
@@ -436,17 +452,21 @@ def exp_map(
     of samples (>= 2). ``rtol``/``atol``: DOP853 tolerances. Raises :class:`InputError` for
     bad input, a non-smooth metric or a start where ``F(x, .)`` is not strongly convex;
     ``strict=True`` raises :class:`SolverError` unless the status is ``SUCCESS``.
+    ``names``: how error messages call ``x`` and ``v`` (a command line passes its options).
     """
     m = as_metric(metric)
     sp = spray(m)
-    xs = check_point(m, x, "x")
-    vs = _vector(m, v, "v")
+    xs = check_point(m, x, names[0])
+    vs = _vector(m, v, names[1])
     if isinstance(t, bool) or not isinstance(t, (int, float, np.integer, np.floating)) or not (
             math.isfinite(t) and t >= 0):
         raise InputError(f"t must be a finite number >= 0, got {t!r}")
     samples = _samples(return_curve)
+    if samples:  # the dense output is evaluated at every sample: (2 dim, samples) floats
+        check_memory((samples, 2 * m.dim), f"{samples} samples of the curve", copies=3)
     _check_tolerances(rtol, atol)
-    _check_convex_at(m, sp, xs, vs, "x")
+    _check_speed(m, xs, vs, names)
+    _check_convex_at(m, sp, xs, vs, names[0])
     if t == 0 or not np.any(vs != 0):
         n = samples if samples else 0
         return ExpResult(
@@ -493,6 +513,7 @@ def log_map(
     rtol: float = RTOL,
     atol: float = ATOL,
     strict: bool = False,
+    names: tuple[str, str] = ("x", "y"),
 ) -> LogResult:
     """Logarithm map: the initial velocity ``v`` ``(dim,)`` with ``exp(x, v) = y`` and
     ``F(x, v) = d(x, y)`` (the shortest geodesic from ``x`` to ``y``, each ``(dim,)``, on
@@ -504,20 +525,21 @@ def log_map(
     search polishes it until ``|exp(x, v) - y|_max <= tol``. Raises :class:`InputError` for
     bad input, a non-smooth metric, or where ``F(x, .)`` is not strongly convex at ``x``,
     ``y`` or along the shortest path (e.g. Matsumoto outside ``|p| ~ 0.289``);
-    ``strict=True`` raises :class:`SolverError` unless converged.
+    ``strict=True`` raises :class:`SolverError` unless converged. ``names``: how error
+    messages call ``x`` and ``y`` (a command line passes its options).
     """
     t0 = time.perf_counter()
     m = as_metric(metric)
     sp = spray(m)
-    xs = check_point(m, x, "x")
-    ys = check_point(m, y, "y")
+    xs = check_point(m, x, names[0])
+    ys = check_point(m, y, names[1])
     if not (isinstance(tol, float) and math.isfinite(tol) and 0 < tol < 1):
         raise InputError(f"tol must be a float in (0, 1), got {tol!r}")
     if isinstance(max_iter, bool) or not isinstance(max_iter, (int, np.integer)) or max_iter < 1:
         raise InputError(f"max_iter must be a positive integer, got {max_iter!r}")
     _check_tolerances(rtol, atol)
-    _check_convex_at(m, sp, xs, None, "x")
-    _check_convex_at(m, sp, ys, None, "y")
+    _check_convex_at(m, sp, xs, None, names[0])
+    _check_convex_at(m, sp, ys, None, names[1])
     if np.array_equal(xs, ys):
         z = np.zeros(m.dim)
         return LogResult(m.name, xs, ys, z, 0.0, 0.0, 0.0, 0.0, LogStatus.TRIVIAL, 0, 0,

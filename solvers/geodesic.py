@@ -26,14 +26,16 @@ from finsler.files import OutputError, atomic_write_bytes
 from finsler.metric import Metric
 from finsler.pool import ProcessPool
 from finsler.spec import MetricSpec
+from solvers.batched import BatchOptions, BatchSolution, covers, residuals, solve_pairs_batched
 from solvers.inputs import (
+    SHORT_PAIR,
     as_metric,
     check_pairs,
     check_point,
     check_segments,
     domain_scale,
-    is_short_pair,
 )
+from solvers.newton import backend_for
 from solvers.result import (
     GeodesicResult,
     MidpointResult,
@@ -92,20 +94,37 @@ def check_initial_paths(metric: Metric, pairs: np.ndarray, n: int, paths: Any
 
 
 def _finish(metric: Metric, points: np.ndarray) -> dict[str, Any]:
-    costs = metric.path_costs(points[None])[0]
-    quad = metric.path_length_error(points, check=False)  # adaptive, with its error
-    nonconvex = 0
+    return _finish_many(metric, points[None])[0]
+
+
+def _finish_many(metric: Metric, paths: np.ndarray, residual: np.ndarray | None = None
+                 ) -> list[dict[str, Any]]:
+    """The reported figures of paths ``(K, n+1, dim)``, all evaluated at once: segment
+    costs, energy, length, the polyline's length by adaptive quadrature with its error,
+    largest segment cost, points where ``F`` is not convex (metrics not convex
+    everywhere), first-order residual (``residual``: known ones, NaN where unknown)."""
+    k, n1, dim = paths.shape
+    costs = metric.path_costs(paths, check=False)
+    # adaptive quadrature with its error, in parts whose worst case fits the memory limit
+    step = max(1, QUAD_SEGMENTS // (n1 - 1))
+    parts = [metric.path_length_error(paths[a:a + step], check=False)
+             for a in range(0, k, step)]
+    quad_value = np.concatenate([np.atleast_1d(q.value) for q in parts])
+    quad_error = np.concatenate([np.atleast_1d(q.error) for q in parts])
+    nonconvex = np.zeros(k, dtype=np.int64)
     if not metric.convex_everywhere:
-        nonconvex = int(np.sum(metric.convexity(points) < 0.0))
-    return {
-        "segment_costs": costs,
-        "energy": float(np.sum(costs**2)),
-        "length": float(np.sum(costs)),
-        "length_quadrature": float(quad.value),
-        "length_quadrature_error": float(quad.error),
-        "max_segment_cost": float(np.max(costs)),
-        "nonconvex_points": nonconvex,
-    }
+        nonconvex = np.sum(metric.convexity(paths.reshape(-1, dim)).reshape(k, n1) < 0.0, 1)
+    res = np.full(k, np.nan) if residual is None else np.asarray(residual, dtype=float)
+    unknown = np.flatnonzero(~np.isfinite(res))
+    if unknown.size:
+        res[unknown] = residuals(metric, paths[unknown])
+    columns = zip(np.sum(costs**2, 1).tolist(), np.sum(costs, 1).tolist(),
+                  quad_value.tolist(), quad_error.tolist(), np.max(costs, 1).tolist(),
+                  np.asarray(nonconvex).tolist(), res.tolist(), strict=True)
+    return [{"segment_costs": costs[i], "energy": e, "length": length,
+             "length_quadrature": qv, "length_quadrature_error": qe, "max_segment_cost": mx,
+             "nonconvex_points": nc, "residual": r}
+            for i, (e, length, qv, qe, mx, nc, r) in enumerate(columns)]
 
 
 def _onto_domain(m: Metric, pts: np.ndarray) -> np.ndarray:
@@ -161,6 +180,7 @@ class _Solve:
     iterations: int
     energy: float
     feasible: bool
+    method: str = "ipopt"
 
     @property
     def ok(self) -> bool:
@@ -298,7 +318,8 @@ def solve_geodesic(
     strict: bool = False,
     tol: float | None = None,
     max_segments: int = TOL_MAX_SEGMENTS,
-    _nearly_converged: bool = False,
+    method: str = "auto",
+    device: Any = None,
 ) -> GeodesicResult:
     """Globally seeded discrete geodesic from ``start`` to ``goal`` (each ``(dim,)``).
 
@@ -320,45 +341,197 @@ def solve_geodesic(
     lengths when their order 2 is observed, else the finest length), ``error_estimate``
     (absolute), ``order`` (observed) / ``order_seen`` and ``tol_levels``; min-max runs at
     the final size.
+
+    ``method``: ``"auto"`` (default) solves with the batched Newton method of
+    :mod:`solvers.batched` where it covers the metric (``F`` smooth), IPOPT otherwise;
+    ``"newton"`` / ``"ipopt"`` ask for one. IPOPT also finishes what the Newton method
+    cannot (an active domain constraint, a stall); ``result.method`` says which produced
+    the path and ``result.residual`` its first-order optimality residual. ``device``: a
+    torch device for the Newton method (``"cuda"``; default numpy on the CPU).
     """
     t0 = time.perf_counter()
     m = _metric(metric)
     n = check_segments(m, segments)
+    how = resolve_method(m, method)
     if tol is not None:
         return _solve_to_tol(m, start, goal, n, tol, max_segments, t0, seeds=seeds,
                              initial=initial, global_seeds=global_seeds, minmax=minmax,
-                             strict=strict)
+                             strict=strict, method=how, device=device)
     s = _point(m, start, "start")
     g = _point(m, goal, "goal")
-    plan = seeds if seeds is not None else SeedPlan.default(m)
+    plan = seeds if seeds is not None else SeedPlan.default(m, how)
     if not isinstance(plan, SeedPlan):
         raise InputError(f"seeds must be a SeedPlan, got {type(plan).__name__}")
-    if is_short_pair(m, s, g):
-        same = np.array_equal(s, g)
-        pts = s + np.linspace(0.0, 1.0, n + 1)[:, None] * (g - s)
-        pts[-1] = g
-        st = Status.TRIVIAL if same else Status.SHORT
-        res = GeodesicResult(
-            metric=m.name, points=pts, status=st, iterations=0,
-            wall_time=time.perf_counter() - t0, seeds_tried=0, seeds_agreeing=0,
-            **_finish(m, pts),
-        )
-        if minmax:
-            res.minmax = MinMaxResult(pts, res.segment_costs, res.max_segment_cost, st, 0, 0.0,
-                                      False)
-        return res
-
     given = [(f"initial{k}", _initial_path(m, init, s, g, n, f"initial path {k}"))
              for k, init in enumerate(initial)]
     if not global_seeds and not given:
         raise InputError("global_seeds=False needs at least one initial path")
+    res = _solve_pairs(m, np.stack([s, g])[None], n, plan, [given], bool(global_seeds), how,
+                       device, minmax)[0]
+    res.wall_time = time.perf_counter() - t0
+    if strict and not (res.converged and (res.minmax is None or res.minmax.converged)):
+        raise SolverError(
+            f"{m.name}: solve did not converge (status {res.status.value}"
+            + (f", min-max {res.minmax.status.value}" if res.minmax is not None else "")
+            + ")",
+            res,
+        )
+    return res
+
+
+def resolve_method(m: Metric, method: Any) -> str:
+    """``"newton"`` or ``"ipopt"`` for ``method`` (``"auto"``: Newton where it covers the
+    metric, :func:`solvers.batched.covers`)."""
+    if method not in ("auto", "newton", "ipopt"):
+        raise InputError(f"method must be 'auto', 'newton' or 'ipopt', got {method!r}")
+    if method == "auto":
+        return "newton" if covers(m) else "ipopt"
+    if method == "newton" and not covers(m):
+        raise InputError(f"{m.name}: the Newton method needs a smooth F (the metric declares "
+                         "smooth = False); use method='ipopt' or 'auto'")
+    return method
+
+
+def _short_result(m: Metric, s: np.ndarray, g: np.ndarray, n: int, minmax: bool
+                  ) -> GeodesicResult:
+    same = np.array_equal(s, g)
+    pts = s + np.linspace(0.0, 1.0, n + 1)[:, None] * (g - s)
+    pts[-1] = g
+    st = Status.TRIVIAL if same else Status.SHORT
+    res = GeodesicResult(metric=m.name, points=pts, status=st, iterations=0, wall_time=0.0,
+                         seeds_tried=0, seeds_agreeing=0, method="none", **_finish(m, pts))
+    if minmax:
+        res.minmax = MinMaxResult(pts, res.segment_costs, res.max_segment_cost, st, 0, 0.0,
+                                  False)
+    return res
+
+
+def _solve_pairs(m: Metric, pairs: np.ndarray, n: int, plan: SeedPlan,
+                 given: list[list[tuple[str, np.ndarray]]], global_seeds: bool, method: str,
+                 device: Any, minmax: bool, warm: bool = False,
+                 options: BatchOptions | None = None) -> list[GeodesicResult]:
+    """Results for ``pairs`` ``(K, 2, dim)`` (validated, in the domain): short pairs as
+    straight segments, the others by the batched Newton method (IPOPT finishing what it
+    cannot) or by IPOPT alone; ``warm``: the given paths are nearly converged (IPOPT's warm
+    options)."""
+    t0 = time.perf_counter()
+    K = pairs.shape[0]
+    out: list[GeodesicResult | None] = [None] * K
+    short = np.max(np.abs(pairs[:, 1] - pairs[:, 0]), axis=1) <= SHORT_PAIR * domain_scale(m)
+    long_ = [int(k) for k in np.flatnonzero(~short)]
+    for k in np.flatnonzero(short):
+        out[k] = _short_result(m, pairs[k, 0], pairs[k, 1], n, minmax)
+    if long_ and method == "newton":
+        opts = options or BatchOptions(device=device)
+        sol = solve_pairs_batched(m, pairs[long_], n, plan, opts, [given[k] for k in long_],
+                                  global_seeds)
+        for k, r in zip(long_, _from_batch(m, sol, global_seeds), strict=True):
+            out[k] = r
+    elif long_:
+        for k in long_:
+            out[k] = _solve_ipopt(m, pairs[k, 0], pairs[k, 1], n, plan, given[k],
+                                  global_seeds, warm)
+    share = (time.perf_counter() - t0) / max(len(long_), 1)
+    for k in long_:
+        out[k].wall_time = share
+    res = [r for r in out if r is not None]
+    if minmax:
+        for r in res:
+            if r.minmax is None:
+                r.minmax = refine_minmax(m, r)
+    return res
+
+
+def _from_batch(m: Metric, sol: BatchSolution, global_seeds: bool
+                ) -> list[GeodesicResult]:
+    """The results of a batch's pairs: per pair the lowest energy among its Newton-
+    converged rows; rows the Newton method could not finish (an active domain constraint,
+    a stall, the iteration cap) are finished by IPOPT when they could be lower than that
+    (or when none converged), from the three lowest. Figures computed for all pairs at
+    once."""
+    rows = sol.final
+    K = len(sol.best)
+    ok = rows.ok
+    per = sol.rows_of()
+    best_ok = np.full(K, np.inf)
+    np.minimum.at(best_ok, rows.pair[ok], rows.energy[ok])
+    lower = ~ok & np.isfinite(rows.energy) & (rows.energy < best_ok[rows.pair])
+    needs = np.zeros(K, bool)
+    needs[rows.pair[lower]] = True
+    needs |= ~np.isfinite(best_ok)
+    picked: list[_Solve | None] = [None] * K
+    extra: list[list[_Solve]] = [[] for _ in range(K)]
+    ipopt_its = np.zeros(K, dtype=np.int64)
+    for k in np.flatnonzero(needs):
+        mine = per[k]
+        cand = mine[lower[mine]] if lower[mine].any() else mine
+        cand = cand[np.argsort(rows.energy[cand])][:3]
+        for i in cand:
+            r = _solve_warm(m, rows.names[i], _onto_domain(m, rows.points[i]))
+            ipopt_its[k] += max(r.iterations, 0)
+            extra[k].append(r)
+        pool = ([r for r in extra[k] if r.ok and r.energy < best_ok[k]]
+                or ([] if np.isfinite(best_ok[k]) else
+                    [r for r in extra[k] if r.feasible and np.isfinite(r.energy)] or extra[k]))
+        if pool:
+            picked[k] = min(pool, key=lambda r: r.energy)
+    # the Newton answers: their points are in the domain up to 1e-12 of its size
+    newton = [k for k in range(K) if picked[k] is None]
+    if newton:
+        idx = sol.best[newton]
+        pts = np.asarray(m.domain.project(rows.points[idx].reshape(-1, m.dim)),
+                         dtype=np.float64).reshape(len(newton), -1, m.dim)
+        pts[:, 0], pts[:, -1] = rows.points[idx, 0], rows.points[idx, -1]
+        for j, k in enumerate(newton):
+            i = idx[j]
+            picked[k] = _Solve(rows.names[i], pts[j], Status.SUCCESS if ok[i] else
+                               Status.MAX_ITERATIONS, int(rows.iterations[i]),
+                               float(rows.energy[i]), True, "newton")
+    # the Newton method's residual is the same measure (at points in the domain to 1e-12)
+    known = np.full(K, np.nan)
+    if newton:
+        known[newton] = rows.residual[sol.best[newton]]
+    figures = _finish_many(m, np.stack([picked[k].points for k in range(K)]), known)
+    out = []
+    for k in range(K):
+        best = picked[k]
+        energies = {rows.names[i]: (float(rows.energy[i]) if ok[i] else float("nan"))
+                    for i in per[k]}
+        energies.update({r.name + ("~ipopt" if r.name in energies else ""):
+                         (r.energy if r.status.converged else float("nan")) for r in extra[k]})
+        agree = int(sol.seeds_agreeing[k])
+        if not global_seeds:
+            agree = sum(1 for e in energies.values() if np.isfinite(e) and abs(
+                e - best.energy) <= AGREE_RTOL * max(best.energy, 1e-300))
+        out.append(GeodesicResult(
+            metric=m.name,
+            points=best.points,
+            status=best.status,
+            iterations=int(sol.iterations[k] + ipopt_its[k]),
+            wall_time=0.0,
+            seeds_tried=int(sol.seeds_tried[k]),
+            seeds_agreeing=agree,
+            seed_energies=energies,
+            best_seed=best.name,
+            levels=sol.levels_of(k),
+            method=best.method,
+            **figures[k],
+        ))
+    return out
+
+
+def _solve_ipopt(m: Metric, s: np.ndarray, g: np.ndarray, n: int, plan: SeedPlan,
+                 given: list[tuple[str, np.ndarray]], global_seeds: bool, warm: bool
+                 ) -> GeodesicResult:
+    """One pair by IPOPT alone: the seed plan's ladder (:func:`_ladder`), or only the given
+    paths (``global_seeds=False``; ``warm``: nearly converged, IPOPT's warm options)."""
     if global_seeds:
         solved, levels, n_seeds, agree, total_iter = _ladder(m, s, g, n, plan, given)
     else:
         solved, levels, total_iter = [], [], 0
         nlp = energy_nlp(m, n)
         for name, seed in given:
-            solved.append(_solve_warm(m, name, seed) if _nearly_converged
+            solved.append(_solve_warm(m, name, seed) if warm
                           else _solve_one(m, nlp, name, seed))
             total_iter += max(solved[-1].iterations, 0)
         n_seeds, agree = len(given), 0
@@ -368,7 +541,7 @@ def solve_geodesic(
     if not global_seeds:
         agree = sum(1 for r in ok if abs(r.energy - best.energy)
                     <= AGREE_RTOL * max(best.energy, 1e-300))
-    res = GeodesicResult(
+    return GeodesicResult(
         metric=m.name,
         points=best.points,
         status=best.status,
@@ -380,19 +553,9 @@ def solve_geodesic(
                        for r in solved},
         best_seed=best.name,
         levels=levels,
+        method="ipopt",
         **_finish(m, best.points),
     )
-    if minmax:
-        res.minmax = refine_minmax(m, res)
-    res.wall_time = time.perf_counter() - t0
-    if strict and not (res.converged and (res.minmax is None or res.minmax.converged)):
-        raise SolverError(
-            f"{m.name}: solve did not converge (status {res.status.value}"
-            + (f", min-max {res.minmax.status.value}" if res.minmax is not None else "")
-            + ")",
-            res,
-        )
-    return res
 
 
 def richardson(sizes: Sequence[int], lengths: Sequence[float], quad_errors: Sequence[float],
@@ -446,7 +609,8 @@ def _tol_estimate(levels: list[dict[str, Any]], nonconvex: bool) -> dict[str, An
 
 
 def _solve_to_tol(m: Metric, start: Any, goal: Any, n: int, tol: Any, max_segments: Any,
-                  t0: float, *, minmax: bool, strict: bool, **kw: Any) -> GeodesicResult:
+                  t0: float, *, minmax: bool, strict: bool, method: str, device: Any,
+                  **kw: Any) -> GeodesicResult:
     if isinstance(tol, bool) or not isinstance(tol, (int, float)) or not (
             np.isfinite(tol) and 0 < tol < 1):
         raise InputError(f"tol must be a relative tolerance in (0, 1), got {tol!r}")
@@ -457,21 +621,23 @@ def _solve_to_tol(m: Metric, start: Any, goal: Any, n: int, tol: Any, max_segmen
     check_segments(m, int(max_segments))
     s = _point(m, start, "start")
     g = _point(m, goal, "goal")
-    res = first = solve_geodesic(m, s, g, n, **kw)
+    res = first = solve_geodesic(m, s, g, n, method=method, device=device, **kw)
     iterations = first.iterations
     levels: list[dict[str, Any]] = []
     while True:
         le = m.path_length_error(res.points, rtol=0.05 * float(tol))
         levels.append({"segments": res.segments, "length": float(le.value),
-                       "quadrature_error": float(le.error), "status": res.status.value,
+                       "quadrature_error": float(le.error), "status": res.status.label,
                        "nonconvex_points": res.nonconvex_points})
         est = _tol_estimate(levels, res.nonconvex_points > 0)
         done = len(levels) >= 3 and est["error_estimate"] <= tol * abs(est["length"])
         if done or 2 * res.segments > max_segments or not res.converged or res.status in (
                 Status.TRIVIAL, Status.SHORT):
             break
-        res = solve_geodesic(m, s, g, 2 * res.segments, initial=[res.points],
-                             global_seeds=False, _nearly_converged=True)
+        nxt = 2 * res.segments
+        warm = [("refined", resample(res.points, np.ones(res.segments), nxt))]
+        res = _solve_pairs(m, np.stack([s, g])[None], nxt, SeedPlan.default(m, method), [warm],
+                           False, method, device, False, warm=True)[0]
         iterations += res.iterations
     # the seeding happened at the first size; later sizes are warm starts of its winner
     res.seeds_tried, res.seeds_agreeing = first.seeds_tried, first.seeds_agreeing
@@ -556,13 +722,32 @@ def _metric_spec(m: Metric) -> MetricSpec:
     return MetricSpec.of(m)
 
 
-def _batch_worker(args: tuple) -> tuple[int, GeodesicResult]:
-    spec, k, s, g, n, plan, minmax, init, global_seeds, *rest = args
-    tol = rest[0] if rest else None
+def _chunk_worker(args: tuple) -> list[tuple[int, GeodesicResult]]:
+    """Solve one chunk of pairs in a worker process or Ray task: ``args`` = (metric spec,
+    pair indices, pairs ``(k, 2, dim)``, segments, plan, minmax, initial paths or None,
+    global_seeds, tol, method, device) -> ``[(index, result)]``."""
+    spec, ks, pairs, n, plan, minmax, inits, global_seeds, tol, method, device = args
     m = _cached_metric(spec)
-    initial = () if init is None else (init,)
-    return k, solve_geodesic(m, s, g, n, seeds=plan, minmax=minmax, initial=initial,
-                             global_seeds=global_seeds, tol=tol)
+    return _solve_chunk(m, ks, pairs, n, plan, minmax, inits, global_seeds, tol, method,
+                        device)
+
+
+def _solve_chunk(m: Metric, ks: Sequence[int], pairs: np.ndarray, n: int, plan: SeedPlan,
+                 minmax: bool, inits: np.ndarray | None, global_seeds: bool,
+                 tol: float | None, method: str, device: Any
+                 ) -> list[tuple[int, GeodesicResult]]:
+    """The pairs of a chunk: one batched solve (each pair refined on its own with
+    ``tol``)."""
+    if tol is not None:
+        return [(k, solve_geodesic(m, p[0], p[1], n, seeds=plan, minmax=minmax,
+                                   initial=() if inits is None else (inits[i],),
+                                   global_seeds=global_seeds, tol=tol, method=method,
+                                   device=device))
+                for i, (k, p) in enumerate(zip(ks, pairs, strict=True))]
+    given = [[] if inits is None else [("initial0", inits[i])] for i in range(len(ks))]
+    res = _solve_pairs(m, np.asarray(pairs), n, plan, given, global_seeds, method, device,
+                       minmax)
+    return list(zip(ks, res, strict=True))
 
 
 _METRICS: dict[MetricSpec, Metric] = {}
@@ -572,6 +757,26 @@ def _cached_metric(spec: MetricSpec) -> Metric:
     if spec not in _METRICS:
         _METRICS[spec] = spec.build()
     return _METRICS[spec]
+
+
+#: Rows (pair x seed problems) per batched Newton solve of :func:`solve_batch`: enough
+#: that array operations dominate Python overhead (measured with ``benchmarks/peers.py
+#: --throughput``: Randers, 3 seeds per pair, 0.53 / 0.35 / 0.27 ms per pair with 192 /
+#: 384 / 1536 rows); the pairs of a chunk are saved together.
+NEWTON_ROWS = 16384
+#: Segments per call of the adaptive quadrature of the reported lengths (its worst-case
+#: memory is checked against the limit).
+QUAD_SEGMENTS = 4096
+
+
+def _chunk_pairs(plan: SeedPlan, global_seeds: bool) -> int:
+    """Pairs per batched chunk: :data:`NEWTON_ROWS` over the plan's seeds per pair."""
+    seeds = (1 + 2 * len(plan.bulges) + plan.random + int(plan.graph) + plan.restarts
+             if global_seeds else 1)
+    return int(np.clip(NEWTON_ROWS // max(seeds, 1), 16, 4096))
+#: ``solve_batch`` with the Newton method uses worker processes by default only from this
+#: many pairs on (starting a process costs seconds of imports).
+NEWTON_POOL_MIN = 1024
 
 
 class _BatchStore:
@@ -638,6 +843,8 @@ def solve_batch(
     initial_paths: Any = None,
     global_seeds: bool = True,
     tol: float | None = None,
+    method: str = "auto",
+    device: Any = None,
 ) -> list[GeodesicResult]:
     """Solve every pair of ``pairs`` ``(K, 2, dim)``; results in the order of the pairs.
 
@@ -663,15 +870,28 @@ def solve_batch(
     iterations); with ``True`` the global seeds are solved too and the lowest energy kept.
     ``tol``: every pair solved to that relative accuracy of its length
     (:func:`solve_geodesic`).
+
+    ``method`` / ``device``: as in :func:`solve_geodesic`. With the batched Newton method
+    (the default where it covers the metric) the pairs are solved in chunks of about
+    :data:`NEWTON_ROWS` (pair, seed) problems, every problem of a chunk in one batch; the
+    default ``workers`` is then 1 below :data:`NEWTON_POOL_MIN` pairs (the batch is
+    vectorised; processes pay off only for many chunks), else the CPU count.
     """
     from tqdm.auto import tqdm
 
     m = _metric(metric)
     arr = check_pairs(m, pairs)
     n = check_segments(m, segments)
-    plan = seeds if seeds is not None else SeedPlan.default(m)
+    how = resolve_method(m, method)
+    if device is not None:
+        backend_for(device)  # a bad device fails here, before any work
+    plan = seeds if seeds is not None else SeedPlan.default(m, how)
+    if not isinstance(plan, SeedPlan):
+        raise InputError(f"seeds must be a SeedPlan, got {type(plan).__name__}")
     if workers is None:
         workers = os.cpu_count() or 1
+        if how == "newton" and arr.shape[0] < NEWTON_POOL_MIN:
+            workers = 1
     if isinstance(workers, bool) or not isinstance(workers, (int, np.integer)) or workers < 1:
         raise InputError(f"workers must be a positive integer, got {workers!r}")
     if chunk_size is not None and (isinstance(chunk_size, bool)
@@ -693,7 +913,6 @@ def solve_batch(
         raise InputError(f"tol must be a relative tolerance in (0, 1), got {tol!r}")
     store = (_BatchStore(checkpoint_dir, m, n, plan, minmax, bool(global_seeds), tol)
              if checkpoint_dir else None)
-    workers = int(min(workers, arr.shape[0]))
     results: list[GeodesicResult | None] = [None] * arr.shape[0]
 
     def init_of(k: int) -> np.ndarray | None:
@@ -703,41 +922,46 @@ def solve_batch(
         for k in range(arr.shape[0]):
             results[k] = store.load(k, arr[k], init_of(k))
     todo = [k for k in range(arr.shape[0]) if results[k] is None]
+    size = 1
+    if how == "newton":
+        size = _chunk_pairs(plan, bool(global_seeds))
+        if workers > 1:  # several chunks per worker: balanced, and finished work is kept
+            size = max(1, min(size, -(-len(todo) // (4 * workers))))
+    chunks = [todo[i:i + size] for i in range(0, len(todo), size)]
+    workers = int(min(workers, max(len(chunks), 1)))
+    spec = _metric_spec(m)
+
+    def job(ks: list[int]) -> tuple:
+        return (spec, ks, arr[ks], n, plan, minmax, None if inits is None else inits[ks],
+                bool(global_seeds), tol, how, device)
+
     bar = tqdm(total=arr.shape[0], desc=f"solve {m.name}", disable=not progress, unit="pair",
                initial=arr.shape[0] - len(todo))
+
+    def take(done: list[tuple[int, GeodesicResult]]) -> None:
+        for k, res in done:
+            results[k] = res
+            if store is not None:
+                store.save(k, arr[k], res, init_of(k))
+        bar.update(len(done))
+
     try:
         if ray_address is not None and todo:
             from solvers.distributed import solve_chunks_ray
 
             local_cpus = int(min(workers, len(todo)))
-            for k, res in solve_chunks_ray(ray_address, _batch_worker, _metric_spec(m), arr,
-                                           todo, n, plan, minmax, chunk_size,
-                                           num_cpus=local_cpus, initial_paths=inits,
-                                           global_seeds=bool(global_seeds), tol=tol):
-                results[k] = res
-                if store is not None:
-                    store.save(k, arr[k], res, init_of(k))
-                bar.update(1)
-        elif workers == 1 or len(todo) <= 1:
-            for k in todo:
-                init = init_of(k)
-                results[k] = solve_geodesic(m, arr[k, 0], arr[k, 1], n, seeds=plan,
-                                            minmax=minmax,
-                                            initial=() if init is None else (init,),
-                                            global_seeds=bool(global_seeds), tol=tol)
-                if store is not None:
-                    store.save(k, arr[k], results[k], init)
-                bar.update(1)
+            for done in solve_chunks_ray(ray_address, _chunk_worker, job, todo,
+                                         chunk_size, num_cpus=local_cpus):
+                take(done)
+        elif workers == 1 or len(chunks) <= 1:
+            for ks in chunks:
+                take(_solve_chunk(m, ks, arr[ks], n, plan, minmax,
+                                  None if inits is None else inits[ks], bool(global_seeds),
+                                  tol, how, device))
         else:
-            spec = _metric_spec(m)
-            jobs = [(spec, k, arr[k, 0], arr[k, 1], n, plan, minmax, init_of(k),
-                     bool(global_seeds), tol) for k in todo]
             with ProcessPool(workers) as pool:
-                for k, res in pool.map_unordered(_batch_worker, jobs):
-                    results[k] = res
-                    if store is not None:
-                        store.save(k, arr[k], res, init_of(k))
-                    bar.update(1)
+                for done in pool.map_unordered(_chunk_worker, [job(ks) for ks in chunks]):
+                    take(done)
     finally:
         bar.close()
     return [r for r in results if r is not None]

@@ -79,6 +79,13 @@ class Status(enum.Enum):
         """Only a full IPOPT success, or a trivial / short pair, counts as converged."""
         return self in (Status.SUCCESS, Status.TRIVIAL, Status.SHORT)
 
+    @property
+    def label(self) -> str:
+        """The toolkit's name of the status, as the API spells it (``Status.SUCCESS`` ->
+        ``"success"``); what JSON results and the command line print (``value`` is IPOPT's
+        return status, kept as ``ipopt_status``)."""
+        return self.name.lower()
+
 
 class DistanceStatus(enum.Enum):
     """Outcome of :func:`solvers.distance`."""
@@ -147,7 +154,13 @@ class GeodesicResult:
     order of the polyline lengths, None if not measurable) and ``order_seen`` (the expected
     order 2 observed; False e.g. through non-convex regions, where the estimate is the
     plain difference of the last two sizes), ``tol_reached`` and ``tol_levels`` (one
-    dict per size: ``segments``, ``length``, ``quadrature_error``, ...).
+    dict per size: ``segments``, ``length``, ``quadrature_error``, ...). ``method`` names
+    what produced ``points``: ``"newton"`` (the batched Newton solve of
+    :mod:`solvers.batched`), ``"ipopt"``, or ``"none"`` (trivial and short pairs);
+    ``residual`` is the path's first-order optimality residual: the largest entry of the
+    projected gradient of ``sum C**2`` in the interior points, times the domain's size,
+    over ``sum C**2`` (:func:`solvers.newton.energy_residual`; ``1e-10`` is this package's
+    convergence tolerance). For a batch, ``wall_time`` is the batch's time over its pairs.
     """
 
     metric: str
@@ -175,6 +188,8 @@ class GeodesicResult:
     tol_reached: bool | None = None
     tol_levels: list[dict[str, Any]] = field(default_factory=list)
     length_quadrature_error: float | None = None
+    method: str = "ipopt"
+    residual: float | None = None
 
     @property
     def segments(self) -> int:
@@ -199,7 +214,11 @@ class GeodesicResult:
         return bool(m <= eps)
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready summary (the schema of ``geodesics solve``)."""
+        """JSON-ready summary (the schema of ``geodesics solve``): ``length`` is always the
+        sum of the costs C; a solve with ``tol`` adds ``length_estimate`` (the continuum
+        length) and ``error_estimate`` (None where no estimate exists, e.g. a single
+        size). ``status`` is :attr:`Status.label`, ``ipopt_status`` IPOPT's own word."""
+        est = self.error_estimate
         out: dict[str, Any] = {
             "points": self.points.tolist(),
             "energy": self.energy,
@@ -207,19 +226,21 @@ class GeodesicResult:
             "length_quadrature": self.length_quadrature,
             "length_quadrature_error": self.length_quadrature_error,
             "max_segment_cost": self.max_segment_cost,
-            "status": self.status.value,
+            "status": self.status.label,
+            "ipopt_status": self.status.value,
             "iterations": self.iterations,
             "wall_time": self.wall_time,
             "seeds_tried": self.seeds_tried,
             "seeds_agreeing": self.seeds_agreeing,
             "nonconvex_points": self.nonconvex_points,
+            "method": self.method,
+            "residual": self.residual,
         }
         out["segments"] = self.segments
-        if self.error_estimate is not None:
-            # accuracy on request: "length" is the estimate of the continuum length
-            out["length_sum_costs"] = self.length
-            out["length"] = self.length_estimate
-            out["error_estimate"] = self.error_estimate
+        if est is not None:
+            # accuracy on request: the continuum length, with its error if there is one
+            out["length_estimate"] = self.length_estimate
+            out["error_estimate"] = est if np.isfinite(est) else None
             out["order"] = self.order
             out["order_seen"] = self.order_seen
             out["tol"] = self.tol
@@ -227,7 +248,7 @@ class GeodesicResult:
             out["tol_levels"] = self.tol_levels
         if self.minmax is not None:
             out["minmax_max_segment_cost"] = self.minmax.max_segment_cost
-            out["minmax_status"] = self.minmax.status.value
+            out["minmax_status"] = self.minmax.status.label
         return out
 
 

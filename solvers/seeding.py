@@ -27,8 +27,10 @@ __all__ = [
     "GraphSeeder",
     "SeedPlan",
     "graph_seeder",
+    "perturbed_batch",
     "perturbed_curves",
     "resample",
+    "seed_batch",
     "seed_curves",
 ]
 
@@ -52,7 +54,10 @@ class SeedPlan:
     stops. ``coarse=None`` solves every seed at the requested size. ``polish``: basin
     hopping at the final size, that many perturbations (``polish_scale * |g - s|``) of
     the current best, each kept if its energy is lower (near-equal discrete local minima
-    of non-convex metrics lie close together).
+    of non-convex metrics lie close together). ``drop_after`` / ``drop_factor`` (batched
+    Newton solves only, :mod:`solvers.batched`): a seed still running after
+    ``drop_after`` iterations whose energy is above ``drop_factor`` times the best
+    converged energy of its pair stops there (``0``: never).
     """
 
     bulges: tuple[float, ...] = (0.3,)
@@ -67,13 +72,15 @@ class SeedPlan:
     factor: int = 4
     polish: int = 0
     polish_scale: float = 0.03
+    drop_after: int = 0
+    drop_factor: float = 1.3
 
     def __post_init__(self) -> None:
         from finsler.errors import InputError
 
         if any(not (np.isfinite(a) and a > 0) for a in self.bulges):
             raise InputError(f"bulge amplitudes must be positive, got {self.bulges!r}")
-        for name in ("random", "restarts", "polish"):
+        for name in ("random", "restarts", "polish", "drop_after"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 0:
                 raise InputError(f"{name} must be a non-negative integer, got {v!r}")
@@ -87,6 +94,10 @@ class SeedPlan:
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and np.isfinite(v) and v > 0):
                 raise InputError(f"{name} must be positive and finite, got {v!r}")
+        if not (isinstance(self.drop_factor, (int, float)) and np.isfinite(self.drop_factor)
+                and self.drop_factor > 1):
+            raise InputError(f"drop_factor must be a finite number > 1, got "
+                             f"{self.drop_factor!r}")
 
     def ladder(self, n: int) -> list[int]:
         """Sizes solved on the way to ``n`` segments: ``coarse``, ``coarse * factor``, ...,
@@ -99,21 +110,26 @@ class SeedPlan:
         return [*sizes, n]
 
     @staticmethod
-    def default(metric: Metric) -> SeedPlan:
-        """The plan for ``metric``, chosen by what the metric can do, never by its name.
+    def default(metric: Metric, method: str = "auto") -> SeedPlan:
+        """The plan for ``metric`` and the solver ``method`` (``"newton"``, ``"ipopt"``, or
+        ``"auto"``: Newton where it covers the metric, i.e. ``F`` smooth), chosen by what
+        the metric can do, never by its name.
 
         A metric may return a :class:`SeedPlan` from its ``seed_plan()`` hook
-        (:mod:`finsler.hooks`); else (the hook's default ``None``):
-        high dimension (> 3) -> a few random curves and the roadmap, coarse size 32; not
+        (:mod:`finsler.hooks`); else (the hook's default ``None``): a metric that declares
+        ``unique_geodesics`` -> the straight line alone; high dimension (> 3) -> a few
+        random curves and the roadmap, coarse size 32; not
         smooth (e.g. car-like: kinks that the energy penalises in one long segment) ->
-        four bulge amplitudes and four random curves, coarse size 256; not convex
-        everywhere (e.g. Matsumoto: local minima round the hill, non-convex regions) ->
-        bulges at six amplitudes, 20 random curves and the graph at 64 segments, the best
-        4 refined; convex and smooth (Finsler, e.g. Riemannian or Randers: few local
-        minima) -> the straight line, one bulge each side and the graph, coarse size 16.
-        Every plan climbs a x4 ladder from its coarse size to the requested size;
-        measured in
-        ``benchmarks/solver_speed.py``.
+        four bulge amplitudes and four random curves, coarse size 256 (IPOPT only); not
+        convex everywhere (e.g. Matsumoto: local minima round the hill, near-equal discrete
+        minima in the non-convex regions) -> bulges at six amplitudes, 20 random curves
+        and the graph: for the batched Newton method solved at 16 segments, every distinct
+        optimum within 0.5 % of the best carried up a x2 ladder, 6 perturbed restarts of
+        the best at the final size, seeds clearly losing after 6 iterations dropped; for
+        IPOPT at 64 segments, the best 4 refined; convex and smooth (Finsler, e.g.
+        Riemannian or Randers: few local minima) -> the straight line and one bulge each
+        side at 16 segments (and, for IPOPT, the graph). Measured in
+        ``benchmarks/solver_speed.py`` and ``benchmarks/peers.py --throughput``.
         """
         plan = metric.seed_plan()
         if plan is not None:
@@ -123,6 +139,10 @@ class SeedPlan:
                 raise InputError(f"{type(metric).__name__}.seed_plan() must return a "
                                  f"SeedPlan, got {type(plan).__name__}")
             return plan
+        newton = method == "newton" or (method == "auto" and metric.smooth)
+        if metric.unique_geodesics:
+            # one geodesic joins every two points: the straight line converges to it
+            return SeedPlan(bulges=(), random=0, graph=False)
         if metric.dim > 3:
             # measured on 10 Panda pairs (n = 32): coarse 8 missed the best energy by up to
             # 6.6% on 2 pairs and saved no time; 32 keeps the task size exact
@@ -135,14 +155,26 @@ class SeedPlan:
             # pairs, so the ladder starts at 256
             return SeedPlan(bulges=(0.15, 0.3, 0.5, 0.7), random=4, graph=True, coarse=256)
         if not metric.convex_everywhere:
+            bulges = (0.1, 0.2, 0.3, 0.45, 0.6, 0.8)
+            if newton:
+                # batched Newton, measured on two sets of 100 fresh Matsumoto pairs (n = 64,
+                # seeds 20261124 and 777001, against a wide multistart): 98-99 of 100 within
+                # 1e-4 of the best energy known (the IPOPT plan below: 100 and 99), none
+                # 1e-3 above. Seeds at 32 instead of 16: no better, 1.5x the time; without
+                # the restarts 97-98
+                return SeedPlan(bulges=bulges, random=20, graph=True, coarse=16, factor=2,
+                                refine_top=8, drop_rtol=0.005, polish=6, polish_scale=0.05,
+                                drop_after=6, drop_factor=1.3)
             # measured on 100 fresh Matsumoto pairs (n = 64, benchmarks/solver_speed.py,
             # seed 2611): 8 seeds at 16 segments reached the best-known energy (1e-4) on
             # 96, 50 seeds at 16 on 93 (the coarse ranking misleads: discrete minima of the
             # non-convex metric differ between sizes), 34 seeds at 32 on 99 (worst 3e-4)
             # but on a second set (seed 8123) one pair 1.5e-3 above; the same 34 seeds at
             # 64: 99 and 100 pairs, worst 1.2e-4, 0.6 s per pair on 2 busy cores
-            return SeedPlan(bulges=(0.1, 0.2, 0.3, 0.45, 0.6, 0.8), random=20, graph=True,
-                            coarse=64, refine_top=4)
+            return SeedPlan(bulges=bulges, random=20, graph=True, coarse=64, refine_top=4)
+        if newton:
+            # the batched Newton method: no graph (its query costs more than the solve)
+            return SeedPlan(bulges=(0.3,), random=0, graph=False, coarse=16)
         return SeedPlan(bulges=(0.3,), random=0, graph=True, coarse=16)
 
 
@@ -164,43 +196,63 @@ def seed_curves(
     metric: Metric, s: np.ndarray, g: np.ndarray, n: int, plan: SeedPlan
 ) -> list[tuple[str, np.ndarray]]:
     """Initial curves ``(n+1, dim)`` from ``s`` to ``g`` named by how they were made."""
-    t = np.linspace(0.0, 1.0, n + 1)[:, None]
-    line = s + t * (g - s)
-    out = [("straight", line)]
-    d = g - s
-    dist = float(np.linalg.norm(d))
-    if dist == 0.0:
-        return out
+    names, curves = seed_batch(metric, np.asarray(s)[None], np.asarray(g)[None], n, plan)
+    if np.array_equal(s, g):
+        return [(names[0], curves[0, 0])]
+    return list(zip(names, curves[0], strict=True))
+
+
+def seed_batch(metric: Metric, starts: np.ndarray, goals: np.ndarray, n: int,
+               plan: SeedPlan) -> tuple[list[str], np.ndarray]:
+    """The plan's initial curves for many pairs at once: names ``(S,)`` and curves
+    ``(K, S, n+1, dim)`` from ``starts[k]`` to ``goals[k]`` (``(K, dim)``), projected into
+    the domain: the straight line; sine bulges of each amplitude ``a * |g - s|`` to either
+    side (perpendicular in the first two coordinates; in more than 3 dimensions along
+    seeded random directions orthogonal to ``g - s``, amplitude ``a * max(|g - s|, 1)``);
+    ``plan.random`` seeded smooth random perturbations (sine modes 1-3). Every pair draws
+    the same seeded numbers (the curves of one pair do not depend on the others)."""
+    s_all = np.asarray(starts, dtype=np.float64).reshape(-1, metric.dim)
+    g_all = np.asarray(goals, dtype=np.float64).reshape(-1, metric.dim)
+    K, dim = s_all.shape
+    t = np.linspace(0.0, 1.0, n + 1)[None, :, None]
+    d = g_all - s_all  # (K, dim)
+    line = s_all[:, None] + t * d[:, None]  # (K, n+1, dim)
+    dist = np.linalg.norm(d, axis=1)
     rng = np.random.default_rng(plan.seed)
-    dirs: list[np.ndarray] = []
-    if metric.dim >= 2:
-        # first: perpendicular in the first two coordinates (the plane for 2-D/3-D metrics)
-        perp = np.zeros(metric.dim)
-        planar = d[:2]
-        if np.linalg.norm(planar) > 1e-12:
-            perp[:2] = np.array([-planar[1], planar[0]]) / np.linalg.norm(planar)
-        else:
-            perp[0] = 1.0
-        dirs.append(perp)
-    bump = np.sin(np.pi * t)
-    scale = dist if metric.dim <= 3 else max(dist, 1.0)
+    perp = np.zeros((K, dim))
+    if dim >= 2:
+        # perpendicular in the first two coordinates (the plane for 2-D/3-D metrics)
+        planar = np.linalg.norm(d[:, :2], axis=1)
+        flat = planar <= 1e-12
+        pn = np.where(flat, 1.0, planar)
+        perp[:, 0] = np.where(flat, 1.0, -d[:, 1] / pn)
+        perp[:, 1] = np.where(flat, 0.0, d[:, 0] / pn)
+    bump = np.sin(np.pi * t)  # (1, n+1, 1)
+    scale = dist if dim <= 3 else np.maximum(dist, 1.0)
+    names = ["straight"]
+    curves = [line]
     for a in plan.bulges:
-        for k, base in enumerate(dirs or [np.zeros(metric.dim)]):
-            for sign in (1.0, -1.0):
-                if metric.dim > 3:
-                    e = rng.normal(size=metric.dim)
-                    e -= (e @ d) / (d @ d) * d
-                    e /= np.linalg.norm(e)
-                else:
-                    e = base
-                curve = line + sign * a * scale * bump * e
-                out.append((f"bulge{'+' if sign > 0 else '-'}{a:g}#{k}", curve))
+        for sign in (1.0, -1.0):
+            if dim > 3:
+                e = rng.normal(size=dim)[None].repeat(K, 0)
+                e = e - (np.sum(e * d, 1) / np.sum(d * d, 1).clip(1e-300))[:, None] * d
+                e = e / np.linalg.norm(e, axis=1, keepdims=True).clip(1e-300)
+            else:
+                e = perp
+            curves.append(line + (sign * a * scale)[:, None, None] * bump * e[:, None])
+            names.append(f"bulge{'+' if sign > 0 else '-'}{a:g}#0")
+    modes = np.arange(1, 4)
+    sines = np.sin(np.pi * t[0] * modes[None, :])  # (n+1, 3)
     for k in range(plan.random):
-        modes = np.arange(1, 4)
-        coef = rng.normal(size=(len(modes), metric.dim)) * 0.15 * scale / modes[:, None]
-        pert = np.sin(np.pi * t * modes[None, :]) @ coef
-        out.append((f"random{k}", line + pert))
-    return [(name, _project(metric, c, s, g)) for name, c in out]
+        coef = rng.normal(size=(len(modes), dim)) * 0.15 / modes[:, None]
+        curves.append(line + scale[:, None, None] * (sines @ coef)[None])
+        names.append(f"random{k}")
+    out = np.stack(curves, 1)  # (K, S, n+1, dim)
+    out = np.asarray(metric.domain.project(out.reshape(-1, dim)),
+                     dtype=np.float64).reshape(out.shape)
+    out[:, :, 0] = s_all[:, None]
+    out[:, :, -1] = g_all[:, None]
+    return names, out
 
 
 def perturbed_curves(metric: Metric, path: np.ndarray, k: int, scale: float, seed: int
@@ -209,17 +261,28 @@ def perturbed_curves(metric: Metric, path: np.ndarray, k: int, scale: float, see
     1-3, amplitude ``scale * max(|g - s|, 1 if dim > 3)``, decaying with the mode), ends
     fixed, projected into the domain -> list of ``(n+1, dim)`` (restarts from an optimum:
     another basin nearby)."""
-    s, g = path[0], path[-1]
-    n = path.shape[0] - 1
-    t = np.linspace(0.0, 1.0, n + 1)[:, None]
-    dist = float(np.linalg.norm(g - s))
-    amp = scale * (dist if metric.dim <= 3 else max(dist, 1.0))
+    return list(perturbed_batch(metric, np.asarray(path)[None], k, scale, seed)[0])
+
+
+def perturbed_batch(metric: Metric, paths: np.ndarray, k: int, scale: float, seed: int
+                    ) -> np.ndarray:
+    """:func:`perturbed_curves` of many paths ``(K, n+1, dim)`` at once -> ``(K, k, n+1,
+    dim)`` (every path gets the same seeded coefficients, scaled by its own amplitude)."""
+    p = np.asarray(paths, dtype=np.float64)
+    n1, dim = p.shape[1], p.shape[2]
+    t = np.linspace(0.0, 1.0, n1)[:, None]
+    dist = np.linalg.norm(p[:, -1] - p[:, 0], axis=1)
+    amp = scale * (dist if dim <= 3 else np.maximum(dist, 1.0))
     rng = np.random.default_rng([seed, 1])
     modes = np.arange(1, 4)
-    out = []
-    for _ in range(k):
-        coef = rng.normal(size=(len(modes), metric.dim)) * amp / modes[:, None]
-        out.append(_project(metric, path + np.sin(np.pi * t * modes[None, :]) @ coef, s, g))
+    sines = np.sin(np.pi * t * modes[None, :])  # (n+1, 3)
+    coef = np.stack([rng.normal(size=(len(modes), dim)) / modes[:, None] for _ in range(k)])
+    pert = np.einsum("tm,kmd->ktd", sines, coef)  # (k, n+1, dim)
+    out = p[:, None] + amp[:, None, None, None] * pert[None]
+    out = np.asarray(metric.domain.project(out.reshape(-1, dim)),
+                     dtype=np.float64).reshape(out.shape)
+    out[:, :, 0] = p[:, None, 0]
+    out[:, :, -1] = p[:, None, -1]
     return out
 
 
@@ -310,32 +373,59 @@ class GraphSeeder:
     def path(self, s: np.ndarray, g: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
         """Shortest graph path from ``s`` to ``g``: (points ``(m+1, dim)``, edge costs
         ``(m,)``), or ``None`` if the graph does not connect them."""
+        return self.paths(np.asarray(s)[None], np.asarray(g)[None])[0]
+
+    def paths(self, starts: np.ndarray, goals: np.ndarray
+              ) -> list[tuple[np.ndarray, np.ndarray] | None]:
+        """Shortest graph paths of many pairs ``(K, dim)`` at once (one graph with a start
+        and a goal node per pair: a start node has only outgoing links, a goal node only
+        incoming ones, so no path crosses another pair's; one Dijkstra call from all the
+        start nodes)."""
+        s_all = np.asarray(starts, dtype=np.float64).reshape(-1, self.metric.dim)
+        g_all = np.asarray(goals, dtype=np.float64).reshape(-1, self.metric.dim)
+        K = s_all.shape[0]
         nn = self.nodes.shape[0]
         k = min(self.k_link, nn)
-        _, si = self.tree.query(s, k=k)
-        _, gi = self.tree.query(g, k=k)
-        si, gi = np.atleast_1d(si), np.atleast_1d(gi)
+        _, si = self.tree.query(s_all, k=k)
+        _, gi = self.tree.query(g_all, k=k)
+        si, gi = si.reshape(K, k), gi.reshape(K, k)
         m = self.metric
-        ws = m.segment_length(np.repeat(s[None], k, 0), self.nodes[si], 4)
-        wg = m.segment_length(self.nodes[gi], np.repeat(g[None], k, 0), 4)
-        wd = float(m.segment_length(s, g, 4))
-        S, G = nn, nn + 1
-        rows = np.concatenate([self.rows, np.full(k, S), gi, [S]])
-        cols = np.concatenate([self.cols, si, np.full(k, G), [G]])
-        w = np.concatenate([self.weights, ws, wg, [wd]])
+        ws = m.segment_length(np.repeat(s_all, k, 0), self.nodes[si.reshape(-1)], 4)
+        wg = m.segment_length(self.nodes[gi.reshape(-1)], np.repeat(g_all, k, 0), 4)
+        wd = np.atleast_1d(m.segment_length(s_all, g_all, 4))
+        S = nn + np.arange(K)
+        G = nn + K + np.arange(K)
+        rows = np.concatenate([self.rows, np.repeat(S, k), gi.reshape(-1), S])
+        cols = np.concatenate([self.cols, si.reshape(-1), np.repeat(G, k), G])
+        w = np.concatenate([self.weights, ws, wg, wd])
         w = np.maximum(w, 1e-300)  # csgraph drops explicit zeros
-        graph = sp.csr_matrix((w, (rows, cols)), shape=(nn + 2, nn + 2))
-        dist, pred = dijkstra(graph, directed=True, indices=S, return_predecessors=True)
-        if not np.isfinite(dist[G]):
-            return None
-        seq = [G]
-        while seq[-1] != S:
-            seq.append(int(pred[seq[-1]]))
-        seq.reverse()
-        allnodes = np.vstack([self.nodes, s[None], g[None]])
-        pts = allnodes[seq]
-        costs = m.segment_length(pts[:-1], pts[1:], 4)
-        return pts, np.atleast_1d(costs)
+        size = nn + 2 * K
+        graph = sp.csr_matrix((w, (rows, cols)), shape=(size, size))
+        allnodes = np.vstack([self.nodes, s_all, g_all])
+        out: list[tuple[np.ndarray, np.ndarray] | None] = []
+        for j in range(K):
+            # the direct link bounds the distance: nothing farther needs exploring
+            dist, pred = dijkstra(graph, directed=True, indices=int(S[j]),
+                                  return_predecessors=True, limit=float(w[-K + j]) * 1.000001)
+            if not np.isfinite(dist[G[j]]):
+                out.append(None)
+                continue
+            seq = [int(G[j])]
+            while seq[-1] != S[j]:
+                seq.append(int(pred[seq[-1]]))
+            seq.reverse()
+            pts = allnodes[seq]
+            out.append((pts, None))
+        # edge costs of every path in one evaluation
+        flat = [p for p in out if p is not None]
+        if flat:
+            a = np.concatenate([p[0][:-1] for p in flat])
+            b = np.concatenate([p[0][1:] for p in flat])
+            costs = np.atleast_1d(m.segment_length(a, b, 4))
+            split = np.cumsum([len(p[0]) - 1 for p in flat])[:-1]
+            it = iter(np.split(costs, split))
+            out = [None if p is None else (p[0], next(it)) for p in out]
+        return out
 
 
 @functools.lru_cache(maxsize=8)

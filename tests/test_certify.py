@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import importlib
 import json
+from dataclasses import dataclass
+from typing import ClassVar
 
 import casadi as ca
 import numpy as np
@@ -259,3 +261,52 @@ def test_second_order_bounds_hold_at_every_sampled_point(name: str) -> None:
         ok = np.isfinite(bound) & (bound > 1e-9)
         if np.any(ok):
             assert np.median(seen[ok] / bound[ok]) > 0.2
+
+
+@dataclass(frozen=True)
+class _Bowl(finsler.Metric):
+    """F(x, v) = (1 + c |x|**2) |v|: Hess_x F = 2 c |v| I exactly, so the in-triangle
+    correction Hz R**2 / 2 = c R**2 is exactly what the linear interpolant of F over an
+    equilateral triangle overshoots F by at its centre (sum_i lambda_i |z_i - z|**2 = R**2
+    there). Not registered: certify takes the object."""
+
+    c: float = 4.0
+    name: ClassVar[str] = "bowl-test"
+    task: ClassVar[finsler.Task] = finsler.Task(depth=4, eps=0.2)
+    reversible: ClassVar[bool] = True
+    domain = property(lambda self: finsler.Disk(radius=1.0))
+
+    def F_sx(self, x: ca.SX, v: ca.SX) -> ca.SX:
+        return (1 + self.c * ca.dot(x, x)) * ca.sqrt(ca.dot(v, v))
+
+
+def test_row_bounds_hold_inside_every_triangle_where_the_hessian_term_is_tight() -> None:
+    """The rows at a triangle's vertices are ``grad phi_T(z_m) . v_k <= b_m,k``; grad phi_T
+    is affine, so inside the triangle ``grad phi_T(z) . v_k`` is at most the barycentric
+    mix of the ``b``: that mix must stay below ``F(z, v_k)`` at EVERY point z (else the
+    potential may violate the dual condition there and the lower bound is not proven).
+    On the bowl metric the Hessian term is tight at the centres of equilateral triangles:
+    a correction any smaller (e.g. ``0.25 * hz * r2`` instead of ``0.5``) fails here."""
+    m = _Bowl()
+    pts = certify_mod._hex_lattice(np.array([-0.6, -0.6]), np.array([0.6, 0.6]), 0.2)
+    pts = pts[np.linalg.norm(pts, axis=1) <= 0.75]
+    msh = certify_mod._Mesh(pts)
+    data = certify_mod._PointData(m, 64)
+    b, corr = certify_mod._row_bounds(msh, data)
+    z = pts[msh.tri]  # (T, 3, 2)
+    side = np.linalg.norm(z[:, 1] - z[:, 0], axis=1)
+    eq = np.abs(side - 0.2) < 1e-9  # the lattice's equilateral triangles
+    assert eq.sum() > 20
+    rng = np.random.default_rng(0)
+    lam = np.vstack([np.full((1, 3), 1 / 3), rng.dirichlet(np.ones(3), 30)])  # centre first
+    worst_centre = np.inf
+    for j, w in enumerate(lam):
+        zz = np.einsum("i,tid->td", w, z[eq])
+        fz = 1 + m.c * np.sum(zz**2, axis=1)  # F(z, v_k) for unit v_k
+        mix = np.einsum("i,tik->tk", w, b[eq])
+        slack = fz[:, None] - mix
+        assert np.all(slack >= 0), (j, slack.min())
+        if j == 0:
+            worst_centre = float((slack / corr[eq]).min())
+    # at the centre almost all of the correction is used: it is tight, not loose
+    assert worst_centre < 0.05

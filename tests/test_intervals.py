@@ -140,6 +140,23 @@ def test_bad_boxes_are_refused() -> None:
         enclose(fn, Interval(np.zeros((3, 1))), Interval(np.zeros((3, 1))))
 
 
+def test_box_shapes_checked_on_both_bounds_and_one_box_accepted() -> None:
+    """The last dimension of hi is checked as well as lo's (a wider hi is not silently
+    cut), a wrong number of per-coordinate intervals is named, and a single box given as
+    1-D arrays (broadcast along N) encloses like the same box in a batch of one."""
+    fn = _lowered(lambda x: ca.sin(x[0]) * x[1], 2)
+    with pytest.raises(ValueError, match="last dimension 2"):
+        enclose(fn, Interval(np.zeros((3, 2)), np.ones((3, 3))))
+    with pytest.raises(ValueError, match="input 0 needs 2 intervals, got 1"):
+        enclose(fn, [Interval(0.0, 1.0)])
+    lo, hi = np.array([0.2, 1.0]), np.array([0.7, 2.0])
+    (one,) = enclose(fn, Interval(lo, hi))
+    (batch,) = enclose(fn, Interval(lo[None], hi[None]))
+    assert np.allclose(one[0].lo, batch[0].lo) and np.allclose(one[0].hi, batch[0].hi)
+    assert one[0].lo <= np.sin(0.2) * 1.0 and one[0].hi >= np.sin(0.7) * 2.0
+    assert one[0].hi <= np.sin(0.7) * 2.0 + 1e-12 and one[0].lo >= np.sin(0.2) - 1e-12
+
+
 def test_logical_operations_are_certain_only_where_the_truth_is() -> None:
     from finsler.intervals import _IntervalBackend as B
 

@@ -285,7 +285,11 @@ def test_short_euclidean_training_learns_true_midpoints(tmp_path) -> None:
     assert np.median(rel) < 0.1, np.median(rel)
 
 
-@pytest.mark.parametrize("extras", [{}, _EXTRAS])
+# expert iteration (learn.expert): its rounds, replay buffer and call count are checkpointed
+_EXPERT = {"expert_weight": 1.0, "expert_pairs": 8, "expert_every": 2, "expert_keep": 2}
+
+
+@pytest.mark.parametrize("extras", [{}, _EXTRAS, _EXPERT])
 def test_resume_equals_uninterrupted(tmp_path, monkeypatch, extras) -> None:
     cfg = _small(timesteps=12_000, eval_every=3, **extras)
     full = learn.train(cfg, tmp_path / "full", progress=False)
@@ -367,13 +371,8 @@ def test_cuda_request_without_cuda_is_a_clear_error() -> None:
         learn.resolve_device("cuda")
 
 
-def test_all_inclusive_count_equals_a_hand_count(tmp_path, monkeypatch) -> None:
-    """Euclidean, depth 3, collections of 1024 pairs: a tree gives 15 + 9 = 24 pairs, so
-    ceil(1024 / 24) = 43 trees = 1032 pairs = 5 minibatches of 256 (one epoch). Per
-    iteration: trees 43 * 8 = 344 evaluations of C (the paper's count); path energy
-    5 steps * 8 pairs * 8 segments = 320 (differentiated); route search
-    16 pairs * 8 * (1 + 4 candidates) = 640. The budget 3000 binds the all-inclusive count:
-    3 iterations, 3 * 1304 = 3912. Every torch evaluation of C is also counted by a spy."""
+def _count_torch_costs(monkeypatch: pytest.MonkeyPatch) -> list[int]:
+    """A spy on Metric.path_costs: ``[n]``, n = the torch evaluations of C made so far."""
     seen = [0]
     real = finsler.Metric.path_costs
 
@@ -383,6 +382,17 @@ def test_all_inclusive_count_equals_a_hand_count(tmp_path, monkeypatch) -> None:
         return real(self, points, check=check)
 
     monkeypatch.setattr(finsler.Metric, "path_costs", spy)
+    return seen
+
+
+def test_all_inclusive_count_equals_a_hand_count(tmp_path, monkeypatch) -> None:
+    """Euclidean, depth 3, collections of 1024 pairs: a tree gives 15 + 9 = 24 pairs, so
+    ceil(1024 / 24) = 43 trees = 1032 pairs = 5 minibatches of 256 (one epoch). Per
+    iteration: trees 43 * 8 = 344 evaluations of C (the paper's count); path energy
+    5 steps * 8 pairs * 8 segments = 320 (differentiated); route search
+    16 pairs * 8 * (1 + 4 candidates) = 640. The budget 3000 binds the all-inclusive count:
+    3 iterations, 3 * 1304 = 3912. Every torch evaluation of C is also counted by a spy."""
+    seen = _count_torch_costs(monkeypatch)
     cfg = _small(timesteps=3000, epochs=1, eval_every=1, path_energy_weight=1.0,
                  path_energy_pairs=8, route_candidates=4, route_pairs=16)
     res = learn.train(cfg, tmp_path / "r", progress=False)
@@ -396,6 +406,24 @@ def test_all_inclusive_count_equals_a_hand_count(tmp_path, monkeypatch) -> None:
     assert doc["model_free"] is False and doc["uses_derivative_of_C"] == ["path_energy"]
     result = learn.storage.read_json(tmp_path / "r" / "result.json")
     assert result["timesteps"] == 3912 and result["stopped_by"] == "timesteps"
+
+
+def test_hand_count_with_two_epochs_counts_the_terms_in_every_epoch(tmp_path,
+                                                                     monkeypatch) -> None:
+    """As above with epochs=2: the collection (trees 344, route search 640, made once per
+    iteration) is counted once, the path-energy term at each of its 2 x 5 steps:
+    10 * 8 pairs * 8 segments = 640. Per iteration 344 + 640 + 640 = 1624; the budget
+    3000 stops after 2 iterations at 3248. A count made in the first epoch only (320)
+    would give 1304 per iteration; the spy sees every torch evaluation of C."""
+    seen = _count_torch_costs(monkeypatch)
+    cfg = _small(timesteps=3000, epochs=2, eval_every=1, path_energy_weight=1.0,
+                 path_energy_pairs=8, route_candidates=4, route_pairs=16)
+    res = learn.train(cfg, tmp_path / "r", progress=False)
+    rows = res.history
+    assert [r["timesteps"] for r in rows] == [0, 1624, 3248]
+    assert [r["timesteps_paper"] for r in rows] == [0, 344, 688]
+    assert [r["timesteps_derivative"] for r in rows] == [0, 640, 1280]
+    assert seen[0] == 3248
 
 
 def test_best_checkpoint_is_chosen_on_the_validation_set(tmp_path, monkeypatch) -> None:

@@ -251,9 +251,20 @@ def test_non_convergence_is_a_status_and_strict_raises(monkeypatch) -> None:
     s, g = np.array([0.6, 0.1]), np.array([-0.5, -0.3])
     monkeypatch.setattr(sg, "energy_nlp",
                         lambda metric, n, warm=False: EnergyNLP(metric, n, max_iter=2))
-    r = solvers.solve_geodesic(m, s, g, 16)
-    assert r.status is Status.MAX_ITERATIONS and not r.converged
+    r = solvers.solve_geodesic(m, s, g, 16, method="ipopt")
+    assert r.status is Status.MAX_ITERATIONS and not r.converged and r.method == "ipopt"
     assert r.seeds_agreeing == 0
+    with pytest.raises(solvers.SolverError, match="did not converge"):
+        solvers.solve_geodesic(m, s, g, 16, strict=True, method="ipopt")
+    # the Newton path: 2 Newton iterations leave every candidate unfinished, IPOPT (also
+    # cut to 2 iterations) finishes none: the result is IPOPT's status, never a success
+    from solvers.batched import BatchOptions
+    from solvers.newton import NewtonOptions
+
+    monkeypatch.setattr(sg, "BatchOptions", lambda device=None: BatchOptions(
+        newton=NewtonOptions(max_iter=2), device=device))
+    r = solvers.solve_geodesic(m, s, g, 16)
+    assert r.status is Status.MAX_ITERATIONS and not r.converged and r.method == "ipopt"
     with pytest.raises(solvers.SolverError, match="did not converge"):
         solvers.solve_geodesic(m, s, g, 16, strict=True)
 
@@ -337,7 +348,7 @@ def test_cli_solve(tmp_path) -> None:
                 "minmax_max_segment_cost", "success", "status"):
         assert key in row
     assert np.asarray(row["points"]).shape == (17, 2)
-    assert row["status"] == "Solve_Succeeded"
+    assert row["status"] == "success" and row["ipopt_status"] == "Solve_Succeeded"
     assert row["success"] == (row["minmax_max_segment_cost"] <= doc["eps"])
 
     m = finsler.get_metric("matsumoto")
@@ -494,13 +505,13 @@ def test_solve_batch_initial_paths_reach_the_ray_chunks() -> None:
     """The Ray task body passes each pair's own initial path (checked without Ray: the
     chunk function is plain Python)."""
     from solvers.distributed import _solve_chunk
-    from solvers.geodesic import _batch_worker, _metric_spec
+    from solvers.geodesic import _chunk_worker, _metric_spec
 
     m = finsler.get_metric("matsumoto")
     pairs = finsler.sample_pairs(m, 2, seed=5)
     paths = np.stack([solvers.solve_geodesic(m, s, g, 16).points for s, g in pairs])
-    out = _solve_chunk(_batch_worker, _metric_spec(m), [4, 7], pairs, 16, SeedPlan(), False,
-                       paths, False)
+    out = _solve_chunk(_chunk_worker, (_metric_spec(m), [4, 7], pairs, 16, SeedPlan(), False,
+                                       paths, False, None, "newton", None))
     assert [k for k, _ in out] == [4, 7]
     for (_, r), p in zip(out, paths):
         assert r.seeds_tried == 1 and r.iterations <= 10

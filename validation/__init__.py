@@ -9,8 +9,9 @@ Python API::
 
 ``validation.propositions`` holds the grid dynamic programming of eqs. (9)-(13) and the
 Proposition 1 checks; ``validation.strategies`` the hypothesis strategies shared by the
-property tests. (``solvers`` and ``learn`` are imported lazily, on first use of the
-comparison API.)
+property tests; ``validation.testing`` the property suite users point at their own metric
+and policy (pytest classes to subclass, functions, ``geodesics check``). (``solvers`` and
+``learn`` are imported lazily, on first use of the comparison API.)
 """
 
 from __future__ import annotations

@@ -7,7 +7,6 @@ Every command calls public functions of ``finsler``, ``solvers``, ``learn`` or
 from __future__ import annotations
 
 import importlib
-import json
 import sys
 from typing import Annotated
 
@@ -19,9 +18,11 @@ from validation.cli_common import (
     MetricModuleOption,
     MetricParamOption,
     fail,
+    json_text,
     metric_from_options,
     parse_point,
 )
+from validation.text import text_table
 
 app = typer.Typer(
     name="geodesics",
@@ -36,11 +37,15 @@ app = typer.Typer(
 def metrics_command(
     as_json: Annotated[bool, typer.Option("--json", help="Print JSON instead of a table.")] = False,
 ) -> None:
-    """List the registered metrics with their domains, task defaults and the optional
-    hooks each provides (finsler.hooks)."""
-    rows = [finsler.get_metric(n).info() for n in finsler.list_metrics()]
+    """List the registered metrics with their domains and task defaults."""
+    rows = []
+    for n in finsler.list_metrics():
+        try:
+            rows.append(finsler.get_metric(n).info())
+        except Exception as err:  # a user's metric (registered by a module) may be broken
+            fail(f"metric {n!r} cannot be described: {type(err).__name__}: {err}")
     if as_json:
-        typer.echo(json.dumps(rows, indent=2))
+        typer.echo(json_text(rows))
         return
     head = ("name", "dim", "domain", "D", "eps", "reversible", "hooks", "convexity")
     table = [head] + [
@@ -56,11 +61,7 @@ def metrics_command(
         )
         for r in rows
     ]
-    widths = [max(len(row[i]) for row in table) for i in range(len(head))]
-    for k, row in enumerate(table):
-        typer.echo("  ".join(c.ljust(w) for c, w in zip(row, widths)).rstrip())
-        if k == 0:
-            typer.echo("  ".join("-" * w for w in widths))
+    typer.echo(text_table(table))
 
 
 @app.command("cost")
@@ -118,7 +119,7 @@ def cost_command(
     for w in warnings:
         typer.echo(f"warning: {w}", err=True)
     if as_json:
-        typer.echo(json.dumps(out, indent=2))
+        typer.echo(json_text(out))
     else:
         typer.echo(f"C(start, goal)           = {out['cost']:.12g}")
         typer.echo(f"symmetric C (eq. 59)     = {out['cost_symmetric']:.12g}")
@@ -138,6 +139,7 @@ def _register_optional_commands() -> None:
         module.register(app)
     importlib.import_module("validation.cli_expmap").register(app)
     importlib.import_module("validation.cli_certify").register(app)
+    importlib.import_module("validation.cli_check").register(app)
 
 
 _register_optional_commands()

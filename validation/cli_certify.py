@@ -7,12 +7,12 @@ the proven bound of it by interval arithmetic), ``upper_source`` (``path`` |
 ``zigzag``), ``path_upper``, ``path_gap`` (the solver's own path), ``triangles``, ``vertices``,
 ``unknowns``, ``directions``, ``lp_rows``, ``lp_rows_total``, ``lp_status``, ``lp_solver``,
 ``convexity`` (``convex`` | ``convexified``), ``convexity_note``, ``solver_status``,
-``mesh`` (the settings), ``times`` (seconds: solve, mesh, bounds, lp, total), ``rounds``.
+``mesh`` (the settings), ``times`` (seconds: solve, mesh, bounds, lp, total), ``rounds``,
+``stopped_by`` (target_gap | max_rounds | max_triangles | no_refinement | time_limit).
 """
 
 from __future__ import annotations
 
-import json
 import math
 from pathlib import Path
 from typing import Annotated
@@ -21,10 +21,12 @@ import typer
 
 from finsler.errors import InputError
 from finsler.files import atomic_write_text, check_output_path
+from solvers.inputs import domain_scale
 from validation.cli_common import (
     MetricModuleOption,
     MetricParamOption,
     fail,
+    json_text,
     metric_from_options,
     parse_point,
 )
@@ -46,7 +48,9 @@ def certify_command(
     target_gap: Annotated[float | None, typer.Option(
         help="Refine until the relative gap is at most this (overrides the preset).")] = None,
     time_limit: Annotated[float | None, typer.Option(
-        help="Seconds after which no new refinement round starts.")] = None,
+        help="Seconds after which no new refinement round starts (the result then depends "
+             "on the machine's speed and says stopped_by: time_limit; without it the "
+             "preset's work budgets, rounds and triangles, decide).")] = None,
     out: Annotated[Path | None, typer.Option(help="Also write the JSON result here.")] = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print JSON.")] = False,
     metric_param: MetricParamOption = None,
@@ -70,9 +74,16 @@ def certify_command(
         spec = MeshSpec.preset(mesh)
         changes = {}
         if h is not None:
+            scale = domain_scale(m)
+            if not (math.isfinite(h) and 0 < h <= scale):
+                raise InputError(f"--h must be a spacing in (0, {scale:g}] (the domain's "
+                                 f"size), got {h!r}")
             changes["h_path"] = h
             changes["h_far"] = max(spec.h_far, h)
         if directions is not None:
+            if not 8 <= directions <= 65536:
+                raise InputError(f"--directions must be an integer in [8, 65536], got "
+                                 f"{directions}")
             changes["directions"] = directions
         if target_gap is not None:
             if not (math.isfinite(target_gap) and 0 < target_gap < 1):
@@ -88,12 +99,15 @@ def certify_command(
         res = certify(m, s, g, spec, time_limit=time_limit)
         doc = res.to_dict()
         if out is not None:
-            atomic_write_text(out, json.dumps(doc, indent=2), "certify result")
+            atomic_write_text(out, json_text(doc), "certify result")
     except InputError as err:
         fail(str(err))
         return
+    except RuntimeError as err:  # the LP solver failed: not the input, the work
+        fail(f"no certificate: {err}", code=1)
+        return
     if as_json:
-        typer.echo(json.dumps(doc, indent=2))
+        typer.echo(json_text(doc))
         return
     typer.echo(f"metric {m.name}: start {tuple(s.tolist())} goal {tuple(g.tolist())}")
     typer.echo(f"lower  = {res.lower:.10g}   (dual potential, P2 on {res.triangles} triangles, "

@@ -10,8 +10,9 @@ import numpy as np
 import typer
 
 import finsler
-from finsler.errors import InputError
-from finsler.plugins import import_module_or_file
+from finsler.errors import InputError, short
+from finsler.modules import import_user_module
+from validation.jsonout import jsonable
 
 __all__ = [
     "METHOD_MODULE_HELP",
@@ -21,8 +22,10 @@ __all__ = [
     "MetricParamOption",
     "fail",
     "import_metric_modules",
+    "json_text",
     "metric_from_options",
     "metric_or_fail",
+    "one_line",
     "parse_metric_params",
     "parse_overrides",
     "parse_point",
@@ -47,10 +50,30 @@ MetricModuleOption = Annotated[list[str] | None, typer.Option(
     "--metric-module", metavar="MODULE", help=METRIC_MODULE_HELP)]
 
 
-def fail(message: str) -> None:
-    """Print a clear error and exit with status 2 (bad input)."""
-    typer.echo(f"error: {message}", err=True)
-    raise typer.Exit(code=2)
+#: Longest error line the commands print (characters, after ``error: ``).
+MESSAGE_LIMIT = 200
+
+
+def one_line(message: str, limit: int = MESSAGE_LIMIT) -> str:
+    """``message`` on one line of at most ``limit`` characters (whitespace runs joined; a
+    longer message keeps its start and end, the middle elided)."""
+    text = " ".join(str(message).split())
+    if len(text) <= limit:
+        return text
+    return text[: limit - 40] + " ... " + text[-35:]
+
+
+def fail(message: str, code: int = 2) -> None:
+    """Print a clear one-line error and exit with ``code`` (2: bad input, 1: the work
+    failed)."""
+    typer.echo(f"error: {one_line(message)}", err=True)
+    raise typer.Exit(code=code)
+
+
+def json_text(doc: Any, indent: int | None = 2) -> str:
+    """Standard JSON of a command's result: numpy values as Python ones, and NaN or
+    infinite numbers (which JSON cannot hold) as ``null``."""
+    return json.dumps(jsonable(doc), indent=indent, allow_nan=False)
 
 
 def parse_point(text: str, dim: int, what: str) -> np.ndarray:
@@ -58,12 +81,13 @@ def parse_point(text: str, dim: int, what: str) -> np.ndarray:
     try:
         values = [float(t) for t in text.replace(" ", "").split(",") if t != ""]
     except ValueError:
-        fail(f"{what} {text!r} is not a comma-separated list of numbers")
+        fail(f"{what} {short(text)!r} is not a comma-separated list of numbers")
     if len(values) != dim:
-        fail(f"{what} needs {dim} comma-separated coordinates, got {len(values)} in {text!r}")
+        fail(f"{what} needs {dim} comma-separated coordinates, got {len(values)} in "
+             f"{short(text)!r}")
     arr = np.asarray(values, dtype=np.float64)
     if not np.all(np.isfinite(arr)):
-        fail(f"{what} {text!r} contains NaN or inf")
+        fail(f"{what} {short(text)!r} contains NaN or inf")
     return arr
 
 
@@ -76,6 +100,10 @@ def metric_or_fail(name: str, params: dict[str, Any] | None = None) -> finsler.M
         return finsler.MetricSpec.resolve(name, params, what="metric").build()
     except InputError as err:
         fail(str(err))
+        raise  # unreachable
+    except Exception as err:  # a user's metric class (--metric-module) may raise anything
+        fail(f"--metric {short(name)}: building the metric raised {type(err).__name__}: "
+             f"{short(str(err), 80)}")
         raise  # unreachable
 
 
@@ -102,9 +130,9 @@ def parse_metric_params(items: list[str] | None) -> dict[str, Any] | None:
         key, sep, raw = item.partition("=")
         key = key.strip()
         if not sep or not key or not raw.strip():
-            raise InputError(f"--metric-param expects NAME=VALUE, got {item!r}")
+            raise InputError(f"--metric-param expects NAME=VALUE, got {short(item)!r}")
         if key in out:
-            raise InputError(f"--metric-param {key} is given twice")
+            raise InputError(f"--metric-param {short(key)} is given twice")
         try:
             value = json.loads(raw)
         except json.JSONDecodeError:
@@ -114,11 +142,10 @@ def parse_metric_params(items: list[str] | None) -> dict[str, Any] | None:
 
 
 def import_metric_modules(items: list[str] | None) -> None:
-    """Import every ``--metric-module``: a dotted module name, or a ``.py`` file (its
-    folder is put first on ``sys.path`` and it is imported by its stem, so that the
-    recorded ``module:qualname`` of its metrics imports again, also in worker processes)."""
+    """Import every ``--metric-module`` (:func:`finsler.modules.import_user_module`: a
+    dotted module name or a ``.py`` file; any failure is a one-line InputError)."""
     for item in items or []:
-        import_module_or_file(item, "--metric-module")
+        import_user_module(item, "--metric-module")
 
 
 def parse_overrides(items: list[str]) -> dict[str, Any]:
@@ -130,7 +157,7 @@ def parse_overrides(items: list[str]) -> dict[str, Any]:
         key, sep, raw = item.partition("=")
         key = key.strip()
         if not sep or not key:
-            raise InputError(f"--set expects FIELD=VALUE, got {item!r}")
+            raise InputError(f"--set expects FIELD=VALUE, got {short(item)!r}")
         try:
             value = json.loads(raw)
         except json.JSONDecodeError:

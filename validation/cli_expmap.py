@@ -11,7 +11,6 @@ where asked), 1 when the status is not a success.
 
 from __future__ import annotations
 
-import json
 from typing import Annotated
 
 import numpy as np
@@ -19,11 +18,14 @@ import typer
 
 import solvers
 from finsler.errors import InputError
+from finsler.limits import check_memory
 from validation.cli_common import (
     MetricModuleOption,
     MetricParamOption,
     fail,
+    json_text,
     metric_from_options,
+    one_line,
     parse_point,
 )
 
@@ -47,13 +49,20 @@ def exp_command(
     v = parse_point(velocity, m.dim, "--velocity")
     if samples < 0 or samples == 1:
         fail(f"--samples must be 0 or >= 2, got {samples}")
+    try:  # before anything is allocated
+        check_memory((samples, 2 * m.dim), f"--samples {samples}", copies=3)
+    except InputError as err:
+        fail(str(err))
     try:
-        r = solvers.exp_map(m, x, v, t=t, return_curve=samples if samples else False)
+        if not (np.isfinite(t) and t >= 0):
+            raise InputError(f"--t must be a finite number >= 0, got {t!r}")
+        r = solvers.exp_map(m, x, v, t=t, return_curve=samples if samples else False,
+                            names=("--start", "--velocity"))
     except InputError as err:
         fail(str(err))
         raise  # unreachable
     if as_json:
-        typer.echo(json.dumps(r.to_dict(), indent=2))
+        typer.echo(json_text(r.to_dict()))
     else:
         typer.echo(f"status        {r.status.value}" + (f" ({r.message})" if r.message else ""))
         typer.echo(f"point         {np.array2string(r.point, precision=12)}")
@@ -62,8 +71,9 @@ def exp_command(
         typer.echo(f"length        {r.speed * r.t_end:.12g}")
         typer.echo(f"speed drift   {r.speed_drift:.2e}")
         typer.echo(f"wall time     {r.wall_time:.3f} s")
-    if not r.converged:
-        raise typer.Exit(code=1)
+    if not r.converged:  # the result above says why; stderr says that it is not the answer
+        stopped(f"the geodesic stopped at t = {r.t_end:.6g} before t = {t:.6g}: "
+                f"{r.status.value}")
 
 
 def log_command(
@@ -80,12 +90,14 @@ def log_command(
     x = parse_point(start, m.dim, "--start")
     y = parse_point(goal, m.dim, "--goal")
     try:
-        r = solvers.log_map(m, x, y, tol=float(tol))
+        if not (np.isfinite(tol) and 0 < tol < 1):
+            raise InputError(f"--tol must be in (0, 1), got {tol!r}")
+        r = solvers.log_map(m, x, y, tol=float(tol), names=("--start", "--goal"))
     except InputError as err:
         fail(str(err))
         raise  # unreachable
     if as_json:
-        typer.echo(json.dumps(r.to_dict(), indent=2))
+        typer.echo(json_text(r.to_dict()))
     else:
         typer.echo(f"status         {r.status.value}")
         typer.echo(f"velocity       {np.array2string(r.velocity, precision=12)}")
@@ -96,7 +108,14 @@ def log_command(
         typer.echo(f"Newton steps   {r.iterations}")
         typer.echo(f"wall time      {r.wall_time:.3f} s")
     if not r.converged:
-        raise typer.Exit(code=1)
+        stopped(f"log did not converge: {r.status.value} (residual {r.residual:.2e})")
+
+
+def stopped(message: str) -> None:
+    """A result that is not the answer asked for: one line on stderr, exit code 1 (the
+    result itself, with its status, is on stdout)."""
+    typer.echo(f"note: {one_line(message)}", err=True)
+    raise typer.Exit(code=1)
 
 
 def register(app: typer.Typer) -> None:

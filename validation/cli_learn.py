@@ -8,7 +8,6 @@ policies; e.g. the shipped Matsumoto policy is reproduced by
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Annotated
 
@@ -17,12 +16,14 @@ import typer
 
 import finsler
 from finsler.errors import InputError
+from finsler.files import check_input_dir, check_output_dir
 from validation.cli_common import (
     METHOD_MODULE_HELP,
     METRIC_MODULE_HELP,
     METRIC_PARAM_HELP,
     fail,
     import_metric_modules,
+    json_text,
     parse_metric_params,
     parse_overrides,
 )
@@ -45,7 +46,8 @@ def train_command(
         "--method-module", metavar="MODULE", help=METHOD_MODULE_HELP)] = None,
     timesteps: Annotated[int | None, typer.Option(
         help="Budget of evaluations of C, all-inclusive: every evaluation the learner makes "
-             "(default: the environment's default).")] = None,
+             "to learn (the validation evaluations that select checkpoints are not "
+             "counted; default: the environment's default).")] = None,
     minutes: Annotated[float | None, typer.Option(
         help="Wall-clock limit in minutes (stops at whichever limit comes first).")] = None,
     seed: Annotated[int | None, typer.Option(help="Random seed (default 0).")] = None,
@@ -71,7 +73,9 @@ def train_command(
     directory (config.json, metrics.csv, checkpoints, result.json when finished).
 
     Counting: --timesteps and the metrics' `timesteps` column count EVERY evaluation of C
-    made in training (all-inclusive); `timesteps_paper` is the paper's count (trees only)
+    made to learn (all-inclusive: trees, extra loss terms in every epoch, route search; not
+    the validation evaluations that select checkpoints, the same for every method);
+    `timesteps_paper` is the paper's count (trees only)
     and `timesteps_derivative` the evaluations whose derivative was used. Checkpoints are
     selected on a validation pair set, never on the default evaluation set.
 
@@ -99,6 +103,7 @@ def train_command(
         import_metric_modules(metric_module)
         import_method_modules(method_module)
         params = parse_metric_params(metric_param)
+        check_output_dir(out, "--out")
         if not resume:  # a resumed run's config names (and re-imports) its metric
             finsler.registry.check_name(env, "environment")
         if timesteps is not None and timesteps < 1:
@@ -200,13 +205,15 @@ def evaluate_command(
         help="Environment: evaluates its shipped policy (unless --run is given).")] = None,
     pairs: Annotated[Path | None, typer.Option(
         help="PAIRS.npy of shape (K, 2, dim); default: the environment's 100 default "
-             "evaluation pairs.")] = None,
+             "evaluation pairs (on which the SHIPPED policies' checkpoints were selected: "
+             "give fresh pairs for honest figures of a shipped policy).")] = None,
     eps: Annotated[float | None, typer.Option(help="Success threshold (default: task's).")
                    ] = None,
     depth: Annotated[int | None, typer.Option(help="Tree depth D (default: task's).")] = None,
     checkpoint: Annotated[str, typer.Option(
-        help="best (selected on the validation set during training) or latest (the last "
-             "one, no selection).")] = "best",
+        help="best (selected on the validation set during training; for the shipped "
+             "policies, on the default evaluation set) or latest (the last one, no "
+             "selection).")] = "best",
     as_json: Annotated[bool, typer.Option("--json", help="Print JSON.")] = False,
     metric_param: Annotated[list[str] | None, typer.Option(
         "--metric-param", metavar="NAME=VALUE",
@@ -223,9 +230,11 @@ def evaluate_command(
 ) -> None:
     """Evaluate a trained policy (section 5.1): success rate, mean length, max segment cost.
 
-    The default pairs are the environment's default evaluation set, which training never
-    sees (checkpoints are selected on a separate validation set). The output names the
-    checkpoint file used."""
+    The default pairs are the environment's default evaluation set. A run trained today
+    never sees it (its checkpoints are selected on a separate validation set); the SHIPPED
+    policies' best checkpoints were selected on it, so their figures there are optimistic
+    (the output says so): give --pairs of a fresh seed for honest ones. The output names
+    the checkpoint file used."""
     import learn
     from learn.registry import import_method_modules
     from learn.runs import load_any_policy
@@ -239,8 +248,7 @@ def evaluate_command(
         if checkpoint not in ("best", "latest"):
             raise InputError(f"--checkpoint must be best or latest, got {checkpoint!r}")
         if run is not None:
-            if not run.is_dir():
-                raise InputError(f"run directory {run} does not exist")
+            check_input_dir(run, "--run")
             policy = load_any_policy(run, checkpoint=checkpoint, env=env,
                                      metric_params=params)
         else:
@@ -254,7 +262,7 @@ def evaluate_command(
             raise InputError(f"--eps must be positive and finite, got {eps}")
         if depth is not None and depth < 0:
             raise InputError(f"--depth must be a non-negative integer, got {depth}")
-        p = finsler.load_pairs(pairs, policy.metric) if pairs is not None else None
+        p = finsler.load_pairs(pairs, policy.metric, "--pairs") if pairs is not None else None
         searched = None
         if search:
             if not callable(getattr(policy, "search", None)):
@@ -270,13 +278,17 @@ def evaluate_command(
         fail(str(err))
         return
     mp = getattr(policy.config, "metric_params", None) or {}
+    note = None
+    if run is None and pairs is None and checkpoint == "best":
+        note = ("the shipped policy's checkpoint was selected on these default evaluation "
+                "pairs: the figures are optimistic; give --pairs of a fresh seed")
     out = {"env": policy.metric.name, "metric_params": mp, "source": policy.source,
-           "checkpoint": policy.checkpoint, **res.to_dict()}
+           "checkpoint": policy.checkpoint, "pairs_note": note, **res.to_dict()}
     if searched is not None:
         out["search"] = {**learn.SearchSpec().to_dict(),
                          "evaluations_of_C_per_path": searched.evaluations_per_path}
     if as_json:
-        typer.echo(json.dumps(out, indent=2))
+        typer.echo(json_text(out))
         return
     typer.echo(f"policy      {policy.source} ({policy.checkpoint})")
     typer.echo(f"environment {policy.metric.name}  depth {res.depth}  eps {res.eps:g}  "
@@ -289,6 +301,8 @@ def evaluate_command(
     typer.echo(f"success     {res.success_rate:.2%}")
     typer.echo(f"mean length {res.mean_length:.6g}")
     typer.echo(f"mean max segment cost {res.mean_max_segment_cost:.6g}")
+    if note is not None:
+        typer.echo(f"note        {note}")
 
 
 def register(app: typer.Typer) -> None:

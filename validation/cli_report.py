@@ -9,6 +9,7 @@ from typing import Annotated
 import typer
 
 from finsler.errors import InputError
+from finsler.files import check_input_dir, check_output_dir
 from validation.cli_common import (
     METRIC_MODULE_HELP,
     fail,
@@ -67,8 +68,9 @@ def report_command(
     try:
         if workers is not None and workers < 1:
             raise InputError(f"--workers must be >= 1, got {workers}")
-        if out.exists() and not out.is_dir():
-            raise InputError(f"--out {out} exists and is not a directory")
+        check_output_dir(out, "--out")
+        if run is not None:
+            check_input_dir(run, "--run")
         import_metric_modules(metric_module)
         params = parse_metric_params(metric_param)
         doc = build_report(env, out, run=run, pairs=pairs, quick=quick, continuum=continuum,
@@ -95,6 +97,9 @@ def report_command(
                    f"mean {sl['mean']:.4f}, median {sl['median']:.4f}, 95th pct "
                    f"{sl['p95']:.4f}, max {sl['max']:.4f}")
     for r in (doc.get("certified") or {}).get("pairs", []):
+        if "error" in r:
+            typer.echo(f"certified pair {r['pair']}: no certificate ({r['error']})")
+            continue
         typer.echo(f"certified pair {r['pair']}: {r['lower']:.6f} <= d <= {r['upper']:.6f} "
                    f"(gap {r['gap']:.1e}); learned path at most "
                    f"{100 * r['learned_excess_bound']:.2f}% longer than d"

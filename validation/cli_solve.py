@@ -8,10 +8,15 @@ JSON schema (one pair with ``--json``, or ``--pairs``)::
                   "minmax_max_segment_cost",
                   "success" (min-max cost <= eps), "status", "segments", ...}]}
 
-With ``--tol`` each result also has ``error_estimate`` (absolute), ``order`` (observed
-order of the polyline lengths), ``order_seen``, ``tol_reached`` and ``tol_levels``, its
-``segments`` is the size the refinement stopped at, and ``length`` is the estimate of the
-continuum length (the discrete sum of costs is then ``length_sum_costs``).
+``length`` is always the sum of the costs C of the returned path. ``status`` is the
+toolkit's name of the solver status (``success``, ``acceptable``, ``max_iterations``, ...:
+:attr:`solvers.Status.label`), ``ipopt_status`` IPOPT's own return status.
+
+With ``--tol`` each result also has ``length_estimate`` (the estimate of the continuum
+length), ``error_estimate`` (absolute; ``null`` where no estimate exists, e.g. when the
+solve could not refine), ``order`` (observed order of the polyline lengths),
+``order_seen``, ``tol_reached`` and ``tol_levels``, and its ``segments`` is the size the
+refinement stopped at. JSON never holds NaN or Infinity: such numbers are ``null``.
 
 ``success_rate`` is the fraction of pairs whose min-max refined discrete geodesic has every
 segment cost ``<= eps``: the exact ceiling of the paper's task.
@@ -19,7 +24,6 @@ segment cost ``<= eps``: the exact ceiling of the paper's task.
 
 from __future__ import annotations
 
-import json
 import shutil
 from pathlib import Path
 from typing import Annotated, Any
@@ -35,6 +39,7 @@ from validation.cli_common import (
     MetricModuleOption,
     MetricParamOption,
     fail,
+    json_text,
     metric_from_options,
     parse_point,
 )
@@ -66,9 +71,9 @@ def solve_payload(metric: Any, results: list[solvers.GeodesicResult], n: int) ->
 
 def _pairs_or_fail(path: Path, metric: finsler.Metric) -> np.ndarray:
     try:
-        return finsler.load_pairs(path, metric)
+        return finsler.load_pairs(path, metric, "--pairs")
     except InputError as err:
-        fail(f"--pairs: {err}")
+        fail(str(err))
         raise  # unreachable
 
 
@@ -122,7 +127,15 @@ def solve_command(
     ] = None,
     out: Annotated[Path | None, typer.Option(help="Write the JSON result to this file.")] = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print JSON.")] = False,
-    workers: Annotated[int, typer.Option(help="Worker processes for --pairs.")] = 2,
+    workers: Annotated[int | None, typer.Option(
+        help="Worker processes for --pairs (default: 1 for the batched Newton method below "
+             "1024 pairs, the batch being vectorised; else the CPU count).")] = None,
+    method: Annotated[str, typer.Option(
+        help="auto (the batched Newton method where it covers the metric, IPOPT "
+             "otherwise), newton or ipopt.")] = "auto",
+    device: Annotated[str | None, typer.Option(
+        help="torch device of the Newton method, e.g. cuda (default: numpy on the "
+             "CPU).")] = None,
     progress: Annotated[bool, typer.Option(help="Show a progress bar for --pairs.")] = True,
     ray: Annotated[str | None, typer.Option(
         "--ray", metavar="ADDRESS",
@@ -134,7 +147,7 @@ def solve_command(
              "64 pairs).")] = None,
     warm_start: Annotated[str | None, typer.Option(
         "--warm-start", metavar="RUN_DIR_OR_ENV",
-        help="Seed IPOPT with learned paths: a run directory of `geodesics train` or an "
+        help="Seed the exact solve with learned paths: a run directory of `geodesics train` or an "
              "environment with a shipped policy; the policy must be for --metric. Without "
              "--keep-global-seeds only the learned path is solved (fast).")] = None,
     keep_global_seeds: Annotated[bool, typer.Option(
@@ -156,7 +169,8 @@ def solve_command(
     metric_param: MetricParamOption = None,
     metric_module: MetricModuleOption = None,
 ) -> None:
-    """Exact discrete geodesics (globally seeded IPOPT) with min-max refinement.
+    """Exact discrete geodesics (globally seeded; the batched Newton method, IPOPT where
+    it does not cover the metric or cannot finish a pair) with min-max refinement.
 
     With --pairs and --out, finished pairs are kept in OUT.parts/ until the JSON is
     written, so running the same command again after an interruption resumes it (also
@@ -166,7 +180,7 @@ def solve_command(
         fail("give either --start/--goal or --pairs, not both")
     if pairs is None and (start is None or goal is None):
         fail("give --start and --goal, or --pairs PAIRS.npy")
-    if workers < 1:
+    if workers is not None and workers < 1:
         fail(f"--workers must be >= 1, got {workers}")
     if (ray is not None or chunk_size is not None) and pairs is None:
         fail("--ray and --chunk-size apply to --pairs")
@@ -209,7 +223,7 @@ def solve_command(
             m, arr, n, minmax=True, workers=workers, progress=progress and pairs is not None,
             checkpoint_dir=parts, ray_address=ray, chunk_size=chunk_size,
             initial_paths=inits, global_seeds=inits is None or keep_global_seeds,
-            tol=tol,
+            tol=tol, method=method, device=device,
         )
         if recheck_above is not None and inits is not None and warm is not None:
             redo = np.flatnonzero(recheck_flags(m, inits, results, recheck_above))
@@ -220,7 +234,7 @@ def solve_command(
                     checkpoint_dir=None if parts is None else parts / "recheck",
                     ray_address=ray, chunk_size=chunk_size,
                     initial_paths=np.stack([_at_size(results[k].points, n) for k in redo]),
-                    global_seeds=True, tol=tol)
+                    global_seeds=True, tol=tol, method=method, device=device)
                 for k, r in zip(redo, again):
                     results[k] = r
             warm["recheck_above"] = float(recheck_above)
@@ -236,7 +250,7 @@ def solve_command(
     payload = solve_payload(m, results, n)
     if warm is not None:
         payload["warm_start"] = warm
-    text = json.dumps(payload, indent=None if pairs is not None else 2)
+    text = json_text(payload, indent=None if pairs is not None else 2)
     if out is not None:
         try:
             finsler.atomic_write_text(out, text, "--out")
@@ -250,7 +264,7 @@ def solve_command(
     elif pairs is None:
         r = results[0]
         row = payload["results"][0]
-        typer.echo(f"status                    {r.status.value}")
+        typer.echo(f"status                    {r.status.label}")
         typer.echo(f"segments                  {r.segments}")
         typer.echo(f"length (sum C)            {r.length:.12g}")
         err = ("" if r.length_quadrature_error is None
@@ -261,12 +275,15 @@ def solve_command(
         typer.echo(f"min-max max segment cost  {row['minmax_max_segment_cost']:.6g}"
                    f"  (eps {payload['eps']:g}: {'success' if row['success'] else 'fail'})")
         typer.echo(f"seeds agreeing / tried    {r.seeds_agreeing} / {r.seeds_tried}")
+        typer.echo(f"method, residual          {r.method}, {r.residual:.2e}")
         if r.error_estimate is not None:
             order = ("not seen" if not r.order_seen else f"{r.order:.2f}") + (
                 f" (observed {r.order:.2f})" if r.order is not None and not r.order_seen
                 else "")
-            typer.echo(f"length (continuum est.)   {r.length_estimate:.15g} +- "
-                       f"{r.error_estimate:.2e} at {r.segments} segments, order {order}"
+            pm = (f"+- {r.error_estimate:.2e}" if np.isfinite(r.error_estimate)
+                  else "(no error estimate: the solve could not refine)")
+            typer.echo(f"length (continuum est.)   {r.length_estimate:.15g} {pm} at "
+                       f"{r.segments} segments, order {order}"
                        + ("" if r.tol_reached else f"  (tol {tol:g} NOT reached)"))
         nr = r.segments  # --tol may refine beyond --segments
         mid = (f"midpoint p_{nr // 2}          " if nr % 2 == 0 else

@@ -3,13 +3,13 @@ local process pool or on a Ray cluster; a thin CLI over :mod:`learn.sweep`."""
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Annotated, Any
 
 import typer
 
 from finsler.errors import InputError
+from finsler.files import check_output_dir
 from finsler.pool import PoolInterrupted
 from validation.cli_common import (
     METHOD_MODULE_HELP,
@@ -17,9 +17,11 @@ from validation.cli_common import (
     METRIC_PARAM_HELP,
     fail,
     import_metric_modules,
+    json_text,
     parse_metric_params,
     parse_overrides,
 )
+from validation.text import text_table
 
 __all__ = ["format_table", "register", "sweep_command"]
 
@@ -46,13 +48,7 @@ def format_table(rows: list[dict[str, Any]]) -> str:
     head = ("env", "variant", "seed", "action", "stopped by", "timesteps", "wall s",
             "val. success")
     table = [head] + [tuple(_cell(r[k], k) for k in keys) for r in rows]
-    widths = [max(len(row[i]) for row in table) for i in range(len(head))]
-    lines = []
-    for k, row in enumerate(table):
-        lines.append("  ".join(c.ljust(w) for c, w in zip(row, widths)).rstrip())
-        if k == 0:
-            lines.append("  ".join("-" * w for w in widths))
-    return "\n".join(lines)
+    return text_table(table)
 
 
 def metric_overrides(envs: list[str], params: dict[str, Any] | None) -> dict[str, Any]:
@@ -130,6 +126,7 @@ def sweep_command(
     try:
         if workers is not None and workers < 1:
             raise InputError(f"--workers must be a positive integer, got {workers}")
+        check_output_dir(out, "--out")
         import_metric_modules(metric_module)
         import_method_modules(method_module)
         overrides = parse_overrides(settings or [])
@@ -152,7 +149,7 @@ def sweep_command(
         raise typer.Exit(code=130) from None
     rows = result.rows()
     if as_json:
-        typer.echo(json.dumps(rows, indent=2))
+        typer.echo(json_text(rows))
     else:
         typer.echo(format_table(rows))
         typer.echo(f"{len(rows)} runs in {result.seconds:.1f} s ({result.backend}); "

@@ -163,7 +163,8 @@ class ExactSet(PathSet):
 
     ``minmax_max_segment_cost (K,)``: largest segment cost after the min-max refinement;
     ``ceiling (K,)``: the task is solvable at this resolution (that cost ``<= eps``);
-    ``status``: IPOPT status per pair; ``converged (K,)``; ``seeds_tried``/``seeds_agreeing``.
+    ``status``: solver status per pair (:attr:`solvers.Status.label`); ``converged (K,)``;
+    ``seeds_tried``/``seeds_agreeing``.
     """
 
     minmax_max_segment_cost: np.ndarray = field(default_factory=lambda: np.zeros(0))
@@ -203,7 +204,7 @@ def exact_reference(
         **{f: getattr(base, f) for f in PathSet.__dataclass_fields__},
         minmax_max_segment_cost=mm,
         ceiling=mm <= eps,
-        status=[r.status.value for r in results],
+        status=[r.status.label for r in results],
         converged=np.array([r.converged for r in results]),
         seeds_tried=np.array([r.seeds_tried for r in results]),
         seeds_agreeing=np.array([r.seeds_agreeing for r in results]),
@@ -349,7 +350,7 @@ def midpoint_error(
     out = MidpointErrors(
         midpoints=mids, segments=n, d_sg=d_sg, d_sm=d_sm, d_mg=d_mg, err_start=e_s,
         err_goal=e_g, ok=ok & (d_sg > 0),
-        status=[(exact.status[i], res[i].status.value, res[k + i].status.value)
+        status=[(exact.status[i], res[i].status.label, res[k + i].status.label)
                 for i in range(k)],
     )
     if continuum:

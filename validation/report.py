@@ -34,7 +34,9 @@ import finsler
 import solvers
 from finsler import Metric, load_pairs
 from finsler.errors import InputError
+from finsler.files import made_folders
 from validation.comparison import Comparison, compare, midpoint_error, ratio_stats
+from validation.jsonout import jsonable
 
 __all__ = ["build_report", "load_report_policy", "read_learning_curve", "write_figures"]
 
@@ -83,13 +85,14 @@ def load_report_policy(
                     f", {pol.checkpoint}")
             except InputError:
                 pass  # incomplete or corrupt: train again below
-        cfg = learn.default_config("matsumoto", timesteps=3_000_000, minutes=3.0,
-                                   eval_every=5, metric_params=metric_params)
+        # a work budget only: a wall-clock limit would make the policy depend on the load
+        cfg = learn.default_config("matsumoto", timesteps=3_000_000, eval_every=5,
+                                   metric_params=metric_params)
         learn.train(cfg, run_dir, progress=progress)
         pol = learn.load_policy(run_dir, checkpoint=checkpoint)
         return pol, run_dir, (
-            f"small policy trained by --quick ({cfg.timesteps:.0e} evaluations of C or "
-            f"{cfg.minutes:g} min) in {run_dir}, {pol.checkpoint}")
+            f"small policy trained by --quick ({cfg.timesteps:.0e} evaluations of C) in "
+            f"{run_dir}, {pol.checkpoint}")
     raise InputError(f"no shipped policy for {env!r} (shipped: "
                      f"{', '.join(learn.shipped_policies()) or 'none'}); pass --run DIR "
                      "or use --quick")
@@ -302,7 +305,8 @@ def _markdown(doc: dict[str, Any], figures: list[str], metric: Metric) -> str:
         lines.append("")
     cert = doc.get("certified")
     if cert:
-        has_s = any("searched_excess_bound" in r for r in cert["pairs"])
+        done = [r for r in cert["pairs"] if "error" not in r]
+        has_s = any("searched_excess_bound" in r for r in done)
         lines += [
             "## Certified distances",
             "",
@@ -310,20 +314,27 @@ def _markdown(doc: dict[str, Any], figures: list[str], metric: Metric) -> str:
             "mesh) proves lower <= d(s, g) <= upper (a dual potential for the lower bound, "
             "the exact path's proven length for the upper). The last columns are PROVEN "
             "bounds on how much longer than the true distance the learned paths are: their "
-            "proven length over the certified lower bound, minus 1.",
+            "proven length over the certified lower bound, minus 1. The mesh's work "
+            "budgets (refinement rounds, triangles) end the refinement, never a time limit "
+            "(`stopped by`), so the intervals do not depend on the machine.",
             "",
             "| pair | lower | upper | gap | learned: excess <= |"
-            + (" learned + route search: excess <= |" if has_s else "") + " seconds |",
-            "|---|---|---|---|---|" + ("---|" if has_s else "") + "---|",
+            + (" learned + route search: excess <= |" if has_s else "")
+            + " stopped by | seconds |",
+            "|---|---|---|---|---|" + ("---|" if has_s else "") + "---|---|",
         ]
         for r in cert["pairs"]:
+            if "error" in r:
+                lines.append(f"| {r['pair']} | no certificate: {r['error']} |")
+                continue
             lines.append(f"| {r['pair']} | {r['lower']:.6f} | {r['upper']:.6f} | "
                          f"{r['gap']:.2e} | {100 * r['learned_excess_bound']:.2f}% |"
                          + (f" {100 * r['searched_excess_bound']:.2f}% |" if has_s else "")
-                         + f" {r['seconds']:.0f} |")
-        lines += ["", f"Convexity: {cert['pairs'][0]['convexity']} (where F(x, .) is not "
-                  "convex the bound holds for the distance, that of the convexified metric)."
-                  , ""]
+                         + f" {r['stopped_by']} | {r['seconds']:.0f} |")
+        if done:
+            lines += ["", f"Convexity: {done[0]['convexity']} (where F(x, .) is not convex "
+                      "the bound holds for the distance, that of the convexified metric).",
+                      ""]
     nc = doc["nonconvex_point_fraction"]
     lines += [
         "## Where the metric is Finsler",
@@ -344,7 +355,8 @@ def _markdown(doc: dict[str, Any], figures: list[str], metric: Metric) -> str:
         *([f"| learned + route search, batch of {doc['pairs']} | "
            f"{_f(t['searched_seconds_per_path_batched'], 3)} |"]
           if "searched_seconds_per_path_batched" in t else []),
-        f"| exact (globally seeded IPOPT + min-max) | {_f(t['exact_seconds_per_path'], 3)} |",
+        f"| exact (globally seeded batched solve + min-max) | "
+        f"{_f(t['exact_seconds_per_path'], 3)} |",
         "",
         f"Speed-up of the learned policy: {t['speedup_batched']:.3g}x (batched), "
         f"{t['speedup_single']:.3g}x (single pair)"
@@ -432,17 +444,11 @@ def build_report(
     if certify is not None and (isinstance(certify, bool) or not isinstance(certify, int)
                                 or certify < 0):
         raise InputError(f"certify must be a number of pairs >= 0, got {certify!r}")
-    out = Path(out)
-    created = not out.exists()
-    try:
-        return _build_report(env, out, run=run, pairs=pairs, quick=quick, continuum=continuum,
-                             workers=workers, progress=progress, policy=policy,
-                             checkpoint=checkpoint, metric_params=metric_params, search=search,
-                             certify=certify)
-    except BaseException:
-        if created and out.is_dir() and not any(out.iterdir()):
-            out.rmdir()  # a failed report leaves nothing behind
-        raise
+    with made_folders(out) as folder:  # a failed report leaves no new empty folders
+        return _build_report(env, folder, run=run, pairs=pairs, quick=quick,
+                             continuum=continuum, workers=workers, progress=progress,
+                             policy=policy, checkpoint=checkpoint, metric_params=metric_params,
+                             search=search, certify=certify)
 
 
 def _build_report(env: str | None, out: Path, *, run: str | Path | None,
@@ -464,7 +470,7 @@ def _build_report(env: str | None, out: Path, *, run: str | Path | None,
             raise InputError("give env for a policy without a metric attribute")
         metric = finsler.MetricSpec.resolve(env, metric_params).build()
     if isinstance(pairs, (str, Path)):
-        arr = load_pairs(pairs, metric)
+        arr = load_pairs(pairs, metric, "--pairs")
         pairs_note = f"from {pairs}"
     elif pairs is not None:
         arr = np.asarray(pairs, dtype=np.float64)
@@ -516,7 +522,7 @@ def _build_report(env: str | None, out: Path, *, run: str | Path | None,
     if cmp.searched is not None:
         doc["summary"]["searched_success"] = doc["success_rate"]["searched"]
         doc["summary"]["searched_ratio"] = ratio_stats(cmp.ratios("searched"))
-    doc = _clean(doc)
+    doc = jsonable(doc)
     from learn.storage import atomic_write_text
 
     atomic_write_text(out / "report.json", json.dumps(doc, indent=2, allow_nan=False))
@@ -531,19 +537,26 @@ def certified_intervals(cmp: Comparison, metric: Metric, count: int, quick: bool
     bound (no second solve), and per pair a PROVEN bound on how much longer than the
     distance the learned path (and the route search's) is: its proven length
     (:meth:`Metric.path_length_bounds`) over the certified lower bound. ``quick``: the
-    coarse mesh with at most 20 s of refinement per pair, else the default mesh. None where
-    the metric is not 2-D or ``count`` is 0."""
+    coarse mesh, else the default mesh; the meshes' work budgets (rounds, triangles) decide
+    the refinement, never a wall-clock limit, so the same report gives the same intervals
+    on any machine under any load. A pair whose certificate fails (the LP solver) is listed
+    with its ``error``. None where the metric is not 2-D or ``count`` is 0."""
     if metric.dim != 2 or count <= 0:
         return None
-    mesh, limit = ("coarse", 20.0) if quick else ("default", None)
-    rows = []
+    mesh = "coarse" if quick else "default"
+    rows: list[dict[str, Any]] = []
     for i in range(min(count, len(cmp.pairs))):
         t0 = time.perf_counter()
-        c = solvers.certify(metric, cmp.pairs[i, 0], cmp.pairs[i, 1], mesh,
-                            path=cmp.exact.paths[i], time_limit=limit)
+        try:
+            c = solvers.certify(metric, cmp.pairs[i, 0], cmp.pairs[i, 1], mesh,
+                                path=cmp.exact.paths[i])
+        except (InputError, RuntimeError) as err:
+            rows.append({"pair": i, "error": str(err), "seconds": time.perf_counter() - t0})
+            continue
         row = {"pair": i, "lower": c.lower, "upper": c.upper, "gap": c.gap,
                "exact_length_proven_upper": c.path_upper, "convexity": c.convexity,
-               "triangles": c.triangles, "seconds": time.perf_counter() - t0}
+               "triangles": c.triangles, "stopped_by": c.stopped_by,
+               "seconds": time.perf_counter() - t0}
         for w in ("learned", "searched"):
             ps = getattr(cmp, w, None)
             if ps is not None:
@@ -551,21 +564,4 @@ def certified_intervals(cmp: Comparison, metric: Metric, count: int, quick: bool
                 row[f"{w}_length_proven_upper"] = up
                 row[f"{w}_excess_bound"] = up / c.lower - 1.0
         rows.append(row)
-    return {"mesh": mesh, "time_limit_per_pair": limit, "pairs": rows}
-
-
-def _clean(o: Any) -> Any:
-    """JSON-ready copy: numpy scalars/arrays to Python, non-finite floats to ``None``."""
-    if isinstance(o, dict):
-        return {str(k): _clean(v) for k, v in o.items()}
-    if isinstance(o, (list, tuple)):
-        return [_clean(v) for v in o]
-    if isinstance(o, np.ndarray):
-        return _clean(o.tolist())
-    if isinstance(o, (np.bool_, bool)):
-        return bool(o)
-    if isinstance(o, (np.integer, int)):
-        return int(o)
-    if isinstance(o, (np.floating, float)):
-        return float(o) if math.isfinite(float(o)) else None
-    return o
+    return {"mesh": mesh, "pairs": rows}

@@ -1,0 +1,354 @@
+"""Globally seeded discrete geodesics for many pairs at once: every (pair, seed) problem
+of a call is a row of one batched Newton solve (:mod:`solvers.newton`).
+
+The seed plan (:class:`~solvers.seeding.SeedPlan`: straight line, bulges, random curves,
+the graph path, restarts) becomes rows of the batch at the plan's coarse size; a seed
+clearly losing against its pair's best is dropped while the batch runs; the best few
+distinct optima of each pair are carried up the plan's ladder of sizes in the same batched
+way (warm started by interpolation); the best is polished by perturbed restarts at the
+final size. IPOPT (:mod:`solvers.transcription`) stays the reference and the fallback: a
+pair whose best candidate the Newton solve could not finish (an active domain constraint,
+a stall, the iteration cap) is finished by IPOPT from that candidate, and metrics the
+batched path does not cover (not ``smooth``: kinks that need IPOPT's slack
+reformulation) are solved by IPOPT alone. Every result names its method and carries the
+first-order optimality residual of its path (:func:`solvers.newton.energy_residual`).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from finsler.metric import Metric
+from solvers.inputs import domain_scale
+from solvers.newton import (
+    NewtonOptions,
+    NewtonState,
+    NewtonStatus,
+    backend_for,
+    energy_residual,
+)
+from solvers.seeding import SeedPlan, graph_seeder, perturbed_batch, resample, seed_batch
+
+__all__ = ["BatchOptions", "BatchSolution", "Rows", "covers", "solve_pairs_batched"]
+
+#: Relative energy difference under which two seeds count as agreeing with the best.
+AGREE_RTOL = 1e-6
+
+
+def covers(metric: Metric) -> bool:
+    """True if the batched Newton path solves ``metric``: ``F`` smooth away from zero
+    velocity (the energy's Hessian exists), as the metric declares; otherwise IPOPT with
+    the metric's smooth reformulation solves it."""
+    return bool(metric.smooth)
+
+
+@dataclass(frozen=True)
+class BatchOptions:
+    """How the batch is run. ``newton``: the Newton settings; ``device``: ``None`` for
+    numpy, or a torch device (``"cuda"``); ``local``: modify only the Hessian blocks that
+    are not positive definite (else IPOPT-like global shifts, :class:`NewtonState`)."""
+
+    newton: NewtonOptions = field(default_factory=NewtonOptions)
+    device: Any = None
+    local: bool = True
+
+
+@dataclass
+class Rows:
+    """Rows of a batch, as arrays: ``pair`` ``(R,)`` (index of each row's pair),
+    ``names`` (``R`` strings), ``points`` ``(R, n+1, d)``; once solved, ``energy``,
+    ``status`` (:class:`NewtonStatus`), ``iterations``, ``residual`` ``(R,)``."""
+
+    pair: np.ndarray
+    names: list[str]
+    points: np.ndarray
+    energy: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    status: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    iterations: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    residual: np.ndarray = field(default_factory=lambda: np.zeros(0))
+
+    def __len__(self) -> int:
+        return len(self.names)
+
+    @property
+    def ok(self) -> np.ndarray:
+        return (self.status == NewtonStatus.CONVERGED) & np.isfinite(self.energy)
+
+    def take(self, idx: Any) -> Rows:
+        idx = np.asarray(idx, dtype=np.int64)
+        solved = len(self.energy) == len(self)
+        return Rows(self.pair[idx], [self.names[i] for i in idx], self.points[idx],
+                    *((self.energy[idx], self.status[idx], self.iterations[idx],
+                       self.residual[idx]) if solved else ()))
+
+    @staticmethod
+    def cat(parts: list[Rows]) -> Rows:
+        parts = [p for p in parts if len(p)]
+        if not parts:
+            return Rows(np.zeros(0, dtype=np.int64), [], np.zeros((0, 0, 0)))
+        solved = all(len(p.energy) == len(p) for p in parts)
+        return Rows(np.concatenate([p.pair for p in parts]),
+                    [n for p in parts for n in p.names],
+                    np.concatenate([p.points for p in parts]),
+                    *((np.concatenate([p.energy for p in parts]),
+                       np.concatenate([p.status for p in parts]),
+                       np.concatenate([p.iterations for p in parts]),
+                       np.concatenate([p.residual for p in parts])) if solved else ()))
+
+
+def _ranked(rows: Rows) -> np.ndarray:
+    """Row order: by pair, then converged first, then by energy."""
+    return np.lexsort((rows.energy, ~rows.ok, rows.pair))
+
+
+def _best(rows: Rows, k: int) -> np.ndarray:
+    """Per pair ``(k,)``: the row of lowest energy among the converged ones, else among
+    the finite ones, else ``-1``."""
+    out = np.full(k, -1, dtype=np.int64)
+    order = _ranked(rows)
+    order = order[np.isfinite(rows.energy[order])]
+    pairs, first = np.unique(rows.pair[order], return_index=True)
+    out[pairs] = order[first]
+    return out
+
+
+def _agreeing(rows: Rows, k: int) -> np.ndarray:
+    """Per pair: converged rows within ``AGREE_RTOL`` of the pair's best converged energy."""
+    ok = rows.ok
+    e0 = np.full(k, np.inf)
+    np.minimum.at(e0, rows.pair[ok], rows.energy[ok])
+    near = ok & (np.abs(rows.energy - e0[rows.pair]) <= AGREE_RTOL * np.maximum(
+        e0[rows.pair], 1e-300))
+    return np.bincount(rows.pair[near], minlength=k)
+
+
+def _carried(rows: Rows, k: int, keep: int, drop_rtol: float, tol: float) -> np.ndarray:
+    """Rows carried up the ladder: per pair the ``keep`` lowest-energy converged rows, one
+    per optimum (paths within ``tol`` of a kept one are the same optimum), none more than
+    ``drop_rtol`` above the pair's lowest; a pair with no converged row carries its
+    ``keep`` lowest finite ones."""
+    best = _best(rows, k)
+    has = best >= 0
+    e0 = np.full(k, np.inf)
+    e0[has] = rows.energy[best[has]]
+    ok = rows.ok
+    pair_ok = np.zeros(k, bool)
+    pair_ok[rows.pair[ok]] = True
+    band = ok & (rows.energy <= e0[rows.pair] * (1.0 + drop_rtol))
+    # rows equal to their pair's best (the common case) are dropped without a loop
+    same = np.max(np.abs(rows.points - rows.points[np.maximum(best[rows.pair], 0)]),
+                  axis=(1, 2)) <= tol
+    out = list(best[has])
+    rest = np.flatnonzero(band & ~same)
+    if rest.size:
+        order = rest[np.lexsort((rows.energy[rest], rows.pair[rest]))]
+        kept: dict[int, list[int]] = {}
+        for r in order:
+            p = int(rows.pair[r])
+            mine = kept.setdefault(p, [int(best[p])])
+            if len(mine) >= keep:
+                continue
+            if any(np.max(np.abs(rows.points[r] - rows.points[o])) <= tol for o in mine):
+                continue
+            mine.append(int(r))
+            out.append(int(r))
+    # pairs without a converged row: their lowest finite rows
+    for p in np.flatnonzero(~pair_ok & has):
+        mine = np.flatnonzero((rows.pair == p) & np.isfinite(rows.energy))
+        out.extend(int(i) for i in mine[np.argsort(rows.energy[mine])][1:keep])
+    return np.sort(np.asarray(out, dtype=np.int64))
+
+
+class _Runner:
+    """Runs rows through :class:`NewtonState`; counts iterations per pair."""
+
+    def __init__(self, m: Metric, opts: BatchOptions, k: int) -> None:
+        self.m, self.opts = m, opts
+        self.ops = backend_for(opts.device)
+        self.scale = domain_scale(m)
+        self.iterations = np.zeros(k, dtype=np.int64)
+        self.evaluations = 0
+        self.value_evaluations = 0
+
+    def solve(self, rows: Rows, drop_after: int = 0, drop_factor: float = 1.3) -> Rows:
+        """Newton-solve ``rows`` (all of one size); from iteration ``drop_after`` on
+        (``0``: never) a running row above ``drop_factor`` times its pair's best
+        converged energy stops."""
+        if not len(rows):
+            return rows
+        st = NewtonState(self.m, rows.points, self.opts.newton, self.ops, self.scale,
+                         self.opts.local)
+        it = 0
+        while st.running:
+            st.step()
+            it += 1
+            if drop_after and it >= drop_after:
+                self._drop_losers(st, rows.pair, drop_factor)
+        res = st.result()
+        self.evaluations += res.evaluations
+        self.value_evaluations += res.value_evaluations
+        np.add.at(self.iterations, rows.pair, res.iterations)
+        return Rows(rows.pair, rows.names, res.points, res.energy, res.status,
+                    res.iterations, res.residual)
+
+    @staticmethod
+    def _drop_losers(st: NewtonState, pair: np.ndarray, factor: float) -> None:
+        conv = st.status == NewtonStatus.CONVERGED
+        if not conv.any() or st.active.size == 0:
+            return
+        best = np.full(pair.max() + 1, np.inf)
+        np.minimum.at(best, pair[conv], st.energy[conv])
+        act = st.active
+        lose = st.energy[act] > factor * best[pair[act]]
+        if lose.any():
+            st.drop(act[lose])
+
+
+@dataclass
+class BatchSolution:
+    """What a batch found: ``final``, every row solved at the final size (polishing
+    restarts included); per pair ``(K,)``: ``best`` (index into ``final``, ``-1`` if none
+    is finite), ``seeds_tried``, ``seeds_agreeing``, ``iterations``; ``levels``: one dict
+    per level with per-pair arrays ``solved`` and ``iterations``; ``stats``: the batch's
+    evaluations and level times."""
+
+    final: Rows
+    best: np.ndarray
+    seeds_tried: np.ndarray
+    seeds_agreeing: np.ndarray
+    iterations: np.ndarray
+    levels: list[dict[str, Any]]
+    stats: dict[str, Any]
+
+    def levels_of(self, k: int) -> list[dict[str, Any]]:
+        """The ladder of pair ``k`` as the result objects report it."""
+        out = []
+        for lv in self.levels:
+            d = {"segments": lv["segments"], "solved": int(lv["solved"][k]),
+                 "iterations": int(lv["iterations"][k])}
+            if lv.get("polish"):
+                d["polish"] = True
+            out.append(d)
+        return out
+
+    def rows_of(self) -> list[np.ndarray]:
+        """Per pair, the indices of its rows in ``final``."""
+        order = np.argsort(self.final.pair, kind="stable")
+        bounds = np.searchsorted(self.final.pair[order], np.arange(len(self.best) + 1))
+        return [order[bounds[k]:bounds[k + 1]] for k in range(len(self.best))]
+
+
+def _level(rows: Rows, k: int, size: int, polish: bool = False) -> dict[str, Any]:
+    lv = {"segments": size, "solved": np.bincount(rows.pair, minlength=k),
+          "iterations": np.bincount(rows.pair, weights=rows.iterations,
+                                    minlength=k).astype(np.int64)}
+    if polish:
+        lv["polish"] = True
+    return lv
+
+
+def solve_pairs_batched(m: Metric, pairs: np.ndarray, n: int, plan: SeedPlan,
+                        opts: BatchOptions | None = None,
+                        given: list[list[tuple[str, np.ndarray]]] | None = None,
+                        global_seeds: bool = True) -> BatchSolution:
+    """Seed, solve, carry up the ladder and polish every pair of ``pairs`` ``(K, 2, d)``
+    (none of them short) in batches. ``given``: per pair, caller-given initial paths at
+    the final size ``n`` (names, ``(n+1, d)``), solved beside the seeds (alone with
+    ``global_seeds=False``). Returns a :class:`BatchSolution`."""
+    opts = opts or BatchOptions()
+    K = pairs.shape[0]
+    run = _Runner(m, opts, K)
+    given = given or [[] for _ in range(K)]
+    given_rows = Rows(np.array([k for k in range(K) for _ in given[k]], dtype=np.int64),
+                      [name for g in given for name, _ in g],
+                      np.array([p for g in given for _, p in g]).reshape(-1, n + 1, m.dim))
+    sizes = plan.ladder(n) if global_seeds else [n]
+    levels: list[dict[str, Any]] = []
+    stats: dict[str, Any] = {"levels": []}
+    tol = 1e-4 * domain_scale(m)
+    if global_seeds:
+        t0 = time.perf_counter()
+        n0 = sizes[0]
+        names, curves = seed_batch(m, pairs[:, 0], pairs[:, 1], n0, plan)
+        S = len(names)
+        seeds = Rows(np.repeat(np.arange(K), S), names * K, curves.reshape(K * S, n0 + 1, -1))
+        parts = [seeds]
+        tried = np.full(K, S, dtype=np.int64)
+        if plan.graph:
+            gp = graph_seeder(m).paths(pairs[:, 0], pairs[:, 1])
+            have = [k for k in range(K) if gp[k] is not None]
+            if have:
+                parts.append(Rows(np.asarray(have, dtype=np.int64), ["graph"] * len(have),
+                                  np.stack([resample(gp[k][0], gp[k][1], n0) for k in have])))
+                tried[have] += 1
+        if len(sizes) == 1:
+            parts.append(given_rows)
+        rows = run.solve(Rows.cat(parts), plan.drop_after, plan.drop_factor)
+        if plan.restarts:
+            best = _best(rows, K)
+            okp = np.flatnonzero((best >= 0) & rows.ok[np.maximum(best, 0)])
+            if okp.size:
+                b = best[okp]
+                curves = perturbed_batch(m, rows.points[b], plan.restarts, plan.restart_scale,
+                                         plan.seed)
+                extra = Rows(np.repeat(okp, plan.restarts),
+                             [f"{rows.names[i]}~{j}" for i in b for j in range(plan.restarts)],
+                             curves.reshape(-1, n0 + 1, m.dim))
+                rows = Rows.cat([rows, run.solve(extra, plan.drop_after, plan.drop_factor)])
+        agree = _agreeing(rows, K)
+        levels.append(_level(rows, K, n0))
+        stats["levels"].append({"segments": n0, "rows": len(rows),
+                                "wall_time": time.perf_counter() - t0})
+        for li, size in enumerate(sizes[1:], start=1):
+            t1 = time.perf_counter()
+            prev = sizes[li - 1]
+            up = rows.take(_carried(rows, K, plan.refine_top, plan.drop_rtol, tol))
+            names = [nm if "@" in nm else f"{nm}@{prev}" for nm in up.names]
+            fine = np.stack([resample(p, np.ones(prev), size) for p in up.points]) \
+                if len(up) else np.zeros((0, size + 1, m.dim))
+            parts = [Rows(up.pair, names, fine)]
+            if li == len(sizes) - 1:
+                parts.append(given_rows)
+            rows = run.solve(Rows.cat(parts))
+            levels.append(_level(rows, K, size))
+            stats["levels"].append({"segments": size, "rows": len(rows),
+                                    "wall_time": time.perf_counter() - t1})
+    else:
+        tried = np.bincount(given_rows.pair, minlength=K)
+        rows = run.solve(given_rows)
+        levels.append(_level(rows, K, n))
+        agree = _agreeing(rows, K)
+    if global_seeds and plan.polish:
+        t1 = time.perf_counter()
+        best = _best(rows, K)
+        okp = np.flatnonzero((best >= 0) & rows.ok[np.maximum(best, 0)])
+        extra = Rows(np.zeros(0, dtype=np.int64), [], np.zeros((0, n + 1, m.dim)))
+        if okp.size:
+            b = best[okp]
+            curves = np.stack([perturbed_batch(m, rows.points[b], 1, plan.polish_scale,
+                                               plan.seed + 1000 + j)[:, 0]
+                               for j in range(plan.polish)], 1)
+            extra = run.solve(Rows(np.repeat(okp, plan.polish),
+                                   [f"{rows.names[i].split('~')[0]}~p{j}" for i in b
+                                    for j in range(plan.polish)],
+                                   curves.reshape(-1, n + 1, m.dim)),
+                              plan.drop_after, plan.drop_factor)
+        levels.append(_level(extra, K, n, polish=True))
+        rows = Rows.cat([rows, extra])
+        stats["levels"].append({"segments": n, "rows": len(extra), "polish": True,
+                                "wall_time": time.perf_counter() - t1})
+    if not global_seeds:
+        agree = _agreeing(rows, K)
+    stats["evaluations"] = run.evaluations
+    stats["value_evaluations"] = run.value_evaluations
+    return BatchSolution(rows, _best(rows, K), tried, agree, run.iterations, levels, stats)
+
+
+def residuals(m: Metric, points: np.ndarray) -> np.ndarray:
+    """:func:`solvers.newton.energy_residual` of paths ``(K, n+1, d)`` with the metric's
+    domain size."""
+    return energy_residual(m, points, domain_scale(m))

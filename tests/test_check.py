@@ -1,0 +1,326 @@
+"""``validation.testing`` as users meet it: ``geodesics check`` (table, JSON, exit codes,
+same seed same result), its verdicts on metrics written to be wrong in one way each
+(``tests/broken_metrics.py``, run in subprocesses so they never enter this session's
+registry) checked against independent formulas, a user's five-line pytest file, the
+function API, and the policy properties (a shipped policy passes, a detour policy fails).
+"""
+
+from __future__ import annotations
+
+import ast
+import json
+import os
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import casadi as ca
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+import finsler
+from finsler import Box, Metric, Task
+from validation import testing as vt
+from validation.cli import app
+from validation.testing import DiscreteDistance, PolicyTests, Solved
+
+HERE = Path(__file__).resolve().parent
+BROKEN = HERE / "broken_metrics.py"
+ROOT = HERE.parent
+
+
+def _expected() -> dict[str, str]:
+    """``EXPECTED`` of broken_metrics.py, read without importing (importing registers)."""
+    for node in ast.parse(BROKEN.read_text()).body:
+        if isinstance(node, ast.Assign) and getattr(node.targets[0], "id", "") == "EXPECTED":
+            return ast.literal_eval(node.value)
+    raise AssertionError("broken_metrics.py has no EXPECTED")
+
+
+EXPECTED = _expected()
+
+
+def _run(args: list[str], cwd: Path = ROOT) -> subprocess.CompletedProcess:
+    env = dict(os.environ, OMP_NUM_THREADS="1", MKL_NUM_THREADS="1")
+    return subprocess.run(args, capture_output=True, text=True, env=env, cwd=cwd, timeout=600)
+
+
+def _check_cli(name: str, *extra: str) -> subprocess.CompletedProcess:
+    return _run([sys.executable, "-m", "validation.cli", "check", "--metric-module", str(BROKEN),
+                 "--metric", name, *extra])
+
+
+# ----------------------------------------------------------------------------------------
+# geodesics check on the deliberately wrong metrics
+# ----------------------------------------------------------------------------------------
+def _independent(name: str, ce: dict, doc_prop: dict) -> None:
+    """Recompute the reported sides at the counterexample from the formulas written in
+    broken_metrics.py's docstrings, not from the metric objects."""
+    lhs, rhs = doc_prop["lhs"]["value"], doc_prop["rhs"]["value"]
+    if name == "broken-positive":
+        x, v = np.array(ce["x"]), np.array(ce["v"])
+        f = np.linalg.norm(v) + 1.5 * x[0] * v[0]
+        assert lhs == pytest.approx(f, rel=1e-12) and f < 0 and abs(x[0]) > 2 / 3
+    elif name == "broken-homogeneity":
+        x = np.array(ce["x"])
+        assert doc_prop["lhs"]["label"] == "F(x, 0)"
+        assert lhs == pytest.approx((1 + 0.5 * x[0] ** 2) * 0.1, rel=1e-12) and rhs == 0
+    elif name == "broken-reversible":
+        v = np.array(ce["v"])
+        assert lhs == pytest.approx(np.linalg.norm(v) - 0.3 * v[0], rel=1e-12)
+        assert rhs == pytest.approx(np.linalg.norm(v) + 0.3 * v[0], rel=1e-12)
+        assert v[0] != 0
+    elif name == "broken-lowered":
+        x, v = np.array(ce["x"]), np.array(ce["v"])
+        r2 = x @ x
+        assert rhs == pytest.approx(2 * np.linalg.norm(v) / (1 - r2), rel=1e-12)  # symbolic
+        assert lhs == pytest.approx(2 * np.linalg.norm(v) / (1 - r2**1.01), rel=1e-12)
+        assert r2 > 0
+    elif name == "broken-closed-form":
+        x, y = np.array(ce["x"]), np.array(ce["y"])
+        den = (1 - x @ x) * (1 - y @ y)
+        true = np.arccosh(1 + 2 * np.sum((x - y) ** 2) / den)  # the Poincare distance
+        wrong = np.arccosh(1 + np.sum((x - y) ** 2) / den)
+        assert lhs == pytest.approx(true, rel=1e-6)  # the solver is right ...
+        assert rhs == pytest.approx(wrong, rel=1e-12)  # ... the supplied formula is not
+        assert abs(true - wrong) > 1e-3
+
+
+@pytest.mark.parametrize("name", sorted(EXPECTED))
+def test_check_exits_1_naming_the_broken_property_with_a_real_counterexample(name: str) -> None:
+    res = _check_cli(name, "--json")
+    assert res.returncode == 1, res.stderr[-2000:]
+    doc = json.loads(res.stdout)
+    assert not doc["ok"] and EXPECTED[name] in doc["failed"]
+    prop = next(p for p in doc["properties"] if p["name"] == EXPECTED[name])
+    assert prop["status"] == "failed" and prop["counterexample"], prop
+    assert prop["lhs"] is not None and prop["rhs"] is not None and prop["relation"]
+    assert prop["tried"] >= 1 and prop["passed"] == prop["tried"] - 1
+    _independent(name, prop["counterexample"], prop)
+    # nothing else is blamed on these metrics but consequences of their one mistake
+    allowed = {EXPECTED[name], "distance-symmetry" if name == "broken-reversible" else "",
+               "strong-convexity" if name == "broken-positive" else ""}
+    assert set(doc["failed"]) <= allowed, doc["failed"]
+
+
+def test_check_table_names_the_property_counterexample_and_both_sides() -> None:
+    res = _check_cli("broken-reversible", "--seed", "3")
+    assert res.returncode == 1
+    out = res.stdout
+    row = next(line for line in out.splitlines() if line.startswith("reversibility "))
+    assert "failed" in row and "x=(" in row and "v=(" in row
+    assert "FAILED reversibility: F(x, -v) = F(x, v)" in out
+    assert "counterexample (shrunk in" in out and "F(x, -v) = " in out and "F(x, v) = " in out
+    assert out.rstrip().splitlines()[-1].startswith("FAILED: reversibility")
+
+
+# ----------------------------------------------------------------------------------------
+# geodesics check on registered metrics (in process)
+# ----------------------------------------------------------------------------------------
+def _json_check(*args: str) -> tuple[int, dict]:
+    res = CliRunner().invoke(app, ["check", "--json", *args])
+    return res.exit_code, json.loads(res.stdout) if res.stdout.strip() else {}
+
+
+def _without_times(doc: dict) -> dict:
+    doc = dict(doc, seconds=None)
+    doc["properties"] = [dict(p, seconds=None) for p in doc["properties"]]
+    return doc
+
+
+def test_check_passes_a_registered_metric_same_seed_same_result() -> None:
+    code, doc = _json_check("--metric", "randers", "--examples", "40", "--seed", "5")
+    assert code == 0 and doc["ok"] and doc["failed"] == []
+    names = [p["name"] for p in doc["properties"]]
+    assert names[:8] == ["domain", "finite-positive", "homogeneity", "subadditivity",
+                         "strong-convexity", "reversibility", "lowered-forms", "smoothness"]
+    assert {"triangle-inequality", "closed-form-distance", "certificate",
+            "midpoint-halves"} <= set(names)
+    status = {p["name"]: p["status"] for p in doc["properties"]}
+    assert status["distance-symmetry"] == "skipped"  # randers is not reversible
+    assert status["closed-form-distance"] == "passed"
+    assert all(p["passed"] == p["tried"] >= 1 for p in doc["properties"]
+               if p["status"] == "passed")
+    assert doc["params"] == {"wind_x": 0.5, "wind_y": 0.2} and doc["seed"] == 5
+    code2, doc2 = _json_check("--metric", "randers", "--examples", "40", "--seed", "5")
+    assert code2 == 0 and _without_times(doc2) == _without_times(doc)
+
+
+def test_check_text_table_and_metric_params() -> None:
+    res = CliRunner().invoke(app, ["check", "--metric", "poincare", "--metric-param",
+                                   "radius=0.5", "--examples", "30"])
+    assert res.exit_code == 0, res.output
+    lines = res.stdout.splitlines()
+    assert lines[0].startswith("metric poincare(radius=0.5)")
+    assert lines[1].split() == ["property", "tried", "passed", "result", "counterexample"]
+    assert any(line.startswith("distance-symmetry") and "passed" in line for line in lines)
+    assert "all properties hold" in lines[-1]
+
+
+@pytest.mark.parametrize("args, match", [
+    (["--metric", "nope"], "unknown metric"),
+    (["--metric", "randers", "--examples", "0"], "--examples"),
+    (["--metric", "randers", "--seed", "-1"], "--seed"),
+    (["--metric", "randers", "--run", "no/such/run"], "does not exist"),
+    (["--metric", "randers", "--run", "matsumoto"], "matsumoto"),
+    (["--metric", "matsumoto", "--run", "matsumoto", "--min-success", "2"], "--min-success"),
+])
+def test_check_bad_input_is_a_one_line_error(args: list[str], match: str) -> None:
+    res = CliRunner().invoke(app, ["check", *args])
+    assert res.exit_code == 2, res.output
+    assert match in res.output and "Traceback" not in res.output
+
+
+# ----------------------------------------------------------------------------------------
+# a user's pytest file
+# ----------------------------------------------------------------------------------------
+def _user_pytest(tmp_path: Path, body: str) -> subprocess.CompletedProcess:
+    f = tmp_path / "test_mine.py"
+    f.write_text(textwrap.dedent(body))
+    return _run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", str(f)],
+                cwd=tmp_path)
+
+
+def test_a_five_line_user_pytest_file_runs_the_suite(tmp_path: Path) -> None:
+    body = """\
+        import finsler
+        from validation.testing import DistanceTests, MetricTests
+
+        class TestMine(MetricTests, DistanceTests):
+            metric = finsler.get_metric("randers", wind_x=0.3)
+    """
+    assert len(textwrap.dedent(body).strip().splitlines()) == 5
+    res = _user_pytest(tmp_path, body)
+    assert res.returncode == 0, res.stdout[-3000:]
+    # 8 properties of F and 8 of distances; randers is not reversible: one skipped
+    assert "15 passed, 1 skipped" in res.stdout, res.stdout[-2000:]
+
+
+def test_a_user_pytest_file_reports_the_counterexample(tmp_path: Path) -> None:
+    res = _user_pytest(tmp_path, f"""\
+        import sys; sys.path.insert(0, {str(HERE)!r})
+        from broken_metrics import NotHomogeneous
+        from validation.testing import MetricTests
+
+        class TestMine(MetricTests):
+            metric = NotHomogeneous()
+    """)
+    assert res.returncode == 1
+    out = res.stdout
+    assert "1 failed, 7 passed" in out, out[-2000:]
+    assert "FAILED test_mine.py::TestMine::test_homogeneity" in out
+    assert "PropertyFailure: FAILED homogeneity" in out
+    assert "counterexample (shrunk in" in out and "F(x, 0) = 0.1" in out
+
+
+# ----------------------------------------------------------------------------------------
+# the functions
+# ----------------------------------------------------------------------------------------
+class Squared(Metric):
+    """F = |v|**2 (the square root forgotten): not 1-homogeneous, not subadditive."""
+
+    name = "squared-test"
+    task = Task(depth=3, eps=0.5)
+    reversible = True
+    domain = property(lambda self: Box((-1.0, -1.0), (1.0, 1.0)))
+
+    def F_sx(self, x: ca.SX, v: ca.SX) -> ca.SX:
+        return ca.dot(v, v)
+
+
+def test_a_function_reports_a_shrunk_real_counterexample() -> None:
+    m = Squared()
+    r = vt.check_subadditivity(m, examples=50, seed=1)
+    assert r.status == "failed" and not r.ok and r.shrink_evaluations > 0
+    v, w = np.array(r.counterexample["v"]), np.array(r.counterexample["w"])
+    # a real counterexample: |v + w|^2 > |v|^2 + |w|^2, i.e. v . w > 0
+    assert v @ w > 0
+    assert r.lhs[1] == pytest.approx((v + w) @ (v + w)) and r.rhs[1] == pytest.approx(
+        v @ v + w @ w)
+    with pytest.raises(vt.PropertyFailure, match="FAILED subadditivity") as info:
+        r.assert_ok()
+    assert "counterexample (shrunk in" in str(info.value) and "F(x, v + w) =" in str(info.value)
+    h = vt.check_homogeneity(m, examples=50)
+    assert h.status == "failed" and h.counterexample["lam"] != 1.0
+    assert vt.check_finite_positive(m, examples=50).ok  # positive it is
+    assert vt.check_reversibility(m, examples=50).ok
+    # same seed, same counterexample
+    assert vt.check_subadditivity(m, examples=50, seed=1).counterexample == r.counterexample
+
+
+class Squares:
+    """An oracle returning squared distances: not a metric, the triangle inequality fails."""
+
+    name = "squared distances"
+
+    def solve(self, metric: Metric, x: np.ndarray, y: np.ndarray) -> Solved:
+        s = DiscreteDistance().solve(metric, x, y)
+        return Solved(s.value**2, s.error, s.status, s.usable)
+
+
+def test_the_distance_properties_can_fail() -> None:
+    m = finsler.get_metric("euclidean")
+    r = vt.distance_properties(m, examples=8, oracle=Squares())
+    tri = next(p for p in r if p.name == "triangle-inequality")
+    assert tri.status == "failed", tri.describe()
+    x, y, z = (np.array(tri.counterexample[k]) for k in "xyz")
+    assert np.sum((x - z) ** 2) > np.sum((x - y) ** 2) + np.sum((y - z) ** 2)  # real
+    good = vt.distance_properties(m, examples=4)
+    assert all(p.ok for p in good), [p.describe() for p in good if not p.ok]
+
+
+def test_check_api_skips_the_distances_when_F_is_broken() -> None:
+    rep = vt.check(Squared(), examples=30)
+    assert not rep.ok and {"homogeneity", "subadditivity"} <= {p.name for p in rep.failed}
+    dist = next(p for p in rep.results if p.name == "triangle-inequality")
+    assert dist.status == "skipped" and "homogeneity" in dist.note
+    assert "FAILED homogeneity" in rep.table()
+
+
+# ----------------------------------------------------------------------------------------
+# policies
+# ----------------------------------------------------------------------------------------
+def test_a_detour_policy_fails_the_policy_properties() -> None:
+    """Midpoints pushed sideways by half the pair's length (test_validation's negative
+    control): d(x, m) = d(x, y) / sqrt(2), a midpoint error of 0.207."""
+    from test_validation import DetourPolicy
+
+    m = finsler.get_metric("euclidean")
+    pol = DetourPolicy(m)
+    res = {r.name: r for r in vt.policy_properties(pol, m, examples=30, pairs=6,
+                                                   midpoint_rtol=0.15)}
+    mid = res["policy-midpoint"]
+    assert mid.status == "failed", mid.describe()
+    x, y = np.array(mid.counterexample["x"]), np.array(mid.counterexample["y"])
+    mp = pol.midpoint(x, y)[0]
+    err = max(abs(np.linalg.norm(mp - x) - 0.5 * np.linalg.norm(y - x)),
+              abs(np.linalg.norm(y - mp) - 0.5 * np.linalg.norm(y - x))) / np.linalg.norm(y - x)
+    assert err > 0.15  # the exact distances are Euclidean: an independent recomputation
+    assert res["policy-symmetry"].status == "failed"  # pushed to the other side
+    assert res["policy-length-ratio"].status == "failed"
+    assert res["policy-length-ratio"].lhs[1] > 1.3
+
+
+class TestShippedPandaPolicy(PolicyTests):
+    """The shipped Panda policy through the policy properties (a pytest class, as a user
+    writes one for their run directory), with tolerances set from what it was measured to
+    do: first-level midpoint errors up to 0.28 (68 pairs, uniform and at the joint limits),
+    L(pi(x, y), pi(y, x)) / L(x, y) up to 0.50 (4000 pairs); the success rate and length
+    ratio on the 6 fresh pairs are at the defaults (0.8, 1.3)."""
+
+    policy = "panda-pole"
+    pairs = 6
+    midpoint_rtol = 0.35
+    symmetry_rtol = 0.6
+
+
+def test_check_cli_with_a_shipped_policy() -> None:
+    code, doc = _json_check("--metric", "matsumoto", "--run", "matsumoto", "--examples", "30")
+    assert code == 0, doc.get("failed")
+    status = {p["name"]: p["status"] for p in doc["properties"]}
+    assert status["policy-midpoint"] == "passed" and status["policy-success"] == "passed"
+    assert status["policy-symmetry"] == "skipped"  # matsumoto is not reversible
+    assert status["subadditivity"] == "mapped" and status["strong-convexity"] == "mapped"
+    assert "matsumoto" in doc["policy"]

@@ -1,0 +1,283 @@
+"""The batched Newton solver of the discrete energy (solvers.newton, solvers.batched):
+block-tridiagonal solves against dense linear algebra, the energy's derivatives against
+CasADi's Hessian of the whole energy, closed-form geodesics, the torch device path, the
+IPOPT fallback at an active domain constraint, statuses and bad input."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import ClassVar
+
+import casadi as ca
+import numpy as np
+import pytest
+import torch
+
+import finsler
+import solvers
+from finsler.errors import InputError
+from solvers.newton import (
+    _NUMPY_OPS,
+    NewtonOptions,
+    NewtonStatus,
+    _to_field,
+    backend_for,
+    block_tridiagonal_solve,
+    energy_residual,
+    energy_terms,
+    newton_energy,
+)
+
+
+def _dense(a: np.ndarray, o: np.ndarray) -> np.ndarray:
+    """The symmetric block-tridiagonal matrix of blocks ``a`` ``(M, d, d)`` and couplings
+    ``o`` ``(M, d, d)`` (``o[j]`` between unknowns ``j`` and ``j + 1``)."""
+    m, d, _ = a.shape
+    h = np.zeros((m * d, m * d))
+    for j in range(m):
+        h[j * d:(j + 1) * d, j * d:(j + 1) * d] = a[j]
+        if j < m - 1:
+            h[j * d:(j + 1) * d, (j + 1) * d:(j + 2) * d] = o[j]
+            h[(j + 1) * d:(j + 2) * d, j * d:(j + 1) * d] = o[j].T
+    return h
+
+
+def _fields(ops, a, o, r, convert):
+    d = a.shape[-1]
+    diag = [[convert(np.ascontiguousarray(a[..., i, k])) for k in range(d)] for i in range(d)]
+    off = [[convert(np.ascontiguousarray(o[..., i, k])) for k in range(d)] for i in range(d)]
+    return diag, off, [convert(np.ascontiguousarray(r[..., i])) for i in range(d)]
+
+
+@pytest.mark.parametrize("shape", [(3, 13, 2), (2, 1, 3), (4, 16, 7), (2, 63, 2), (1, 2, 1),
+                                   (5, 9, 3), (2, 100, 2)])
+@pytest.mark.parametrize("method", ["thomas", "cyclic"])
+@pytest.mark.parametrize("device", [None, "cpu"])
+def test_block_tridiagonal_solve_matches_dense(shape, method, device) -> None:
+    """Both elimination orders, numpy and torch, any number of blocks (padding to 2**L-1
+    in cyclic reduction), block sizes 1-7: the solution of numpy's dense solve to 1e-12,
+    and positive definiteness told exactly (an indefinite system is reported)."""
+    b, m, d = shape
+    rng = np.random.default_rng(sum(shape))
+    a = rng.normal(size=(b, m, d, d))
+    a = a @ np.swapaxes(a, -1, -2) + 4.0 * np.eye(d)
+    o = rng.normal(size=(b, m, d, d)) * 0.6
+    a[0, m // 2] -= 30.0 * np.eye(d)  # the first system indefinite
+    r = rng.normal(size=(b, m, d))
+    ops = backend_for(device)
+    convert = (lambda x: x) if device is None else (lambda x: torch.tensor(x))
+    x, ok = block_tridiagonal_solve(ops, *_fields(ops, a, o, r, convert), method=method)
+    x = np.stack([ops.to_numpy(xi) for xi in x], -1)
+    ok = ops.to_numpy(ok)
+    for k in range(b):
+        h = _dense(a[k], o[k])
+        assert bool(ok[k]) == bool(np.all(np.linalg.eigvalsh(h) > 0))
+        if ok[k]:
+            ref = np.linalg.solve(h, r[k].reshape(-1))
+            np.testing.assert_allclose(x[k].reshape(-1), ref, rtol=0, atol=1e-12 * np.max(
+                np.abs(ref)))
+
+
+def test_local_modification_solves_a_definite_neighbour() -> None:
+    """With ``local`` every system factorises, and the solution solves (H + E) x = r with E
+    block diagonal, zero on the blocks that were definite: checked by recovering E."""
+    rng = np.random.default_rng(3)
+    b, m, d = 1, 9, 2
+    a = rng.normal(size=(b, m, d, d))
+    a = a @ np.swapaxes(a, -1, -2) + 3.0 * np.eye(d)
+    a[0, 4] = np.array([[-2.0, 0.5], [0.5, 1.0]])  # one indefinite block
+    o = rng.normal(size=(b, m, d, d)) * 0.3
+    r = rng.normal(size=(b, m, d))
+    x, ok = block_tridiagonal_solve(_NUMPY_OPS, *_fields(_NUMPY_OPS, a, o, r, lambda v: v),
+                                    method="thomas", local=True)
+    assert ok.all()
+    x = np.stack(x, -1)[0]
+    resid = (r[0].reshape(-1) - _dense(a[0], o[0]) @ x.reshape(-1)).reshape(m, d)
+    # H x + E x = r: the residual is E x, non-zero only where a block was modified
+    nonzero = np.flatnonzero(np.max(np.abs(resid), axis=1) > 1e-10)
+    assert nonzero.size >= 1
+    assert set(nonzero) <= {3, 4, 5}  # the modified pivot's block (Schur complements near it)
+
+
+@pytest.mark.parametrize("name", ["matsumoto", "randers", "poincare", "panda-pole"])
+def test_energy_terms_equal_casadi_hessian_of_the_whole_energy(name) -> None:
+    """Gradient and block-tridiagonal Hessian assembled from the segment function equal
+    CasADi's gradient and Hessian of the whole discrete energy (one symbolic expression of
+    all interior points) to 1e-10 relative."""
+    m = finsler.get_metric(name)
+    n, d = 5, m.dim
+    pair = finsler.sample_pairs(m, 1, seed=11)[0]
+    rng = np.random.default_rng(0)
+    t = np.linspace(0, 1, n + 1)[:, None]
+    pts = pair[0] + t * (pair[1] - pair[0])
+    pts[1:-1] += 0.02 * rng.normal(size=(n - 1, d))
+    pts = np.asarray(m.domain.project(pts))
+    X = ca.SX.sym("X", d, n - 1)
+    P = [ca.SX(ca.DM(pts[0]))] + [X[:, i] for i in range(n - 1)] + [ca.SX(ca.DM(pts[-1]))]
+    e = sum(m.F_sx(P[i], P[i + 1] - P[i]) ** 2 for i in range(n))
+    h, g = ca.hessian(e, ca.vec(X))
+    fn = ca.Function("e", [X], [e, g, h])
+    e_ref, g_ref, h_ref = (np.asarray(v) for v in fn(pts[1:-1].T))
+    terms = energy_terms(m, _NUMPY_OPS, _to_field(_NUMPY_OPS, pts[None]))
+    assert terms.energy[0] == pytest.approx(float(e_ref.reshape(-1)[0]), rel=1e-12)
+    grad = np.stack(terms.grad, -1)[0].reshape(-1)
+    np.testing.assert_allclose(grad, g_ref.reshape(-1), rtol=0,
+                               atol=1e-10 * np.max(np.abs(g_ref)))
+    a = np.stack([np.stack(row, -1) for row in terms.diag], -2)[0]
+    o = np.stack([np.stack(row, -1) for row in terms.off], -2)[0]
+    np.testing.assert_allclose(_dense(a, o), h_ref, rtol=0, atol=1e-10 * np.max(np.abs(h_ref)))
+
+
+def test_euclidean_newton_reaches_the_straight_line_in_one_step() -> None:
+    """Euclidean energy is quadratic: from any bulged path one Newton step gives the
+    equally spaced straight line (energy |g - s|**2 / n exactly), residual 0."""
+    m = finsler.get_metric("euclidean")
+    s, g = np.array([-0.7, 0.2]), np.array([0.5, -0.4])
+    n = 32
+    t = np.linspace(0, 1, n + 1)[:, None]
+    paths = np.stack([s + t * (g - s) + a * np.sin(np.pi * t) * np.array([0.3, 0.4])
+                      for a in (0.0, 0.5, -1.0)])
+    paths = np.asarray(m.domain.project(paths.reshape(-1, 2))).reshape(paths.shape)
+    res = newton_energy(m, paths, scale=2.0)
+    assert np.all(res.status == NewtonStatus.CONVERGED) and np.all(res.iterations <= 2)
+    np.testing.assert_allclose(res.points, np.broadcast_to(s + t * (g - s), res.points.shape),
+                               atol=1e-14)
+    np.testing.assert_allclose(res.energy, np.sum((g - s) ** 2) / n, rtol=1e-14)
+
+
+@pytest.mark.parametrize("name", ["poincare", "randers", "sphere", "minkowski"])
+def test_closed_form_distances_and_ipopt_agree(name) -> None:
+    """Closed-form metrics: the Newton path (the default) converges (residual <= 1e-10),
+    its energy equals IPOPT's to 1e-10, and its length to the exact distance (Randers,
+    Minkowski: straight lines, exact at any n; Poincare, sphere: to the O(n^-2) of the
+    discretisation: the polyline's eq. (58) length)."""
+    m = finsler.get_metric(name)
+    pairs = finsler.sample_pairs(m, 4, seed=7)
+    res = solvers.solve_batch(m, pairs, 64, workers=1, progress=False)
+    exact = m.distance(pairs[:, 0], pairs[:, 1])
+    for (s, g), r, d in zip(pairs, res, exact):
+        assert r.method == "newton" and r.status is solvers.Status.SUCCESS
+        assert r.residual <= 1e-10
+        ref = solvers.solve_geodesic(m, s, g, 64, method="ipopt")
+        assert r.energy == pytest.approx(ref.energy, rel=1e-10)
+        if name in ("randers", "minkowski"):  # x-independent F: C is exact on segments
+            assert abs(r.length - d) <= 1e-12 * d
+        else:  # the polyline's length bounds d from above, within O(n^-2)
+            assert d <= r.length_quadrature + r.length_quadrature_error
+            assert r.length_quadrature <= d * (1 + 1e-3)
+
+
+def test_torch_device_path_equals_numpy() -> None:
+    """The same batch on torch tensors (here on the CPU, as it would run on CUDA): the
+    same statuses and paths as numpy to 1e-10."""
+    m = finsler.get_metric("matsumoto")
+    pairs = finsler.sample_pairs(m, 3, seed=2)
+    a = solvers.solve_batch(m, pairs, 32, workers=1, progress=False)
+    b = solvers.solve_batch(m, pairs, 32, workers=1, progress=False, device="cpu")
+    for x, y in zip(a, b):
+        assert x.status is y.status and x.method == y.method == "newton"
+        np.testing.assert_allclose(x.points, y.points, atol=1e-10)
+    with pytest.raises(InputError, match="device"):
+        solvers.solve_batch(m, pairs, 32, workers=1, progress=False, device="nonsense")
+
+
+@dataclass(frozen=True)
+class _Cheaper(finsler.Metric):
+    """``F = exp(-3 x_0) |v|``: travel is cheaper to the right, so a geodesic between two
+    points near the domain's right side presses against it. On the box ``[-1, 1]**2``
+    or, with ``disk``, the unit disk."""
+
+    disk: bool = False
+
+    name: ClassVar[str] = "test-cheaper-right"
+    task: ClassVar[finsler.Task] = finsler.Task(depth=4, eps=0.5)
+    reversible: ClassVar[bool] = True
+
+    @property
+    def domain(self) -> finsler.Domain:
+        return finsler.Disk(1.0) if self.disk else finsler.Box((-1.0, -1.0), (1.0, 1.0))
+
+    def F_sx(self, x: ca.SX, v: ca.SX) -> ca.SX:
+        return ca.exp(-3.0 * x[0]) * ca.sqrt(ca.dot(v, v))
+
+
+def test_active_box_bound_projected_newton() -> None:
+    """A geodesic pressed against a box's edge (as a Panda path against a joint limit):
+    projected Newton holds the coordinates at the bound that the gradient pushes out and
+    converges by itself, to IPOPT's energy, with points on the edge and a residual (the
+    projected gradient) below 1e-10 where the plain gradient is O(1)."""
+    m = _Cheaper()
+    s, g = np.array([0.9, -0.8]), np.array([0.9, 0.8])
+    ref = solvers.solve_geodesic(m, s, g, 16, method="ipopt")
+    assert np.max(ref.points[:, 0]) > 1 - 1e-6  # the constraint is active
+    r = solvers.solve_geodesic(m, s, g, 16)
+    assert r.converged and r.method == "newton" and r.residual <= 1e-10
+    assert r.energy == pytest.approx(ref.energy, rel=1e-8)
+    assert np.sum(r.points[:, 0] == 1.0) >= 3
+    terms = energy_terms(m, _NUMPY_OPS, _to_field(_NUMPY_OPS, r.points[None]), hessian=False)
+    assert np.max(np.abs(np.stack(terms.grad, -1))) * 2.0 / r.energy > 1e-3
+    assert energy_residual(m, r.points[None], 2.0)[0] <= 1e-8
+
+
+def test_active_disk_constraint_is_finished_by_ipopt() -> None:
+    """The same pressed against the unit disk's rim: the Newton steps keep leaving the
+    disk (status BOUNDARY), IPOPT finishes the pair: a converged result named ``ipopt``
+    with points on the rim, IPOPT's energy, and a small projected residual."""
+    m = _Cheaper(disk=True)
+    s, g = np.array([0.8, -0.55]), np.array([0.8, 0.55])
+    ref = solvers.solve_geodesic(m, s, g, 16, method="ipopt")
+    assert np.max(np.linalg.norm(ref.points, axis=1)) > 1 - 1e-6  # the rim is active
+    t = np.linspace(0, 1, 17)[:, None]
+    alone = newton_energy(m, (s + t * (g - s))[None], scale=2.0)
+    assert alone.status[0] == NewtonStatus.BOUNDARY
+    r = solvers.solve_geodesic(m, s, g, 16)
+    assert r.converged and r.method == "ipopt"
+    assert r.energy == pytest.approx(ref.energy, rel=1e-8)
+    assert r.residual <= 1e-6
+    assert energy_residual(m, r.points[None], 2.0)[0] == pytest.approx(r.residual)
+
+
+def test_statuses_and_bad_input() -> None:
+    m = finsler.get_metric("poincare")
+    s, g = np.array([-0.3, 0.1]), np.array([0.4, 0.2])
+    t = np.linspace(0, 1, 9)[:, None]
+    good = s + t * (g - s)
+    bad = good.copy()
+    bad[3] = np.nan
+    res = newton_energy(m, np.stack([good, bad]), scale=2.0)
+    assert res.status[0] == NewtonStatus.CONVERGED
+    assert res.status[1] == NewtonStatus.NOT_FINITE
+    capped = newton_energy(m, (good + 0.3 * np.sin(np.pi * t) * [0, 1])[None],
+                           NewtonOptions(max_iter=1), scale=2.0)
+    assert capped.status[0] == NewtonStatus.MAX_ITERATIONS and capped.residual[0] > 1e-10
+    with pytest.raises(InputError, match="shape"):
+        newton_energy(m, good, scale=2.0)
+    with pytest.raises(InputError, match="gtol"):
+        NewtonOptions(gtol=0.0)
+    with pytest.raises(InputError, match="method"):
+        solvers.solve_geodesic(m, s, g, 8, method="bogus")
+    with pytest.raises(InputError, match="smooth"):
+        solvers.solve_geodesic("carlike", [0.1, 0.1, 0.0], [0.3, 0.2, 0.1], 8, method="newton")
+
+
+def test_residual_is_small_only_at_a_minimiser() -> None:
+    """The reported residual (projected gradient of the energy, relative) is ~1e-12 at a
+    converged path and O(1) after moving one point."""
+    m = finsler.get_metric("sphere")
+    r = solvers.solve_geodesic(m, [-0.5, 0.1], [0.4, 0.3], 16)
+    assert r.residual <= 1e-10
+    moved = r.points.copy()
+    moved[5] += 0.01
+    assert energy_residual(m, moved[None], 1.6)[0] > 1e-2
+
+
+def test_batch_results_do_not_depend_on_the_other_pairs() -> None:
+    """A pair solved alone, or in a batch with others, gives the same path (every problem
+    has its own steps and tests; drops compare seeds of one pair only)."""
+    m = finsler.get_metric("matsumoto")
+    pairs = finsler.sample_pairs(m, 4, seed=9)
+    batch = solvers.solve_batch(m, pairs, 32, workers=1, progress=False)
+    for (s, g), r in zip(pairs, batch):
+        alone = solvers.solve_geodesic(m, s, g, 32)
+        np.testing.assert_allclose(alone.points, r.points, atol=1e-12)
+        assert alone.best_seed == r.best_seed

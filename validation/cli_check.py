@@ -1,0 +1,136 @@
+"""``geodesics check``: the property suite of :mod:`validation.testing` on a metric (and a
+policy), as a table of property, examples tried, passed, result and counterexample.
+
+Exit status 0 when every property holds (or is mapped: a non-convex region the metric
+documents, or skipped: does not apply), 1 when one fails, 2 for bad input. The same
+``--seed`` (with the same code loaded) gives the same examples and results. Nothing is
+written: hypothesis's caches go to a temporary folder, removed at the end.
+
+``--json`` prints :meth:`validation.testing.CheckReport.to_dict`: ``metric``, ``params``,
+``policy``, ``seed``, ``examples``, ``ok``, ``failed`` (names), ``seconds`` and
+``properties``, one dict per property (``name``, ``claim``, ``status``, ``tried``,
+``passed``, ``mapped``, ``counterexample``, ``lhs`` / ``rhs`` (``label``, ``value``),
+``relation``, ``note``, ``shrink_evaluations``, ``seconds``).
+"""
+
+from __future__ import annotations
+
+import json
+import tempfile
+from typing import Annotated
+
+import typer
+
+from finsler.errors import InputError
+from validation.cli_common import (
+    MetricModuleOption,
+    MetricParamOption,
+    fail,
+    metric_from_options,
+    one_line,
+    parse_metric_params,
+)
+from validation.testing.engine import PropertyResult
+
+__all__ = ["check_command", "register"]
+
+
+def check_command(
+    metric: Annotated[str, typer.Option(help="Registered metric name (see `geodesics metrics`).")],
+    run: Annotated[str | None, typer.Option(
+        help="Also check a policy: a run directory, or an environment with a shipped "
+             "policy; it must be for --metric with the same parameters.")] = None,
+    checkpoint: Annotated[str, typer.Option(help="Checkpoint of --run: best or latest.")
+                          ] = "best",
+    examples: Annotated[int, typer.Option(
+        help="Hypothesis examples per property of F; properties that solve geodesics use "
+             "examples/30 (at least 3), the policy's fresh pairs examples/10 (at least 4).")
+                        ] = 100,
+    seed: Annotated[int, typer.Option(help="Seed of every search (same seed, same result).")
+                    ] = 0,
+    min_success: Annotated[float, typer.Option(
+        help="--run: smallest success rate on fresh pairs.")] = 0.8,
+    max_length_ratio: Annotated[float, typer.Option(
+        help="--run: largest mean length ratio learned/exact on fresh pairs.")] = 1.3,
+    midpoint_tol: Annotated[float, typer.Option(
+        help="--run: largest first-level midpoint error (relative to d) per pair, and "
+             "largest L(pi(x,y), pi(y,x)) / L(x,y) (segment lengths) on reversible "
+             "metrics.")] = 0.25,
+    as_json: Annotated[bool, typer.Option("--json", help="Print JSON instead of a table.")
+                       ] = False,
+    metric_param: MetricParamOption = None,
+    metric_module: MetricModuleOption = None,
+) -> None:
+    """Property-based checks of a metric (Finsler axioms, lowered forms, smoothness, solved
+    distances) and of a policy (--run): a table with minimal counterexamples; exit 1 when a
+    property fails."""
+    from validation.testing import check
+
+    m = metric_from_options(metric, metric_param, metric_module)
+    try:
+        if isinstance(examples, bool) or examples < 1:
+            raise InputError(f"--examples must be a positive integer, got {examples}")
+        if seed < 0:
+            raise InputError(f"--seed must be a non-negative integer, got {seed}")
+        if not 0.0 <= min_success <= 1.0:
+            raise InputError(f"--min-success must be in [0, 1], got {min_success}")
+        for opt, val in (("--max-length-ratio", max_length_ratio),
+                         ("--midpoint-tol", midpoint_tol)):
+            if not val > 0 or val == float("inf"):
+                raise InputError(f"{opt} must be positive and finite, got {val}")
+        policy = None
+        if run is not None:
+            import learn
+
+            policy = learn.load_any_policy(run, checkpoint=checkpoint, env=m.name,
+                                           metric_params=parse_metric_params(metric_param))
+            if policy.metric != m:
+                raise InputError(f"--run {run} is a policy for {policy.metric!r}, not for "
+                                 f"{m!r}; give --metric-param as it was trained")
+    except InputError as err:
+        fail(str(err))
+        return
+
+    def progress(r: PropertyResult) -> None:
+        if not as_json:
+            typer.echo(f"  {r.name}: {r.status} ({r.seconds:.1f} s)", err=True)
+
+    if not as_json:
+        typer.echo(f"checking {m.name} (seed {seed}, {examples} examples per property)"
+                   + (f" and the policy {run}" if run else ""), err=True)
+    # hypothesis caches what it reads of the loaded modules under ./.hypothesis: keep the
+    # user's folder clean (nothing written outside the declared outputs)
+    from hypothesis.configuration import set_hypothesis_home_dir
+
+    try:
+        with tempfile.TemporaryDirectory(prefix="geodesics-check-") as home:
+            set_hypothesis_home_dir(home)
+            report = check(m, policy=policy, examples=examples, seed=seed,
+                           midpoint_rtol=midpoint_tol, symmetry_rtol=midpoint_tol,
+                           min_success=min_success, max_length_ratio=max_length_ratio,
+                           progress=progress)
+    except InputError as err:
+        fail(str(err))
+        return
+    finally:
+        set_hypothesis_home_dir(None)
+    if as_json:
+        typer.echo(json.dumps(report.to_dict(), indent=2))
+    else:
+        params = ", ".join(f"{k}={v!r}" for k, v in report.params.items())
+        typer.echo(f"metric {m.name}({params})"
+                   + (f", policy {report.policy}" if report.policy else "")
+                   + f": seed {seed}, {examples} examples per property of F")
+        typer.echo(report.table())
+        verdict = ("all properties hold" if report.ok else
+                   f"FAILED: {', '.join(r.name for r in report.failed)}")
+        typer.echo(f"\n{verdict} ({report.seconds:.1f} s)")
+    if not report.ok:
+        typer.echo(one_line(f"note: {len(report.failed)} of {len(report.results)} properties "
+                            f"failed: {', '.join(r.name for r in report.failed)}"), err=True)
+        raise typer.Exit(code=1)
+
+
+def register(app: typer.Typer) -> None:
+    """Add ``check`` to the ``geodesics`` app."""
+    app.command("check")(check_command)

@@ -1,0 +1,540 @@
+"""Properties of a metric's ``F(x, v)`` itself (no solver): the domain, finiteness and
+positivity, positive 1-homogeneity, the triangle inequality in ``v`` (convexity of the
+indicatrix) with the non-convex region mapped, strong convexity (the fundamental tensor),
+reversibility as declared, the lowered numpy/torch forms against the symbolic one, and
+smoothness where the solver and exp/log need it.
+
+Each ``check_*`` function takes the metric and returns a :class:`PropertyResult`; a
+metric that documents where ``F(x, .)`` is not convex (``convex_everywhere = False``) has
+that region *mapped* (how much of the domain, how near the centre it comes), and the
+claim is tested on its convex part: a region the caller names (``convex_shrink``: the
+domain scaled about its centre) or, if none, the convex core found by the map.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import casadi as ca
+import numpy as np
+from hypothesis import strategies as st
+
+from finsler import Box, Disk, Domain, Metric, Product
+from finsler.errors import InputError
+from validation import strategies as vs
+from validation.testing.engine import (
+    FAILED,
+    MAPPED,
+    SKIPPED,
+    PropertyResult,
+    Verdict,
+    combine,
+    fmt,
+    search,
+    seeded,
+)
+
+__all__ = [
+    "ConvexityMap",
+    "check_domain",
+    "check_finite_positive",
+    "check_homogeneity",
+    "check_lowered_forms",
+    "check_reversibility",
+    "check_smoothness",
+    "check_strong_convexity",
+    "check_subadditivity",
+    "convexity_map",
+    "domain_scale_of",
+    "metric_properties",
+    "vectors",
+]
+
+#: Relative tolerance of homogeneity, subadditivity and the lowered forms (float64 rounding
+#: of a few hundred operations).
+RTOL = 1e-12
+#: Relative tolerance of reversibility ``F(x, -v) = F(x, v)``.
+SYMMETRY_RTOL = 1e-13
+#: A metric declared not reversible must show ``|F(x, -v) - F(x, v)| > this * F(x, v)``
+#: somewhere.
+ASYMMETRY_MIN = 1e-3
+#: Relative tolerance of the lowered fundamental tensor against CasADi's.
+HESSIAN_RTOL = 1e-10
+#: Points of the convexity map.
+MAP_SAMPLES = 4096
+#: The automatic convex region is this fraction of the convex core found by the map.
+CORE_MARGIN = 0.95
+
+
+def vectors(dim: int, low: float = 1e-3, scale: float = 3.0) -> st.SearchStrategy[np.ndarray]:
+    """A tangent vector ``(dim,)``: coordinates in ``[-scale, scale]`` (shrinking towards
+    small integers), Euclidean norm at least ``low``."""
+    coord = st.floats(-scale, scale, allow_nan=False, allow_infinity=False)
+    return (st.lists(coord, min_size=dim, max_size=dim).map(lambda c: np.asarray(c, float))
+            .filter(lambda v: float(np.linalg.norm(v)) >= low))
+
+
+def _points(m: Metric, shrink: float = 1.0) -> st.SearchStrategy[np.ndarray]:
+    if shrink < 1.0 and domain_scale_of(m.domain, np.zeros((1, m.dim))) is None:
+        raise InputError(f"a convex region (the domain scaled by {shrink:g}) needs a box, "
+                         f"disk or product domain; {m.name} has {m.domain.describe()}")
+    return vs.points(m, shrink)
+
+
+def _f(m: Metric, x: np.ndarray, v: np.ndarray) -> float:
+    return float(m.F(x, v, check=False))
+
+
+def _vec(x: np.ndarray) -> list[float]:
+    return [float(a) for a in np.asarray(x).reshape(-1)]
+
+
+# ----------------------------------------------------------------------------------------
+# where F(x, .) is convex: the map of the documented region
+# ----------------------------------------------------------------------------------------
+def domain_scale_of(domain: Domain, x: np.ndarray) -> np.ndarray | None:
+    """For points ``x`` ``(N, dim)``: the smallest ``s`` with ``x`` in the domain scaled by
+    ``s`` about its centre (as :func:`validation.strategies.points` scales it) -> ``(N,)``;
+    None for a domain kind that is not a box, disk or product of them."""
+    x = np.asarray(x, float).reshape(-1, domain.dim)
+    if isinstance(domain, Box):
+        lo, hi = domain.bounds()
+        c, r = 0.5 * (lo + hi), 0.5 * (hi - lo)
+        return np.max(np.abs(x - c) / r, axis=1)
+    if isinstance(domain, Disk):
+        return np.linalg.norm(x - np.asarray(domain.center), axis=1) / domain.radius
+    if isinstance(domain, Product):
+        parts, k = [], 0
+        for f in domain.factors:
+            s = domain_scale_of(f, x[:, k:k + f.dim])
+            if s is None:
+                return None
+            parts.append(s)
+            k += f.dim
+        return np.max(np.stack(parts, 1), axis=1)
+    return None
+
+
+@dataclass(frozen=True)
+class ConvexityMap:
+    """Where ``F(x, .)`` is not strongly convex, from ``samples`` uniform points of the
+    domain (seeded): the smallest eigenvalue of the fundamental tensor over 32 directions
+    per point (:meth:`finsler.Metric.convexity`).
+
+    ``fraction``: share of the points where it is ``< 0``; ``nearest``: the non-convex
+    point nearest the domain's centre, and ``nearest_scale`` its scale (1 = the boundary;
+    None for a domain kind without a centre); ``core``: the largest scale below which every
+    sampled point is convex (1 if none is non-convex)."""
+
+    samples: int
+    fraction: float
+    min_eigenvalue: float
+    nearest: tuple[float, ...] | None
+    nearest_scale: float | None
+    core: float | None
+
+    def describe(self) -> str:
+        if self.fraction == 0:
+            return (f"F(x, .) is strongly convex at all {self.samples} sampled points of the "
+                    "domain")
+        near = ""
+        if self.nearest_scale is not None:
+            near = (f"; the non-convex sample nearest the domain's centre is "
+                    f"{fmt(self.nearest, 4)}, at {self.nearest_scale:.4f} of the domain's "
+                    "size")
+        return (f"F(x, .) is not convex on {100 * self.fraction:.1f}% of {self.samples} "
+                f"sampled points (smallest eigenvalue of the fundamental tensor "
+                f"{self.min_eigenvalue:.3g}){near}")
+
+
+@functools.lru_cache(maxsize=32)
+def _cached_map(m: Metric, samples: int, seed: int) -> ConvexityMap:
+    return _map(m, samples, seed)
+
+
+def convexity_map(metric: Metric, samples: int = MAP_SAMPLES, seed: int = 0) -> ConvexityMap:
+    """The :class:`ConvexityMap` of ``metric`` (cached per metric, samples and seed)."""
+    try:
+        return _cached_map(metric, int(samples), int(seed))
+    except TypeError:  # an unhashable user metric
+        return _map(metric, int(samples), int(seed))
+
+
+def _map(m: Metric, samples: int, seed: int) -> ConvexityMap:
+    x = m.domain.sample(samples, np.random.default_rng([seed, 24]))
+    lam = m.convexity(x, n_directions=32)
+    bad = lam < 0
+    scale = domain_scale_of(m.domain, x)
+    nearest = nearest_scale = None
+    core: float | None = 1.0
+    if bad.any() and scale is not None:
+        k = int(np.flatnonzero(bad)[np.argmin(scale[bad])])
+        nearest, nearest_scale = tuple(float(a) for a in x[k]), float(scale[k])
+        core = nearest_scale
+    elif bad.any():
+        core = None
+    return ConvexityMap(samples, float(bad.mean()), float(lam.min()), nearest, nearest_scale,
+                        core)
+
+
+def convex_region(metric: Metric, convex_shrink: float | None, seed: int = 0
+                  ) -> tuple[float | None, str]:
+    """The scale of the domain on which a metric not convex everywhere is claimed (and
+    tested) to be convex: ``convex_shrink`` if given, else a margin inside the core of the
+    convexity map (None if it has none), with a sentence saying which."""
+    if convex_shrink is not None:
+        s = float(convex_shrink)
+        if not 0.0 < s <= 1.0:
+            raise InputError(f"convex_shrink must be in (0, 1], got {convex_shrink!r}")
+        return s, f"the declared convex region (the domain scaled by {s:.4g})"
+    core = convexity_map(metric, seed=seed).core
+    if not core:
+        return None, "no convex core around the domain's centre"
+    s = CORE_MARGIN * core
+    return s, f"the convex core found by the map (the domain scaled by {s:.4g})"
+
+
+def solve_region(metric: Metric, convex_shrink: float | None = None, seed: int = 0) -> float:
+    """Where solved distances are checked: the whole domain (1) for a metric convex
+    everywhere, else its convex region (:func:`convex_region`; 1 if it has none) -- through
+    a non-convex region discrete lengths converge to the distance slower than their stated
+    errors say."""
+    if metric.convex_everywhere:
+        return 1.0
+    return convex_region(metric, convex_shrink, seed)[0] or 1.0
+
+
+def _mapped_search(m: Metric, name: str, claim: str, build: Any, check: Any, describe: Any,
+                   examples: int, seed: int, convex_shrink: float | None) -> PropertyResult:
+    """A convexity-type property: on a metric convex everywhere a failure is a failure; on
+    one that documents non-convexity it must hold on the convex region and its failures
+    elsewhere are mapped."""
+    rng = seeded(seed, name)
+    if m.convex_everywhere:
+        return search(name, claim, build(1.0), check, describe, examples=examples, rng=rng)
+    region, which = convex_region(m, convex_shrink, seed)
+    parts = []
+    if region is not None:
+        inside = search(name, claim, build(region), check, describe, examples=examples,
+                        rng=rng)
+        inside.note = (f"Holds on {which} ({inside.tried} examples)." if inside.ok else
+                       f"FAILS on {which}, where it must hold. {inside.note}".strip())
+        parts.append(inside)
+    whole = search(name, claim, build(1.0), check, describe, examples=examples, rng=rng)
+    if whole.status == FAILED:
+        whole.status = MAPPED
+        whole.mapped += 1
+        whole.note = (f"On the whole domain it fails (the counterexample): mapped, not an "
+                      f"error, since {m.name} documents it ({m.convexity_note}). "
+                      f"{convexity_map(m, seed=seed).describe()}.")
+    parts.append(whole)
+    return combine(name, claim, parts)
+
+
+# ----------------------------------------------------------------------------------------
+# the properties
+# ----------------------------------------------------------------------------------------
+def check_domain(metric: Metric, *, examples: int = 100, seed: int = 0) -> PropertyResult:
+    """Projection onto the domain: ``project(p)`` lies in the domain, is unchanged by a
+    second projection, and leaves points of the domain where they are (points ``p`` drawn
+    from the domain's bounding box enlarged by 20%)."""
+    m = metric
+    lo, hi = m.domain.bounds()
+    lo = np.where(np.isfinite(lo), lo, -10.0)
+    hi = np.where(np.isfinite(hi), hi, 10.0)
+    pad = 0.2 * (hi - lo)
+    scale = float(np.max(hi - lo))
+    strat = st.tuples(*(st.floats(float(a - p), float(b + p)) for a, b, p in zip(lo, hi, pad))
+                      ).map(lambda c: np.asarray(c, float))
+
+    def check(p: np.ndarray) -> Verdict:
+        q = np.asarray(m.domain.project(p[None]), float)[0]
+        if not bool(m.domain.contains(q[None], tol=1e-9)[0]):
+            return Verdict(False, ("project(p)", _vec(q)), ("in the domain", m.domain.describe()),
+                           "in", "the projection lies outside the domain")
+        qq = np.asarray(m.domain.project(q[None]), float)[0]
+        moved = float(np.max(np.abs(qq - q)))
+        if moved > 1e-12 * scale:
+            return Verdict.compare(("project(project(p))", _vec(qq)), "==",
+                                   ("project(p)", _vec(q)), False, "projection not idempotent")
+        if bool(m.domain.contains(p[None], tol=0.0)[0]):
+            moved = float(np.max(np.abs(q - p)))
+            if moved > 1e-12 * scale:
+                return Verdict.compare(("project(p)", _vec(q)), "==", ("p", _vec(p)), False,
+                                       "a point of the domain is moved by the projection")
+        return Verdict(True)
+
+    return search("domain", "project(p) is in the domain, idempotent, the identity inside",
+                  strat, check, lambda p: {"p": _vec(p)}, examples=examples,
+                  rng=seeded(seed, "domain"))
+
+
+def check_finite_positive(metric: Metric, *, examples: int = 100, seed: int = 0
+                          ) -> PropertyResult:
+    """``F(x, v)`` is finite and ``> 0`` for every ``x`` of the domain and ``v != 0``."""
+    m = metric
+
+    def check(ex: tuple[np.ndarray, np.ndarray]) -> Verdict:
+        x, v = ex
+        f = _f(m, x, v)
+        return Verdict.compare(("F(x, v)", f), ">", ("0", 0.0), math.isfinite(f) and f > 0,
+                               "" if math.isfinite(f) else "F is not finite")
+
+    return search("finite-positive", "F(x, v) is finite and > 0 for v != 0 on the domain",
+                  st.tuples(_points(m), vectors(m.dim)), check,
+                  lambda ex: {"x": _vec(ex[0]), "v": _vec(ex[1])}, examples=examples,
+                  rng=seeded(seed, "finite-positive"))
+
+
+def check_homogeneity(metric: Metric, *, examples: int = 100, seed: int = 0,
+                      rtol: float = RTOL) -> PropertyResult:
+    """``F(x, lam v) = lam F(x, v)`` for ``lam`` in ``[0.01, 100]`` (relative ``rtol``), and
+    ``F(x, 0) = 0``."""
+    m = metric
+    zero = np.zeros(m.dim)
+
+    def check(ex: tuple[np.ndarray, np.ndarray, float]) -> Verdict:
+        x, v, lam = ex
+        f0 = _f(m, x, zero)
+        if f0 != 0.0:
+            return Verdict.compare(("F(x, 0)", f0), "==", ("0", 0.0), False)
+        a, b = _f(m, x, lam * v), lam * _f(m, x, v)
+        ok = abs(a - b) <= rtol * abs(b) + 1e-300
+        return Verdict.compare(("F(x, lam v)", a), "==", ("lam F(x, v)", b), ok,
+                               f"relative difference {abs(a - b) / max(abs(b), 1e-300):.3g} "
+                               f"(tolerance {rtol:g})")
+
+    return search("homogeneity", "F(x, lam v) = lam F(x, v) for lam > 0, F(x, 0) = 0",
+                  st.tuples(_points(m), vectors(m.dim), st.floats(0.01, 100.0)), check,
+                  lambda ex: {"x": _vec(ex[0]), "v": _vec(ex[1]), "lam": float(ex[2])},
+                  examples=examples, rng=seeded(seed, "homogeneity"))
+
+
+def check_subadditivity(metric: Metric, *, examples: int = 100, seed: int = 0,
+                        convex_shrink: float | None = None, rtol: float = RTOL
+                        ) -> PropertyResult:
+    """The triangle inequality of ``F(x, .)``: ``F(x, v + w) <= F(x, v) + F(x, w)`` and the
+    midpoint form ``F(x, (v + w)/2) <= (F(x, v) + F(x, w))/2`` (both within ``rtol``).
+    Where the metric documents non-convexity the failures are mapped (module docstring)."""
+    m = metric
+
+    def check(ex: tuple[np.ndarray, np.ndarray, np.ndarray]) -> Verdict:
+        x, v, w = ex
+        fv, fw = _f(m, x, v), _f(m, x, w)
+        tol = rtol * (1.0 + abs(fv) + abs(fw))
+        lhs = _f(m, x, v + w)
+        if not lhs <= fv + fw + tol:
+            return Verdict.compare(("F(x, v + w)", lhs), "<=", ("F(x, v) + F(x, w)", fv + fw),
+                                   False, f"excess {lhs - fv - fw:.3g}")
+        mid = _f(m, x, 0.5 * (v + w))
+        return Verdict.compare(("F(x, (v + w)/2)", mid), "<=",
+                               ("(F(x, v) + F(x, w))/2", 0.5 * (fv + fw)),
+                               mid <= 0.5 * (fv + fw) + tol)
+
+    return _mapped_search(
+        m, "subadditivity", "F(x, v + w) <= F(x, v) + F(x, w) (the indicatrix is convex)",
+        lambda s: st.tuples(_points(m, s), vectors(m.dim), vectors(m.dim)), check,
+        lambda ex: {"x": _vec(ex[0]), "v": _vec(ex[1]), "w": _vec(ex[2])}, examples, seed,
+        convex_shrink)
+
+
+def _not_smooth(m: Metric, name: str, claim: str, why: str) -> PropertyResult:
+    return PropertyResult(name, claim, SKIPPED, note=(
+        f"{m.name} is declared not smooth ({m.convexity_note}): {why}"))
+
+
+def check_strong_convexity(metric: Metric, *, examples: int = 100, seed: int = 0,
+                           convex_shrink: float | None = None, directions: int = 64
+                           ) -> PropertyResult:
+    """The fundamental tensor ``Hess_v F(x, v)**2 / 2`` is positive definite at ``x`` for
+    ``directions`` unit directions ``v`` (:meth:`finsler.Metric.convexity`): a smooth metric
+    is Finsler there. Skipped for metrics declared not smooth. Non-convexity the metric
+    documents is mapped."""
+    m = metric
+    name = "strong-convexity"
+    claim = "the fundamental tensor Hess_v F^2/2 is positive definite"
+    if not m.smooth:
+        return _not_smooth(m, name, claim, "its fundamental tensor is not defined "
+                                           "everywhere; convexity is checked by subadditivity")
+
+    def check(x: np.ndarray) -> Verdict:
+        lam = float(m.convexity(x[None], n_directions=directions)[0])
+        return Verdict.compare((f"smallest eigenvalue over {directions} directions", lam), ">",
+                               ("0", 0.0), lam > 0)
+
+    return _mapped_search(m, name, claim, lambda s: _points(m, s), check,
+                          lambda x: {"x": _vec(x)}, examples, seed, convex_shrink)
+
+
+def check_reversibility(metric: Metric, *, examples: int = 100, seed: int = 0,
+                        rtol: float = SYMMETRY_RTOL) -> PropertyResult:
+    """As declared: a reversible metric has ``F(x, -v) = F(x, v)`` (relative ``rtol``); a
+    metric declared not reversible has ``|F(x, -v) - F(x, v)| > 1e-3 F(x, v)`` somewhere
+    among ``examples`` draws (else it should say ``reversible = True``)."""
+    m = metric
+    name = "reversibility"
+    ex_strat = st.tuples(_points(m), vectors(m.dim))
+
+    def gap(ex: tuple[np.ndarray, np.ndarray]) -> tuple[float, float]:
+        x, v = ex
+        return _f(m, x, -v), _f(m, x, v)
+
+    def describe(ex: tuple[np.ndarray, np.ndarray]) -> dict[str, Any]:
+        return {"x": _vec(ex[0]), "v": _vec(ex[1])}
+
+    if m.reversible:
+        def check(ex: tuple[np.ndarray, np.ndarray]) -> Verdict:
+            a, b = gap(ex)
+            return Verdict.compare(("F(x, -v)", a), "==", ("F(x, v)", b),
+                                   abs(a - b) <= rtol * abs(b),
+                                   "the metric is declared reversible")
+
+        return search(name, "F(x, -v) = F(x, v) (declared reversible)", ex_strat, check,
+                      describe, examples=examples, rng=seeded(seed, name))
+
+    # declared not reversible: an asymmetric example must exist; search for one
+    def symmetric(ex: tuple[np.ndarray, np.ndarray]) -> Verdict:
+        a, b = gap(ex)
+        return Verdict(abs(a - b) <= ASYMMETRY_MIN * abs(b))  # "fails" = asymmetric: found
+
+    found = search(name, "", ex_strat, symmetric, describe, examples=examples,
+                   rng=seeded(seed, name))
+    claim = "F(x, -v) != F(x, v) somewhere (declared not reversible)"
+    if found.status == FAILED:  # an asymmetric example: the declaration holds
+        return PropertyResult(name, claim, "passed", tried=found.tried, passed=found.tried,
+                              note=f"asymmetric at {found.short_example(200)}: "
+                                   f"{found.lhs[1]:.6g} vs {found.rhs[1]:.6g}"
+                              if found.lhs and found.rhs else "", seconds=found.seconds)
+    return PropertyResult(
+        name, claim, FAILED, tried=found.tried, passed=0, seconds=found.seconds,
+        note=(f"F(x, -v) = F(x, v) within {ASYMMETRY_MIN:g} relative on all {found.tried} "
+              f"examples: the metric looks reversible; declare reversible = True (symmetric "
+              f"distances, checked by distance-symmetry)"))
+
+
+def check_lowered_forms(metric: Metric, *, examples: int = 100, seed: int = 0,
+                        rtol: float = RTOL, hessian_rtol: float = HESSIAN_RTOL
+                        ) -> PropertyResult:
+    """The numpy and torch programs lowered from the CasADi graph (``metric.F`` on arrays
+    and on float64 tensors) equal CasADi's own evaluation of the symbolic ``F``
+    (``|diff| <= rtol max(1, |F|)``), and the lowered fundamental tensor equals CasADi's
+    (``hessian_rtol``)."""
+    import torch
+
+    m = metric
+
+    def check(ex: tuple[np.ndarray, np.ndarray]) -> Verdict:
+        x, v = ex
+        ref = float(np.asarray(m.casadi_F(x, v)).reshape(-1)[0])
+        scale = max(1.0, abs(ref))
+        got_np = _f(m, x, v)
+        got_t = float(m.F(torch.from_numpy(x[None].copy()), torch.from_numpy(v[None].copy()))[0])
+        for label, got in (("F lowered to numpy", got_np), ("F lowered to torch", got_t)):
+            if not abs(got - ref) <= rtol * scale:
+                return Verdict.compare((label, got), "==", ("F symbolic (CasADi)", ref), False,
+                                       f"difference {got - ref:.3g} (tolerance {rtol:g} "
+                                       "max(1, |F|))")
+        (h,) = m.lowered_hessian(x[None], v[None])
+        got_h = np.asarray(h).reshape(m.dim, m.dim).T  # CasADi is column-major
+        ref_h = np.asarray(m.casadi_hessian(x, v))
+        if not np.allclose(got_h, ref_h, rtol=hessian_rtol, atol=hessian_rtol):
+            k = np.unravel_index(np.argmax(np.abs(got_h - ref_h)), got_h.shape)
+            return Verdict.compare((f"fundamental tensor lowered [{k[0]},{k[1]}]",
+                                    float(got_h[k])), "==",
+                                   ("symbolic (CasADi)", float(ref_h[k])), False)
+        return Verdict(True)
+
+    return search("lowered-forms", "numpy/torch F and its Hessian equal the symbolic CasADi F",
+                  st.tuples(_points(m), vectors(m.dim, low=1e-2)), check,
+                  lambda ex: {"x": _vec(ex[0]), "v": _vec(ex[1])}, examples=examples,
+                  rng=seeded(seed, "lowered-forms"))
+
+
+@functools.lru_cache(maxsize=32)
+def _joint_second_derivative(metric: Metric) -> ca.Function:
+    return _build_second_derivative(metric)
+
+
+def _build_second_derivative(metric: Metric) -> ca.Function:
+    """``(z, u) -> u' Hess_z E(z) u`` with ``E = F(x, v)**2 / 2`` and ``z = (x, v)``, by
+    CasADi's automatic differentiation of the metric's one expression."""
+    d = metric.dim
+    z = ca.SX.sym("z", 2 * d)
+    u = ca.SX.sym("u", 2 * d)
+    e = 0.5 * metric.F_sx(z[:d], z[d:]) ** 2
+    h, _ = ca.hessian(e, z)
+    return ca.Function("d2E", [z, u], [ca.mtimes([u.T, h, u])])
+
+
+def check_smoothness(metric: Metric, *, examples: int = 100, seed: int = 0,
+                     step: float = 2e-3, rtol: float = 1e-6) -> PropertyResult:
+    """For a metric declared smooth: ``E = F**2 / 2`` is C^2 in ``(x, v)`` away from
+    ``v = 0``, as IPOPT (exact Hessians) and exp/log (the spray) need: along a random
+    direction ``u`` (``x`` part scaled by the domain's size, ``v`` part by ``|v|``), the
+    second difference of ``E`` at steps ``h = step`` and ``h/2`` converges to CasADi's
+    symbolic ``u' Hess E u`` (its error at ``h/2`` at most ``rtol (|E| + |Hess|)`` or
+    shrinking by 0.6 from ``h``; a kink within ``h/2`` makes it grow like ``1/h``).
+    Skipped for metrics declared not smooth."""
+    m = metric
+    name = "smoothness"
+    claim = "F^2 is C^2 in (x, v) for v != 0 (symbolic Hessian = second differences)"
+    if not m.smooth:
+        return _not_smooth(m, name, claim, "exp/log refuse it and the solver uses its smooth "
+                                           "reformulation")
+    try:
+        fn = _joint_second_derivative(m)
+    except TypeError:
+        fn = _build_second_derivative(m)
+    d = m.dim
+    lo, hi = m.domain.bounds()
+    width = np.where(np.isfinite(hi - lo), hi - lo, 1.0)
+    direction = (st.lists(st.floats(-1.0, 1.0), min_size=2 * d, max_size=2 * d)
+                 .map(lambda c: np.asarray(c, float))
+                 .filter(lambda c: float(np.linalg.norm(c)) > 0.1))
+
+    def energy(z: np.ndarray) -> float:  # the symbolic F, as IPOPT and exp/log see it
+        return 0.5 * float(np.asarray(m.casadi_F(z[:d], z[d:])).reshape(-1)[0]) ** 2
+
+    def check(ex: tuple[np.ndarray, np.ndarray, np.ndarray]) -> Verdict:
+        x, v, c = ex
+        c = c / np.linalg.norm(c)
+        u = np.concatenate([c[:d] * width, c[d:] * np.linalg.norm(v)])
+        z = np.concatenate([x, v])
+        e0 = energy(z)
+        sym = float(np.asarray(fn(z, u)).reshape(-1)[0])
+        errs, d2s = [], []
+        for h in (step, 0.5 * step):
+            d2 = (energy(z + h * u) - 2.0 * e0 + energy(z - h * u)) / (h * h)
+            d2s.append(d2)
+            errs.append(abs(d2 - sym))
+        ok = math.isfinite(sym) and (errs[1] <= rtol * (abs(e0) + abs(sym))
+                                     or errs[1] <= 0.6 * errs[0])
+        return Verdict.compare((f"second difference of F^2/2 (h = {0.5 * step:g})", d2s[1]), "==",
+                               ("u' Hess(F^2/2) u (symbolic)", sym), ok,
+                               f"error {errs[0]:.3g} at h = {step:g}, {errs[1]:.3g} at h/2: "
+                               "not converging, F^2 has a kink here")
+
+    return search(name, claim,
+                  st.tuples(_points(m, 0.9), vectors(d, low=0.1), direction), check,
+                  lambda ex: {"x": _vec(ex[0]), "v": _vec(ex[1]),
+                              "u": _vec(ex[2] / np.linalg.norm(ex[2]))},
+                  examples=examples, rng=seeded(seed, name))
+
+
+def metric_properties(metric: Metric, *, examples: int = 100, seed: int = 0,
+                      convex_shrink: float | None = None) -> list[PropertyResult]:
+    """Every property of ``F`` in this module, in order."""
+    kw = {"examples": examples, "seed": seed}
+    return [
+        check_domain(metric, **kw),
+        check_finite_positive(metric, **kw),
+        check_homogeneity(metric, **kw),
+        check_subadditivity(metric, convex_shrink=convex_shrink, **kw),
+        check_strong_convexity(metric, convex_shrink=convex_shrink, **kw),
+        check_reversibility(metric, **kw),
+        check_lowered_forms(metric, **kw),
+        check_smoothness(metric, **kw),
+    ]
