@@ -838,8 +838,7 @@ def main() -> None:
             for r in res["rows"]:
                 r["peer"] = peer
                 rows.append(r)
-        exact = (m.distance(pairs[:, 0], pairs[:, 1]) if metric_name in ("poincare", "randers")
-                 else None)
+        exact = (m.distance(pairs[:, 0], pairs[:, 1]) if m.provides("distance") else None)
         score(m, pairs, rows, exact)
         title = "poincare, exp map" if name == "exp" else name
         kind = None if name == "exp" else exact is not None

@@ -1,9 +1,13 @@
 """finsler: Finsler metrics defined once, symbolically in CasADi, with every numeric
-evaluator (numpy, torch, IPOPT) derived from that single expression."""
+evaluator (numpy, torch, IPOPT) derived from that single expression.
+
+A metric's optional capabilities are declared in :mod:`finsler.hooks`; its identity (name
+or class, parameters) as a :class:`MetricSpec` in :mod:`finsler.spec`."""
 
 from finsler.domains import Box, Disk, Domain, JointBox, Product
 from finsler.errors import DomainError, InputError, UnknownMetricError
 from finsler.files import OutputError, atomic_write_bytes, atomic_write_text, check_output_path
+from finsler.hooks import HOOKS, MetricHooks
 from finsler.metric import LengthBounds, LengthEstimate, Metric, Task
 from finsler.metrics import (
     MATSUMOTO_CONVEX_RADIUS,
@@ -25,10 +29,12 @@ from finsler.pairs import (
     sample_pairs,
     validation_pairs,
 )
-from finsler.registry import get_metric, list_metrics, register_metric
+from finsler.registry import get_metric, list_metrics, metric_class, register_metric
+from finsler.spec import MetricSpec, metric_spec
 
 __all__ = [
     "DEFAULT_EVAL_SEED",
+    "HOOKS",
     "MATSUMOTO_CONVEX_RADIUS",
     "VALIDATION_SEED",
     "Box",
@@ -44,6 +50,8 @@ __all__ = [
     "LengthEstimate",
     "Matsumoto",
     "Metric",
+    "MetricHooks",
+    "MetricSpec",
     "Minkowski",
     "OutputError",
     "PandaPole",
@@ -60,6 +68,8 @@ __all__ = [
     "get_metric",
     "list_metrics",
     "load_pairs",
+    "metric_class",
+    "metric_spec",
     "register_metric",
     "sample_pairs",
     "validation_pairs",

@@ -49,7 +49,8 @@ class Domain(ABC):
     """A closed subset of R^dim in coordinates."""
 
     dim: int
-    names: tuple[str, ...]
+    names: tuple[str, ...] = ()
+    """Coordinate names (empty: unnamed; figures then say ``x0``, ``x1``, ...)."""
 
     @property
     def is_box(self) -> bool:

@@ -12,6 +12,11 @@ From that single expression the class derives
   lengths with an error estimate: ``segment_length_error`` / ``path_length_error``
   (adaptive Gauss-Kronrod to a tolerance),
 * a numerical convexity check of ``F(x, .)`` (the Finsler condition).
+
+A metric's OPTIONAL capabilities (a smooth form of a non-smooth ``F``, a seeding plan, a
+height map or kinematics for figures, a closed-form distance) are declared, with their
+meaning, in :mod:`finsler.hooks` (:class:`~finsler.hooks.MetricHooks`, a base of
+:class:`Metric`); the toolkit asks ``metric.provides(hook)``.
 """
 
 from __future__ import annotations
@@ -26,6 +31,7 @@ import numpy as np
 
 from finsler.domains import Domain, _as_batch, is_torch
 from finsler.errors import InputError
+from finsler.hooks import MetricHooks
 from finsler.limits import check_memory
 from finsler.lowering import LoweredFunction, lower
 
@@ -153,10 +159,13 @@ def _gauss_legendre01(order: int) -> tuple[np.ndarray, np.ndarray]:
     return 0.5 * (t + 1.0), 0.5 * w
 
 
-class Metric(ABC):
+class Metric(MetricHooks, ABC):
     """A Finsler-type metric ``F(x, v)`` on a coordinate domain.
 
-    Subclasses are frozen dataclasses; their fields are the metric's parameters.
+    Subclasses are frozen dataclasses; their fields are the metric's parameters (its
+    identity is its registered name plus those parameters: :class:`finsler.MetricSpec`).
+    They implement :attr:`domain` and :meth:`F_sx`, and may provide the optional hooks of
+    :mod:`finsler.hooks` (``metric.provides(hook)``, ``metric.hooks()``).
     Class attributes describe it:
 
     * ``name``: registry name; ``task``: default :class:`Task`;
@@ -570,6 +579,7 @@ class Metric(ABC):
             "eps": self.task.eps,
             "reversible": self.reversible,
             "convexity": self.convexity_note,
+            "hooks": list(self.hooks()),
         }
 
 

@@ -79,11 +79,17 @@ class Matsumoto(Metric):
 
     @property
     def convex_radius(self) -> float:
-        """Analytic radius of the region where ``F(p, .)`` is strongly convex."""
+        """Hook: analytic radius of the region where ``F(p, .)`` is strongly convex."""
         return MATSUMOTO_CONVEX_RADIUS / self.height
 
+    def height_map(self, points: Any) -> np.ndarray:
+        """Hook: the height ``h(p) = -height |p|**2`` of eq. (21), ``(N, 2) -> (N,)``
+        (``F_sx`` uses its gradient ``-2 height p``)."""
+        p = np.asarray(points, dtype=np.float64)
+        return -self.height * np.sum(p * p, axis=-1)
+
     def F_sx(self, x: ca.SX, v: ca.SX) -> ca.SX:
-        grad_h = -2.0 * self.height * x
+        grad_h = -2.0 * self.height * x  # the gradient of height_map's h
         beta = ca.dot(grad_h, v)
         alpha = ca.sqrt(ca.dot(v, v) + beta * beta)
         return alpha * alpha / (alpha - beta)
@@ -139,9 +145,9 @@ class CarLike(Metric):
         return ca.sqrt(self._square_sx(x, v)[0])
 
     def smooth_square_sx(self, x: ca.SX, v: ca.SX, tag: str = "") -> dict[str, Any]:
-        """Hook for optimisers that need C^2 functions (solvers' transcriptions): ``F**2``
-        as a smooth expression of ``(x, v, xi)`` with one slack ``xi``, exact at any
-        minimiser of an objective increasing in ``F**2``.
+        """Hook (:mod:`finsler.hooks`) for optimisers that need C^2 functions (solvers'
+        transcriptions): ``F**2`` as a smooth expression of ``(x, v, xi)`` with one slack
+        ``xi``, exact at any minimiser of an objective increasing in ``F**2``.
 
         ``max(r_min |v_th| - u, 0)`` becomes ``xi >= 0``, ``xi >= r_min v_th - u``,
         ``xi >= -r_min v_th - u``: the objective increases with ``xi**2``, so at a minimiser
@@ -192,8 +198,12 @@ class PandaPole(Metric):
 
         return panda.pole_metric_sx(x, v, pole=(self.pole_x, self.pole_y))
 
+    def landmarks(self) -> dict[str, tuple[float, ...]]:
+        """Hook: the pole's position in the world frame (x, y)."""
+        return {"pole": (float(self.pole_x), float(self.pole_y))}
+
     def frame_positions(self, q: Any) -> Any:
-        """World positions of the ten frames, ``(N, 7)`` -> ``(N, 10, 3)`` (lowered CasADi
+        """Hook: world positions of the ten frames, ``(N, 7)`` -> ``(N, 10, 3)`` (lowered CasADi
         forward kinematics; numpy or torch)."""
         qb = _as_batch(q, 7, "q")
         (p,) = _lowered_panda_fk()(qb)
@@ -218,7 +228,9 @@ def _lowered_panda_fk() -> Any:
 # Closed-form references
 # ----------------------------------------------------------------------------------------
 class ClosedFormMetric(Metric):
-    """A metric whose distance and minimising geodesics are known in closed form."""
+    """A metric whose distance and minimising geodesics are known in closed form: it
+    provides the hooks ``distance`` and ``geodesic`` (from ``_distance`` and
+    ``_geodesic``, which subclasses write)."""
 
     def distance(self, x: Any, y: Any) -> np.ndarray:
         """Exact distance ``d(x, y)`` for ``(N, dim)`` arrays -> ``(N,)``."""

@@ -1,4 +1,6 @@
-"""Registry of metrics by name: ``get_metric(name, **params)`` and ``list_metrics()``."""
+"""Registry of metrics by name: ``get_metric(name, **params)``, ``list_metrics()``,
+``metric_class(name)``. A metric's identity (name or class, parameters) turned into a spec
+and back lives beside it, in :mod:`finsler.spec`."""
 
 from __future__ import annotations
 
@@ -18,7 +20,8 @@ from finsler.metrics import (
     Sphere,
 )
 
-__all__ = ["get_metric", "list_metrics", "register_metric"]
+__all__ = ["check_name", "get_metric", "list_metrics", "metric_class", "register_metric",
+           "unregister_metric"]
 
 _REGISTRY: dict[str, type[Metric]] = {}
 
@@ -34,6 +37,18 @@ def register_metric(cls: type[Metric]) -> type[Metric]:
 
 for _cls in (Matsumoto, CarLike, PandaPole, Euclidean, Minkowski, Randers, Poincare, Sphere):
     register_metric(_cls)
+
+
+def unregister_metric(name: str) -> type[Metric] | None:
+    """Remove the metric registered as ``name`` (returns its class; None if there was
+    none), e.g. to undo a registration in a test."""
+    return _REGISTRY.pop(name, None)
+
+
+def metric_class(name: str) -> type[Metric]:
+    """The class registered as ``name`` (:class:`UnknownMetricError` with a did-you-mean
+    otherwise)."""
+    return _REGISTRY[check_name(name)]
 
 
 def list_metrics() -> list[str]:

@@ -4,9 +4,12 @@ Train with :func:`train` and a :class:`TrainConfig` (:func:`default_config` give
 documented per-environment defaults); load a trained or shipped policy with
 :func:`load_policy` and generate paths with ``policy.generate(starts, goals)``, or with
 the policy-guided route search ``policy.search(starts, goals)`` (:mod:`learn.search`).
-The paper's baselines sit beside the midpoint learner (:mod:`learn.seq`, :mod:`learn.pg`);
-:mod:`learn.runs` trains and loads any method and names the paper's variants, and
-:mod:`learn.methods` holds the actor losses and extra terms.
+The paper's baselines sit beside the midpoint learner (:mod:`learn.seq` with its
+gymnasium environment in :mod:`learn.env`, :mod:`learn.pg`). Every method is a plug-in on
+one run loop (:class:`learn.loop.RunLoop`) registered in :mod:`learn.registry`, which the
+CLI, sweeps and :func:`load_policy` read; :mod:`learn.runs` trains and loads any method
+and names the paper's variants, and :mod:`learn.methods` holds the actor losses and extra
+terms of the midpoint learner.
 """
 
 from learn.base import TrainResult
@@ -18,6 +21,7 @@ from learn.config import (
     package_versions,
     paper_config,
 )
+from learn.loop import RunLoop
 from learn.networks import Actor, Critic
 from learn.policy import (
     EvalResult,
@@ -25,9 +29,11 @@ from learn.policy import (
     evaluate_paths,
     evaluate_policy,
     export_policy,
+    load_midpoint_policy,
     load_policy,
     shipped_policies,
 )
+from learn.registry import Method, Variant, get_method, list_methods, register_method
 from learn.runs import VARIANTS, load_any_policy, make_config, run_one, train_run
 from learn.search import SearchResult, SearchSpec, equalize_paths, search_paths
 from learn.storage import CorruptFileError
@@ -41,12 +47,15 @@ __all__ = [
     "CorruptFileError",
     "Critic",
     "EvalResult",
+    "Method",
     "Policy",
+    "RunLoop",
     "SearchResult",
     "SearchSpec",
     "TrainConfig",
     "TrainResult",
     "Trainer",
+    "Variant",
     "beyond_paper",
     "build_tree",
     "default_config",
@@ -54,14 +63,18 @@ __all__ = [
     "evaluate_paths",
     "evaluate_policy",
     "export_policy",
+    "get_method",
     "level_pairs",
+    "list_methods",
     "load_any_policy",
+    "load_midpoint_policy",
     "load_policy",
     "make_config",
     "mc_targets",
     "package_versions",
     "paper_config",
     "read_run_config",
+    "register_method",
     "resolve_device",
     "run_one",
     "search_paths",

@@ -9,16 +9,14 @@ with the toolkit (chosen to reach the issue's bars on a 2-core CPU);
 
 from __future__ import annotations
 
-import dataclasses
 import json
-import math
 import platform
 from dataclasses import dataclass
 from typing import Any
 
 import finsler
 from finsler.errors import InputError
-from finsler.modules import import_user_module
+from finsler.spec import MetricSpec, class_path, ensure_registered
 from learn.base import RunConfig, check_choice, check_hidden
 from learn.methods import derivative_terms, describe
 
@@ -37,6 +35,8 @@ __all__ = [
     "package_versions",
     "paper_config",
     "resolve_metric",
+    "run_document",
+    "run_header",
 ]
 
 #: Actor-loss variants: eq. (6), eq. (17), eq. (18).
@@ -50,136 +50,28 @@ _ENERGY_SCALES = ("none", "straight")
 
 
 # ----------------------------------------------------------------------------------------
-# The run's metric: registered name + parameters (+ the class of a user metric)
+# The run's metric: registered name + parameters (+ the class of a user metric). The
+# metric's identity is finsler's (finsler.MetricSpec); these are the names learn has
+# always exported.
 # ----------------------------------------------------------------------------------------
-_PARAM_KINDS: dict[str, tuple[type, ...]] = {
-    "float": (int, float), "int": (int,), "bool": (bool,), "str": (str,)}
-
-
-def metric_class_path(cls: type) -> str | None:
-    """``module:qualname`` of a metric class defined outside :mod:`finsler` (None for the
-    toolkit's own metrics)."""
-    if cls.__module__ == "finsler" or cls.__module__.startswith("finsler."):
-        return None
-    return f"{cls.__module__}:{cls.__qualname__}"
-
-
-def _import_metric_class(env: str, path: str) -> None:
-    """Import the module of ``path`` (``module:qualname``) so that metric ``env`` is
-    registered (its ``@register_metric`` runs on import; a class found but not registered
-    is registered here)."""
-    module, sep, qualname = path.partition(":")
-    advice = (f"make module {module!r} importable (PYTHONPATH, or `--metric-module "
-              f"FILE.py` on the command line) or import it before loading the run")
-    if not sep or not module or not qualname:
-        raise InputError(f"metric_class must be 'module:qualname', got {path!r}")
-    if module == "__main__":
-        raise InputError(
-            f"metric {env!r} was defined by class {qualname} in a script (__main__), which "
-            "cannot be re-imported: register it (run the code defining it) before loading "
-            "the run, or move the class into a module")
-    try:
-        mod = import_user_module(module, f"metric {env!r}: module")
-    except InputError as err:
-        raise InputError(f"{err}; {advice}") from err
-    obj: Any = mod
-    for part in qualname.split("."):
-        obj = getattr(obj, part, None)
-    if not (isinstance(obj, type) and issubclass(obj, finsler.Metric)):
-        raise InputError(f"metric {env!r}: {path} is not a finsler.Metric class; {advice}")
-    if obj.name != env:
-        raise InputError(f"metric class {path} is registered as {obj.name!r}, not {env!r}")
-    if env not in finsler.list_metrics():
-        finsler.register_metric(obj)
-
-
-def ensure_registered(env: str, metric_class: str | None = None) -> None:
-    """Make sure metric ``env`` is registered: import ``metric_class`` (``module:qualname``)
-    if it is not; :class:`InputError` (with a did-you-mean) if it still is not."""
-    if metric_class is not None and isinstance(env, str) and \
-            env not in finsler.list_metrics():
-        _import_metric_class(env, metric_class)
-    finsler.registry.check_name(env, "environment")
-
-
-def _json_safe(value: Any) -> Any:
-    """Tuples to lists, numpy scalars to Python: the value as it reads back from JSON."""
-    if isinstance(value, (list, tuple)):
-        return [_json_safe(v) for v in value]
-    if hasattr(value, "item") and not isinstance(value, (str, bytes)):
-        return value.item()
-    return value
-
-
-def _check_param(env: str, name: str, kind: str, value: Any) -> Any:
-    """``value`` checked against the field annotation ``kind`` of the metric's class."""
-    ok_types = _PARAM_KINDS.get(kind.replace(" ", ""))
-    if ok_types is not None:
-        ok = isinstance(value, ok_types) and (kind == "bool" or not isinstance(value, bool))
-        if ok and kind == "float":
-            ok = math.isfinite(value)
-            value = float(value)
-        if not ok:
-            raise InputError(f"metric parameter {name} of {env!r} must be {kind}"
-                             f"{' (finite)' if kind == 'float' else ''}, got {value!r}")
-        return value
-    try:  # another annotation: anything JSON can hold, checked by the metric itself
-        json.dumps(value, allow_nan=False)
-    except (TypeError, ValueError) as err:
-        raise InputError(f"metric parameter {name} of {env!r} must be a JSON value, got "
-                         f"{value!r}") from err
-    return value
+#: ``module:qualname`` of a metric class defined outside :mod:`finsler` (None for the
+#: toolkit's own metrics): :func:`finsler.spec.class_path`.
+metric_class_path = class_path
 
 
 def resolve_metric(env: str, params: Any = None,
                    metric_class: str | None = None) -> tuple[dict[str, Any], str | None]:
-    """Check a run's metric and return ``(full parameters, class path)``.
-
-    ``env`` is a registered name; if it is not registered and ``metric_class``
-    (``module:qualname``) is given, that module is imported first (user metrics).
-    ``params`` (a dict, None = the defaults) are checked against the fields of the metric's
-    dataclass: unknown names and ill-typed values raise :class:`InputError` naming the
-    allowed parameters. The metric is then built (its own checks run) and the FULL set of
-    its parameters is returned, JSON-safe, so that a run's config pins its metric even if a
-    default changes later. The class path is ``module:qualname`` for a metric defined
-    outside :mod:`finsler`, else None.
-    """
-    if not isinstance(env, str):
-        raise InputError(f"env must be a registered metric name, got {env!r}")
-    if metric_class is not None and not isinstance(metric_class, str):
-        raise InputError(f"metric_class must be 'module:qualname', got {metric_class!r}")
-    ensure_registered(env, metric_class)
-    cls = finsler.registry._REGISTRY[env]
-    path = metric_class_path(cls)
-    if metric_class is not None and metric_class != path:
-        raise InputError(f"metric {env!r} of this run is class {metric_class}, but {env!r} "
-                         f"is registered as {path or cls.__qualname__ + ' (finsler)'} here")
-    if params is None:
-        params = {}
-    if not isinstance(params, dict):
-        raise InputError(f"metric_params must be a dict of parameter values, got {params!r}")
-    fields = {f.name: f.type.__name__ if isinstance(f.type, type) else str(f.type)
-              for f in dataclasses.fields(cls) if f.init}
-    unknown = sorted(set(params) - set(fields))
-    if unknown:
-        raise InputError(
-            f"metric {env!r} has no parameter {', '.join(map(repr, unknown))}; its "
-            f"parameters are: {', '.join(f'{k} ({t})' for k, t in fields.items()) or '(none)'}")
-    checked = {k: _check_param(env, k, fields[k], v) for k, v in params.items()}
-    metric = build_metric(env, checked)
-    full = {k: _json_safe(getattr(metric, k)) for k in fields}
-    return full, path
+    """Check a run's metric and return ``(full parameters, class path)``: the parts of
+    :meth:`finsler.MetricSpec.resolve` (unknown names and ill-typed values raise
+    :class:`InputError` naming the allowed parameters; a user metric's module is imported
+    from ``metric_class`` if ``env`` is not registered)."""
+    spec = MetricSpec.resolve(env, params, metric_class)
+    return dict(spec.params), spec.class_path
 
 
 def build_metric(env: str, params: dict[str, Any] | None = None) -> finsler.Metric:
-    """The registered metric ``env`` with ``params`` (JSON lists become tuples)."""
-    args = {k: tuple(v) if isinstance(v, list) else v for k, v in (params or {}).items()}
-    try:
-        return finsler.get_metric(env, **args)
-    except InputError:
-        raise
-    except (TypeError, ValueError) as err:  # a metric's own check that is not an InputError
-        raise InputError(f"metric {env!r} refuses parameters {params}: {err}") from err
+    """The registered metric ``env`` with ``params`` (:meth:`finsler.MetricSpec.build`)."""
+    return MetricSpec(env, dict(params or {})).build()
 
 
 def metric_info(cfg: Any) -> dict[str, Any]:
@@ -199,19 +91,19 @@ def check_run_metric(cfg: Any, source: str, env: str | None = None,
         raise InputError(f"--env {env} does not match the run's environment {cfg.env}")
     if metric_params is None:
         return
-    full, _ = resolve_metric(cfg.env, metric_params, cfg.metric_class)
-    if full != cfg.metric_params:
-        diff = ", ".join(f"{k}={cfg.metric_params.get(k)!r} (given {full.get(k)!r})"
-                         for k in full if full.get(k) != cfg.metric_params.get(k))
+    given = MetricSpec.resolve(cfg.env, metric_params, cfg.metric_class)
+    diff = cfg.metric_spec.param_differences(given)
+    if diff:
+        text = ", ".join(f"{k}={a!r} (given {b!r})" for k, (a, b) in diff.items())
         raise InputError(f"{source} was trained on {cfg.env} with other metric parameters: "
-                         f"{diff}; a policy is only loaded for the metric it learned")
+                         f"{text}; a policy is only loaded for the metric it learned")
 
 
 class MetricConfig(RunConfig):
     """Mixin of the method configs: the run's metric is ``env`` with ``metric_params``
     (validated and completed to the full parameter set when the config is built; old
     configs without the field get the defaults), and ``metric_class`` locates a user
-    metric's class so that loading a run re-imports it."""
+    metric's class so that loading a run re-imports it. Together: :attr:`metric_spec`."""
 
     metric_params: dict[str, Any] | None
     metric_class: str | None
@@ -227,9 +119,14 @@ class MetricConfig(RunConfig):
             self.env, params, self.metric_class)
 
     @property
+    def metric_spec(self) -> MetricSpec:
+        """The run's metric as a :class:`finsler.MetricSpec`."""
+        return MetricSpec(self.env, dict(self.metric_params or {}), self.metric_class)
+
+    @property
     def metric(self) -> finsler.Metric:
         """The run's metric: ``env`` with ``metric_params``."""
-        return build_metric(self.env, self.metric_params)
+        return self.metric_spec.build()
 
 
 @dataclass
@@ -545,13 +442,19 @@ def package_versions() -> dict[str, str]:
     }
 
 
-def config_json(cfg: TrainConfig) -> str:
-    """The ``config.json`` text of a run: the config, metric, task, versions and the list of
-    choices beyond the paper."""
-    doc = {
-        "config": cfg.to_dict(),
-        "metric": metric_info(cfg),
-        "task": {"depth": cfg.max_depth, "eps": cfg.eval_eps, "segments": 2**cfg.max_depth},
+def run_header(cfg: Any) -> dict[str, Any]:
+    """The first sections of every run's ``config.json``: the config, the metric (with its
+    full parameters) and the task (depth, eps, segments)."""
+    return {"config": cfg.to_dict(), "metric": metric_info(cfg),
+            "task": {"depth": cfg.max_depth, "eps": cfg.eval_eps,
+                     "segments": 2**cfg.max_depth}}
+
+
+def run_document(cfg: TrainConfig) -> dict[str, Any]:
+    """``config.json``'s sections about the midpoint learner: loss, terms, model-free or
+    not, what the counts mean, how the best checkpoint is chosen, versions, and the list
+    of choices beyond the paper."""
+    return {
         **describe(cfg),
         "counts": "timesteps = every evaluation of C made to learn (all-inclusive: trees "
                   "and every extra term, in every epoch; the validation evaluations that "
@@ -563,5 +466,9 @@ def config_json(cfg: TrainConfig) -> str:
         "versions": package_versions(),
         "beyond_paper": beyond_paper(cfg),
     }
-    return json.dumps(doc, indent=2)
 
+
+def config_json(cfg: TrainConfig) -> str:
+    """The ``config.json`` text of a run: the config, metric, task, versions and the list of
+    choices beyond the paper."""
+    return json.dumps({**run_header(cfg), **run_document(cfg)}, indent=2)

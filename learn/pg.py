@@ -44,9 +44,7 @@ curves compare with the other methods. ``checkpoint_best`` is chosen on the task
 from __future__ import annotations
 
 import copy
-import json
 import math
-import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -59,31 +57,12 @@ from torch import nn
 
 import finsler
 from finsler.errors import InputError
-from learn.base import StopOnSignal, TrainResult, check_choice, check_hidden, finish_run
-from learn.config import (
-    MetricConfig,
-    check_run_metric,
-    ensure_registered,
-    metric_info,
-    package_versions,
-)
+from learn.base import TrainResult, check_choice, check_hidden
+from learn.config import MetricConfig, ensure_registered
+from learn.loop import RunLoop, best_record, eval_columns, load_run, load_weights
 from learn.networks import mlp, resolve_device
 from learn.policy import EvalResult, check_pairs, evaluate_paths
-from learn.storage import (
-    BEST_FILE,
-    CONFIG_FILE,
-    LATEST_FILE,
-    METRICS_FILE,
-    RESULT_FILE,
-    CorruptFileError,
-    atomic_write_text,
-    check_run_dir,
-    load_checkpoint,
-    read_json,
-    restore_history,
-    save_checkpoint,
-    write_metrics,
-)
+from learn.registry import Method, register_method
 from learn.tree import build_tree
 
 __all__ = [
@@ -111,9 +90,6 @@ _DEFAULT_CYCLES = (1000, 538)
 _OBJECTIVES = ("halves-squared", "sum")
 _SURROGATES = ("ppo", "sgt-pg-code")
 _ACTIVATIONS = ("tanh", "relu")
-#: Config fields that may change when a run is resumed (run control, not the run itself).
-_FREE_ON_RESUME = ("minutes", "device", "timesteps")
-_WALL_COLUMNS = ("wall_seconds", "evaluations_per_second", "cycles_per_second")
 
 
 # ----------------------------------------------------------------------------------------
@@ -458,11 +434,9 @@ def _eval_key(ev: EvalResult) -> tuple[float, float]:
     return (ev.success_rate, -ev.mean_max_segment_cost)
 
 
-def _config_json(cfg: PGConfig) -> str:
-    doc = {
-        "config": cfg.to_dict(),
-        "metric": metric_info(cfg),
-        "task": {"depth": cfg.max_depth, "eps": cfg.eval_eps, "segments": 2**cfg.max_depth},
+def _run_document(cfg: PGConfig) -> dict[str, Any]:
+    """``config.json``'s sections about PG."""
+    return {
         "objective": "c_tau of eq. (15)" if cfg.objective == "halves-squared"
         else "path length (sum of C)",
         "model_free": True,
@@ -482,21 +456,22 @@ def _config_json(cfg: PGConfig) -> str:
         "selection": f"checkpoint_best by success_rate_task_depth on finsler.validation_pairs "
                      f"(seed {finsler.VALIDATION_SEED}, {cfg.eval_pairs} pairs), ties by "
                      "lower mean_max_segment_cost_task_depth",
-        "versions": package_versions(),
     }
-    return json.dumps(doc, indent=2)
 
 
-class PGTrainer:
-    """Train the per-depth policies of a :class:`PGConfig` into a run directory."""
+class PGTrainer(RunLoop):
+    """Train the per-depth policies of a :class:`PGConfig` into a run directory (the
+    loop: :class:`learn.loop.RunLoop`). One iteration is one cycle; a cycle is only
+    started if it fits the budget; every level's last cycle is also evaluated."""
 
-    def __init__(self, cfg: PGConfig, run_dir: str | Path, resume: bool = False,
-                 progress: bool = True) -> None:
-        self.run_dir = check_run_dir(Path(run_dir), resume)
-        self.progress = progress
-        if resume:
-            cfg = self._resume_config(cfg)
-        self.cfg = cfg
+    config_class = PGConfig
+    label = "pg"
+    free_on_resume = ("minutes", "device", "timesteps")
+    final_columns = ("success_rate_task_depth", "mean_length_task_depth",
+                     "mean_max_segment_cost_task_depth")
+
+    def setup(self) -> None:
+        cfg = self.cfg
         self.device = resolve_device(cfg.device)
         torch.set_num_threads(cfg.threads)
         self.metric = cfg.metric
@@ -513,81 +488,36 @@ class PGTrainer:
         self.gen = torch.Generator(device=self.device)
         self.gen.manual_seed(cfg.seed + 1)
 
-        self.iteration = 0  # cycles done
-        self.timesteps = 0  # all-inclusive evaluations of C
-        self.timesteps_paper = 0
         self.level = 1  # depth of the policy being trained
         self.level_best: dict[str, Any] | None = None  # best state of pi_level on validation
-        self.wall_before = 0.0
-        self.best: dict[str, float] = {"success_rate": -1.0, "mean_max_segment_cost": math.inf}
-        self.history: list[dict[str, Any]] = []
+        self._level_ends = False
         self._stats: list[dict[str, float]] = []
-        if resume:
-            if not (self.run_dir / LATEST_FILE).is_file():
-                raise InputError(
-                    f"cannot resume: {self.run_dir / LATEST_FILE} is missing (nothing was "
-                    "changed); start a new run with another --out")
-            self._load_state(load_checkpoint(self.run_dir / LATEST_FILE))
-        else:
-            self.run_dir.mkdir(parents=True, exist_ok=True)
-            atomic_write_text(self.run_dir / CONFIG_FILE, _config_json(cfg))
 
-    # -- resume ---------------------------------------------------------------------------
-    def _resume_config(self, cfg: PGConfig) -> PGConfig:
-        doc = read_json(self.run_dir / CONFIG_FILE)
-        if not isinstance(doc.get("config"), dict):
-            raise CorruptFileError(f"{self.run_dir / CONFIG_FILE} has no 'config' section")
-        saved = PGConfig.from_dict(doc["config"])
-        if cfg.env != saved.env:
-            raise InputError(f"cannot resume: run {self.run_dir} trains {saved.env!r}, "
-                             f"not {cfg.env!r}")
-        new, old = cfg.to_dict(), saved.to_dict()
-        changed = [k for k in old if k not in _FREE_ON_RESUME and new[k] != old[k]]
-        if changed:
-            raise InputError("cannot resume with different settings: " + ", ".join(
-                f"{k} ({old[k]!r} in the run, {new[k]!r} given)" for k in changed))
-        return saved.replace(**{k: getattr(cfg, k) for k in _FREE_ON_RESUME})
-
-    def _state(self) -> dict[str, Any]:
+    def state_dict(self) -> dict[str, Any]:
         return {
-            "format": "learn-checkpoint-v1",
-            "config": self.cfg.to_dict(),
             "policies": [p.state_dict() for p in self.policies],
             "optimizers": [o.state_dict() for o in self.opts],
             "np_rng": self.np_rng.bit_generator.state,
             "torch_rng": self.gen.get_state(),
-            "counters": {
-                "iteration": self.iteration,
-                "timesteps": self.timesteps,
-                "timesteps_paper": self.timesteps_paper,
-                "level": self.level,
-                "wall_seconds": self._wall(),
-            },
+            "counters": {"level": self.level},
             "level_best": self.level_best,
-            "best": dict(self.best),
-            "history": [dict(r) for r in self.history],
         }
 
-    def _load_state(self, st: dict[str, Any]) -> None:
-        try:
-            for p, sd in zip(self.policies, st["policies"], strict=True):
-                p.load_state_dict(sd)
-            for o, sd in zip(self.opts, st["optimizers"], strict=True):
-                o.load_state_dict(sd)
-            self.np_rng.bit_generator.state = st["np_rng"]
-            self.gen.set_state(st["torch_rng"])
-            c = st["counters"]
-            self.iteration, self.timesteps = int(c["iteration"]), int(c["timesteps"])
-            self.timesteps_paper = int(c["timesteps_paper"])
-            self.level = int(c["level"])
-            self.wall_before = float(c["wall_seconds"])
-            self.level_best = st["level_best"]
-            self.best = dict(st["best"])
-        except (KeyError, RuntimeError, TypeError, ValueError) as err:
-            raise CorruptFileError(
-                f"checkpoint {self.run_dir / LATEST_FILE} does not match the run: {err}"
-            ) from err
-        self.history = restore_history(self.run_dir, st, self.iteration)
+    def load_state_dict(self, st: dict[str, Any]) -> None:
+        for p, sd in zip(self.policies, st["policies"], strict=True):
+            p.load_state_dict(sd)
+        for o, sd in zip(self.opts, st["optimizers"], strict=True):
+            o.load_state_dict(sd)
+        self.np_rng.bit_generator.state = st["np_rng"]
+        self.gen.set_state(st["torch_rng"])
+        self.level = int(st["counters"]["level"])
+        self.level_best = st["level_best"]
+
+    def policy_state(self) -> dict[str, Any]:
+        return {"policies": [p.state_dict() for p in self.policies]}
+
+    def run_document(self) -> dict[str, Any]:
+        return _run_document(self.cfg)
 
     # -- the algorithm --------------------------------------------------------------------
     def _enter_level(self, depth: int) -> None:
@@ -600,6 +530,21 @@ class PGTrainer:
             self.policies[depth - 1].load_state_dict(below.state_dict())
         self.level = depth
         self.level_best = None
+
+    def has_budget(self) -> bool:
+        """The next cycle fits the budget (a cycle is never started past it)."""
+        d = cycle_depth(self.cfg, self.iteration)
+        return self.timesteps + self.cfg.cycle_evaluations(d) <= self.cfg.timesteps
+
+    def iterate(self) -> None:
+        d = cycle_depth(self.cfg, self.iteration)
+        if d != self.level:
+            self._enter_level(d)
+        self._stats.append(self.cycle())
+        self._level_ends = cycle_depth(self.cfg, self.iteration) != d
+
+    def evaluation_due(self) -> bool:
+        return self.iteration % self.cfg.eval_every == 0 or self._level_ends
 
     def cycle(self) -> dict[str, float]:
         """One training cycle of ``pi_D`` (D = :attr:`level`): collect, eq. (15) costs,
@@ -640,7 +585,7 @@ class PGTrainer:
         return {"loss": float(loss.detach()), **parts, "mean_cost": float(cost.mean()),
                 "mean_std": float(std.detach().mean())}
 
-    # -- evaluation, logging, checkpoints -------------------------------------------------
+    # -- evaluation -----------------------------------------------------------------------
     def evaluate(self, depth: int | None = None, pairs: torch.Tensor | None = None) -> EvalResult:
         """Section 5.1 evaluation of the deterministic policies at ``depth`` (default Dmax)
         on ``pairs`` ``(K, 2, dim)`` (default: the validation set)."""
@@ -649,107 +594,31 @@ class PGTrainer:
         paths = generate_pg_paths(self.policies, self.metric, pt[:, 0], pt[:, 1], d)
         return evaluate_paths(self.metric, paths.cpu().numpy(), self.cfg.eval_eps)
 
-    def _wall(self) -> float:
-        return self.wall_before + (time.perf_counter() - self._t0)
-
-    def _log_and_checkpoint(self) -> dict[str, Any]:
+    def evaluation(self) -> tuple[dict[str, Any], dict[str, Any]]:
+        """The policy being trained at its depth (the paper's curves) and all of them at
+        the task's depth (the best checkpoint is chosen there); keeps the level's best."""
         d = self.level
         ev = self.evaluate(d)
         ev_task = ev if d == self.depth_max else self.evaluate(self.depth_max)
-        wall = self._wall()
         stats = {k: float(np.mean([s[k] for s in self._stats])) if self._stats else math.nan
                  for k in ("loss", "surrogate", "entropy", "mean_cost", "mean_std")}
         self._stats = []
-        row = {
-            "iteration": self.iteration,
-            "timesteps": self.timesteps,
-            "timesteps_paper": self.timesteps_paper,
-            "timesteps_derivative": 0,
-            "wall_seconds": round(wall, 3),
-            "depth": d,
-            "success_rate": ev.success_rate,
-            "mean_length": round(ev.mean_length, 8),
-            "mean_max_segment_cost": round(ev.mean_max_segment_cost, 8),
-            "success_rate_task_depth": ev_task.success_rate,
-            "mean_length_task_depth": round(ev_task.mean_length, 8),
-            "mean_max_segment_cost_task_depth": round(ev_task.mean_max_segment_cost, 8),
-            **stats,
-            "evaluations_per_second": round(self.timesteps / max(wall, 1e-9), 1),
-            "cycles_per_second": round(self.iteration / max(wall, 1e-9), 3),
-        }
-        self.history.append(row)
-        write_metrics(self.run_dir / METRICS_FILE, self.history)
         # best state of the level's policy (restored when the level ends)
         key = _eval_key(ev)
         if self.level_best is None or key > tuple(self.level_best["key"]):
             self.level_best = {"key": list(key), "iteration": self.iteration,
                                "state": copy.deepcopy(self.policies[d - 1].state_dict())}
-        # best checkpoint: the policies as they will be used, at the task's depth
-        if _eval_key(ev_task) > (self.best["success_rate"], -self.best["mean_max_segment_cost"]):
-            self.best = {
-                "success_rate": ev_task.success_rate,
-                "mean_max_segment_cost": ev_task.mean_max_segment_cost,
-                "mean_length": ev_task.mean_length,
-                "timesteps": self.timesteps,
-                "iteration": self.iteration,
-                "depth": d,
-                "wall_seconds": wall,
-            }
-            save_checkpoint(self.run_dir / BEST_FILE, {
-                "format": "learn-checkpoint-v1",
-                "config": self.cfg.to_dict(),
-                "policies": [p.state_dict() for p in self.policies],
-                "eval": dict(self.best),
-            })
-        save_checkpoint(self.run_dir / LATEST_FILE, self._state())
-        return row
+        columns = {"depth": d, **eval_columns(ev), **eval_columns(ev_task, "_task_depth"),
+                   **stats}
+        return columns, best_record(ev_task, timesteps=self.timesteps,
+                                    iteration=self.iteration, depth=d)
 
-    def run(self) -> TrainResult:
-        """Train until the budget (``timesteps``: a cycle is only started if it fits) or
-        ``minutes`` is spent; returns the summary."""
-        from tqdm.auto import tqdm
+    def rates(self, wall: float) -> dict[str, Any]:
+        return {"cycles_per_second": round(self.iteration / max(wall, 1e-9), 3)}
 
-        cfg = self.cfg
-        assert cfg.timesteps is not None
-        self._t0 = time.perf_counter()
-        (self.run_dir / RESULT_FILE).unlink(missing_ok=True)
-        bar = tqdm(total=cfg.timesteps, initial=self.timesteps, unit="C", unit_scale=True,
-                   disable=not self.progress, desc=f"pg {cfg.env}", dynamic_ncols=True)
-        if self.iteration == 0 and not self.history:
-            self._log_and_checkpoint()
-        last_logged = self.iteration
-        stopped_by = "timesteps"
-        with StopOnSignal() as stop:
-            try:
-                while True:
-                    if stop.requested:
-                        stopped_by = stop.requested
-                        break
-                    d = cycle_depth(cfg, self.iteration)
-                    if self.timesteps + cfg.cycle_evaluations(d) > cfg.timesteps:
-                        break
-                    if cfg.minutes is not None and self._wall() >= 60.0 * cfg.minutes:
-                        stopped_by = "minutes"
-                        break
-                    if d != self.level:
-                        self._enter_level(d)
-                    before = self.timesteps
-                    self._stats.append(self.cycle())
-                    bar.update(self.timesteps - before)
-                    level_ends = cycle_depth(cfg, self.iteration) != d
-                    if self.iteration % cfg.eval_every == 0 or level_ends:
-                        row = self._log_and_checkpoint()
-                        last_logged = self.iteration
-                        bar.set_postfix(depth=d, success=f"{row['success_rate']:.2f}",
-                                        task=f"{row['success_rate_task_depth']:.2f}")
-                if self.iteration != last_logged:
-                    self._log_and_checkpoint()
-            finally:
-                bar.close()
-        return finish_run(self.run_dir, self.history, self.best, stopped_by,
-                          self.timesteps, self.iteration,
-                          extra_final=("success_rate_task_depth", "mean_length_task_depth",
-                                       "mean_max_segment_cost_task_depth"))
+    def progress_fields(self, row: dict[str, Any]) -> dict[str, Any]:
+        return {"depth": row["depth"], "success": f"{row['success_rate']:.2f}",
+                "task": f"{row['success_rate_task_depth']:.2f}"}
 
 
 def train_pg(cfg: PGConfig, out: str | Path, resume: bool = False,
@@ -757,8 +626,6 @@ def train_pg(cfg: PGConfig, out: str | Path, resume: bool = False,
     """Train PG with ``cfg`` into run directory ``out`` (``resume`` continues the run saved
     there exactly as an uninterrupted run would; a non-empty ``out`` without ``resume`` is
     refused)."""
-    if not isinstance(cfg, PGConfig):
-        raise InputError(f"train_pg needs a PGConfig, got {type(cfg).__name__}")
     return PGTrainer(cfg, out, resume=resume, progress=progress).run()
 
 
@@ -824,32 +691,30 @@ def load_pg_policy(run_dir: str | Path, checkpoint: str = "best",
     the task's depth on the validation set; falls back to the latest) or ``latest``;
     ``env`` / ``metric_params``, if given, must be the run's
     (:func:`learn.config.check_run_metric`)."""
-    path = Path(run_dir)
-    if not path.is_dir():
-        raise InputError(f"run directory {str(run_dir)!r} does not exist")
-    if checkpoint not in ("best", "latest"):
-        raise InputError(f"checkpoint must be 'best' or 'latest', got {checkpoint!r}")
-    doc = read_json(path / CONFIG_FILE)
-    if not isinstance(doc.get("config"), dict):
-        raise CorruptFileError(f"{path / CONFIG_FILE} has no 'config' section")
-    if doc["config"].get("method") != "pg":
-        raise InputError(f"{path} is not a PG run (method {doc['config'].get('method')!r})")
-    cfg = PGConfig.from_dict(doc["config"])
-    check_run_metric(cfg, f"policy {path}", env, metric_params)
-    order = (BEST_FILE, LATEST_FILE) if checkpoint == "best" else (LATEST_FILE,)
-    for name in order:
-        if (path / name).is_file():
-            ckpt = load_checkpoint(path / name)
-            loaded = name
-            break
-    else:
-        raise InputError(f"run directory {path} holds no checkpoint "
-                         f"({' or '.join(order)})")
+    path, cfg, ckpt, loaded = load_run(run_dir, checkpoint, PGConfig, ("pg",), env,
+                                       metric_params)
     policies = _build_policies(cfg, cfg.metric)
-    try:
-        for p, sd in zip(policies, ckpt["policies"], strict=True):
-            p.load_state_dict(sd)
-    except (KeyError, RuntimeError, TypeError, ValueError) as err:
-        raise CorruptFileError(f"checkpoint in {path} does not match its config: {err}") from err
+    load_weights(_Stack(policies), ckpt.get("policies"), path)
     policies = policies.to(resolve_device(device))
     return PGPolicy(list(policies), cfg, source=str(path), checkpoint=loaded)
+
+
+class _Stack:
+    """The per-depth policies loaded from a list of state dicts (one per depth)."""
+
+    def __init__(self, policies: nn.ModuleList) -> None:
+        self.policies = policies
+
+    def load_state_dict(self, states: Any) -> None:
+        for p, sd in zip(self.policies, states, strict=True):
+            p.load_state_dict(sd)
+
+
+register_method(Method(
+    name="pg",
+    summary="per-depth policies trained by policy gradient (eqs. 15, 16)",
+    config_class=PGConfig,
+    trainer=PGTrainer,
+    load_policy=load_pg_policy,
+    default_config=default_pg_config,
+))

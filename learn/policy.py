@@ -1,8 +1,9 @@
 """Trained midpoint policies: loading, path generation and the section 5.1 evaluation.
 
-``load_policy(run_dir_or_env)`` accepts a run directory written by :func:`learn.train`
-or the name of an environment with a shipped policy (``matsumoto``, ``carlike``,
-``panda-pole``); the returned :class:`Policy` generates paths by ``D`` batched actor calls.
+``load_policy(run_dir_or_env)`` accepts a run directory of any learning method (its
+loader is found in :mod:`learn.registry`) or the name of an environment with a shipped
+policy (``matsumoto``, ``carlike``, ``panda-pole``); a midpoint :class:`Policy`
+generates paths by ``D`` batched actor calls.
 """
 
 from __future__ import annotations
@@ -18,18 +19,12 @@ import torch
 
 import finsler
 from finsler.errors import InputError
-from learn.config import TrainConfig, check_run_metric
+from learn.config import METHODS, TrainConfig
+from learn.loop import load_run, load_weights, read_config_section
 from learn.networks import Actor, resolve_device
+from learn.registry import method_of_run
 from learn.search import SearchResult, SearchSpec, search_paths
-from learn.storage import (
-    BEST_FILE,
-    CONFIG_FILE,
-    LATEST_FILE,
-    POLICY_FILE,
-    CorruptFileError,
-    load_checkpoint,
-    read_json,
-)
+from learn.storage import BEST_FILE, CONFIG_FILE, LATEST_FILE, POLICY_FILE, load_checkpoint
 from learn.tree import build_tree
 
 __all__ = [
@@ -40,6 +35,7 @@ __all__ = [
     "evaluate_paths",
     "evaluate_policy",
     "export_policy",
+    "load_midpoint_policy",
     "load_policy",
     "shipped_policies",
 ]
@@ -257,21 +253,12 @@ def _shipped_dir(name: str) -> Path:
     return Path(str(resources.files("learn") / "policies" / name))
 
 
-def load_policy(run: str | Path, device: str = "cpu", checkpoint: str = "best",
-                env: str | None = None,
-                metric_params: dict[str, Any] | None = None) -> Policy:
-    """Load a policy from a run directory or, given an environment name, the policy
-    shipped with the package. ``checkpoint``: ``best`` (best success on the validation
-    set during training; falls back to the latest) or ``latest``; the policy's
-    ``checkpoint`` attribute names the file actually loaded. With
-    ``env``, the policy must belong to that environment; with ``metric_params``, to the
-    metric with those parameters (the run's config records them; runs written before the
-    field existed are on the defaults). A user metric's class is re-imported from the
-    config's ``metric_class`` if it is not registered.
-
-    Raises :class:`InputError` for a missing directory, an unknown name, an ``env`` or
-    parameter mismatch, and :class:`CorruptFileError` for unreadable files.
-    """
+def load_midpoint_policy(run: str | Path, device: str = "cpu", checkpoint: str = "best",
+                         env: str | None = None,
+                         metric_params: dict[str, Any] | None = None) -> Policy:
+    """The midpoint learner's loader (:func:`load_policy` picks it from the registry for
+    ``midpoint`` / ``inter`` / ``two-to-one`` runs and shipped policies): a run directory
+    or, given an environment name, the policy shipped with the package."""
     path = Path(run)
     if not path.is_dir():
         if str(run) in shipped_policies():
@@ -282,32 +269,38 @@ def load_policy(run: str | Path, device: str = "cpu", checkpoint: str = "best",
                 f"run directory {str(run)!r} does not exist and is not the name of a shipped "
                 f"policy (shipped: {known})"
             )
-    doc = read_json(path / CONFIG_FILE)
-    try:
-        cfg = TrainConfig.from_dict(doc["config"])
-    except KeyError as err:
-        raise CorruptFileError(f"{path / CONFIG_FILE} has no 'config' section") from err
-    check_run_metric(cfg, f"policy {path}", env, metric_params)
-    if checkpoint not in ("best", "latest"):
-        raise InputError(f"checkpoint must be 'best' or 'latest', got {checkpoint!r}")
-    order = (BEST_FILE, POLICY_FILE, LATEST_FILE) if checkpoint == "best" else (
-        LATEST_FILE, POLICY_FILE)
-    for name in order:
-        if (path / name).is_file():
-            ckpt = load_checkpoint(path / name)
-            loaded = name
-            break
-    else:
-        raise InputError(f"run directory {path} holds no checkpoint ({BEST_FILE}, "
-                         f"{POLICY_FILE} or {LATEST_FILE})")
+    path, cfg, ckpt, loaded = load_run(path, checkpoint, TrainConfig, METHODS, env,
+                                       metric_params)
     actor = build_actor(cfg)
-    try:
-        actor.load_state_dict(ckpt["actor"])
-    except (KeyError, RuntimeError) as err:
-        raise CorruptFileError(f"checkpoint in {path} does not match its config: {err}") from err
+    load_weights(actor, ckpt.get("actor"), path)
     if device != "cpu":
         actor = actor.to(resolve_device(device))
     return Policy(actor, cfg, source=str(path), checkpoint=loaded)
+
+
+def load_policy(run: str | Path, device: str = "cpu", checkpoint: str = "best",
+                env: str | None = None, metric_params: dict[str, Any] | None = None) -> Any:
+    """Load the policy of any learning method from a run directory (the method's loader,
+    found in :mod:`learn.registry` by the run's ``method``), or, given an environment
+    name, the midpoint policy shipped with the package. ``checkpoint``: ``best`` (best
+    success on the validation set during training; falls back to the latest) or
+    ``latest``; the policy's ``checkpoint`` attribute names the file actually loaded.
+    With ``env``, the policy must belong to that environment; with ``metric_params``, to
+    the metric with those parameters (the run's config records them; runs written before
+    the field existed are on the defaults). A user metric's class is re-imported from the
+    config's ``metric_class``, a user method's module from ``method_module``, if they are
+    not registered.
+
+    Raises :class:`InputError` for a missing directory, an unknown name, an ``env`` or
+    parameter mismatch, and :class:`CorruptFileError` for unreadable files.
+    """
+    path = Path(run)
+    if path.is_dir():
+        method = method_of_run(path, read_config_section(path))
+        return method.load_policy(path, checkpoint=checkpoint, device=device, env=env,
+                                  metric_params=metric_params)
+    return load_midpoint_policy(run, device=device, checkpoint=checkpoint, env=env,
+                                metric_params=metric_params)
 
 
 def export_policy(run_dir: str | Path, dest: str | Path, checkpoint: str = "best") -> Path:
@@ -317,7 +310,7 @@ def export_policy(run_dir: str | Path, dest: str | Path, checkpoint: str = "best
     from learn.storage import METRICS_FILE, atomic_write_bytes, save_checkpoint
 
     src = Path(run_dir)
-    pol = load_policy(src, checkpoint=checkpoint)
+    pol = load_midpoint_policy(src, checkpoint=checkpoint)
     dest = Path(dest)
     dest.mkdir(parents=True, exist_ok=True)
     ck = load_checkpoint(src / (BEST_FILE if checkpoint == "best" and (src / BEST_FILE)

@@ -1,12 +1,14 @@
 """One entry point for every learning method: named variants, training, status, loading.
 
-The midpoint learner (:mod:`learn.train`) and the paper's baselines (:mod:`learn.seq`,
-:mod:`learn.pg`) write run directories of the same layout (``config.json``,
-``metrics.csv``, ``checkpoint_latest.pt``, ``checkpoint_best.pt`` and, once finished,
-``result.json``). This module picks the right one from a config's ``method`` so that the
-CLI, sweeps and reports never branch on it themselves.
+Every method (the midpoint learner of :mod:`learn.train`, the paper's baselines
+:mod:`learn.seq` and :mod:`learn.pg`, and any method registered from a user's file)
+writes run directories of the same layout (``config.json``, ``metrics.csv``,
+``checkpoint_latest.pt``, ``checkpoint_best.pt`` and, once finished, ``result.json``:
+:class:`learn.loop.RunLoop`). This module finds a run's method in :mod:`learn.registry`,
+so that the CLI, sweeps and reports never branch on it themselves.
 
-Variants (:data:`VARIANTS`) are the configurations compared in the paper's experiment:
+Variants (:data:`VARIANTS`, read from the registry) are the configurations compared in the
+paper's experiment:
 
 * ``midpoint``: the toolkit's defaults (:func:`learn.default_config`); for some
   environments they differentiate C (the path-energy term): not model-free;
@@ -16,27 +18,28 @@ Variants (:data:`VARIANTS`) are the configurations compared in the paper's exper
 * ``paper``: appendix B.1's settings (:func:`learn.paper_config`);
 * ``inter`` / ``two-to-one``: ``midpoint-free`` with the actor loss of eq. (17) / (18);
 * ``seq``: goal-conditioned PPO (section 5.2, appendix B.2);
-* ``pg``: per-depth policy gradient (section 5.2, appendix B.3).
+* ``pg``: per-depth policy gradient (section 5.2, appendix B.3);
+* and the variants of every method registered with :func:`learn.registry.register_method`.
 """
 
 from __future__ import annotations
 
 import contextlib
-import importlib
 import os
 import shutil
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
 from finsler.errors import InputError
+from learn.loop import read_config_section
+from learn.registry import find_variant, get_method, method_of_run, variants
 from learn.storage import (
     BEST_FILE,
     CONFIG_FILE,
     LATEST_FILE,
     METRICS_FILE,
     RESULT_FILE,
-    CorruptFileError,
     read_json,
 )
 
@@ -52,41 +55,25 @@ __all__ = [
     "warm_start_paths",
 ]
 
-VARIANTS: dict[str, str] = {
-    "midpoint": "the toolkit's defaults (may differentiate C: see config.json model_free)",
-    "midpoint-free": "the model-free defaults: every term that differentiates C off (values "
-                     "only), with the passes per collection measured best without them",
-    "paper": "appendix B.1's settings (values of C only)",
-    "inter": "midpoint-free with the actor loss of eq. (17)",
-    "two-to-one": "midpoint-free with the actor loss of eq. (18)",
-    "seq": "goal-conditioned PPO on a gymnasium environment (eqs. 14, 57)",
-    "pg": "per-depth policies trained by policy gradient (eqs. 15, 16)",
-}
 
-# baseline method -> (module, config class, default-config factory, trainer, loader)
-_BASELINES = {
-    "seq": ("learn.seq", "SeqConfig", "default_seq_config", "train_seq", "load_seq_policy"),
-    "pg": ("learn.pg", "PGConfig", "default_pg_config", "train_pg", "load_pg_policy"),
-}
+class _Variants(Mapping[str, str]):
+    """Variant name -> summary, read from :mod:`learn.registry` (live: a method
+    registered later appears)."""
 
+    def __getitem__(self, name: str) -> str:
+        return variants()[name].summary
 
-def _baseline(method: str, what: int) -> Any:
-    entry = _BASELINES[method]
-    return getattr(importlib.import_module(entry[0]), entry[what])
+    def __iter__(self) -> Iterator[str]:
+        return iter(variants())
+
+    def __len__(self) -> int:
+        return len(variants())
+
+    def __repr__(self) -> str:
+        return repr(dict(self))
 
 
-def _backend(method: str) -> tuple[Any, Any, Any]:
-    """``(config class, trainer, policy loader)`` of a method."""
-    if method in _BASELINES:
-        return _baseline(method, 1), _baseline(method, 3), _baseline(method, 4)
-    from learn.config import METHODS, TrainConfig
-    from learn.policy import load_policy
-    from learn.train import train
-
-    if method not in METHODS:
-        raise InputError(f"unknown method {method!r}; known: "
-                         f"{', '.join((*METHODS, *_BASELINES))}")
-    return TrainConfig, train, load_policy
+VARIANTS: Mapping[str, str] = _Variants()
 
 
 def make_config(env: str, variant: str, seed: int = 0, timesteps: int | None = None,
@@ -94,58 +81,38 @@ def make_config(env: str, variant: str, seed: int = 0, timesteps: int | None = N
                 **overrides: Any) -> Any:
     """The config of ``variant`` (a key of :data:`VARIANTS`) for ``env``; ``timesteps`` and
     ``minutes`` bound the run (all-inclusive evaluations of C / wall minutes)."""
-    from learn.config import default_config, model_free_overrides, paper_config
-
-    if variant not in VARIANTS:
-        raise InputError(f"unknown variant {variant!r}; known: {', '.join(VARIANTS)}")
+    _, var = find_variant(variant)
     common: dict[str, Any] = {"seed": seed, "minutes": minutes, "device": device}
     if timesteps is not None:
         common["timesteps"] = timesteps
     common.update(overrides)
-    if variant == "midpoint":
-        return default_config(env, **common)
-    if variant == "paper":
-        return paper_config(env, **common)
-    if variant in ("midpoint-free", "inter", "two-to-one"):
-        method = "midpoint" if variant == "midpoint-free" else variant
-        return default_config(env, **{**model_free_overrides(env), "method": method,
-                                      **common})
-    return _baseline(variant, 2)(env, **common)
+    return var.make(env, **common)
 
 
 def load_run_config(run_dir: str | Path) -> Any:
     """The config saved in a run directory, as the method's config class."""
     if not Path(run_dir).is_dir():
         raise InputError(f"run directory {run_dir} does not exist")
-    doc = read_json(Path(run_dir) / CONFIG_FILE)
-    cfg = doc.get("config")
-    if not isinstance(cfg, dict):
-        raise CorruptFileError(f"{Path(run_dir) / CONFIG_FILE} has no 'config' section")
-    cls, _, _ = _backend(str(cfg.get("method", "midpoint")))
-    return cls.from_dict(cfg)
+    section = read_config_section(run_dir)
+    return method_of_run(run_dir, section).config_class.from_dict(section)
 
 
 def train_run(cfg: Any, out: str | Path, resume: bool = False, progress: bool = True) -> Any:
     """Train ``cfg`` (any method's config) into run directory ``out``."""
-    _, trainer, _ = _backend(cfg.method)
-    return trainer(cfg, out, resume=resume, progress=progress)
+    return get_method(cfg.method).train(cfg, out, resume=resume, progress=progress)
 
 
 def load_any_policy(run: str | Path, checkpoint: str = "best", device: str = "cpu",
                     env: str | None = None,
                     metric_params: dict[str, Any] | None = None) -> Any:
-    """Load the policy of any method from a run directory (or a shipped policy's name).
-    ``env`` and ``metric_params``, if given, must be the run's metric and parameters (the
-    run's own parameters are always used: a policy is loaded for the metric it learned)."""
-    path = Path(run)
-    method = "midpoint"
-    if path.is_dir() and (path / CONFIG_FILE).is_file():
-        section = read_json(path / CONFIG_FILE).get("config", {})
-        method = str(section.get("method", "midpoint") if isinstance(section, dict)
-                     else "midpoint")
-    _, _, loader = _backend(method)
-    return loader(run, device=device, checkpoint=checkpoint, env=env,
-                  metric_params=metric_params)
+    """Load the policy of any method from a run directory (or a shipped policy's name):
+    :func:`learn.load_policy`. ``env`` and ``metric_params``, if given, must be the run's
+    metric and parameters (the run's own parameters are always used: a policy is loaded
+    for the metric it learned)."""
+    from learn.policy import load_policy
+
+    return load_policy(run, device=device, checkpoint=checkpoint, env=env,
+                       metric_params=metric_params)
 
 
 def warm_start_paths(source: str | Path, metric: Any, pairs: Any,
@@ -158,9 +125,8 @@ def warm_start_paths(source: str | Path, metric: Any, pairs: Any,
     :class:`InputError` naming the difference. ``pairs`` ``(K, 2, dim)``. ``search``: the
     route search's paths (:meth:`learn.Policy.search`) instead of the plain generation.
     """
-    import dataclasses
-
     import learn
+    from finsler import MetricSpec
 
     src = str(source)
     path = Path(source)
@@ -178,18 +144,15 @@ def warm_start_paths(source: str | Path, metric: Any, pairs: Any,
                              "directory")
         raise InputError(f"--warm-start {src}: no such run directory, and not an environment "
                          f"with a shipped policy (shipped: {known})")
-    pm = pol.metric
-    if pm.name != metric.name:
-        raise InputError(f"--warm-start {src} is a policy for {pm.name!r}, not for "
-                         f"{metric.name!r}")
-    if pm != metric:
-        def params(m: Any) -> dict[str, Any]:
-            return {f.name: getattr(m, f.name) for f in dataclasses.fields(m) if f.init}
-
-        a, b = params(pm), params(metric)
-        diff = ", ".join(f"{k}={a.get(k)!r} (solve: {b.get(k)!r})" for k in sorted(set(a) | set(b))
-                         if a.get(k) != b.get(k)) or f"class {type(pm)} vs {type(metric)}"
-        raise InputError(f"--warm-start {src} was trained on {pm.name} with other parameters "
+    mine, theirs = MetricSpec.of(pol.metric), MetricSpec.of(metric)
+    if mine.name != theirs.name:
+        raise InputError(f"--warm-start {src} is a policy for {mine.name!r}, not for "
+                         f"{theirs.name!r}")
+    if mine != theirs:
+        diff = ", ".join(f"{k}={a!r} (solve: {b!r})"
+                         for k, (a, b) in sorted(mine.param_differences(theirs).items())) \
+            or f"class {mine.class_path} vs {theirs.class_path}"
+        raise InputError(f"--warm-start {src} was trained on {mine.name} with other parameters "
                          f"than the solve's metric: {diff}")
     if search:
         if not callable(getattr(pol, "search", None)):

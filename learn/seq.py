@@ -1,33 +1,19 @@
 """The paper's sequential RL baseline "Seq" (section 5.2, appendix B.2): goal-conditioned PPO.
 
-The agent walks from a start ``s`` to a goal ``g`` in steps of local cost ``eps``:
-
-* observation ``(p, g)`` (``2 * dim``), action a direction ``v`` (``dim``, in ``[-1, 1]``);
-* next point, eq. (57): ``q = p + eps / F(p, v) * v``, projected into the domain (the
-  coordinates are the chart, so ``df`` is the identity);
-* reward, eq. (14): ``R = F(g, g - p) - F(g, g - q) - eps``; a zero action leaves ``p``
-  where it is and gives ``R = -100``;
-* the episode terminates (success) when ``C(q, g) < eps`` and is truncated after
-  ``n = 2**D`` steps (D: the task's depth).
-
-:class:`GeodesicEnv` is that environment for any registered metric (gymnasium API);
-:class:`GeodesicVecEnv` steps ``n_envs`` copies at once with one vectorised evaluation of
-``F`` per quantity (a stable-baselines3 ``VecEnv`` with exactly the transitions of
-``DummyVecEnv`` over :class:`GeodesicEnv`). :func:`train_seq` trains stable-baselines3's
-PPO with the paper's hyperparameters into a run directory of the shared contract
+stable-baselines3's PPO, with the paper's hyperparameters, on the goal-conditioned walk of
+eqs. (57) and (14) (:mod:`learn.env`: :class:`GeodesicEnv`, and :class:`GeodesicVecEnv`
+that steps ``n_envs`` copies with one vectorised evaluation of ``F`` per quantity).
+:class:`SeqTrainer` trains it into a run directory of the shared contract
 (``config.json``, ``metrics.csv``, ``checkpoint_latest.pt``, ``checkpoint_best.pt``,
-``result.json``); :func:`load_seq_policy` loads a :class:`SeqPolicy` that generates and
-evaluates paths like :class:`learn.policy.Policy`.
+``result.json``; the loop is :class:`learn.loop.RunLoop`'s); :func:`load_seq_policy`
+loads a :class:`SeqPolicy` that generates and evaluates paths like
+:class:`learn.policy.Policy`.
 
 **Counting.** ``timesteps`` (the budget) counts every evaluation of ``F`` or ``C`` the
-environment makes, whatever for: per step with a non-zero action exactly 3 (``F(p, v)`` of
-eq. (57), ``F(g, g - q)`` of eq. (14) and ``C(q, g)`` of the termination test;
-``F(g, g - p)`` is carried over from the previous step), 0 for a zero action (nothing
-changes), and 2 per sampled start/goal candidate at a reset (``F(g, g - s)`` and
-``C(s, g)``; 1 for a reset to given points, which training never does).
-``timesteps_paper`` counts environment steps (the paper's count, section 5.2), so
-``timesteps`` is about 3x ``timesteps_paper``. The validation rollouts are not training
-and are not counted.
+environments make, whatever for (3 per step with a non-zero action, 0 for a zero action,
+2 per sampled start/goal candidate at a reset: :mod:`learn.env`); ``timesteps_paper``
+counts environment steps (the paper's count, section 5.2), so ``timesteps`` is about 3x
+``timesteps_paper``. The validation rollouts are not training and are not counted.
 
 **Departures and choices** (all recorded in ``config.json``): like the authors' code
 (``scripts/gym_env_wrapper.py`` of omron-sinicx/midpoint_learning) a start/goal pair that
@@ -41,57 +27,44 @@ gym-0.21 code ended such episodes as plain terminations.
 from __future__ import annotations
 
 import dataclasses
-import json
 import math
 import random
-import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import gymnasium
 import numpy as np
 import torch
-from gymnasium import spaces
-from gymnasium.utils import seeding
-from stable_baselines3.common.vec_env.base_vec_env import VecEnv
 
 import finsler
 from finsler.errors import InputError
-from learn.base import StopOnSignal, TrainResult, check_hidden, finish_run
-from learn.config import (
-    MetricConfig,
-    check_run_metric,
-    ensure_registered,
-    metric_info,
-    package_versions,
+from learn.base import TrainResult, check_hidden
+from learn.config import MetricConfig, ensure_registered, package_versions
+from learn.env import (
+    TIME_LIMITS,
+    ZERO_ACTION_REWARD,
+    GeodesicEnv,
+    GeodesicVecEnv,
+    env_spaces,
+    move,
+    observation,
 )
+from learn.loop import RunLoop, best_record, eval_columns, load_run, load_weights
 from learn.networks import resolve_device
 from learn.policy import EvalResult, check_pairs
-from learn.storage import (
-    BEST_FILE,
-    CONFIG_FILE,
-    LATEST_FILE,
-    METRICS_FILE,
-    RESULT_FILE,
-    CorruptFileError,
-    atomic_write_text,
-    check_run_dir,
-    load_checkpoint,
-    read_json,
-    restore_history,
-    save_checkpoint,
-    write_metrics,
-)
+from learn.registry import Method, register_method
 
 __all__ = [
     "SEGMENT_RTOL",
+    "TIME_LIMITS",
+    "WALL_COLUMNS",
     "ZERO_ACTION_REWARD",
     "GeodesicEnv",
     "GeodesicVecEnv",
     "SeqConfig",
     "SeqEvalResult",
     "SeqPolicy",
+    "SeqTrainer",
     "default_seq_config",
     "evaluate_seq",
     "load_seq_policy",
@@ -99,359 +72,10 @@ __all__ = [
     "train_seq",
 ]
 
-#: Reward of a zero action (appendix B.2); the point does not move.
-ZERO_ACTION_REWARD = -100.0
-TIME_LIMITS = ("truncate", "terminate")
-"""How the step limit may end an episode (see :class:`SeqConfig`.time_limit)."""
 #: Relative tolerance on the segment test ``C(p_i, p_i+1) <= eps`` of Seq's paths: every
 #: step of eq. (57) has ``C = eps`` exactly in exact arithmetic, ``eps * (1 +- 1e-16)`` in
 #: float64 (see :func:`evaluate_seq`).
 SEGMENT_RTOL = 1e-9
-_MAX_RESAMPLE_ROUNDS = 1000
-
-
-# ----------------------------------------------------------------------------------------
-# The transition of eqs. (57) and (14), batch-first, float64
-# ----------------------------------------------------------------------------------------
-def _metric_of(metric: finsler.Metric | str) -> finsler.Metric:
-    return metric if isinstance(metric, finsler.Metric) else finsler.get_metric(metric)
-
-
-def _move(metric: finsler.Metric, eps: float, p: np.ndarray,
-          v: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
-    """Eq. (57) for rows ``p, v`` ``(N, dim)`` float64: ``q = proj(p + eps / F(p, v) * v)``.
-
-    Rows with ``v == 0`` stay (``q = p``), as do rows where ``F(p, v)`` is not positive and
-    finite (impossible for a Finsler metric; guarded, not silently divided by).
-    Returns ``(q (N, dim), moved (N,) bool, evaluations of F)``.
-    """
-    q = p.copy()
-    moved = np.any(v != 0.0, axis=1)
-    idx = np.flatnonzero(moved)
-    if idx.size == 0:
-        return q, moved, 0
-    f = np.asarray(metric.F(p[idx], v[idx]), dtype=np.float64)
-    ok = np.isfinite(f) & (f > 0.0)
-    good = idx[ok]
-    if good.size:
-        q[good] = metric.domain.project(p[good] + (eps / f[ok])[:, None] * v[good])
-    moved[idx[~ok]] = False
-    return q, moved, int(idx.size)
-
-
-def _transition(metric: finsler.Metric, eps: float, p: np.ndarray, g: np.ndarray,
-                v: np.ndarray, dist: np.ndarray
-                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int]:
-    """One step of every row: points ``p``, goals ``g``, actions ``v`` ``(N, dim)`` and the
-    carried ``dist = F(g, g - p)`` ``(N,)``.
-
-    Returns ``(q, reward, F(g, g - q), reached = C(q, g) < eps, evaluations)``; a row that
-    did not move gets ``R = -100``, keeps its ``dist`` and is not reached (its point was
-    tested at the previous step or at the reset).
-    """
-    q, moved, n_eval = _move(metric, eps, p, v)
-    reward = np.full(p.shape[0], ZERO_ACTION_REWARD)
-    new_dist = dist.copy()
-    reached = np.zeros(p.shape[0], dtype=bool)
-    idx = np.flatnonzero(moved)
-    if idx.size:
-        gm, qm = g[idx], q[idx]
-        d = gm - qm
-        # F(g, g - q) (eq. 14) and C(q, g) = F(q, g - q) in one vectorised call
-        both = np.asarray(metric.F(np.concatenate([gm, qm]), np.concatenate([d, d])))
-        k = idx.size
-        new_dist[idx] = both[:k]
-        reward[idx] = dist[idx] - both[:k] - eps
-        reached[idx] = both[k:] < eps
-        n_eval += 2 * k
-    return q, reward, new_dist, reached, n_eval
-
-
-def _sample_pairs(metric: finsler.Metric, eps: float, rngs: list[np.random.Generator],
-                  reject_solved: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
-    """One start/goal pair per generator (``domain.sample(2, rng)``: row 0 the start, row 1
-    the goal), redrawn while ``C(s, g) < eps`` if ``reject_solved``.
-
-    Returns ``(starts, goals (K, dim), F(g, g - s) (K,), evaluations)``.
-    """
-    k, dim = len(rngs), metric.dim
-    s, g, dist = np.empty((k, dim)), np.empty((k, dim)), np.empty(k)
-    pending = np.arange(k)
-    n_eval = 0
-    for _ in range(_MAX_RESAMPLE_ROUNDS):
-        for i in pending:
-            pts = metric.domain.sample(2, rngs[i])
-            s[i], g[i] = pts[0], pts[1]
-        gp, sp = g[pending], s[pending]
-        d = gp - sp
-        both = np.asarray(metric.F(np.concatenate([gp, sp]), np.concatenate([d, d])))
-        m = pending.size
-        dist[pending] = both[:m]
-        n_eval += 2 * m
-        pending = pending[both[m:] < eps] if reject_solved else pending[:0]
-        if pending.size == 0:
-            return s, g, dist, n_eval
-    raise InputError(f"eps = {eps!r} is too large for {metric.name}: {_MAX_RESAMPLE_ROUNDS} "
-                     "uniform start/goal pairs in a row were already within eps")
-
-
-def _spaces(metric: finsler.Metric) -> tuple[spaces.Box, spaces.Box]:
-    """Observation box ``(p, g)`` from the domain's bounds and action box ``[-1, 1]**dim``
-    (float32, as SB3's networks use)."""
-    lo, hi = metric.domain.bounds()
-    lo2 = np.concatenate([lo, lo]).astype(np.float32)
-    hi2 = np.concatenate([hi, hi]).astype(np.float32)
-    obs = spaces.Box(lo2, hi2, dtype=np.float32)
-    act = spaces.Box(-np.ones(metric.dim, np.float32), np.ones(metric.dim, np.float32),
-                     dtype=np.float32)
-    return obs, act
-
-
-def _obs(p: np.ndarray, g: np.ndarray) -> np.ndarray:
-    return np.concatenate([p, g], axis=-1).astype(np.float32)
-
-
-def _check_action(a: Any, n: int, dim: int) -> np.ndarray:
-    """Actions as float64 ``(n, dim)``; :class:`InputError` for a wrong size or NaN/inf."""
-    if np.size(a) != n * dim:
-        raise InputError(f"action must have {dim} components per environment ({n}), got "
-                         f"shape {np.shape(a)}")
-    v = np.asarray(a, dtype=np.float64).reshape(n, dim)
-    if not np.all(np.isfinite(v)):
-        raise InputError("action contains NaN or inf")
-    return v
-
-
-# ----------------------------------------------------------------------------------------
-# Environments
-# ----------------------------------------------------------------------------------------
-class GeodesicEnv(gymnasium.Env):
-    """Goal-conditioned walk of eqs. (57) and (14) on any metric (gymnasium API).
-
-    Parameters: ``metric`` (a :class:`finsler.Metric` or a registered name), ``eps``
-    (step cost and success threshold; default the task's), ``depth`` (the episode lasts at
-    most ``2**depth`` steps; default the task's), ``reject_solved`` (redraw start/goal
-    pairs with ``C(s, g) < eps``, as the authors' code does).
-
-    ``reset(seed=..., options={"start": s, "goal": g})`` starts from given points (no
-    redraw). The state is float64; observations are float32 ``(2 * dim,)``. Counters:
-    :attr:`evaluations` (every evaluation of F or C, see the module docstring) and
-    :attr:`env_steps` (steps taken, the paper's count). ``info["is_success"]`` marks the
-    terminating step, ``info["evaluations"]`` the evaluations of this call.
-    """
-
-    metadata: dict[str, Any] = {"render_modes": []}  # noqa: RUF012 (gymnasium's API)
-
-    def __init__(self, metric: finsler.Metric | str = "matsumoto", eps: float | None = None,
-                 depth: int | None = None, reject_solved: bool = True,
-                 render_mode: str | None = None, time_limit: str = "truncate") -> None:
-        super().__init__()
-        if time_limit not in TIME_LIMITS:
-            raise InputError(f"time_limit must be one of {', '.join(TIME_LIMITS)}, got "
-                             f"{time_limit!r}")
-        self.time_limit = time_limit
-        self.metric = _metric_of(metric)
-        self.eps = float(self.metric.task.eps if eps is None else eps)
-        self.depth = int(self.metric.task.depth if depth is None else depth)
-        if not (math.isfinite(self.eps) and self.eps > 0):
-            raise InputError(f"eps must be positive and finite, got {eps!r}")
-        if self.depth < 0:
-            raise InputError(f"depth must be a non-negative integer, got {depth!r}")
-        if render_mode is not None:
-            raise InputError("GeodesicEnv has no render modes")
-        self.render_mode = render_mode
-        self.max_steps = 2**self.depth
-        self.reject_solved = bool(reject_solved)
-        self.observation_space, self.action_space = _spaces(self.metric)
-        self.evaluations = 0
-        self.env_steps = 0
-        self._p = np.zeros((1, self.metric.dim))
-        self._g = np.zeros((1, self.metric.dim))
-        self._dist = np.zeros(1)
-        self._t = 0
-
-    @property
-    def point(self) -> np.ndarray:
-        """Current point ``(dim,)`` float64."""
-        return self._p[0].copy()
-
-    @property
-    def goal(self) -> np.ndarray:
-        """Goal ``(dim,)`` float64."""
-        return self._g[0].copy()
-
-    def reset(self, *, seed: int | None = None,
-              options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
-        super().reset(seed=seed)
-        options = options or {}
-        if "start" in options or "goal" in options:
-            s = self.metric.domain.check(options.get("start"), "start").reshape(1, -1)
-            g = self.metric.domain.check(options.get("goal"), "goal").reshape(1, -1)
-            dist = np.asarray(self.metric.F(g, g - s)).reshape(1)
-            n_eval = 1
-        else:
-            s, g, dist, n_eval = _sample_pairs(self.metric, self.eps, [self.np_random],
-                                               self.reject_solved)
-        self._p, self._g, self._dist, self._t = s.copy(), g.copy(), dist, 0
-        self.evaluations += n_eval
-        return _obs(self._p, self._g)[0], {"evaluations": n_eval}
-
-    def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
-        v = _check_action(action, 1, self.metric.dim)
-        q, reward, dist, reached, n_eval = _transition(self.metric, self.eps, self._p,
-                                                       self._g, v, self._dist)
-        self._p, self._dist = q, dist
-        self._t += 1
-        self.env_steps += 1
-        self.evaluations += n_eval
-        terminated = bool(reached[0])
-        truncated = (not terminated) and self._t >= self.max_steps
-        if truncated and self.time_limit == "terminate":
-            terminated, truncated = True, False
-        info = {"is_success": bool(reached[0]), "evaluations": n_eval}
-        return _obs(self._p, self._g)[0], float(reward[0]), terminated, truncated, info
-
-
-class GeodesicVecEnv(VecEnv):
-    """``n_envs`` copies of :class:`GeodesicEnv` stepped together: one vectorised call of
-    ``F`` per quantity for all copies instead of one per copy.
-
-    Same transitions, rewards, infos and random streams as
-    ``DummyVecEnv([lambda: GeodesicEnv(...)] * n_envs)``: copy ``i`` has its own
-    generator, seeded with ``seed + i`` at the first :meth:`reset` after :meth:`seed`;
-    finished copies are reset automatically and their last observation is in
-    ``info["terminal_observation"]`` (SB3's convention). Rewards are float32 as in
-    ``DummyVecEnv``. Counters: :attr:`evaluations` (all copies, all-inclusive),
-    :attr:`env_steps` (steps of all copies), :attr:`episodes` and :attr:`successes`
-    (finished and terminated training episodes).
-    """
-
-    def __init__(self, metric: finsler.Metric | str, n_envs: int, eps: float | None = None,
-                 depth: int | None = None, reject_solved: bool = True,
-                 time_limit: str = "truncate") -> None:
-        if not isinstance(n_envs, (int, np.integer)) or n_envs < 1:
-            raise InputError(f"n_envs must be a positive integer, got {n_envs!r}")
-        proto = GeodesicEnv(metric, eps=eps, depth=depth, reject_solved=reject_solved,
-                            time_limit=time_limit)
-        self.time_limit = time_limit
-        self.metric, self.eps, self.max_steps = proto.metric, proto.eps, proto.max_steps
-        self.reject_solved = proto.reject_solved
-        self.render_mode = None
-        super().__init__(int(n_envs), proto.observation_space, proto.action_space)
-        n, dim = self.num_envs, self.metric.dim
-        self._p, self._g = np.zeros((n, dim)), np.zeros((n, dim))
-        self._dist = np.zeros(n)
-        self._t = np.zeros(n, dtype=np.int64)
-        self._rngs: list[np.random.Generator | None] = [None] * n
-        self._actions = np.zeros((n, dim))
-        self.evaluations = 0
-        self.env_steps = 0
-        self.episodes = 0
-        self.successes = 0
-
-    # -- VecEnv API -----------------------------------------------------------------------
-    def reset(self) -> np.ndarray:
-        for i in range(self.num_envs):
-            if self._seeds[i] is not None or self._rngs[i] is None:
-                self._rngs[i] = seeding.np_random(self._seeds[i])[0]
-        self._reset_rows(np.arange(self.num_envs))
-        self._reset_seeds()
-        self._reset_options()
-        return _obs(self._p, self._g)
-
-    def _reset_rows(self, rows: np.ndarray) -> None:
-        rngs = [self._rngs[i] for i in rows]
-        s, g, dist, n_eval = _sample_pairs(self.metric, self.eps, rngs,  # type: ignore[arg-type]
-                                           self.reject_solved)
-        self._p[rows], self._g[rows], self._dist[rows] = s, g, dist
-        self._t[rows] = 0
-        self.evaluations += n_eval
-
-    def step_async(self, actions: np.ndarray) -> None:
-        self._actions = _check_action(actions, self.num_envs, self.metric.dim)
-
-    def step_wait(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[dict[str, Any]]]:
-        q, reward, dist, reached, n_eval = _transition(
-            self.metric, self.eps, self._p, self._g, self._actions, self._dist)
-        self._p, self._dist = q, dist
-        self._t += 1
-        self.env_steps += self.num_envs
-        self.evaluations += n_eval
-        truncated = ~reached & (self._t >= self.max_steps)
-        dones = reached | truncated
-        obs = _obs(self._p, self._g)
-        infos: list[dict[str, Any]] = [
-            {"is_success": bool(reached[i]),
-             "TimeLimit.truncated": bool(truncated[i]) and self.time_limit == "truncate"}
-            for i in range(self.num_envs)
-        ]
-        done_rows = np.flatnonzero(dones)
-        if done_rows.size:
-            for i in done_rows:
-                infos[i]["terminal_observation"] = obs[i].copy()
-            self.episodes += int(done_rows.size)
-            self.successes += int(reached.sum())
-            self._reset_rows(done_rows)
-            obs[done_rows] = _obs(self._p[done_rows], self._g[done_rows])
-        return obs, reward.astype(np.float32), dones, infos
-
-    def close(self) -> None:
-        pass
-
-    def get_attr(self, attr_name: str, indices: Any = None) -> list[Any]:
-        return [getattr(self, attr_name)] * len(self._indices(indices))
-
-    def set_attr(self, attr_name: str, value: Any, indices: Any = None) -> None:
-        setattr(self, attr_name, value)
-
-    def env_method(self, method_name: str, *method_args: Any, indices: Any = None,
-                   **method_kwargs: Any) -> list[Any]:
-        fn = getattr(self, method_name)
-        return [fn(*method_args, **method_kwargs) for _ in self._indices(indices)]
-
-    def env_is_wrapped(self, wrapper_class: type, indices: Any = None) -> list[bool]:
-        return [False] * len(self._indices(indices))
-
-    def _indices(self, indices: Any) -> list[int]:
-        if indices is None:
-            return list(range(self.num_envs))
-        if isinstance(indices, int):
-            return [indices]
-        return list(indices)
-
-    # -- state for exact resume -----------------------------------------------------------
-    def get_state(self) -> dict[str, Any]:
-        """Everything that defines the future of the copies (tensors and plain data)."""
-        return {
-            "points": torch.from_numpy(self._p.copy()),
-            "goals": torch.from_numpy(self._g.copy()),
-            "dist": torch.from_numpy(self._dist.copy()),
-            "t": torch.from_numpy(self._t.copy()),
-            "rngs": [None if r is None else r.bit_generator.state for r in self._rngs],
-            "counters": {"evaluations": self.evaluations, "env_steps": self.env_steps,
-                         "episodes": self.episodes, "successes": self.successes},
-        }
-
-    def set_state(self, st: dict[str, Any]) -> None:
-        n = self.num_envs
-        p = st["points"].numpy().astype(np.float64)
-        if p.shape != (n, self.metric.dim) or len(st["rngs"]) != n:
-            raise ValueError(f"saved environment state is for {p.shape} points, not "
-                             f"({n}, {self.metric.dim})")
-        self._p, self._g = p, st["goals"].numpy().astype(np.float64)
-        self._dist = st["dist"].numpy().astype(np.float64)
-        self._t = st["t"].numpy().astype(np.int64)
-        for i, s in enumerate(st["rngs"]):
-            if s is None:
-                self._rngs[i] = None
-            else:
-                r = np.random.Generator(np.random.PCG64())
-                r.bit_generator.state = s
-                self._rngs[i] = r
-        c = st["counters"]
-        self.evaluations, self.env_steps = int(c["evaluations"]), int(c["env_steps"])
-        self.episodes, self.successes = int(c["episodes"]), int(c["successes"])
-        self._reset_seeds()
 
 
 # ----------------------------------------------------------------------------------------
@@ -620,14 +244,12 @@ def _paper_differences(cfg: SeqConfig) -> dict[str, dict[str, Any]]:
     return {k: {"used": d[k], "paper": v} for k, v in paper.items() if d[k] != v}
 
 
-def _config_json(cfg: SeqConfig) -> str:
+def _run_document(cfg: SeqConfig) -> dict[str, Any]:
+    """``config.json``'s sections about Seq."""
     import gymnasium as gym
     import stable_baselines3 as sb3
 
-    doc = {
-        "config": cfg.to_dict(),
-        "metric": metric_info(cfg),
-        "task": {"depth": cfg.max_depth, "eps": cfg.eval_eps, "segments": 2**cfg.max_depth},
+    return {
         "model_free": True,
         "uses_derivative_of_C": [],
         "counts": "timesteps = every evaluation of F or C made by the environments during "
@@ -643,7 +265,6 @@ def _config_json(cfg: SeqConfig) -> str:
                      "gymnasium": gym.__version__},
         "beyond_paper": _paper_differences(cfg),
     }
-    return json.dumps(doc, indent=2)
 
 
 # ----------------------------------------------------------------------------------------
@@ -677,8 +298,8 @@ def rollout(act: Any, metric: finsler.Metric, starts: np.ndarray, goals: np.ndar
     for j in range(1, steps + 1):
         active = np.flatnonzero(reached_at < 0)
         if active.size:
-            v = act(_obs(p[active], g[active]))
-            q, moved, _ = _move(metric, eps, p[active], v)
+            v = act(observation(p[active], g[active]))
+            q, moved, _ = move(metric, eps, p[active], v)
             p[active] = q
             mv = active[moved]
             if mv.size:
@@ -789,7 +410,7 @@ def _build_policy(cfg: SeqConfig, device: str = "cpu") -> Any:
     ``cfg`` (untrained)."""
     from stable_baselines3.common.policies import ActorCriticPolicy
 
-    obs, act = _spaces(cfg.metric)
+    obs, act = env_spaces(cfg.metric)
     lr = cfg.lr
     return ActorCriticPolicy(obs, act, lambda _: lr, **_policy_kwargs(cfg)).to(
         resolve_device(device))
@@ -859,30 +480,10 @@ def load_seq_policy(run_dir: str | Path, checkpoint: str = "best",
     """Load the Seq policy of a run directory: ``checkpoint`` ``best`` (best validation
     success; falls back to the latest) or ``latest``; ``env`` / ``metric_params``, if
     given, must be the run's (:func:`learn.config.check_run_metric`)."""
-    path = Path(run_dir)
-    if not path.is_dir():
-        raise InputError(f"run directory {str(run_dir)!r} does not exist")
-    if checkpoint not in ("best", "latest"):
-        raise InputError(f"checkpoint must be 'best' or 'latest', got {checkpoint!r}")
-    doc = read_json(path / CONFIG_FILE)
-    if not isinstance(doc.get("config"), dict):
-        raise CorruptFileError(f"{path / CONFIG_FILE} has no 'config' section")
-    if doc["config"].get("method") != "seq":
-        raise InputError(f"{path} is not a Seq run (method {doc['config'].get('method')!r})")
-    cfg = SeqConfig.from_dict(doc["config"])
-    check_run_metric(cfg, f"policy {path}", env, metric_params)
-    order = (BEST_FILE, LATEST_FILE) if checkpoint == "best" else (LATEST_FILE,)
-    for name in order:
-        if (path / name).is_file():
-            ckpt = load_checkpoint(path / name)
-            break
-    else:
-        raise InputError(f"run directory {path} holds no checkpoint ({', '.join(order)})")
+    path, cfg, ckpt, name = load_run(run_dir, checkpoint, SeqConfig, ("seq",), env,
+                                     metric_params)
     policy = _build_policy(cfg, device)
-    try:
-        policy.load_state_dict(ckpt["policy"])
-    except (KeyError, RuntimeError) as err:
-        raise CorruptFileError(f"checkpoint in {path} does not match its config: {err}") from err
+    load_weights(policy, ckpt.get("policy"), path)
     return SeqPolicy(policy, cfg, source=str(path), checkpoint=name)
 
 
@@ -902,28 +503,26 @@ _TRAIN_KEYS = {
 WALL_COLUMNS = ("wall_seconds", "evaluations_per_second", "steps_per_second")
 
 
-class SeqTrainer:
-    """PPO (stable-baselines3) on :class:`GeodesicVecEnv` into a run directory.
+class SeqTrainer(RunLoop):
+    """PPO (stable-baselines3) on :class:`GeodesicVecEnv` into a run directory (the loop:
+    :class:`learn.loop.RunLoop`).
 
     One iteration = one SB3 rollout of ``n_envs * n_steps`` steps and its PPO update
     (``model.learn`` for exactly one rollout, ``reset_num_timesteps=False``: SB3's own
     loop, cut into rollouts so that budgets, evaluations and checkpoints fall between
     rollouts). The learning rate and clip range are constant (the paper's settings), so
-    this is the same computation as one long ``learn`` call.
+    this is the same computation as one long ``learn`` call. A metrics row is written
+    every ``eval_every`` all-inclusive timesteps (checked after each rollout).
     """
 
-    def __init__(self, cfg: SeqConfig, run_dir: str | Path, resume: bool = False,
-                 progress: bool = True) -> None:
+    config_class = SeqConfig
+    label = "seq"
+
+    def setup(self) -> None:
         from stable_baselines3 import PPO
         from stable_baselines3.common.logger import Logger
 
-        if not isinstance(cfg, SeqConfig):
-            raise InputError(f"train_seq needs a SeqConfig, got {type(cfg).__name__}")
-        self.run_dir = check_run_dir(Path(run_dir), resume)
-        self.progress = progress
-        if resume:
-            cfg = self._resume_config(cfg)
-        self.cfg = cfg
+        cfg = self.cfg
         self.device = resolve_device(cfg.device)
         torch.set_num_threads(cfg.threads)
         self.metric = cfg.metric
@@ -938,61 +537,27 @@ class SeqTrainer:
             vf_coef=cfg.vf_coef, max_grad_norm=cfg.max_grad_norm,
             policy_kwargs=_policy_kwargs(cfg), seed=cfg.seed, device=self.device, verbose=0)
         self.model.set_logger(Logger(folder=None, output_formats=[]))
-        self.iteration = 0
         self.next_eval = 0
-        self.wall_before = 0.0
-        self.best: dict[str, float] = {"success_rate": -1.0, "mean_max_segment_cost": math.inf}
-        self.history: list[dict[str, Any]] = []
         self._ep_mark = (0, 0)  # (episodes, successes) at the last metrics row
-        if resume:
-            if not (self.run_dir / LATEST_FILE).is_file():
-                raise InputError(
-                    f"cannot resume: {self.run_dir / LATEST_FILE} is missing (the run's "
-                    "progress cannot be restored; nothing was changed). Start a new run "
-                    "with another --out")
-            self._load_state(load_checkpoint(self.run_dir / LATEST_FILE))
-        else:
-            # the first reset, as SB3's first ``learn`` would do it (seeds seed + i)
-            self.model._last_obs = self.venv.reset()
-            self.model._last_episode_starts = np.ones(cfg.n_envs, dtype=bool)
-            self.run_dir.mkdir(parents=True, exist_ok=True)
-            atomic_write_text(self.run_dir / CONFIG_FILE, _config_json(cfg))
 
-    # -- counters -------------------------------------------------------------------------
-    @property
-    def timesteps(self) -> int:
-        """All-inclusive evaluations of F or C during training."""
-        return self.venv.evaluations
+    def start(self) -> None:
+        # the first reset, as SB3's first ``learn`` would do it (seeds seed + i)
+        self.model._last_obs = self.venv.reset()
+        self.model._last_episode_starts = np.ones(self.cfg.n_envs, dtype=bool)
+        self._sync_counters()
+        self.next_eval = self.cfg.eval_every  # the first row is at iteration 0
 
-    @property
-    def timesteps_paper(self) -> int:
-        """Environment steps (the paper's count)."""
-        return self.venv.env_steps
+    def _sync_counters(self) -> None:
+        """``timesteps``: all-inclusive evaluations of F or C of the environments;
+        ``timesteps_paper``: their steps (the paper's count)."""
+        self.timesteps = self.venv.evaluations
+        self.timesteps_paper = self.venv.env_steps
 
-    # -- resume ---------------------------------------------------------------------------
-    def _resume_config(self, cfg: SeqConfig) -> SeqConfig:
-        doc = read_json(self.run_dir / CONFIG_FILE)
-        if not isinstance(doc.get("config"), dict):
-            raise CorruptFileError(f"{self.run_dir / CONFIG_FILE} has no 'config' section")
-        saved = SeqConfig.from_dict(doc["config"])
-        if cfg.env != saved.env:
-            raise InputError(f"cannot resume: run {self.run_dir} trains {saved.env!r}, "
-                             f"not {cfg.env!r}")
-        free = {"minutes", "device", "eval_pairs"}
-        new, old = cfg.to_dict(), saved.to_dict()
-        changed = [k for k in old if k not in free and new[k] != old[k]]
-        if changed:
-            raise InputError("cannot resume with different settings: " + ", ".join(
-                f"{k} ({old[k]!r} in the run, {new[k]!r} given)" for k in changed))
-        return saved.replace(minutes=cfg.minutes, device=cfg.device,
-                             eval_pairs=cfg.eval_pairs)
-
-    def _state(self) -> dict[str, Any]:
+    # -- state ----------------------------------------------------------------------------
+    def state_dict(self) -> dict[str, Any]:
         m = self.model
         np_state = np.random.get_state(legacy=False)  # noqa: NPY002 (SB3's generator)
         return {
-            "format": "learn-checkpoint-v1",
-            "config": self.cfg.to_dict(),
             "policy": m.policy.state_dict(),
             "optimizer": m.policy.optimizer.state_dict(),
             "env": self.venv.get_state(),
@@ -1012,60 +577,59 @@ class SeqTrainer:
                     "gauss": float(np_state["gauss"])},
                 "python": random.getstate(),
             },
-            "counters": {
-                "iteration": self.iteration,
-                "timesteps": self.timesteps,
-                "timesteps_paper": self.timesteps_paper,
-                "timesteps_derivative": 0,
-                "next_eval": self.next_eval,
-                "wall_seconds": self._wall(),
-                "episodes_mark": list(self._ep_mark),
-            },
-            "best": dict(self.best),
-            "history": [dict(r) for r in self.history],
+            "counters": {"next_eval": self.next_eval, "episodes_mark": list(self._ep_mark)},
         }
 
-    def _load_state(self, st: dict[str, Any]) -> None:
+    def load_state_dict(self, st: dict[str, Any]) -> None:
         m = self.model
-        try:
-            m.policy.load_state_dict(st["policy"])
-            m.policy.optimizer.load_state_dict(st["optimizer"])
-            self.venv.set_state(st["env"])
-            sb = st["sb3"]
-            m.num_timesteps = int(sb["num_timesteps"])
-            m._n_updates = int(sb["n_updates"])
-            m._last_obs = sb["last_obs"].numpy().copy()
-            m._last_episode_starts = sb["last_episode_starts"].numpy().copy()
-            rng = st["rng"]
-            torch.set_rng_state(rng["torch"])
-            npst = rng["numpy"]
-            np.random.set_state({  # noqa: NPY002 (SB3 samples from the global one)
-                "bit_generator": "MT19937",
-                "state": {"key": npst["state"]["key"].numpy().astype(np.uint32),
-                          "pos": int(npst["state"]["pos"])},
-                "has_gauss": int(npst["has_gauss"]), "gauss": float(npst["gauss"])})
-            py = rng["python"]
-            random.setstate((py[0], tuple(py[1]), py[2]))
-            c = st["counters"]
-            self.iteration = int(c["iteration"])
-            self.next_eval = int(c["next_eval"])
-            self.wall_before = float(c["wall_seconds"])
-            self._ep_mark = (int(c["episodes_mark"][0]), int(c["episodes_mark"][1]))
-            self.best = dict(st["best"])
-        except (KeyError, RuntimeError, TypeError, ValueError, IndexError) as err:
-            raise CorruptFileError(
-                f"checkpoint {self.run_dir / LATEST_FILE} does not match the run: {err}"
-            ) from err
-        self.history = restore_history(self.run_dir, st, self.iteration)
+        m.policy.load_state_dict(st["policy"])
+        m.policy.optimizer.load_state_dict(st["optimizer"])
+        self.venv.set_state(st["env"])
+        sb = st["sb3"]
+        m.num_timesteps = int(sb["num_timesteps"])
+        m._n_updates = int(sb["n_updates"])
+        m._last_obs = sb["last_obs"].numpy().copy()
+        m._last_episode_starts = sb["last_episode_starts"].numpy().copy()
+        rng = st["rng"]
+        torch.set_rng_state(rng["torch"])
+        npst = rng["numpy"]
+        np.random.set_state({  # noqa: NPY002 (SB3 samples from the global one)
+            "bit_generator": "MT19937",
+            "state": {"key": npst["state"]["key"].numpy().astype(np.uint32),
+                      "pos": int(npst["state"]["pos"])},
+            "has_gauss": int(npst["has_gauss"]), "gauss": float(npst["gauss"])})
+        py = rng["python"]
+        random.setstate((py[0], tuple(py[1]), py[2]))
+        c = st["counters"]
+        self.next_eval = int(c["next_eval"])
+        self._ep_mark = (int(c["episodes_mark"][0]), int(c["episodes_mark"][1]))
+        self._sync_counters()
+
+    def policy_state(self) -> dict[str, Any]:
+        return {"policy": self.model.policy.state_dict()}
+
+    def run_document(self) -> dict[str, Any]:
+        return _run_document(self.cfg)
 
     # -- one rollout + update -------------------------------------------------------------
+    def iterate(self) -> None:
+        self.train_rollout()
+
     def train_rollout(self) -> None:
         """Collect one rollout of ``n_envs * n_steps`` steps and run PPO's update on it."""
         self.model.learn(total_timesteps=self.cfg.n_envs * self.cfg.n_steps,
                          reset_num_timesteps=False, log_interval=None, progress_bar=False)
         self.iteration += 1
+        self._sync_counters()
 
-    # -- evaluation, logging, checkpoints -------------------------------------------------
+    def evaluation_due(self) -> bool:
+        if self.timesteps < self.next_eval:
+            return False
+        while self.next_eval <= self.timesteps:
+            self.next_eval += self.cfg.eval_every
+        return True
+
+    # -- evaluation -----------------------------------------------------------------------
     def evaluate(self, pairs: np.ndarray | None = None) -> SeqEvalResult:
         """Deterministic policy on the validation set (all pairs at once)."""
         p = self.eval_pairs if pairs is None else pairs
@@ -1074,25 +638,14 @@ class SeqTrainer:
         self.model.policy.set_training_mode(False)
         return res
 
-    def _wall(self) -> float:
-        return self.wall_before + (time.perf_counter() - self._t0)
-
-    def _log_and_checkpoint(self) -> dict[str, Any]:
+    def evaluation(self) -> tuple[dict[str, Any], dict[str, Any]]:
         ev = self.evaluate()
-        wall = self._wall()
         logged = self.model.logger.name_to_value if self.iteration > 0 else {}
         eps_done = self.venv.episodes - self._ep_mark[0]
         succ = self.venv.successes - self._ep_mark[1]
         self._ep_mark = (self.venv.episodes, self.venv.successes)
-        row: dict[str, Any] = {
-            "iteration": self.iteration,
-            "timesteps": self.timesteps,
-            "timesteps_paper": self.timesteps_paper,
-            "timesteps_derivative": 0,
-            "wall_seconds": round(wall, 3),
-            "success_rate": ev.success_rate,
-            "mean_length": round(ev.mean_length, 8),
-            "mean_max_segment_cost": round(ev.mean_max_segment_cost, 8),
+        columns: dict[str, Any] = {
+            **eval_columns(ev),
             "reached_rate": ev.reached_rate,
             "strict_success_rate": ev.strict_success_rate,
             "mean_steps": float(np.mean(ev.steps)),
@@ -1100,73 +653,19 @@ class SeqTrainer:
             "train_success_rate": round(succ / eps_done, 6) if eps_done else float("nan"),
         }
         for col, key in _TRAIN_KEYS.items():
-            row[col] = float(logged[key]) if key in logged else float("nan")
-        row["lr"] = self.cfg.lr
-        row["evaluations_per_second"] = round(self.timesteps / max(wall, 1e-9), 1)
-        row["steps_per_second"] = round(self.timesteps_paper / max(wall, 1e-9), 1)
-        self.history.append(row)
-        write_metrics(self.run_dir / METRICS_FILE, self.history)
-        key = (ev.success_rate, -ev.mean_max_segment_cost)
-        if key > (self.best["success_rate"], -self.best["mean_max_segment_cost"]):
-            self.best = {
-                "success_rate": ev.success_rate,
-                "mean_max_segment_cost": ev.mean_max_segment_cost,
-                "mean_length": ev.mean_length,
-                "reached_rate": ev.reached_rate,
-                "timesteps": self.timesteps,
-                "timesteps_paper": self.timesteps_paper,
-                "iteration": self.iteration,
-                "wall_seconds": wall,
-            }
-            save_checkpoint(self.run_dir / BEST_FILE, {
-                "format": "learn-checkpoint-v1",
-                "config": self.cfg.to_dict(),
-                "policy": self.model.policy.state_dict(),
-                "eval": dict(self.best),
-            })
-        save_checkpoint(self.run_dir / LATEST_FILE, self._state())
-        return row
+            columns[col] = float(logged[key]) if key in logged else float("nan")
+        columns["lr"] = self.cfg.lr
+        return columns, best_record(ev, reached_rate=ev.reached_rate,
+                                    timesteps=self.timesteps,
+                                    timesteps_paper=self.timesteps_paper,
+                                    iteration=self.iteration)
 
-    def run(self) -> TrainResult:
-        """Train until ``timesteps`` (all-inclusive) or ``minutes`` is spent."""
-        from tqdm.auto import tqdm
+    def rates(self, wall: float) -> dict[str, Any]:
+        return {"steps_per_second": round(self.timesteps_paper / max(wall, 1e-9), 1)}
 
-        cfg = self.cfg
-        self._t0 = time.perf_counter()
-        (self.run_dir / RESULT_FILE).unlink(missing_ok=True)
-        bar = tqdm(total=cfg.timesteps, initial=min(self.timesteps, cfg.timesteps), unit="C",
-                   unit_scale=True, disable=not self.progress, desc=f"seq {cfg.env}",
-                   dynamic_ncols=True)
-        if self.iteration == 0 and not self.history:
-            self._log_and_checkpoint()
-            self.next_eval = cfg.eval_every
-        last_logged = self.iteration
-        stopped_by = "timesteps"
-        with StopOnSignal() as stop:
-            try:
-                while self.timesteps < cfg.timesteps:
-                    if stop.requested:
-                        stopped_by = stop.requested
-                        break
-                    if cfg.minutes is not None and self._wall() >= 60.0 * cfg.minutes:
-                        stopped_by = "minutes"
-                        break
-                    before = self.timesteps
-                    self.train_rollout()
-                    bar.update(min(self.timesteps, cfg.timesteps) - min(before, cfg.timesteps))
-                    if self.timesteps >= self.next_eval:
-                        while self.next_eval <= self.timesteps:
-                            self.next_eval += cfg.eval_every
-                        row = self._log_and_checkpoint()
-                        last_logged = self.iteration
-                        bar.set_postfix(success=f"{row['success_rate']:.2f}",
-                                        steps_s=f"{row['steps_per_second']:.0f}")
-                if self.iteration != last_logged:
-                    self._log_and_checkpoint()
-            finally:
-                bar.close()
-        return finish_run(self.run_dir, self.history, self.best, stopped_by,
-                          self.timesteps, self.iteration)
+    def progress_fields(self, row: dict[str, Any]) -> dict[str, Any]:
+        return {"success": f"{row['success_rate']:.2f}",
+                "steps_s": f"{row['steps_per_second']:.0f}"}
 
 
 def train_seq(cfg: SeqConfig, out: str | Path, resume: bool = False,
@@ -1191,3 +690,13 @@ def train_seq(cfg: SeqConfig, out: str | Path, resume: bool = False,
     (``seed``) and leaves advanced.
     """
     return SeqTrainer(cfg, out, resume=resume, progress=progress).run()
+
+
+register_method(Method(
+    name="seq",
+    summary="goal-conditioned PPO on a gymnasium environment (eqs. 14, 57)",
+    config_class=SeqConfig,
+    trainer=SeqTrainer,
+    load_policy=load_seq_policy,
+    default_config=default_seq_config,
+))

@@ -29,6 +29,7 @@ Python API::
 from __future__ import annotations
 
 import dataclasses
+import importlib
 import json
 import os
 import tempfile
@@ -41,6 +42,7 @@ from typing import Any
 
 from finsler.cluster import connect_ray
 from finsler.errors import InputError
+from learn.registry import find_variant, get_method
 from learn.runs import VARIANTS, load_run_config, make_config, run_one, run_status
 from learn.storage import (
     CONFIG_FILE,
@@ -66,8 +68,6 @@ __all__ = [
 
 SWEEP_FILE = "sweep.json"
 
-#: Config fields that may differ between a run on disk and the sweep's plan (as on resume).
-_FREE_FIELDS = frozenset({"minutes", "device", "eval_pairs"})
 #: Fields a sweep sets itself (``--seeds``, ``--timesteps``, ``--minutes``, the variant).
 _SWEEP_FIELDS = frozenset({"env", "method", "seed", "timesteps", "minutes", "device"})
 
@@ -96,7 +96,8 @@ class RunSpec:
 @dataclass(frozen=True)
 class SweepPlan:
     """Environments x variants x seeds ``0..seeds-1``, with budgets and config overrides
-    (``overrides[variant]``: the fields given to that variant's config)."""
+    (``overrides[variant]``: the fields given to that variant's config) and the modules of
+    methods registered outside the toolkit, which every worker imports first."""
 
     envs: tuple[str, ...]
     variants: tuple[str, ...]
@@ -104,6 +105,7 @@ class SweepPlan:
     timesteps: int | None = None
     minutes: float | None = None
     overrides: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
+    modules: tuple[str, ...] = ()
 
     def runs(self) -> list[RunSpec]:
         """Every run, env-major then variant then seed."""
@@ -123,6 +125,7 @@ class SweepPlan:
             "timesteps": self.timesteps,
             "minutes": self.minutes,
             "overrides": {v: _jsonable(dict(o)) for v, o in self.overrides.items()},
+            "modules": list(self.modules),
         }
 
 
@@ -187,8 +190,10 @@ def plan_sweep(envs: Iterable[str], variants: Iterable[str], seeds: int,
         raise InputError(f"unknown config field(s) {', '.join(map(repr, unused))} for "
                          f"variants {', '.join(var_t)}")
     per_variant = {v: {k: val for k, val in over.items() if k in fields_of[v]} for v in var_t}
+    methods = [find_variant(v)[0] for v in var_t]
+    modules = tuple(sorted({m.module for m in methods if not m.builtin}))
     plan = SweepPlan(env_t, var_t, int(seeds), timesteps,
-                     None if minutes is None else float(minutes), per_variant)
+                     None if minutes is None else float(minutes), per_variant, modules)
     for e in env_t:
         for v in var_t:
             plan.config(RunSpec(e, v, 0))  # validates every (env, variant) config
@@ -197,14 +202,17 @@ def plan_sweep(envs: Iterable[str], variants: Iterable[str], seeds: int,
 
 def check_existing(plan: SweepPlan, out: str | os.PathLike[str]) -> None:
     """Raise :class:`InputError` if a run directory in ``out`` was made with settings other
-    than the plan's (only ``minutes``, ``device`` and ``eval_pairs`` may differ)."""
+    than the plan's (only the fields its method lets a resume change may differ, e.g.
+    ``minutes``, ``device``, ``eval_pairs``)."""
     for spec in plan.runs():
         path = spec.path(out)
         if run_status(path) == "absent":
             continue
-        saved = _config_dict(load_run_config(path))
+        cfg = load_run_config(path)
+        free = get_method(cfg.method).trainer.free_on_resume
+        saved = _config_dict(cfg)
         want = _config_dict(plan.config(spec))
-        diff = [k for k in sorted(set(saved) | set(want)) if k not in _FREE_FIELDS
+        diff = [k for k in sorted(set(saved) | set(want)) if k not in free
                 and saved.get(k) != want.get(k)]
         if diff:
             raise InputError(
@@ -287,11 +295,14 @@ def _set_threads() -> None:
 
 
 def _run_local(spec: RunSpec, out: str, timesteps: int | None, minutes: float | None,
-               overrides: dict[str, Any]) -> dict[str, Any]:
-    """Worker-process body: ``run_one`` into ``out``; exceptions come back as text."""
+               overrides: dict[str, Any], modules: tuple[str, ...] = ()) -> dict[str, Any]:
+    """Worker-process body: import the plan's method ``modules``, then ``run_one`` into
+    ``out``; exceptions come back as text."""
     t0 = time.perf_counter()
     _set_threads()
     try:
+        for module in modules:
+            importlib.import_module(module)
         res = run_one(spec.env, spec.variant, spec.seed, out, timesteps=timesteps,
                       minutes=minutes, progress=False, **overrides)
         return {"action": res.pop("action"), "result": res,
@@ -356,7 +367,8 @@ def write_run_files(run_dir: str | os.PathLike[str], files: Mapping[str, bytes],
 
 
 def _run_remote(spec: RunSpec, files: dict[str, bytes], timesteps: int | None,
-                minutes: float | None, overrides: dict[str, Any]) -> dict[str, Any]:
+                minutes: float | None, overrides: dict[str, Any],
+                modules: tuple[str, ...] = ()) -> dict[str, Any]:
     """Ray-task body: rebuild the run directory from ``files`` in a temporary folder, make
     sure the run is finished there, and return its files (also after a failure, so that
     the progress made is kept and resumed next time)."""
@@ -364,7 +376,7 @@ def _run_remote(spec: RunSpec, files: dict[str, bytes], timesteps: int | None,
         run_dir = Path(tmp) / "run"
         if files:
             write_run_files(run_dir, files)
-        out = _run_local(spec, str(run_dir), timesteps, minutes, overrides)
+        out = _run_local(spec, str(run_dir), timesteps, minutes, overrides, modules)
         out["files"] = read_run_files(run_dir)
         out["node"] = os.uname().nodename
     return out
@@ -462,7 +474,8 @@ def _sweep_local(plan: SweepPlan, root: Path, todo: list[RunOutcome], workers: i
     from finsler.pool import ProcessPool
 
     jobs = [(k, o.spec, str(o.spec.path(root)), plan.timesteps, plan.minutes,
-             dict(plan.overrides.get(o.spec.variant, {}))) for k, o in enumerate(todo)]
+             dict(plan.overrides.get(o.spec.variant, {})), plan.modules)
+            for k, o in enumerate(todo)]
     # SIGINT / SIGTERM: every worker gets SIGTERM, saves a resumable checkpoint and exits;
     # finsler.pool.PoolInterrupted is raised once they are gone
     # a run whose process dies (OOM killer, segfault) is reported failed; the others go on
@@ -486,7 +499,7 @@ def _sweep_ray(plan: SweepPlan, root: Path, todo: list[RunOutcome], workers: int
                 o = queue.pop(0)
                 files = read_run_files(o.spec.path(root))
                 ref = task.remote(o.spec, files, plan.timesteps, plan.minutes,
-                                  dict(plan.overrides.get(o.spec.variant, {})))
+                                  dict(plan.overrides.get(o.spec.variant, {})), plan.modules)
                 running[ref] = (o, list(files))
             ready, _ = ray.wait(list(running), num_returns=1)
             o, sent = running.pop(ready[0])

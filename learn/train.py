@@ -18,14 +18,16 @@ Every ``eval_every`` iterations the deterministic policy is evaluated on the
 **validation** pair set (``finsler.validation_pairs``, never the default evaluation set
 that ``evaluate`` and ``report`` use), a metrics row is written, the best checkpoint is
 chosen there and the latest checkpoint saved atomically; resuming from it replays the run
-exactly (all RNG and optimiser states are in the checkpoint).
+exactly (all RNG and optimiser states are in the checkpoint). The run directory, budget,
+limits, signals, rows and checkpoints are :class:`learn.loop.RunLoop`'s, as for every
+method; this module registers the midpoint family (``midpoint``, ``inter``,
+``two-to-one`` and their sweep variants) in :mod:`learn.registry`.
 """
 
 from __future__ import annotations
 
 import logging
 import math
-import time
 from pathlib import Path
 from typing import Any
 
@@ -33,30 +35,30 @@ import numpy as np
 import torch
 
 import finsler
-from finsler.errors import InputError
-from learn.base import StopOnSignal, TrainResult, finish_run
-from learn.config import TrainConfig, config_json
+from learn.base import TrainResult
+from learn.config import (
+    METHODS,
+    TrainConfig,
+    default_config,
+    model_free_overrides,
+    paper_config,
+    run_document,
+)
+from learn.loop import RunLoop, best_record, eval_columns, read_config_section
 from learn.methods import actor_loss_of, actor_terms
 from learn.networks import Critic, resolve_device
-from learn.policy import EvalResult, build_actor, evaluate_paths, generate_paths
-from learn.storage import (
-    BEST_FILE,
-    CONFIG_FILE,
-    LATEST_FILE,
-    METRICS_FILE,
-    RESULT_FILE,
-    CorruptFileError,
-    atomic_write_text,
-    check_run_dir,
-    load_checkpoint,
-    read_json,
-    restore_history,
-    save_checkpoint,
-    write_metrics,
+from learn.policy import (
+    EvalResult,
+    build_actor,
+    evaluate_paths,
+    generate_paths,
+    load_midpoint_policy,
 )
+from learn.registry import Method, Variant, register_method
 from learn.tree import build_tree, level_pairs, mc_targets, td_lambda_targets
 
-__all__ = ["TrainResult", "Trainer", "actor_loss", "resolve_device", "train"]
+__all__ = ["TrainResult", "Trainer", "actor_loss", "read_run_config", "resolve_device",
+           "train"]
 
 _LOG = logging.getLogger(__name__)
 
@@ -74,16 +76,15 @@ def paper_depth(trees_before: int, total_timesteps: int, max_depth: int) -> int:
     return min(trees_before // c_d, max_depth)
 
 
-class Trainer:
-    """Run Algorithm 1 for a :class:`TrainConfig` into a run directory."""
+class Trainer(RunLoop):
+    """Run Algorithm 1 for a :class:`TrainConfig` into a run directory (the loop:
+    :class:`learn.loop.RunLoop`)."""
 
-    def __init__(self, cfg: TrainConfig, run_dir: str | Path, resume: bool = False,
-                 progress: bool = True) -> None:
-        self.run_dir = check_run_dir(Path(run_dir), resume)
-        self.progress = progress
-        if resume:
-            cfg = self._resume_config(cfg)
-        self.cfg = cfg
+    config_class = TrainConfig
+    label = "train"
+
+    def setup(self) -> None:
+        cfg = self.cfg
         self.device = resolve_device(cfg.device)
         torch.set_num_threads(cfg.threads)
         self.metric = cfg.metric
@@ -109,95 +110,48 @@ class Trainer:
         self.gen = torch.Generator(device=self.device)
         self.gen.manual_seed(cfg.seed + 1)
 
-        self.iteration = 0
-        self.timesteps = 0  # all-inclusive evaluations of C
-        self.timesteps_paper = 0  # evaluations of C in collected trees (the paper's count)
-        self.timesteps_derivative = 0  # evaluations of C that were differentiated
         self.trees = 0
         self.updates = 0
         self.skipped_steps = 0
-        self.wall_before = 0.0
-        self.best: dict[str, float] = {"success_rate": -1.0, "mean_max_segment_cost": math.inf}
-        self.history: list[dict[str, Any]] = []
+        self.lr = cfg.lr
         self._losses: list[tuple[float, float]] = []
-        if resume:
-            if not (self.run_dir / LATEST_FILE).is_file():
-                raise InputError(
-                    f"cannot resume: {self.run_dir / LATEST_FILE} is missing (the run's "
-                    "progress cannot be restored; nothing was changed). Start a new run "
-                    "with another --out")
-            self._load_state(load_checkpoint(self.run_dir / LATEST_FILE))
-        else:
-            self.run_dir.mkdir(parents=True, exist_ok=True)
-            atomic_write_text(self.run_dir / CONFIG_FILE, config_json(cfg))
 
-    # -- resume ---------------------------------------------------------------------------
-    def _resume_config(self, cfg: TrainConfig) -> TrainConfig:
-        doc = read_json(self.run_dir / CONFIG_FILE)
-        if "config" not in doc:
-            raise CorruptFileError(f"{self.run_dir / CONFIG_FILE} has no 'config' section")
-        saved = TrainConfig.from_dict(doc["config"])
-        # Only run-control fields may change on resume; everything else defines the run.
-        free = {"minutes", "device", "eval_pairs"}
-        new, old = cfg.to_dict(), saved.to_dict()
-        changed = [k for k in old if k not in free and new[k] != old[k]]
-        if cfg.env != saved.env:
-            raise InputError(f"cannot resume: run {self.run_dir} trains {saved.env!r}, "
-                             f"not {cfg.env!r}")
-        if changed:
-            raise InputError("cannot resume with different settings: " + ", ".join(
-                f"{k} ({old[k]!r} in the run, {new[k]!r} given)" for k in changed))
-        return saved.replace(minutes=cfg.minutes, device=cfg.device)
-
-    def _state(self) -> dict[str, Any]:
+    # -- state ----------------------------------------------------------------------------
+    def state_dict(self) -> dict[str, Any]:
         return {
-            "format": "learn-checkpoint-v1",
-            "config": self.cfg.to_dict(),
             "actor": self.actor.state_dict(),
             "critic": self.critic.state_dict(),
             "opt_actor": self.opt_actor.state_dict(),
             "opt_critic": self.opt_critic.state_dict(),
             "np_rng": self.np_rng.bit_generator.state,
             "torch_rng": self.gen.get_state(),
-            "counters": {
-                "iteration": self.iteration,
-                "timesteps": self.timesteps,
-                "timesteps_paper": self.timesteps_paper,
-                "timesteps_derivative": self.timesteps_derivative,
-                "trees": self.trees,
-                "updates": self.updates,
-                "skipped_steps": self.skipped_steps,
-                "wall_seconds": self._wall(),
-            },
-            "best": dict(self.best),
-            "history": [dict(r) for r in self.history],
+            "counters": {"trees": self.trees, "updates": self.updates,
+                         "skipped_steps": self.skipped_steps},
             "terms": {t.name: st for t in self.terms if (st := t.state()) is not None},
         }
 
-    def _load_state(self, st: dict[str, Any]) -> None:
-        try:
-            self.actor.load_state_dict(st["actor"])
-            self.critic.load_state_dict(st["critic"])
-            self.opt_actor.load_state_dict(st["opt_actor"])
-            self.opt_critic.load_state_dict(st["opt_critic"])
-            self.np_rng.bit_generator.state = st["np_rng"]
-            self.gen.set_state(st["torch_rng"])
-            c = st["counters"]
-            self.iteration, self.timesteps = int(c["iteration"]), int(c["timesteps"])
-            self.timesteps_paper = int(c["timesteps_paper"])
-            self.timesteps_derivative = int(c["timesteps_derivative"])
-            self.trees, self.updates = int(c["trees"]), int(c["updates"])
-            self.skipped_steps = int(c.get("skipped_steps", 0))
-            self.wall_before = float(c["wall_seconds"])
-            self.best = dict(st["best"])
-            for t in self.terms:
-                if t.name in st.get("terms", {}):
-                    t.load(st["terms"][t.name], self.device)
-        except (KeyError, RuntimeError, TypeError, ValueError) as err:
-            raise CorruptFileError(
-                f"checkpoint {self.run_dir / LATEST_FILE} does not match the run: {err}"
-            ) from err
-        self.history = restore_history(self.run_dir, st, self.iteration)
+    def load_state_dict(self, st: dict[str, Any]) -> None:
+        self.actor.load_state_dict(st["actor"])
+        self.critic.load_state_dict(st["critic"])
+        self.opt_actor.load_state_dict(st["opt_actor"])
+        self.opt_critic.load_state_dict(st["opt_critic"])
+        self.np_rng.bit_generator.state = st["np_rng"]
+        self.gen.set_state(st["torch_rng"])
+        c = st["counters"]
+        self.trees, self.updates = int(c["trees"]), int(c["updates"])
+        self.skipped_steps = int(c.get("skipped_steps", 0))
+        for t in self.terms:  # extra actor terms with state (expert iteration's buffer)
+            if t.name in st.get("terms", {}):
+                t.load(st["terms"][t.name], self.device)
+
+    def policy_state(self) -> dict[str, Any]:
+        return {"actor": self.actor.state_dict(), "critic": self.critic.state_dict()}
+
+    def run_document(self) -> dict[str, Any]:
+        return run_document(self.cfg)
+
+    def result_extra(self) -> dict[str, Any]:
+        return {"skipped_steps": self.skipped_steps}
 
     # -- the algorithm --------------------------------------------------------------------
     def depth_for(self, trees_before: int) -> int:
@@ -320,7 +274,19 @@ class Trainer:
                 group["lr"] = lr
         return lr
 
-    # -- evaluation, logging, checkpoints -------------------------------------------------
+    # -- one iteration and its evaluation (the loop calls these) ----------------------------
+    def begin(self) -> None:
+        self.lr = self._set_lr()
+
+    def iterate(self) -> None:
+        """Collect a batch of trees (the paper's timesteps), then :meth:`update`."""
+        self.lr = self._set_lr()
+        s, g, c, ts = self.collect()
+        self.timesteps += ts
+        self.timesteps_paper += ts
+        self._losses.append(self.update(s, g, c))
+        self.iteration += 1
+
     def evaluate(self, pairs: np.ndarray | None = None) -> EvalResult:
         """Section 5.1 evaluation of the deterministic policy (default pair set)."""
         p = self.eval_pairs if pairs is None else pairs
@@ -330,93 +296,17 @@ class Trainer:
         self.actor.train()
         return evaluate_paths(self.metric, paths.cpu().numpy(), self.cfg.eval_eps)
 
-    def _wall(self) -> float:
-        return self.wall_before + (time.perf_counter() - self._t0)
-
-    def _log_and_checkpoint(self, lr: float) -> dict[str, Any]:
+    def evaluation(self) -> tuple[dict[str, Any], dict[str, Any]]:
         ev = self.evaluate()
-        wall = self._wall()
         lc, la = (np.mean(self._losses, axis=0) if self._losses else (float("nan"),) * 2)
         self._losses = []
-        row = {
-            "iteration": self.iteration,
-            "timesteps": self.timesteps,
-            "timesteps_paper": self.timesteps_paper,
-            "timesteps_derivative": self.timesteps_derivative,
-            "wall_seconds": round(wall, 3),
-            "depth": self.depth_for(self.trees),
-            "success_rate": ev.success_rate,
-            "mean_length": round(ev.mean_length, 8),
-            "mean_max_segment_cost": round(ev.mean_max_segment_cost, 8),
-            "critic_loss": float(lc),
-            "actor_loss": float(la),
-            "lr": lr,
-            "evaluations_per_second": round(self.timesteps / max(wall, 1e-9), 1),
-        }
-        self.history.append(row)
-        write_metrics(self.run_dir / METRICS_FILE, self.history)
-        key = (ev.success_rate, -ev.mean_max_segment_cost)
-        if key > (self.best["success_rate"], -self.best["mean_max_segment_cost"]):
-            self.best = {
-                "success_rate": ev.success_rate,
-                "mean_max_segment_cost": ev.mean_max_segment_cost,
-                "mean_length": ev.mean_length,
-                "timesteps": self.timesteps,
-                "wall_seconds": wall,
-            }
-            save_checkpoint(self.run_dir / BEST_FILE, {
-                "format": "learn-checkpoint-v1",
-                "config": self.cfg.to_dict(),
-                "actor": self.actor.state_dict(),
-                "critic": self.critic.state_dict(),
-                "eval": dict(self.best),
-            })
-        save_checkpoint(self.run_dir / LATEST_FILE, self._state())
-        return row
+        columns = {"depth": self.depth_for(self.trees), **eval_columns(ev),
+                   "critic_loss": float(lc), "actor_loss": float(la), "lr": self.lr}
+        return columns, best_record(ev, timesteps=self.timesteps)
 
-    def run(self) -> TrainResult:
-        """Train until ``timesteps`` (or ``minutes``) are spent; returns the summary."""
-        from tqdm.auto import tqdm
-
-        cfg = self.cfg
-        self._t0 = time.perf_counter()
-        (self.run_dir / RESULT_FILE).unlink(missing_ok=True)  # finished again at the end
-        bar = tqdm(total=cfg.timesteps, initial=self.timesteps, unit="C", unit_scale=True,
-                   disable=not self.progress, desc=f"train {cfg.env}", dynamic_ncols=True)
-        lr = self._set_lr()
-        if self.iteration == 0 and not self.history:
-            self._log_and_checkpoint(lr)
-        last_logged = self.iteration
-        stopped_by = "timesteps"
-        with StopOnSignal() as stop:
-            try:
-                while self.timesteps < cfg.timesteps:
-                    if stop.requested:
-                        stopped_by = stop.requested
-                        break
-                    if cfg.minutes is not None and self._wall() >= 60.0 * cfg.minutes:
-                        stopped_by = "minutes"
-                        break
-                    lr = self._set_lr()
-                    before = self.timesteps
-                    s, g, c, ts = self.collect()
-                    self.timesteps += ts
-                    self.timesteps_paper += ts
-                    self._losses.append(self.update(s, g, c))
-                    self.iteration += 1
-                    bar.update(self.timesteps - before)
-                    if self.iteration % cfg.eval_every == 0:
-                        row = self._log_and_checkpoint(lr)
-                        last_logged = self.iteration
-                        bar.set_postfix(success=f"{row['success_rate']:.2f}",
-                                        C_s=f"{row['evaluations_per_second']:.0f}")
-                if self.iteration != last_logged:
-                    self._log_and_checkpoint(lr)
-            finally:
-                bar.close()
-        return finish_run(self.run_dir, self.history, self.best, stopped_by,
-                          self.timesteps, self.iteration,
-                          extra_result={"skipped_steps": self.skipped_steps})
+    def progress_fields(self, row: dict[str, Any]) -> dict[str, Any]:
+        return {"success": f"{row['success_rate']:.2f}",
+                "C_s": f"{row['evaluations_per_second']:.0f}"}
 
 
 def train(cfg: TrainConfig, out: str | Path, resume: bool = False,
@@ -428,7 +318,36 @@ def train(cfg: TrainConfig, out: str | Path, resume: bool = False,
 
 def read_run_config(run_dir: str | Path) -> TrainConfig:
     """The :class:`TrainConfig` saved in a run directory."""
-    doc = read_json(Path(run_dir) / CONFIG_FILE)
-    if "config" not in doc:
-        raise CorruptFileError(f"{Path(run_dir) / CONFIG_FILE} has no 'config' section")
-    return TrainConfig.from_dict(doc["config"])
+    return TrainConfig.from_dict(read_config_section(run_dir))
+
+
+# -- the registry entry of the midpoint family ---------------------------------------------
+def _model_free(method: str) -> Any:
+    def make(env: str, **fields: Any) -> TrainConfig:
+        return default_config(env, **{**model_free_overrides(env), "method": method,
+                                      **fields})
+    return make
+
+
+register_method(Method(
+    name="midpoint",
+    summary="Algorithm 1: the midpoint-tree actor-critic, actor loss of eq. (6); inter: "
+            "eq. (17), two-to-one: eq. (18)",
+    config_class=TrainConfig,
+    trainer=Trainer,
+    load_policy=load_midpoint_policy,
+    default_config=default_config,
+    config_methods=METHODS,
+    variants={
+        "midpoint": Variant("the toolkit's defaults (may differentiate C: see config.json "
+                            "model_free)", default_config),
+        "midpoint-free": Variant("the model-free defaults: every term that differentiates C "
+                                 "off (values only), with the passes per collection "
+                                 "measured best without them", _model_free("midpoint")),
+        "paper": Variant("appendix B.1's settings (values of C only)", paper_config),
+        "inter": Variant("midpoint-free with the actor loss of eq. (17)", _model_free("inter")),
+        "two-to-one": Variant("midpoint-free with the actor loss of eq. (18)",
+                              _model_free("two-to-one")),
+    },
+    presets={"paper": "paper", "model-free": "midpoint-free"},
+))

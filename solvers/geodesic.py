@@ -25,6 +25,7 @@ from finsler.errors import InputError
 from finsler.files import OutputError, atomic_write_bytes
 from finsler.metric import Metric
 from finsler.pool import ProcessPool
+from finsler.spec import MetricSpec
 from solvers.batched import BatchOptions, BatchSolution, covers, residuals, solve_pairs_batched
 from solvers.inputs import (
     SHORT_PAIR,
@@ -716,16 +717,17 @@ def midpoint(
 # ----------------------------------------------------------------------------------------
 # batches
 # ----------------------------------------------------------------------------------------
-def _metric_spec(m: Metric) -> tuple[type, dict[str, Any]]:
-    return type(m), {f.name: getattr(m, f.name) for f in dataclasses.fields(m)}
+def _metric_spec(m: Metric) -> MetricSpec:
+    """What a worker process rebuilds the metric from (finsler's identity of a metric)."""
+    return MetricSpec.of(m)
 
 
 def _chunk_worker(args: tuple) -> list[tuple[int, GeodesicResult]]:
     """Solve one chunk of pairs in a worker process or Ray task: ``args`` = (metric spec,
     pair indices, pairs ``(k, 2, dim)``, segments, plan, minmax, initial paths or None,
     global_seeds, tol, method, device) -> ``[(index, result)]``."""
-    (cls, params), ks, pairs, n, plan, minmax, inits, global_seeds, tol, method, device = args
-    m = _cached_metric(cls, tuple(sorted(params.items())))
+    spec, ks, pairs, n, plan, minmax, inits, global_seeds, tol, method, device = args
+    m = _cached_metric(spec)
     return _solve_chunk(m, ks, pairs, n, plan, minmax, inits, global_seeds, tol, method,
                         device)
 
@@ -748,14 +750,13 @@ def _solve_chunk(m: Metric, ks: Sequence[int], pairs: np.ndarray, n: int, plan: 
     return list(zip(ks, res, strict=True))
 
 
-_METRICS: dict[tuple, Metric] = {}
+_METRICS: dict[MetricSpec, Metric] = {}
 
 
-def _cached_metric(cls: type, items: tuple) -> Metric:
-    key = (cls, items)
-    if key not in _METRICS:
-        _METRICS[key] = cls(**dict(items))
-    return _METRICS[key]
+def _cached_metric(spec: MetricSpec) -> Metric:
+    if spec not in _METRICS:
+        _METRICS[spec] = spec.build()
+    return _METRICS[spec]
 
 
 #: Rows (pair x seed problems) per batched Newton solve of :func:`solve_batch`: enough

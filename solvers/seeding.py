@@ -115,9 +115,10 @@ class SeedPlan:
         ``"auto"``: Newton where it covers the metric, i.e. ``F`` smooth), chosen by what
         the metric can do, never by its name.
 
-        A metric may define ``seed_plan()`` returning a :class:`SeedPlan` (a hook); else:
-        a metric that declares ``unique_geodesics`` -> the straight line alone; high
-        dimension (> 3) -> a few random curves and the roadmap, coarse size 32; not
+        A metric may return a :class:`SeedPlan` from its ``seed_plan()`` hook
+        (:mod:`finsler.hooks`); else (the hook's default ``None``): a metric that declares
+        ``unique_geodesics`` -> the straight line alone; high dimension (> 3) -> a few
+        random curves and the roadmap, coarse size 32; not
         smooth (e.g. car-like: kinks that the energy penalises in one long segment) ->
         four bulge amplitudes and four random curves, coarse size 256 (IPOPT only); not
         convex everywhere (e.g. Matsumoto: local minima round the hill, near-equal discrete
@@ -130,9 +131,8 @@ class SeedPlan:
         side at 16 segments (and, for IPOPT, the graph). Measured in
         ``benchmarks/solver_speed.py`` and ``benchmarks/peers.py --throughput``.
         """
-        hook = getattr(metric, "seed_plan", None)
-        if callable(hook):
-            plan = hook()
+        plan = metric.seed_plan()
+        if plan is not None:
             if not isinstance(plan, SeedPlan):
                 from finsler.errors import InputError
 

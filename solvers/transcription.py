@@ -9,9 +9,10 @@ seed curve).
 Smooth reformulation (:func:`smooth_square`): IPOPT needs twice continuously differentiable
 functions. The objective uses ``F**2`` rather than ``F`` (CasADi simplifies
 ``sq(sqrt(q))`` to ``q``, so for metrics of the form ``sqrt(q)`` no square root remains);
-a metric whose ``F`` is not C^2 may define ``smooth_square_sx`` (the car-like metric
-does: its ``max(r|v_th| - u, 0)`` becomes a slack with two linear constraints, exact at
-a minimiser), and the transcription uses it: the formula lives only in the metric.
+a metric whose ``F`` is not C^2 may provide the hook ``smooth_square_sx``
+(:mod:`finsler.hooks`; the car-like metric does: its ``max(r|v_th| - u, 0)`` becomes a
+slack with two linear constraints, exact at a minimiser), and the transcription uses it:
+the formula lives only in the metric.
 """
 
 from __future__ import annotations
@@ -57,12 +58,12 @@ class SmoothSquare:
 
 def smooth_square(metric: Metric, x: ca.SX, v: ca.SX, tag: str = "") -> SmoothSquare:
     """Smooth form of ``F(x, v)**2`` for ``metric``: the metric's own
-    ``smooth_square_sx(x, v, tag)`` hook where it defines one (metrics whose ``F`` is not
-    C^2, e.g. the car-like metric's ``max``; the formula stays in the metric), else
-    ``F_sx(x, v)**2``."""
-    hook = getattr(metric, "smooth_square_sx", None)
-    if callable(hook):
-        return SmoothSquare(**hook(x, v, tag))
+    ``smooth_square_sx(x, v, tag)`` hook (:mod:`finsler.hooks`) where it gives one
+    (metrics whose ``F`` is not C^2, e.g. the car-like metric's ``max``; the formula stays
+    in the metric), else ``F_sx(x, v)**2``."""
+    hook = metric.smooth_square_sx(x, v, tag)
+    if hook is not None:
+        return SmoothSquare(**hook)
     f = metric.F_sx(x, v)
     empty = ca.SX(0, 1)
     return SmoothSquare(f * f, empty, empty, [], [], empty, [], [])

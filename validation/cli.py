@@ -47,7 +47,7 @@ def metrics_command(
     if as_json:
         typer.echo(json_text(rows))
         return
-    head = ("name", "dim", "domain", "D", "eps", "reversible", "convexity")
+    head = ("name", "dim", "domain", "D", "eps", "reversible", "hooks", "convexity")
     table = [head] + [
         (
             r["name"],
@@ -56,6 +56,7 @@ def metrics_command(
             str(r["depth"]),
             f"{r['eps']:g}",
             "yes" if r["reversible"] else "no",
+            ",".join(r["hooks"]) or "-",
             r["convexity"],
         )
         for r in rows

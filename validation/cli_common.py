@@ -15,6 +15,7 @@ from finsler.modules import import_user_module
 from validation.jsonout import jsonable
 
 __all__ = [
+    "METHOD_MODULE_HELP",
     "METRIC_MODULE_HELP",
     "METRIC_PARAM_HELP",
     "MetricModuleOption",
@@ -37,6 +38,11 @@ METRIC_PARAM_HELP = ("Metric parameter NAME=VALUE (repeatable; numbers parsed), 
 METRIC_MODULE_HELP = ("Module (dotted name) or FILE.py to import first, so that the "
                       "metrics it registers (@finsler.register_metric) can be used "
                       "(repeatable; a file's folder is put on sys.path).")
+#: Help of the ``--method-module`` option (``train``, ``evaluate``, ``sweep``).
+METHOD_MODULE_HELP = ("Module (dotted name) or FILE.py to import first, so that the "
+                      "learning methods it registers (learn.registry.register_method) can "
+                      "be used (repeatable; a file's folder is put on sys.path, so sweep "
+                      "workers import it too).")
 #: The two options as parameter types of a command.
 MetricParamOption = Annotated[list[str] | None, typer.Option(
     "--metric-param", metavar="NAME=VALUE", help=METRIC_PARAM_HELP)]
@@ -91,10 +97,7 @@ def metric_or_fail(name: str, params: dict[str, Any] | None = None) -> finsler.M
     try:
         if params is None:
             return finsler.get_metric(name)
-        from learn.config import build_metric, resolve_metric  # torch: only when needed
-
-        full, _ = resolve_metric(name, params)
-        return build_metric(name, full)
+        return finsler.MetricSpec.resolve(name, params, what="metric").build()
     except InputError as err:
         fail(str(err))
         raise  # unreachable
@@ -119,7 +122,7 @@ def metric_from_options(name: str, metric_param: list[str] | None,
 def parse_metric_params(items: list[str] | None) -> dict[str, Any] | None:
     """``["name=value", ...]`` (``--metric-param``) -> ``{name: value}``; values are
     parsed as JSON (numbers, true/false, lists), else kept as strings. None if no item.
-    Which names exist is checked against the metric (``learn.config.resolve_metric``)."""
+    Which names exist is checked against the metric (``finsler.MetricSpec.resolve``)."""
     if not items:
         return None
     out: dict[str, Any] = {}

@@ -2,7 +2,8 @@
 
 Per-environment defaults (``learn.default_config``) are the settings of the shipped
 policies; e.g. the shipped Matsumoto policy is reproduced by
-``geodesics train --env matsumoto --out runs/matsumoto --seed 0``.
+``geodesics train --env matsumoto --out runs/matsumoto --seed 0``. Methods come from
+:mod:`learn.registry` (``--method-module FILE.py`` imports a user's method first).
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ import finsler
 from finsler.errors import InputError
 from finsler.files import check_input_dir, check_output_dir
 from validation.cli_common import (
+    METHOD_MODULE_HELP,
     METRIC_MODULE_HELP,
     METRIC_PARAM_HELP,
     fail,
@@ -37,9 +39,11 @@ def train_command(
     metric_module: Annotated[list[str] | None, typer.Option(
         "--metric-module", metavar="MODULE", help=METRIC_MODULE_HELP)] = None,
     method: Annotated[str | None, typer.Option(
-        help="midpoint (eq. 6, default), inter (eq. 17), two-to-one (eq. 18), or the "
-             "paper's baselines seq (PPO, eqs. 14/57) and pg (policy gradient, eqs. 15/16).")
-    ] = None,
+        help="A registered learning method: midpoint (eq. 6, default), inter (eq. 17), "
+             "two-to-one (eq. 18), the paper's baselines seq (PPO, eqs. 14/57) and pg "
+             "(policy gradient, eqs. 15/16), or one of --method-module.")] = None,
+    method_module: Annotated[list[str] | None, typer.Option(
+        "--method-module", metavar="MODULE", help=METHOD_MODULE_HELP)] = None,
     timesteps: Annotated[int | None, typer.Option(
         help="Budget of evaluations of C, all-inclusive: every evaluation the learner makes "
              "to learn (the validation evaluations that select checkpoints are not "
@@ -60,9 +64,9 @@ def train_command(
     quiet: Annotated[bool, typer.Option("--quiet", help="No progress bar.")] = False,
     settings: Annotated[list[str] | None, typer.Option(
         "--set", metavar="FIELD=VALUE",
-        help="Override any field of the method's config (learn.TrainConfig, or SeqConfig / "
-             "PGConfig for seq / pg; repeatable; VALUE is JSON or a bare string), e.g. "
-             "--set path_energy_weight=0 --set hidden=[128,128].")
+        help="Override any field of the method's config (learn.TrainConfig, SeqConfig / "
+             "PGConfig for seq / pg, a user method's own; repeatable; VALUE is JSON or a "
+             "bare string), e.g. --set path_energy_weight=0 --set hidden=[128,128].")
     ] = None,
 ) -> None:
     """Train a midpoint policy (Algorithm 1), or one of the paper's baselines, into a run
@@ -93,9 +97,11 @@ def train_command(
     import learn
     from learn import runs
     from learn.base import TrainingInterrupted
+    from learn.registry import import_method_modules
 
     try:
         import_metric_modules(metric_module)
+        import_method_modules(method_module)
         params = parse_metric_params(metric_param)
         check_output_dir(out, "--out")
         if not resume:  # a resumed run's config names (and re-imports) its metric
@@ -127,7 +133,8 @@ def train_command(
         typer.echo(f"interrupted ({stop.signal_name}): the run is saved in {stop.run_dir} at "
                    f"{stop.timesteps} evaluations of C (iteration {stop.iterations}); resume "
                    f"with: geodesics train --env {env} --out {stop.run_dir} --resume"
-                   + "".join(f" --metric-module {m}" for m in metric_module or []), err=True)
+                   + "".join(f" --metric-module {m}" for m in metric_module or [])
+                   + "".join(f" --method-module {m}" for m in method_module or []), err=True)
         raise typer.Exit(code=130) from None
     f = result.final
     typer.echo(
@@ -142,25 +149,24 @@ def _new_config(env: str, method: str | None, paper: bool, model_free: bool,
                 seed: int | None, timesteps: int | None, minutes: float | None,
                 device: str, settings: list[str],
                 metric_params: dict[str, object] | None = None) -> object:
-    """The config of a new run from the command-line options."""
+    """The config of a new run from the command-line options: the method's default variant,
+    or the variant of one of its presets (``--paper``, ``--model-free``)."""
     from learn import runs
+    from learn.registry import get_method
 
     method = method or "midpoint"
-    if method in ("seq", "pg"):
-        if paper or model_free:
-            raise InputError(f"--paper and --model-free apply to the midpoint learner, not "
-                             f"--method {method} (its defaults are the paper's, model-free)")
-        variant = method
-    elif paper and model_free:
+    entry = get_method(method)
+    flags = [f for f, on in (("paper", paper), ("model-free", model_free)) if on]
+    if len(flags) > 1:
         raise InputError("--paper already is model-free; give one of --paper, --model-free")
-    elif paper:
-        variant = "paper"
-    else:
-        variant = "midpoint-free" if model_free else "midpoint"
+    if flags and flags[0] not in entry.presets:
+        raise InputError(f"--{flags[0]} applies to the midpoint learner, not --method "
+                         f"{method} (its defaults are its own; --set FIELD=VALUE changes "
+                         "them)")
+    variant = entry.presets[flags[0]] if flags else entry.name
     cls = type(runs.make_config(env, variant))
     over = parse_settings(settings, cls)
-    if variant in ("paper", "midpoint", "midpoint-free"):
-        over.setdefault("method", method)
+    over.setdefault("method", method)
     if metric_params is not None:
         over["metric_params"] = metric_params
     return runs.make_config(env, variant, seed=0 if seed is None else seed,
@@ -215,6 +221,8 @@ def evaluate_command(
              "run's own parameters are always used).")] = None,
     metric_module: Annotated[list[str] | None, typer.Option(
         "--metric-module", metavar="MODULE", help=METRIC_MODULE_HELP)] = None,
+    method_module: Annotated[list[str] | None, typer.Option(
+        "--method-module", metavar="MODULE", help=METHOD_MODULE_HELP)] = None,
     search: Annotated[bool, typer.Option(
         "--search", help="Evaluate the paths of the route search (learn.search: candidate "
         "midpoints at the top levels chosen by the cost of the policy's completed paths, "
@@ -228,10 +236,12 @@ def evaluate_command(
     (the output says so): give --pairs of a fresh seed for honest ones. The output names
     the checkpoint file used."""
     import learn
+    from learn.registry import import_method_modules
     from learn.runs import load_any_policy
 
     try:
         import_metric_modules(metric_module)
+        import_method_modules(method_module)
         params = parse_metric_params(metric_param)
         if run is None and env is None:
             raise InputError("give --run DIR or --env NAME")

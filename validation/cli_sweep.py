@@ -12,6 +12,7 @@ from finsler.errors import InputError
 from finsler.files import check_output_dir
 from finsler.pool import PoolInterrupted
 from validation.cli_common import (
+    METHOD_MODULE_HELP,
     METRIC_MODULE_HELP,
     METRIC_PARAM_HELP,
     fail,
@@ -55,7 +56,7 @@ def metric_overrides(envs: list[str], params: dict[str, Any] | None) -> dict[str
     environment), and ``metric_class`` for a metric registered outside the toolkit, so
     that worker processes (spawned, or on Ray) import it. A user metric is swept alone."""
     import finsler
-    from learn.config import metric_class_path
+    from finsler.spec import class_path
 
     out: dict[str, Any] = {}
     if params is not None:
@@ -63,7 +64,7 @@ def metric_overrides(envs: list[str], params: dict[str, Any] | None) -> dict[str
     user = {}
     for e in envs:
         if e in finsler.list_metrics():
-            path = metric_class_path(finsler.registry._REGISTRY[e])
+            path = class_path(finsler.metric_class(e))
             if path is not None:
                 user[e] = path
     if user:
@@ -79,7 +80,7 @@ def sweep_command(
                                            "matsumoto,carlike.")],
     methods: Annotated[str, typer.Option(
         help="Comma-separated variants: midpoint, midpoint-free, paper, inter, two-to-one, "
-             "seq, pg.")],
+             "seq, pg, or those of a method of --method-module.")],
     seeds: Annotated[int, typer.Option(help="Number of seeds N: runs use seeds 0..N-1.")],
     out: Annotated[Path, typer.Option(
         help="Sweep folder: runs go to OUT/<env>/<variant>/seed-<s>/, the plan and the "
@@ -108,6 +109,8 @@ def sweep_command(
         help=METRIC_PARAM_HELP + " Applies to every environment of the sweep.")] = None,
     metric_module: Annotated[list[str] | None, typer.Option(
         "--metric-module", metavar="MODULE", help=METRIC_MODULE_HELP)] = None,
+    method_module: Annotated[list[str] | None, typer.Option(
+        "--method-module", metavar="MODULE", help=METHOD_MODULE_HELP)] = None,
 ) -> None:
     """Train every (environment, variant, seed) into its own run directory: finished runs
     are skipped, unfinished ones resumed, absent ones started, so an interrupted sweep is
@@ -118,12 +121,14 @@ def sweep_command(
     worker and sends the files back, so the cluster's machines need the project installed
     but no shared filesystem. Exit status 1 if a run failed (the others still finish)."""
     from learn import sweep as sw
+    from learn.registry import import_method_modules
 
     try:
         if workers is not None and workers < 1:
             raise InputError(f"--workers must be a positive integer, got {workers}")
         check_output_dir(out, "--out")
         import_metric_modules(metric_module)
+        import_method_modules(method_module)
         overrides = parse_overrides(settings or [])
         for key, option in (("metric_params", "--metric-param"),
                             ("metric_class", "--metric-module")):

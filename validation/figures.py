@@ -184,37 +184,29 @@ def _finsler_background(ax: Any, metric: Metric, res: int = 160) -> None:
         h = np.where(np.isnan(z.ravel()), np.nan, height(pts)).reshape(gx.shape)
         cs = ax.contour(gx, gy, h, levels=8, colors="grey", linewidths=0.6)
         ax.clabel(cs, fontsize=6, fmt="%.2f")
-    radius = getattr(metric, "convex_radius", None)
-    if isinstance(radius, (int, float)) and metric.dim == 2:
+    radius = metric.convex_radius
+    if radius is not None and metric.dim == 2:
         ax.add_patch(Circle((0, 0), radius, fill=False, ls="-.", color="darkgreen", lw=0.8))
 
 
 def height_map(metric: Metric) -> Any:
     """The height function ``(N, 2) -> (N,)`` drawn as contours under 2-D paths: the
-    metric's own ``height_map`` method if it has one (a plotting hook for user metrics),
-    ``h(p) = -height |p|^2`` for a Matsumoto metric (eq. 21), else None."""
-    hook = getattr(metric, "height_map", None)
-    if callable(hook):
-        return hook
-    from finsler.metrics import Matsumoto
-
-    if isinstance(metric, Matsumoto):
-        k = float(metric.height)
-        return lambda p: -k * np.sum(np.asarray(p) ** 2, axis=1)
-    return None
+    metric's ``height_map`` hook (:mod:`finsler.hooks`; Matsumoto's slope of eq. 21
+    provides it) if it provides one, else None."""
+    return metric.height_map if metric.provides("height_map") else None
 
 
 def is_planar_pose(metric: Metric) -> bool:
     """True for a 3-D metric whose coordinates are a planar position and a heading angle
     (third coordinate named theta, heading or yaw), like the car-like metric."""
-    names = tuple(getattr(metric.domain, "names", ()) or ())
+    names = tuple(metric.domain.names)
     return metric.dim == 3 and len(names) == 3 and names[2] in ("theta", "heading", "yaw")
 
 
 def has_kinematics(metric: Metric) -> bool:
-    """True for a metric with the ``frame_positions(q) -> (N, frames, 3)`` hook (a robot
-    arm's forward kinematics, like the Panda metric)."""
-    return callable(getattr(metric, "frame_positions", None))
+    """True for a metric that provides the ``frame_positions(q) -> (N, frames, 3)`` hook
+    (:mod:`finsler.hooks`: a robot arm's forward kinematics, like the Panda metric)."""
+    return metric.provides("frame_positions")
 
 
 def _legend_handles() -> list[Any]:
@@ -262,8 +254,8 @@ def paths_2d(cmp: Comparison, metric: Metric) -> Figure:
                Line2D([], [], ls="", marker="*", color="red", label="goal")]
     if height_map(metric) is not None:
         handles.append(Line2D([], [], color="grey", lw=0.6, label="height h(p) contours"))
-    radius = getattr(metric, "convex_radius", None)
-    if isinstance(radius, (int, float)):
+    radius = metric.convex_radius
+    if radius is not None:
         handles.append(Line2D([], [], color="darkgreen", ls="-.", lw=0.8,
                               label=f"convex radius {radius:.4f}"))
     fig.legend(handles=handles, loc="lower center", ncol=min(len(handles), 5), fontsize=8)
@@ -322,7 +314,7 @@ def carlike_headings(cmp: Comparison, metric: Metric) -> Figure:
 
 def panda_motion(cmp: Comparison, metric: Metric) -> Figure:
     """Arms (:func:`has_kinematics`, e.g. Panda): joint angles along one path, and link
-    positions seen from above (with the pole, if the metric has ``pole_x``, ``pole_y``)."""
+    positions seen from above (with the metric's ``landmarks``, e.g. Panda's pole)."""
     r = cmp.ratios("learned")
     i = int(_select_pairs(cmp, 3)[-1]) if len(cmp.pairs) > 1 else 0
     fig = new_figure((12, 4.8))
@@ -350,9 +342,9 @@ def panda_motion(cmp: Comparison, metric: Metric) -> Figure:
                     label=lab if a == len(idx) - 1 else None)
         ax.plot(fp[:, -1, 0], fp[:, -1, 1], color=col, lw=1.8,
                 ls="-" if lab == "learned" else "--", label=f"hand trajectory ({lab})")
-    if hasattr(metric, "pole_x") and hasattr(metric, "pole_y"):
-        px, py = float(metric.pole_x), float(metric.pole_y)
-        ax.add_patch(Circle((px, py), 0.03, color="tab:red", label="pole"))
+    for label, where in metric.landmarks().items():
+        ax.add_patch(Circle((float(where[0]), float(where[1])), 0.03, color="tab:red",
+                            label=label))
     ax.set_aspect("equal")
     ax.set_xlabel("x (m, world frame)")
     ax.set_ylabel("y (m, world frame)")
@@ -365,7 +357,7 @@ def panda_motion(cmp: Comparison, metric: Metric) -> Figure:
 
 
 def _coordinate_names(metric: Metric) -> list[str]:
-    names = list(getattr(metric.domain, "names", ()) or ())
+    names = list(metric.domain.names)
     return names if len(names) == metric.dim else [f"x{j}" for j in range(metric.dim)]
 
 

@@ -27,7 +27,7 @@ import numpy as np
 from scipy.optimize import minimize
 from scipy.spatial import ConvexHull
 
-from finsler import ClosedFormMetric, Metric
+from finsler import Metric
 from finsler.errors import InputError
 
 __all__ = [
@@ -94,7 +94,7 @@ def grid_cost(metric: Metric, pts: np.ndarray) -> np.ndarray:
 
 def grid_distance(metric: Metric, pts: np.ndarray) -> np.ndarray:
     """Exact ``d(x_a, x_b)`` of a closed-form metric for all grid pairs -> ``(G, G)``."""
-    if not isinstance(metric, ClosedFormMetric):
+    if not metric.provides("distance"):
         raise InputError(f"{metric.name} has no closed-form distance")
     return _pair_matrix(metric.distance, pts)
 
@@ -222,7 +222,7 @@ def _grid_midpoint_floor(d: np.ndarray, chunk_bytes: float = 64e6) -> np.ndarray
 
 
 def proposition2_table(
-    metric: ClosedFormMetric,
+    metric: Metric,
     sizes: tuple[int, ...] = (11, 15, 21),
     iterations: int = 5,
     d_min: float | None = None,
@@ -236,7 +236,7 @@ def proposition2_table(
     ``i < iterations``), ``mid_floor_max`` (the best any grid point can do), and
     ``mid_coord_max``: coordinate distance from ``pi_i(x, y)`` to the exact midpoint.
     """
-    if not isinstance(metric, ClosedFormMetric):
+    if not metric.provides("distance"):
         raise InputError("proposition2_table needs a closed-form metric (exact d)")
     rows: list[dict[str, Any]] = []
     if d_min is None:
@@ -374,7 +374,7 @@ class Remark3Result:
     squared_rule_err: list[float] = field(default_factory=list)
 
 
-def remark3(metric: ClosedFormMetric, n: int = 15, iterations: int = 4) -> Remark3Result:
+def remark3(metric: Metric, n: int = 15, iterations: int = 4) -> Remark3Result:
     """Run Remark 3's counterexample (eq. 13 with ``C = f o d``) and, for contrast, the
     eq.-(10) DP from the same ``V_0``."""
     pts = grid_points(metric, n)
@@ -495,7 +495,7 @@ def proposition1_rate(
     ys = x + ts[:, None] * u
     metric.domain.check(ys, "x + t u")
     c = metric.cost(np.broadcast_to(x, ys.shape), ys)
-    if isinstance(metric, ClosedFormMetric) and distance is None:
+    if distance is None and metric.provides("distance"):
         d = metric.distance(np.broadcast_to(x, ys.shape), ys)
     else:
         fn = distance or (lambda a, b: polygon_distance(metric, a, b))

@@ -188,10 +188,8 @@ def _pct(x: float) -> str:
 
 
 def _params(metric: Metric) -> dict[str, Any]:
-    """The metric's parameters (its dataclass fields)."""
-    import dataclasses
-
-    return {f.name: getattr(metric, f.name) for f in dataclasses.fields(metric) if f.init}
+    """The metric's parameters (its :class:`finsler.MetricSpec`'s)."""
+    return dict(finsler.MetricSpec.of(metric).params)
 
 
 def _params_text(metric: Metric) -> str:
@@ -468,11 +466,9 @@ def _build_report(env: str | None, out: Path, *, run: str | Path | None,
     if hasattr(pol, "metric"):  # the policy's own metric, with its parameters
         metric = pol.metric
     else:
-        from learn.config import build_metric, resolve_metric
-
         if env is None:
             raise InputError("give env for a policy without a metric attribute")
-        metric = build_metric(env, resolve_metric(env, metric_params)[0])
+        metric = finsler.MetricSpec.resolve(env, metric_params).build()
     if isinstance(pairs, (str, Path)):
         arr = load_pairs(pairs, metric, "--pairs")
         pairs_note = f"from {pairs}"

@@ -25,7 +25,7 @@ from typing import Any, Protocol
 import numpy as np
 from hypothesis import strategies as st
 
-from finsler import ClosedFormMetric, Metric
+from finsler import Metric
 from finsler.errors import InputError
 from validation import strategies as vs
 from validation.testing.engine import SKIPPED, PropertyResult, Verdict, search, seeded
@@ -213,12 +213,11 @@ def _vec(x: np.ndarray) -> list[float]:
 
 
 def closed_form_of(metric: Metric) -> tuple[Callable[..., Any] | None, Callable[..., Any] | None]:
-    """The closed-form ``(distance, geodesic)`` a metric supplies (a
-    :class:`finsler.ClosedFormMetric` implements ``distance(x, y)`` and ``geodesic(x, y,
-    t)``), or ``(None, None)``."""
-    if isinstance(metric, ClosedFormMetric):
-        return metric.distance, metric.geodesic
-    return None, None
+    """The closed-form ``(distance, geodesic)`` a metric provides (its declared hooks
+    ``distance(x, y)`` and ``geodesic(x, y, t)``, :mod:`finsler.hooks`; a
+    :class:`finsler.ClosedFormMetric` has both), each ``None`` where it provides none."""
+    return (metric.distance if metric.provides("distance") else None,
+            metric.geodesic if metric.provides("geodesic") else None)
 
 
 @dataclass

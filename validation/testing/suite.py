@@ -8,6 +8,7 @@ from typing import Any
 
 from finsler import Metric
 from finsler.errors import InputError
+from finsler.spec import MetricSpec
 from validation.testing.distance import DistanceOracle, distance_properties
 from validation.testing.engine import SKIPPED, CheckReport, PropertyResult
 from validation.testing.metric import (
@@ -43,11 +44,12 @@ def solved_examples_for(examples: int) -> int:
 
 
 def _params(metric: Metric) -> dict[str, Any]:
-    import dataclasses
-
-    if dataclasses.is_dataclass(metric):
-        return {f.name: getattr(metric, f.name) for f in dataclasses.fields(metric) if f.init}
-    return {}
+    """The metric's parameters (its identity, :class:`finsler.MetricSpec`); none for a
+    metric that is not a dataclass."""
+    try:
+        return dict(MetricSpec.of(metric).params)
+    except InputError:
+        return {}
 
 
 def check(

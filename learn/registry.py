@@ -1,0 +1,199 @@
+"""The registry of learning methods: what the CLI, sweeps and ``load_policy`` read.
+
+A method registers itself once, in the module that defines it, with
+:func:`register_method` and a :class:`Method`: its config class, its trainer (a
+:class:`learn.loop.RunLoop` subclass), its policy loader, its default config and, for
+sweeps, its named :class:`Variant` s. Nothing else names it: ``geodesics train --method``,
+``geodesics sweep --methods``, ``geodesics evaluate --run`` and :func:`learn.load_policy`
+find it here. The toolkit's own methods (:mod:`learn.train`: midpoint / inter /
+two-to-one, :mod:`learn.pg`, :mod:`learn.seq`) are imported on first need; a method in a
+user's file is imported with ``--method-module FILE.py`` (:func:`import_method_modules`)
+and its module is recorded in each run's ``config.json`` (``method_module``) so that
+loading the run re-imports it (when it is importable).
+"""
+
+from __future__ import annotations
+
+import difflib
+import importlib
+from collections.abc import Callable, Iterable, Iterator, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from finsler.errors import InputError
+from finsler.modules import import_user_module
+
+__all__ = [
+    "Method",
+    "Variant",
+    "find_variant",
+    "get_method",
+    "import_method_modules",
+    "list_methods",
+    "method_of_run",
+    "register_method",
+    "variants",
+]
+
+#: The toolkit's own method modules, imported (in this order) when a name is not yet
+#: registered: each registers its methods on import.
+BUILTIN_MODULES = ("learn.train", "learn.seq", "learn.pg")
+
+
+@dataclass(frozen=True)
+class Variant:
+    """A named configuration of a method for sweeps and comparisons: ``make(env,
+    **fields)`` returns the config (``fields``: seed, timesteps, minutes, device and any
+    overrides)."""
+
+    summary: str
+    make: Callable[..., Any]
+
+
+@dataclass(frozen=True)
+class Method:
+    """A learning method as the registry knows it.
+
+    ``config_methods``: the values of the config's ``method`` field this entry trains
+    (default: ``name`` alone; the midpoint learner also trains ``inter`` and
+    ``two-to-one``). ``variants``: named configurations for sweeps (default: ``name`` ->
+    ``default_config``). ``presets``: command-line switches of ``geodesics train`` mapped
+    to variants (the midpoint learner's ``paper`` and ``model-free``).
+    """
+
+    name: str
+    summary: str
+    config_class: type
+    trainer: type
+    """A :class:`learn.loop.RunLoop` subclass: ``trainer(cfg, out, resume=, progress=)``."""
+    load_policy: Callable[..., Any]
+    """``load_policy(run_dir, checkpoint=, device=, env=, metric_params=)`` -> a policy
+    with ``metric``, ``config``, ``source``, ``checkpoint``, ``generate`` and
+    ``evaluate``."""
+    default_config: Callable[..., Any]
+    """``default_config(env, **fields)`` -> the method's config."""
+    config_methods: tuple[str, ...] = ()
+    variants: Mapping[str, Variant] = field(default_factory=dict)
+    presets: Mapping[str, str] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if not self.config_methods:
+            object.__setattr__(self, "config_methods", (self.name,))
+        if not self.variants:
+            object.__setattr__(self, "variants",
+                               {self.name: Variant(self.summary, self.default_config)})
+
+    @property
+    def module(self) -> str:
+        """The module that defines the method's trainer (re-imported to load its runs)."""
+        return self.trainer.__module__
+
+    @property
+    def builtin(self) -> bool:
+        return self.module.split(".")[0] == "learn"
+
+    def train(self, cfg: Any, out: str | Path, resume: bool = False,
+              progress: bool = True) -> Any:
+        """Train ``cfg`` into run directory ``out``: the :class:`learn.base.TrainResult`."""
+        return self.trainer(cfg, out, resume=resume, progress=progress).run()
+
+
+_METHODS: dict[str, Method] = {}
+
+
+def register_method(method: Method) -> Method:
+    """Register ``method`` under each of its ``config_methods`` (re-registering a name
+    replaces it; a variant name already taken by another method is an error)."""
+    if not isinstance(method, Method):
+        raise InputError(f"register_method needs a learn.registry.Method, got "
+                         f"{type(method).__name__}")
+    for other in {id(m): m for m in _METHODS.values()}.values():
+        if other.name == method.name:
+            continue
+        taken = set(other.variants) & set(method.variants)
+        if taken:
+            raise InputError(f"method {method.name!r}: variant(s) {', '.join(sorted(taken))} "
+                             f"already belong to method {other.name!r}")
+    for name in method.config_methods:
+        _METHODS[name] = method
+    return method
+
+
+def _import_builtins(until: str | None = None) -> None:
+    """Import the toolkit's method modules (all, or until ``until`` is registered)."""
+    for module in BUILTIN_MODULES:
+        if until is not None and until in _METHODS:
+            return
+        importlib.import_module(module)
+
+
+def get_method(name: str) -> Method:
+    """The method whose config ``method`` value is ``name`` (:class:`InputError` with the
+    registered names otherwise)."""
+    if not isinstance(name, str):
+        raise InputError(f"method must be a name, got {name!r}")
+    if name not in _METHODS:
+        _import_builtins(until=name)
+    if name not in _METHODS:
+        known = list_methods()
+        close = difflib.get_close_matches(name, known, n=1)
+        hint = f" (did you mean {close[0]!r}?)" if close else ""
+        raise InputError(f"unknown method {name!r}{hint}; known: {', '.join(known)} (a "
+                         "method of your own: --method-module FILE.py)")
+    return _METHODS[name]
+
+
+def list_methods() -> list[str]:
+    """Every registered value of a config's ``method``."""
+    _import_builtins()
+    return list(_METHODS)
+
+
+def _entries() -> Iterator[Method]:
+    _import_builtins()
+    yield from {id(m): m for m in _METHODS.values()}.values()
+
+
+def variants() -> dict[str, Variant]:
+    """Every registered variant (name -> :class:`Variant`), method by method."""
+    return {name: v for m in _entries() for name, v in m.variants.items()}
+
+
+def find_variant(name: str) -> tuple[Method, Variant]:
+    """The method and :class:`Variant` called ``name`` (:class:`InputError` otherwise)."""
+    for m in {id(m): m for m in _METHODS.values()}.values():
+        if name in m.variants:
+            return m, m.variants[name]
+    for m in _entries():
+        if name in m.variants:
+            return m, m.variants[name]
+    raise InputError(f"unknown variant {name!r}; known: {', '.join(variants())}")
+
+
+def method_of_run(run_dir: str | Path, section: Mapping[str, Any]) -> Method:
+    """The method of a run directory whose ``config`` section is ``section`` (default
+    ``midpoint``): registered, or registered by importing the ``method_module`` the run's
+    ``config.json`` records."""
+    from learn.storage import CONFIG_FILE, read_json
+
+    name = section.get("method", "midpoint")
+    if isinstance(name, str) and name not in _METHODS:
+        _import_builtins(until=name)
+        module = read_json(Path(run_dir) / CONFIG_FILE).get("method_module")
+        if name not in _METHODS and isinstance(module, str):
+            try:
+                import_user_module(module, f"method {name!r}: module")
+            except InputError as err:
+                raise InputError(
+                    f"run {run_dir} was trained by method {name!r} of module {module!r}, "
+                    f"which cannot be imported ({err}): pass --method-module FILE.py (or "
+                    "put the module on PYTHONPATH)") from err
+    return get_method(str(name))
+
+
+def import_method_modules(items: Iterable[str] | None) -> list[str]:
+    """Import every ``--method-module`` (a dotted module name, or a ``.py`` file whose
+    folder is put first on ``sys.path`` and which is imported by its stem, so that worker
+    processes and later loads import it by that name too); returns the module names."""
+    return [import_user_module(item, "--method-module").__name__ for item in items or []]

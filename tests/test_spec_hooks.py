@@ -1,0 +1,126 @@
+"""A metric's identity (finsler.spec.MetricSpec) and its declared hooks (finsler.hooks)."""
+
+from __future__ import annotations
+
+import ast
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import ClassVar
+
+import numpy as np
+import pytest
+
+import finsler
+from finsler.domains import Box
+from finsler.errors import InputError
+from finsler.spec import MetricSpec, metric_spec
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.mark.parametrize("name", ["matsumoto", "carlike", "euclidean", "randers", "sphere"])
+def test_spec_round_trip_through_json(name: str) -> None:
+    metric = finsler.get_metric(name)
+    spec = MetricSpec.of(metric)
+    again = MetricSpec.from_dict(json.loads(json.dumps(spec.to_dict())))
+    assert again == spec and hash(again) == hash(spec)
+    rebuilt = again.build()
+    assert type(rebuilt) is type(metric)
+    x = np.array([[0.1] * metric.dim])
+    v = np.array([[0.3] + [-0.2] * (metric.dim - 1)])
+    assert np.allclose(rebuilt.F(x, v), metric.F(x, v), rtol=0, atol=0)
+
+
+def test_spec_compare_names_the_differing_parameter() -> None:
+    a = metric_spec("matsumoto")
+    b = metric_spec("matsumoto", {"height": 2.0})
+    assert a != b
+    assert a.param_differences(b) == {"height": (1.0, 2.0)}
+    assert a == metric_spec("matsumoto", {"height": 1.0, "radius": 1.0})
+    assert b.build().height == 2.0
+
+
+def test_spec_refuses_bad_input() -> None:
+    with pytest.raises(InputError, match="no parameter 'heigth'"):
+        metric_spec("matsumoto", {"heigth": 2.0})
+    with pytest.raises(InputError):
+        metric_spec("no-such-metric")
+    with pytest.raises(InputError, match="'name'"):
+        MetricSpec.from_dict({"params": {}})
+
+
+@dataclass(frozen=True)
+class _Plain(finsler.Metric):
+    """A user metric with no hooks: Euclidean on the plane."""
+
+    name: ClassVar[str] = "test-plain"
+
+    @property
+    def domain(self) -> Box:
+        return Box((-1.0, -1.0), (1.0, 1.0))
+
+    def F_sx(self, x, v):
+        import casadi as ca
+        return ca.sqrt(ca.dot(v, v))
+
+
+@dataclass(frozen=True)
+class _Hill(_Plain):
+    """The same metric declaring two hooks by overriding them."""
+
+    name: ClassVar[str] = "test-hill"
+
+    def height_map(self, points):
+        return np.asarray(points)[:, 0] ** 2
+
+    @property
+    def convex_radius(self) -> float:
+        return 3.0
+
+
+def test_declared_hooks_are_found_by_asking_the_metric() -> None:
+    plain, hill = _Plain(), _Hill()
+    assert plain.hooks() == ()
+    assert not plain.provides("height_map")
+    assert set(hill.hooks()) == {"height_map", "convex_radius"}
+    assert hill.provides("height_map") and hill.provides("convex_radius")
+    assert np.allclose(hill.height_map(np.array([[2.0, 1.0]])), [4.0])
+    assert hill.convex_radius == 3.0
+    assert plain.convex_radius is None and plain.seed_plan() is None
+    with pytest.raises(InputError, match="does not provide the hook 'height_map'"):
+        plain.height_map(np.zeros((1, 2)))
+    with pytest.raises(InputError):
+        plain.provides("no_such_hook")
+    # the toolkit's own metrics declare theirs the same way
+    assert {"height_map", "convex_radius"} <= set(finsler.get_metric("matsumoto").hooks())
+    assert finsler.get_metric("carlike").provides("smooth_square_sx")
+
+
+def _metric_probes(path: Path) -> list[str]:
+    """``getattr(metric, ...)``/``hasattr(metric, ...)`` and ``isinstance(x, <concrete
+    metric class>)`` calls in one file."""
+    concrete = {n for n in dir(finsler.metrics) if isinstance(getattr(finsler.metrics, n), type)
+                and issubclass(getattr(finsler.metrics, n), finsler.Metric)
+                and getattr(finsler.metrics, n) is not finsler.Metric}
+    found = []
+    for node in ast.walk(ast.parse(path.read_text())):
+        if not (isinstance(node, ast.Call) and isinstance(node.func, ast.Name)):
+            continue
+        if node.func.id in ("getattr", "hasattr") and node.args:
+            target = ast.unparse(node.args[0])
+            if "metric" in target.lower() and "config" not in target:
+                found.append(f"{path}:{node.lineno} {ast.unparse(node)}")
+        if node.func.id == "isinstance" and len(node.args) == 2:
+            names = {n.id if isinstance(n, ast.Name) else getattr(n, "attr", "")
+                     for n in ast.walk(node.args[1])}
+            if names & concrete:
+                found.append(f"{path}:{node.lineno} {ast.unparse(node)}")
+    return found
+
+
+def test_no_getattr_or_concrete_isinstance_on_metrics_outside_finsler() -> None:
+    files = [p for pkg in ("solvers", "learn", "validation") for p in (ROOT / pkg).rglob("*.py")]
+    assert files
+    probes = [hit for p in files for hit in _metric_probes(p)]
+    assert probes == []
