@@ -17,7 +17,6 @@ only).
 
 from __future__ import annotations
 
-import math
 import random
 import time
 from collections.abc import Callable, Sequence
@@ -30,6 +29,7 @@ from hypothesis.errors import NoSuchExample, Unsatisfiable
 from hypothesis.strategies import SearchStrategy
 
 from finsler.errors import InputError
+from validation.jsonout import jsonable as _jsonable
 from validation.text import text_table
 
 __all__ = [
@@ -215,20 +215,7 @@ class CheckReport:
 
 def jsonable(v: Any) -> Any:
     """Numbers, arrays and containers as JSON-ready Python values (non-finite -> str)."""
-    if isinstance(v, dict):
-        return {str(k): jsonable(x) for k, x in v.items()}
-    if isinstance(v, (list, tuple)):
-        return [jsonable(x) for x in v]
-    if isinstance(v, np.ndarray):
-        return jsonable(v.tolist())
-    if isinstance(v, (bool, np.bool_)):
-        return bool(v)
-    if isinstance(v, (int, np.integer)):
-        return int(v)
-    if isinstance(v, (float, np.floating)):
-        f = float(v)
-        return f if math.isfinite(f) else str(f)
-    return v
+    return _jsonable(v, nonfinite_as_text=True)
 
 
 def fmt(v: Any, digits: int = 6) -> str:
