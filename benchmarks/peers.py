@@ -473,7 +473,7 @@ def project_rows(m: Any, pairs: np.ndarray, with_log: bool) -> list[dict]:
                     rec["length"] = out.length
                 elif method == "distance":
                     rec["length"] = out.distance
-                    rec["status"] = out.status.value
+                    rec["status"] = out.status.label
                 else:  # solve_geodesic(tol=): the estimate of the continuum length
                     est = getattr(out, "length_estimate", None)
                     rec["length"] = out.length if est is None else est
@@ -511,7 +511,7 @@ def project_exp_rows(m: Any, pairs: np.ndarray, vel: np.ndarray) -> list[dict]:
         per.append({"seconds": sec, "error": err,
                     **({} if out is None else {"point": out.point.tolist(),
                                                "converged": out.converged,
-                                               "status": out.status.value})})
+                                               "status": out.status.label})})
     return [{"peer": "project", "method": "exp_map", "setting": "defaults (DOP853, 1e-13)",
              "kind": "exp", "setup": setup, "per_pair": per}]
 

@@ -82,10 +82,10 @@ def run_metric(name: str, k: int) -> dict:
     ratio = np.array([r.cost_ratio for r in results])
     statuses = {}
     for r in results:
-        statuses[r.status.value] = statuses.get(r.status.value, 0) + 1
+        statuses[r.status.label] = statuses.get(r.status.label, 0) + 1
     mm_status = {}
     for r in results:
-        mm_status[r.minmax.status.value] = mm_status.get(r.minmax.status.value, 0) + 1
+        mm_status[r.minmax.status.label] = mm_status.get(r.minmax.status.label, 0) + 1
     eps = m.task.eps
     success_mm = np.mean([r.minmax.max_segment_cost <= eps for r in results])
     success_energy = np.mean([r.max_segment_cost <= eps for r in results])
@@ -227,7 +227,7 @@ def run_scale(k: int, sizes: list[int], full_max: int) -> None:
             res = [solve_geodesic(m, s, g, n, seeds=plan, minmax=True) for s, g in pairs]
             t = np.array([r.wall_time for r in res])
             tm = np.array([r.minmax.wall_time for r in res])
-            st = sorted({r.status.value for r in res} | {r.minmax.status.value for r in res})
+            st = sorted({r.status.label for r in res} | {r.minmax.status.label for r in res})
             lengths[name, n] = np.array([r.length for r in res])
             energies[name, n] = np.array([r.energy for r in res])
             med = float(np.median(t))

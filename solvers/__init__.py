@@ -13,10 +13,13 @@ Public API::
                 -> list[GeodesicResult]
     exp_map(metric, x, v, t=1.0, return_curve=False) -> ExpResult
     log_map(metric, x, y) -> LogResult
+
+Every result carries a status of one family (:mod:`solvers.status`): ``status.label`` is
+what the API, JSON and the command line print.
 """
 
 from solvers.certify import CertifyResult, MeshSpec, certify
-from solvers.expmap import ExpResult, ExpStatus, LogResult, LogStatus, exp_map, log_map
+from solvers.expmap import ExpResult, LogResult, exp_map, log_map
 from solvers.geodesic import (
     check_pairs,
     check_segments,
@@ -27,18 +30,25 @@ from solvers.geodesic import (
 )
 from solvers.result import (
     DistanceResult,
-    DistanceStatus,
     GeodesicResult,
     MidpointResult,
     MinMaxResult,
     SolverError,
-    Status,
 )
 from solvers.seeding import SeedPlan
 from solvers.spectral import distance
+from solvers.status import (
+    CertifyStatus,
+    DistanceStatus,
+    ExpStatus,
+    LogStatus,
+    Outcome,
+    Status,
+)
 
 __all__ = [
     "CertifyResult",
+    "CertifyStatus",
     "DistanceResult",
     "DistanceStatus",
     "ExpResult",
@@ -49,6 +59,7 @@ __all__ = [
     "MeshSpec",
     "MidpointResult",
     "MinMaxResult",
+    "Outcome",
     "SeedPlan",
     "SolverError",
     "Status",

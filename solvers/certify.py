@@ -65,12 +65,13 @@ import casadi as ca
 import numpy as np
 
 from finsler.domains import Box, Disk
-from finsler.errors import InputError
+from finsler.errors import InputError, short
 from finsler.intervals import Interval, enclose, isqrt
 from finsler.limits import check_memory
 from finsler.lowering import LoweredFunction, lower
 from finsler.metric import Metric
 from solvers.inputs import SHORT_PAIR, as_metric, domain_scale, is_short_pair
+from solvers.status import CertifyStatus
 
 __all__ = ["CertifyResult", "MeshSpec", "certify"]
 
@@ -93,6 +94,10 @@ INITIAL_DIRECTIONS = 8
 #: Directions an exact vertex starts with around the path's (or a tight edge's) direction:
 #: this fraction of the K sampled directions on each side (violated ones are added later).
 WINDOW_FRACTION = 1 / 64
+
+
+class LPFailure(RuntimeError):
+    """The LP solver failed on one round (turned into :attr:`CertifyStatus.LP_FAILED`)."""
 
 
 def _window(k: int) -> int:
@@ -194,7 +199,11 @@ class CertifyResult:
     refinement: ``target_gap`` (reached), ``max_rounds`` or ``max_triangles`` (the work
     budgets of :class:`MeshSpec`), ``no_refinement`` (no triangle left to refine), or
     ``time_limit`` (the caller's wall-clock limit: only then can the result depend on the
-    machine's speed).
+    machine's speed), or the failure's label. ``status`` (:class:`solvers.CertifyStatus`)
+    says the same in the toolkit's one family of statuses: a failure of the refinement (an
+    LP solver failure, corrections that do not shrink) is a status with the best interval
+    proven so far (lower bound 0 if none) and ``message``, never an exception.
+    ``solver_status`` is the label of the upper-bound solve's status (or ``given``).
     """
 
     metric: str
@@ -225,6 +234,13 @@ class CertifyResult:
     rounds: list[dict[str, Any]] = field(default_factory=list)
     path: np.ndarray | None = None
     stopped_by: str = "target_gap"
+    status: CertifyStatus = CertifyStatus.CERTIFIED
+    message: str = ""
+
+    @property
+    def converged(self) -> bool:
+        """True if the refinement reached its target gap (``status`` is ``CERTIFIED``)."""
+        return self.status.converged
 
     @property
     def certified(self) -> bool:
@@ -240,7 +256,9 @@ class CertifyResult:
             val = getattr(self, f.name)
             if f.name == "path" and not with_path:
                 continue
-            out[f.name] = val.tolist() if isinstance(val, np.ndarray) else val
+            if isinstance(val, np.ndarray):
+                val = val.tolist()
+            out[f.name] = val.label if isinstance(val, CertifyStatus) else val
         return out
 
 
@@ -811,11 +829,11 @@ def _solve_lp(mesh: _Mesh, b: np.ndarray, dirs: np.ndarray, s_idx: int, g_idx: i
                 warnings.simplefilter("ignore")  # "inaccurate" is in the status, checked below
                 prob.solve(solver=LP_SOLVER)
         except cp.error.SolverError as err:
-            raise RuntimeError(f"certify: the LP solver failed: {err}") from err
+            raise LPFailure(f"the LP solver failed: {short(str(err))}") from err
         lp_seconds += time.perf_counter() - t0
         status = str(prob.status)
         if x.value is None:
-            raise RuntimeError(f"certify: the LP ended with status {status}")
+            raise LPFailure(f"the LP ended with status {status}")
         phi = np.asarray(x.value, float)
         duals = np.maximum(np.asarray(cons[0].dual_value, float), 0.0)
         ratio = np.einsum("vi,ki->vk", np.einsum("vid,vd->vi", gradc, phi[dofs]), dirs) / b_flat
@@ -969,7 +987,7 @@ def certify(
         n = spec.segments if spec.segments is not None else 4 * m.task.segments
         sol = solve_geodesic(m, s, g, n)
         pts = np.asarray(sol.points, float)
-        solver_status = sol.status.value
+        solver_status = sol.status.label
     else:
         pts = np.array(path, dtype=np.float64)
         if pts.ndim != 2 or pts.shape[1] != 2 or pts.shape[0] < 2:
@@ -1001,6 +1019,8 @@ def certify(
     rounds: list[dict[str, Any]] = []
     previous = None
     stopped_by = "max_rounds"
+    failure: tuple[CertifyStatus, str] | None = None
+    last_mesh: _Mesh | None = None
     for _ in range(spec.max_rounds):
         t0 = time.perf_counter()
         msh = _Mesh(points)
@@ -1014,23 +1034,32 @@ def certify(
             if msh.n_tri + 3 * int(bad.sum()) > spec.max_triangles:
                 # the corrections do not shrink with the triangles: the chord term (fixed
                 # by the number of directions) or a singularity of F; stop, do not grow
-                raise InputError(
-                    f"certify: {int(bad.sum())} triangles keep second-order corrections "
-                    f"above half of F, and refining them would exceed max_triangles "
-                    f"({spec.max_triangles}); use more directions (e.g. the default or fine "
-                    "mesh preset) or a smaller h_path / h_far")
+                failure = (CertifyStatus.CORRECTIONS_TOO_LARGE,
+                           f"{int(bad.sum())} triangles keep second-order corrections above "
+                           f"half of F, and refining them would exceed max_triangles "
+                           f"({spec.max_triangles}); use more directions (e.g. the default "
+                           "or fine mesh preset) or a smaller h_path / h_far")
+                break
             t0 = time.perf_counter()
             msh = _Mesh(msh.refine(np.flatnonzero(bad)))
             t_mesh += time.perf_counter() - t0
             b, corr = _row_bounds(msh, data)
-        if np.min(b) <= 0.0:
-            raise InputError(f"certify: {int(np.sum(np.min(b, axis=(1, 2)) <= 0))} triangles "
-                             "keep second-order corrections above F after "
-                             f"{MAX_PRE_REFINE} refinements; use a smaller h_path / h_far")
+        if failure is None and np.min(b) <= 0.0:
+            failure = (CertifyStatus.CORRECTIONS_TOO_LARGE,
+                       f"{int(np.sum(np.min(b, axis=(1, 2)) <= 0))} triangles keep "
+                       f"second-order corrections above F after {MAX_PRE_REFINE} "
+                       "refinements; use a smaller h_path / h_far")
+        if failure is not None:
+            last_mesh = msh
+            break
         t0 = time.perf_counter()
-        lp = _solve_lp(msh, b, data.dirs, 0, 1, upper, spec.target_gap,
-                       start=_initial_modes(msh, spec.directions, previous, pts,
-                                            2.0 * spec.h_path))
+        try:
+            lp = _solve_lp(msh, b, data.dirs, 0, 1, upper, spec.target_gap,
+                           start=_initial_modes(msh, spec.directions, previous, pts,
+                                                2.0 * spec.h_path))
+        except LPFailure as err:
+            failure, last_mesh = (CertifyStatus.LP_FAILED, str(err)), msh
+            break
         previous = (msh, lp)
         t_lp += time.perf_counter() - t0
         gap = (upper - lp["lower"]) / upper
@@ -1061,7 +1090,18 @@ def certify(
         t0 = time.perf_counter()
         points = msh.refine(order[:n_mark])
         t_mesh += time.perf_counter() - t0
-    assert best is not None  # max_rounds >= 1
+    if failure is not None:
+        stopped_by = failure[0].label
+        status, message = failure
+    else:
+        status = {"target_gap": CertifyStatus.CERTIFIED,
+                  "time_limit": CertifyStatus.TIME_LIMIT}.get(stopped_by,
+                                                             CertifyStatus.BUDGET_REACHED)
+        message = ""
+    if best is None:  # failed in the first round: the trivial bound d >= 0 holds
+        assert last_mesh is not None
+        best = {"lower": 0.0, "mesh": last_mesh, "n_rows": 0, "status": "not_solved",
+                "solver": LP_SOLVER, "ratio": float("nan")}
     final: _Mesh = best["mesh"]
     lower = best["lower"]
     kind, note = _convexity(m, final.points)
@@ -1079,5 +1119,6 @@ def certify(
         mesh={**asdict(spec), "element": "P2", "domain_polygon_vertices": int(poly.shape[0])},
         times={"solve": t_solve, "mesh": t_mesh, "bounds": data.seconds,
                "lp": t_lp, "total": total},
-        rounds=rounds, path=upper_path, stopped_by=stopped_by,
+        rounds=rounds, path=upper_path, stopped_by=stopped_by, status=status,
+        message=message,
     )

@@ -26,7 +26,6 @@ equation, integrated alongside.
 
 from __future__ import annotations
 
-import enum
 import functools
 import math
 import time
@@ -44,6 +43,7 @@ from solvers.chebyshev import differentiation_matrix
 from solvers.inputs import as_metric, check_point, is_short_pair
 from solvers.result import DistanceStatus, SolverError
 from solvers.spectral import distance
+from solvers.status import ExpStatus, LogStatus
 
 __all__ = ["ExpResult", "ExpStatus", "LogResult", "LogStatus", "exp_map", "log_map"]
 
@@ -61,42 +61,6 @@ LOG_TOL = 1e-11
 #: Relative gap between ``F(x, log(x, y))`` and the solver's distance above which the
 #: shooting is taken to have found another (longer) geodesic.
 OTHER_GEODESIC_RTOL = 1e-6
-
-
-class ExpStatus(enum.Enum):
-    """Outcome of :func:`exp_map`."""
-
-    SUCCESS = "success"
-    """Integrated to ``t``."""
-    LEFT_DOMAIN = "left_domain"
-    """The curve reached the boundary of the domain at ``t_end < t``."""
-    NOT_CONVEX = "not_convex"
-    """The curve reached a region where ``F(x, .)`` is not strongly convex at ``t_end``:
-    beyond it the geodesic equation does not describe locally shortest curves."""
-    INTEGRATION_FAILED = "integration_failed"
-    """The integrator failed (step size underflow or non-finite values)."""
-
-    @property
-    def converged(self) -> bool:
-        return self is ExpStatus.SUCCESS
-
-
-class LogStatus(enum.Enum):
-    """Outcome of :func:`log_map`."""
-
-    SUCCESS = "success"
-    """``|exp(x, v) - y| <= tol`` and ``F(x, v)`` agrees with the solver's distance."""
-    TRIVIAL = "trivial"
-    """``x == y``: ``v = 0``."""
-    NOT_CONVERGED = "not_converged"
-    """Shooting stopped above the tolerance (``residual`` says by how much)."""
-    OTHER_GEODESIC = "other_geodesic"
-    """Shooting converged to a geodesic longer than the shortest path found by the solver
-    (relative gap above :data:`OTHER_GEODESIC_RTOL`): ``v`` is not the log."""
-
-    @property
-    def converged(self) -> bool:
-        return self in (LogStatus.SUCCESS, LogStatus.TRIVIAL)
 
 
 @dataclass
@@ -144,7 +108,7 @@ class ExpResult:
             "point": self.point.tolist(),
             "point_velocity": self.point_velocity.tolist(),
             "t_end": self.t_end,
-            "status": self.status.value,
+            "status": self.status.label,
             "speed": self.speed,
             "length": self.speed * self.t_end,
             "speed_drift": self.speed_drift,
@@ -202,7 +166,7 @@ class LogResult:
             "distance": self.distance,
             "distance_error_estimate": self.distance_error_estimate,
             "residual": self.residual,
-            "status": self.status.value,
+            "status": self.status.label,
             "iterations": self.iterations,
             "integrations": self.integrations,
             "wall_time": self.wall_time,
@@ -479,7 +443,7 @@ def exp_map(
                      atol=atol)
     if strict and not res.converged:
         raise SolverError(f"{m.name}: exp_map stopped at t = {res.t_end:.6g} < {t:g} "
-                          f"({res.status.value}: {res.message})", res)
+                          f"({res.status.label}: {res.message})", res)
     return res
 
 
@@ -605,6 +569,6 @@ def log_map(
     out = LogResult(m.name, xs, ys, v, length, dist, est, resid, status, iterations,
                     integrations, time.perf_counter() - t0, v0, cur)
     if strict and not out.converged:
-        raise SolverError(f"{m.name}: log_map {status.value} (residual {resid:.3e}, tol "
+        raise SolverError(f"{m.name}: log_map {status.label} (residual {resid:.3e}, tol "
                           f"{tol:g}, F(x, v) = {length:.12g} vs distance {dist:.12g})", out)
     return out

@@ -371,8 +371,8 @@ def solve_geodesic(
     res.wall_time = time.perf_counter() - t0
     if strict and not (res.converged and (res.minmax is None or res.minmax.converged)):
         raise SolverError(
-            f"{m.name}: solve did not converge (status {res.status.value}"
-            + (f", min-max {res.minmax.status.value}" if res.minmax is not None else "")
+            f"{m.name}: solve did not converge (status {res.status.label}"
+            + (f", min-max {res.minmax.status.label}" if res.minmax is not None else "")
             + ")",
             res,
         )
@@ -662,7 +662,7 @@ def _solve_to_tol(m: Metric, start: Any, goal: Any, n: int, tol: Any, max_segmen
                        and (res.minmax is None or res.minmax.converged)):
         raise SolverError(f"{m.name}: tol {tol:g} not reached (estimate "
                           f"{res.error_estimate:.3e} at {res.segments} segments, status "
-                          f"{res.status.value})", res)
+                          f"{res.status.label})", res)
     return res
 
 

@@ -23,7 +23,6 @@ The same code runs on numpy (float64, CPU) and on torch tensors on any device
 
 from __future__ import annotations
 
-import enum
 from dataclasses import dataclass
 from typing import Any
 
@@ -31,6 +30,7 @@ import numpy as np
 
 from finsler.errors import InputError
 from finsler.metric import Metric
+from solvers.status import NewtonStatus
 
 __all__ = [
     "EnergyTerms",
@@ -44,23 +44,6 @@ __all__ = [
     "energy_terms",
     "newton_energy",
 ]
-
-
-class NewtonStatus(enum.IntEnum):
-    """Outcome of one problem of :func:`newton_energy`."""
-
-    RUNNING = 0
-    CONVERGED = 1
-    """``residual <= gtol``: a first-order point of the energy (relative gradient)."""
-    MAX_ITERATIONS = 2
-    STALLED = 3
-    """No acceptable step even with the largest shift (round-off, or a kink of ``F``)."""
-    BOUNDARY = 4
-    """Steps kept leaving the domain: the optimum has an active domain constraint."""
-    NOT_FINITE = 5
-    """The energy or its derivatives are not finite at the start."""
-    DROPPED = 6
-    """Stopped by the caller (e.g. a seed clearly losing against another of its pair)."""
 
 
 @dataclass(frozen=True)

@@ -6,7 +6,6 @@ turns a non-converged status into a :class:`SolverError`.
 
 from __future__ import annotations
 
-import enum
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -14,6 +13,7 @@ import numpy as np
 
 from finsler.errors import InputError
 from solvers.chebyshev import interpolation_matrix
+from solvers.status import DistanceStatus, Status
 
 __all__ = [
     "DistanceResult",
@@ -32,80 +32,6 @@ class SolverError(RuntimeError):
     def __init__(self, message: str, result: Any = None) -> None:
         super().__init__(message)
         self.result = result
-
-
-class Status(enum.Enum):
-    """IPOPT's return status (``return_status`` of CasADi's ``nlpsol`` stats), plus the
-    toolkit's own ``TRIVIAL`` (start == goal: nothing to solve) and ``SHORT`` (start and goal
-    closer than :data:`solvers.inputs.SHORT_PAIR` times the domain's size: the straight
-    segment, equally divided, is the geodesic to within ``O(|g - s|**2)`` ~ 1e-14 in
-    coordinates, below what IPOPT resolves, and ``F**2`` is not differentiable at zero
-    velocity, so no NLP is solved)."""
-
-    SUCCESS = "Solve_Succeeded"
-    ACCEPTABLE = "Solved_To_Acceptable_Level"
-    INFEASIBLE = "Infeasible_Problem_Detected"
-    SEARCH_DIRECTION_TOO_SMALL = "Search_Direction_Becomes_Too_Small"
-    DIVERGING_ITERATES = "Diverging_Iterates"
-    USER_STOP = "User_Requested_Stop"
-    FEASIBLE_POINT_FOUND = "Feasible_Point_Found"
-    MAX_ITERATIONS = "Maximum_Iterations_Exceeded"
-    RESTORATION_FAILED = "Restoration_Failed"
-    STEP_COMPUTATION_ERROR = "Error_In_Step_Computation"
-    MAX_CPU_TIME = "Maximum_CpuTime_Exceeded"
-    MAX_WALL_TIME = "Maximum_WallTime_Exceeded"
-    NOT_ENOUGH_DEGREES_OF_FREEDOM = "Not_Enough_Degrees_Of_Freedom"
-    INVALID_PROBLEM = "Invalid_Problem_Definition"
-    INVALID_OPTION = "Invalid_Option"
-    INVALID_NUMBER = "Invalid_Number_Detected"
-    UNRECOVERABLE = "Unrecoverable_Exception"
-    NONIPOPT_EXCEPTION = "NonIpopt_Exception_Thrown"
-    INSUFFICIENT_MEMORY = "Insufficient_Memory"
-    INTERNAL_ERROR = "Internal_Error"
-    TRIVIAL = "Trivial_Start_Equals_Goal"
-    SHORT = "Short_Pair_Straight_Segment"
-    UNKNOWN = "Unknown"
-
-    @classmethod
-    def from_ipopt(cls, text: str) -> Status:
-        """Map IPOPT's ``return_status`` string to the enum (``UNKNOWN`` if unrecognised)."""
-        for s in cls:
-            if s.value == text:
-                return s
-        return cls.UNKNOWN
-
-    @property
-    def converged(self) -> bool:
-        """Only a full IPOPT success, or a trivial / short pair, counts as converged."""
-        return self in (Status.SUCCESS, Status.TRIVIAL, Status.SHORT)
-
-    @property
-    def label(self) -> str:
-        """The toolkit's name of the status, as the API spells it (``Status.SUCCESS`` ->
-        ``"success"``); what JSON results and the command line print (``value`` is IPOPT's
-        return status, kept as ``ipopt_status``)."""
-        return self.name.lower()
-
-
-class DistanceStatus(enum.Enum):
-    """Outcome of :func:`solvers.distance`."""
-
-    CONVERGED = "converged"
-    """The error estimate is below ``rtol * distance``."""
-    TOLERANCE_NOT_REACHED = "tolerance_not_reached"
-    """The finest discretisation was solved but the estimate is above the tolerance."""
-    NOT_CONVEX = "not_convex"
-    """The path crosses a region where ``F(x, .)`` is not convex: the continuum infimum is
-    the length for the convexified metric, discretised paths chatter, and the number is
-    only the length of a smooth local minimiser (an upper bound of the infimum)."""
-    SOLVER_FAILED = "solver_failed"
-    """IPOPT did not converge at some level."""
-    TRIVIAL = "trivial"
-    """Start equals goal."""
-
-    @property
-    def converged(self) -> bool:
-        return self in (DistanceStatus.CONVERGED, DistanceStatus.TRIVIAL)
 
 
 @dataclass

@@ -246,7 +246,7 @@ def distance(
     )
     if strict and not res.converged:
         raise SolverError(
-            f"{m.name}: distance not converged ({status.value}, estimate {estimate:.3e}, "
+            f"{m.name}: distance not converged ({status.label}, estimate {estimate:.3e}, "
             f"rtol {rtol:g})",
             res,
         )

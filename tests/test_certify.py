@@ -16,7 +16,7 @@ from typer.testing import CliRunner
 
 import finsler
 from finsler.errors import InputError
-from solvers import CertifyResult, MeshSpec, certify
+from solvers import CertifyResult, CertifyStatus, MeshSpec, certify
 from validation.cli import app
 
 runner = CliRunner()
@@ -70,11 +70,13 @@ def test_solver_path_upper_bound_and_default_gap_poincare() -> None:
     r = certify(m, s, g, MeshSpec(h_path=0.1, directions=64, target_gap=1e-2))
     assert r.lower <= exact <= r.upper
     assert r.gap <= 1e-2
-    assert r.solver_status == "Solve_Succeeded"
+    assert r.solver_status == "success"
+    assert r.status is CertifyStatus.CERTIFIED and r.converged
     assert r.convexity == "convex"
     assert r.upper - exact < 1e-4 * exact  # the solver's path is near the geodesic
     d = r.to_dict()
     assert {"lower", "upper", "gap", "triangles", "directions", "times", "mesh"} <= set(d)
+    assert d["status"] == "certified" and d["stopped_by"] == "target_gap"
     assert "path" not in d and len(r.to_dict(with_path=True)["path"]) == r.path.shape[0]
     json.dumps(d)
 
@@ -310,3 +312,77 @@ def test_row_bounds_hold_inside_every_triangle_where_the_hessian_term_is_tight()
             worst_centre = float((slack / corr[eq]).min())
     # at the centre almost all of the correction is used: it is tight, not loose
     assert worst_centre < 0.05
+
+
+# ---- failures of the refinement are statuses with a proven interval, not exceptions ----
+def _failing_lp(monkeypatch: pytest.MonkeyPatch, fail_from_call: int) -> list[int]:
+    """Make the LP solver fail from its ``fail_from_call``-th call (1-based) on."""
+    real, calls = certify_mod._solve_lp, [0]
+
+    def solve_lp(*args: object, **kwargs: object) -> dict:
+        calls[0] += 1
+        if calls[0] >= fail_from_call:
+            raise certify_mod.LPFailure("the LP ended with status infeasible (simulated)")
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(certify_mod, "_solve_lp", solve_lp)
+    return calls
+
+
+POINCARE_PAIR = (np.array([0.5, -0.4]), np.array([-0.3, 0.6]))
+
+
+def test_lp_failure_in_first_round_is_a_status_with_trivial_lower_bound(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    _failing_lp(monkeypatch, 1)
+    m = finsler.get_metric("poincare")
+    s, g = POINCARE_PAIR
+    r = certify(m, s, g, "coarse")
+    exact = float(m.distance(s, g)[0])
+    assert r.status is CertifyStatus.LP_FAILED and not r.converged
+    assert r.stopped_by == "lp_failed" and "simulated" in r.message
+    assert r.lower == 0.0 and r.upper >= exact and r.certified and r.rounds == []
+    assert r.to_dict()["status"] == "lp_failed"
+
+
+def test_lp_failure_in_a_later_round_keeps_the_best_proven_lower_bound(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    _failing_lp(monkeypatch, 2)
+    m = finsler.get_metric("poincare")
+    s, g = POINCARE_PAIR
+    r = certify(m, s, g, MeshSpec(h_path=0.2, directions=16, target_gap=1e-6))
+    exact = float(m.distance(s, g)[0])
+    assert r.status is CertifyStatus.LP_FAILED and len(r.rounds) == 1
+    assert r.lower == r.rounds[0]["lower"] and 0.0 < r.lower <= exact <= r.upper
+
+
+def test_corrections_that_do_not_shrink_are_a_status(monkeypatch: pytest.MonkeyPatch) -> None:
+    def huge(hz: np.ndarray, ht: np.ndarray, r2: np.ndarray) -> np.ndarray:
+        return np.full_like(hz, 1e6)
+
+    monkeypatch.setattr(certify_mod, "_corrections", huge)
+    m = finsler.get_metric("poincare")
+    s, g = POINCARE_PAIR
+    r = certify(m, s, g, "coarse")
+    assert r.status is CertifyStatus.CORRECTIONS_TOO_LARGE and r.lower == 0.0
+    assert "max_triangles" in r.message or "refinements" in r.message
+
+
+def test_budget_ends_with_budget_reached_status() -> None:
+    m = finsler.get_metric("poincare")
+    s, g = POINCARE_PAIR
+    r = certify(m, s, g, MeshSpec(h_path=0.2, directions=16, target_gap=1e-9, max_rounds=1))
+    exact = float(m.distance(s, g)[0])
+    assert r.status is CertifyStatus.BUDGET_REACHED and r.stopped_by == "max_rounds"
+    assert r.lower <= exact <= r.upper and r.gap > 1e-9 and not r.converged
+
+
+def test_cli_certify_failure_prints_the_result_then_exits_1(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    _failing_lp(monkeypatch, 1)
+    res = runner.invoke(app, ["certify", "--metric", "poincare", "--start", "0.5,-0.4",
+                              "--goal", "-0.3,0.6", "--mesh", "coarse", "--json"])
+    assert res.exit_code == 1
+    doc = json.loads(res.stdout)
+    assert doc["status"] == "lp_failed" and doc["lower"] == 0.0
+    assert "certify lp_failed" in res.stderr and len(res.stderr.strip().splitlines()) == 1

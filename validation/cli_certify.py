@@ -8,20 +8,27 @@ the proven bound of it by interval arithmetic), ``upper_source`` (``path`` |
 ``unknowns``, ``directions``, ``lp_rows``, ``lp_rows_total``, ``lp_status``, ``lp_solver``,
 ``convexity`` (``convex`` | ``convexified``), ``convexity_note``, ``solver_status``,
 ``mesh`` (the settings), ``times`` (seconds: solve, mesh, bounds, lp, total), ``rounds``,
-``stopped_by`` (target_gap | max_rounds | max_triangles | no_refinement | time_limit).
+``stopped_by`` (target_gap | max_rounds | max_triangles | no_refinement | time_limit |
+a failure's label), ``status`` (:class:`solvers.CertifyStatus` label: certified |
+budget_reached | time_limit | corrections_too_large | lp_failed), ``message``.
+
+Exit code 0 when the interval is certified or a budget ended the refinement (the interval
+is proven either way; ``status`` says which), 1 when the refinement failed (the result,
+with the best interval proven so far, is still printed and written).
 """
 
 from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
 from finsler.errors import InputError
 from finsler.files import atomic_write_text, check_output_path
 from solvers.inputs import domain_scale
+from solvers.status import CertifyStatus
 from validation.cli_common import (
     MetricModuleOption,
     MetricParamOption,
@@ -30,6 +37,9 @@ from validation.cli_common import (
     metric_from_options,
     parse_point,
 )
+
+if TYPE_CHECKING:
+    from solvers.certify import CertifyResult
 
 __all__ = ["certify_command", "register"]
 
@@ -103,13 +113,17 @@ def certify_command(
     except InputError as err:
         fail(str(err))
         return
-    except RuntimeError as err:  # the LP solver failed: not the input, the work
-        fail(f"no certificate: {err}", code=1)
-        return
     if as_json:
         typer.echo(json_text(doc))
-        return
-    typer.echo(f"metric {m.name}: start {tuple(s.tolist())} goal {tuple(g.tolist())}")
+    else:
+        _print_result(m.name, s, g, res)
+    if res.status in (CertifyStatus.LP_FAILED, CertifyStatus.CORRECTIONS_TOO_LARGE):
+        fail(f"certify {res.status.label}: {res.message}", code=1)
+
+
+def _print_result(name: str, s: Any, g: Any, res: CertifyResult) -> None:
+    typer.echo(f"metric {name}: start {tuple(s.tolist())} goal {tuple(g.tolist())}")
+    typer.echo(f"status = {res.status.label}   (stopped by {res.stopped_by})")
     typer.echo(f"lower  = {res.lower:.10g}   (dual potential, P2 on {res.triangles} triangles, "
                f"{res.directions} directions)")
     typer.echo(f"upper  = {res.upper:.10g}   (path length, proven by interval arithmetic; "

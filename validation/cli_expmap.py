@@ -64,7 +64,7 @@ def exp_command(
     if as_json:
         typer.echo(json_text(r.to_dict()))
     else:
-        typer.echo(f"status        {r.status.value}" + (f" ({r.message})" if r.message else ""))
+        typer.echo(f"status        {r.status.label}" + (f" ({r.message})" if r.message else ""))
         typer.echo(f"point         {np.array2string(r.point, precision=12)}")
         typer.echo(f"t_end         {r.t_end:.12g}")
         typer.echo(f"speed F(x,v)  {r.speed:.12g}")
@@ -73,7 +73,7 @@ def exp_command(
         typer.echo(f"wall time     {r.wall_time:.3f} s")
     if not r.converged:  # the result above says why; stderr says that it is not the answer
         stopped(f"the geodesic stopped at t = {r.t_end:.6g} before t = {t:.6g}: "
-                f"{r.status.value}")
+                f"{r.status.label}")
 
 
 def log_command(
@@ -99,7 +99,7 @@ def log_command(
     if as_json:
         typer.echo(json_text(r.to_dict()))
     else:
-        typer.echo(f"status         {r.status.value}")
+        typer.echo(f"status         {r.status.label}")
         typer.echo(f"velocity       {np.array2string(r.velocity, precision=12)}")
         typer.echo(f"F(x, v)        {r.length:.12g}")
         typer.echo(f"distance       {r.distance:.12g}  (solver, estimate "
@@ -108,7 +108,7 @@ def log_command(
         typer.echo(f"Newton steps   {r.iterations}")
         typer.echo(f"wall time      {r.wall_time:.3f} s")
     if not r.converged:
-        stopped(f"log did not converge: {r.status.value} (residual {r.residual:.2e})")
+        stopped(f"log did not converge: {r.status.label} (residual {r.residual:.2e})")
 
 
 def stopped(message: str) -> None:

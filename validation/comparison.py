@@ -304,7 +304,7 @@ def _continuum(metric: Metric, s: np.ndarray, g: np.ndarray) -> tuple[float, str
         r = solvers.distance(metric, s, g)
     except NotImplementedError:
         return float("nan"), "unavailable"
-    return (float(r.distance) if r.converged else float("nan")), r.status.value
+    return (float(r.distance) if r.converged else float("nan")), r.status.label
 
 
 def midpoint_error(

@@ -152,7 +152,7 @@ class DiscreteDistance:
         def curve(t: np.ndarray) -> np.ndarray:
             return _along(pts, cum, t)
 
-        return Solved(value, err, r.status.value, bool(r.converged), mapped, pts,
+        return Solved(value, err, r.status.label, bool(r.converged), mapped, pts,
                       pts[k].copy(), excess + abs(cum[k] - 0.5 * length), curve,
                       1e-6 + excess / max(value, 1e-300),
                       {"segments": r.segments, "tol_reached": r.tol_reached,
@@ -178,7 +178,7 @@ class ContinuumDistance:
 
         r = solvers.distance(metric, x, y, rtol=self.rtol)
         path = r.curve(np.linspace(0.0, 1.0, 65))
-        return Solved(float(r.distance), float(r.error_estimate), r.status.value,
+        return Solved(float(r.distance), float(r.error_estimate), r.status.label,
                       bool(r.converged), r.status is DistanceStatus.NOT_CONVEX, path,
                       path[32].copy(), float(r.error_estimate) + 1e-10 * float(r.distance),
                       r.curve, 1e-6, {"degrees": r.degrees})

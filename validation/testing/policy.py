@@ -112,7 +112,7 @@ def check_policy_midpoint(policy: Any, metric: Metric, *, examples: int = 3, see
                                                                               (mid, y))]
         for r in (whole, *halves):
             if not r.converged:
-                return Verdict(False, note=f"an exact solve did not converge ({r.status.value})")
+                return Verdict(False, note=f"an exact solve did not converge ({r.status.label})")
         d = whole.length
         if d <= 0:
             return Verdict(True)
