@@ -21,8 +21,10 @@ meaning, in :mod:`finsler.hooks` (:class:`~finsler.hooks.MetricHooks`, a base of
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 from abc import ABC, abstractmethod
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
@@ -230,6 +232,30 @@ class Metric(MetricHooks, ABC):
         e = 0.5 * self.F_sx(x, v) ** 2
         h, _ = ca.hessian(e, v)
         return ca.Function(f"g_{self._ident}", [x, v], [ca.densify(h)], ["x", "v"], ["g"])
+
+    def derived(self, key: str, build: Callable[[], Any]) -> Any:
+        """The toolkit's one cache of derived geometry: ``build()`` once per metric and
+        ``key``, then the same object. The derived objects of this class are
+        ``functools.cached_property`` attributes (the same per-instance storage); other
+        packages keep theirs here under a key naming their module (``"certify.values"``,
+        ``"solvers.spray"``), never in module-level caches keyed by metric (which keep
+        metrics alive and are a second scheme). Keys are strings; the object lives as long
+        as the metric. Thread-safe enough for the toolkit: two threads racing on a key
+        build it twice and keep one."""
+        if not isinstance(key, str) or not key:
+            raise InputError(f"derived: key must be a non-empty string, got {key!r}")
+        cache = self.__dict__.setdefault("_derived", {})
+        if key not in cache:
+            cache.setdefault(key, build())
+        return cache[key]
+
+    def __getstate__(self) -> dict[str, Any]:
+        """Pickle the parameters only: derived objects (lowered programs, CasADi
+        functions, :meth:`derived` entries) are rebuilt on demand in the other process."""
+        if dataclasses.is_dataclass(self):
+            return {f.name: self.__dict__[f.name] for f in dataclasses.fields(self)
+                    if f.name in self.__dict__}
+        return {}
 
     @functools.cached_property
     def lowered_F(self) -> LoweredFunction:

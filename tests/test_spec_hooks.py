@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import ast
 import json
+import pickle
 from dataclasses import dataclass
 from pathlib import Path
 from typing import ClassVar
@@ -124,3 +125,26 @@ def test_no_getattr_or_concrete_isinstance_on_metrics_outside_finsler() -> None:
     assert files
     probes = [hit for p in files for hit in _metric_probes(p)]
     assert probes == []
+
+
+def test_derived_geometry_is_built_once_per_metric_and_not_pickled() -> None:
+
+
+    m = finsler.get_metric("matsumoto")
+    builds: list[int] = []
+
+    def build() -> list[int]:
+        builds.append(1)
+        return [len(builds)]
+
+    first = m.derived("test.thing", build)
+    assert m.derived("test.thing", build) is first and builds == [1]
+    other = finsler.get_metric("matsumoto")
+    assert other.derived("test.thing", build) == [2]  # per metric, not per class
+    with pytest.raises(finsler.InputError, match="key"):
+        m.derived("", build)
+    x, v = np.array([[0.1, 0.2]]), np.array([[0.3, -0.1]])
+    f_before = m.F(x, v)  # lowers F into the instance
+    clone = pickle.loads(pickle.dumps(m))
+    assert clone == m and "_derived" not in clone.__dict__ and "lowered_F" not in clone.__dict__
+    assert np.array_equal(clone.F(x, v), f_before)
