@@ -20,12 +20,15 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TypeVar
 
+import numpy as np
+
 import finsler
 from finsler.errors import InputError
 from finsler.limits import check_memory
 from learn.storage import write_result
 
 __all__ = [
+    "LoadedPolicy",
     "RunConfig",
     "StopOnSignal",
     "TrainResult",
@@ -128,6 +131,35 @@ class RunConfig:
             raise InputError(f"unknown config field(s) of {type(self).__name__}: "
                              f"{', '.join(unknown)}")
         return dataclasses.replace(self, **changes)  # type: ignore[type-var]
+
+
+@dataclass
+class LoadedPolicy:
+    """What every trained policy a method loads holds (:class:`learn.policy.Policy`,
+    :class:`learn.pg.PGPolicy`, :class:`learn.seq.SeqPolicy`, a plug-in's): its run config,
+    metric, evaluation depth and eps, the run it came from and the checkpoint file."""
+
+    def __init__(self, config: Any, source: str = "", checkpoint: str = "") -> None:
+        self.config = config
+        self.metric = config.metric
+        self.depth = config.max_depth
+        self.eps = config.eval_eps
+        self.source = source
+        """The run folder (or package resource) the policy was loaded from."""
+        self.checkpoint = checkpoint
+        """File the weights came from (``checkpoint_best.pt``, ``checkpoint_latest.pt`` or
+        ``policy.pt`` for shipped policies)."""
+
+    def __repr__(self) -> str:
+        return (f"{type(self).__name__}(env={self.metric.name!r}, depth={self.depth}, "
+                f"source={self.source!r})")
+
+    def _depth(self, depth: Any) -> int:
+        """``depth`` checked (a non-negative integer), or the policy's own if None."""
+        d = self.depth if depth is None else depth
+        if not isinstance(d, (int, np.integer)) or isinstance(d, bool) or d < 0:
+            raise InputError(f"depth must be a non-negative integer, got {depth!r}")
+        return int(d)
 
 
 @dataclass

@@ -99,14 +99,23 @@ def check_run_metric(cfg: Any, source: str, env: str | None = None,
                          f"{text}; a policy is only loaded for the metric it learned")
 
 
+@dataclass
 class MetricConfig(RunConfig):
-    """Mixin of the method configs: the run's metric is ``env`` with ``metric_params``
-    (validated and completed to the full parameter set when the config is built; old
-    configs without the field get the defaults), and ``metric_class`` locates a user
-    metric's class so that loading a run re-imports it. Together: :attr:`metric_spec`."""
+    """Base of the method configs (a dataclass: a method's config subclasses it with
+    ``@dataclass`` and adds its own fields after these three): the run's metric is ``env``
+    with ``metric_params`` (validated and completed to the full parameter set when the
+    config is built; old configs without the field get the defaults), and ``metric_class``
+    locates a user metric's class so that loading a run re-imports it. Together:
+    :attr:`metric_spec`."""
 
-    metric_params: dict[str, Any] | None
-    metric_class: str | None
+    env: str = "matsumoto"
+    """Registered metric name (``finsler.list_metrics()``)."""
+    metric_params: dict[str, Any] | None = None
+    """Parameters of the metric (``finsler.get_metric(env, **metric_params)``); None or {}
+    = its defaults. Completed to the full parameter set when the config is built."""
+    metric_class: str | None = None
+    """``module:qualname`` of a metric class registered outside the toolkit (filled in
+    automatically; re-imported when the run is loaded in another process)."""
 
     def _check_types(self) -> None:
         params = self.metric_params
@@ -133,14 +142,6 @@ class MetricConfig(RunConfig):
 class TrainConfig(MetricConfig):
     """Every setting of one training run of Algorithm 1 (saved as ``config.json``)."""
 
-    env: str = "matsumoto"
-    """Registered metric name (``finsler.list_metrics()``)."""
-    metric_params: dict[str, Any] | None = None
-    """Parameters of the metric (``finsler.get_metric(env, **metric_params)``); None or {}
-    = its defaults. Completed to the full parameter set when the config is built."""
-    metric_class: str | None = None
-    """``module:qualname`` of a metric class registered outside the toolkit (filled in
-    automatically; re-imported when the run is loaded in another process)."""
     method: str = "midpoint"
     """Actor loss: ``midpoint`` (eq. 6), ``inter`` (eq. 17) or ``two-to-one`` (eq. 18)."""
     timesteps: int = 20_000_000

@@ -57,7 +57,7 @@ from torch import nn
 
 import finsler
 from finsler.errors import InputError
-from learn.base import TrainResult, check_choice, check_hidden
+from learn.base import LoadedPolicy, TrainResult, check_choice, check_hidden
 from learn.config import MetricConfig, ensure_registered
 from learn.loop import RunLoop, best_record, eval_columns, load_run, load_weights
 from learn.networks import mlp, resolve_device
@@ -99,14 +99,6 @@ _ACTIVATIONS = ("tanh", "relu")
 class PGConfig(MetricConfig):
     """Every setting of one PG training run (saved as ``config.json``)."""
 
-    env: str = "matsumoto"
-    """Registered metric name (``finsler.list_metrics()``)."""
-    metric_params: dict[str, Any] | None = None
-    """Parameters of the metric (``finsler.get_metric(env, **metric_params)``); None or {}
-    = its defaults. Completed to the full parameter set when the config is built."""
-    metric_class: str | None = None
-    """``module:qualname`` of a metric class registered outside the toolkit (filled in
-    automatically; re-imported when the run is loaded in another process)."""
     method: str = "pg"
     """Always ``pg``."""
     seed: int = 0
@@ -632,22 +624,13 @@ def train_pg(cfg: PGConfig, out: str | Path, resume: bool = False,
 # ----------------------------------------------------------------------------------------
 # Loading and using a trained PG policy
 # ----------------------------------------------------------------------------------------
-class PGPolicy:
+class PGPolicy(LoadedPolicy):
     """Trained per-depth policies (deterministic means) for one metric."""
 
     def __init__(self, policies: Sequence[DepthPolicy], config: PGConfig,
                  source: str = "", checkpoint: str = "") -> None:
+        super().__init__(config, source, checkpoint)
         self.policies = nn.ModuleList(policies).eval()
-        self.config = config
-        self.metric = config.metric
-        self.depth = config.max_depth
-        self.eps = config.eval_eps
-        self.source = source
-        self.checkpoint = checkpoint
-        """File the weights came from."""
-
-    def __repr__(self) -> str:
-        return f"PGPolicy(env={self.metric.name!r}, depth={self.depth}, source={self.source!r})"
 
     def _points(self, x: Any, name: str) -> torch.Tensor:
         xn = self.metric.domain.check(x, name)

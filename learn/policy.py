@@ -19,6 +19,7 @@ import torch
 
 import finsler
 from finsler.errors import InputError
+from learn.base import LoadedPolicy
 from learn.config import METHODS, TrainConfig
 from learn.loop import load_run, load_weights, read_config_section
 from learn.networks import Actor, resolve_device
@@ -155,33 +156,17 @@ def check_pairs(metric: finsler.Metric, pairs: Any) -> np.ndarray:
     return arr
 
 
-class Policy:
+class Policy(LoadedPolicy):
     """A trained midpoint policy (deterministic means) for one metric."""
 
     def __init__(self, actor: Actor, config: TrainConfig, source: str = "",
                  checkpoint: str = "") -> None:
+        super().__init__(config, source, checkpoint)
         self.actor = actor.eval()
-        self.config = config
-        self.metric = config.metric
-        self.depth = config.max_depth
-        self.eps = config.eval_eps
-        self.source = source
-        self.checkpoint = checkpoint
-        """File the weights came from (``checkpoint_best.pt``, ``checkpoint_latest.pt`` or
-        ``policy.pt`` for shipped policies)."""
-
-    def __repr__(self) -> str:
-        return f"Policy(env={self.metric.name!r}, depth={self.depth}, source={self.source!r})"
 
     def _points(self, x: Any, name: str) -> torch.Tensor:
         xn = self.metric.domain.check(x, name)
         return torch.as_tensor(xn, dtype=torch.float64)
-
-    def _depth(self, depth: Any) -> int:
-        d = self.depth if depth is None else depth
-        if not isinstance(d, (int, np.integer)) or isinstance(d, bool) or d < 0:
-            raise InputError(f"depth must be a non-negative integer, got {depth!r}")
-        return int(d)
 
     def _pair_points(self, starts: Any, goals: Any) -> tuple[torch.Tensor, torch.Tensor]:
         s = self._points(starts, "starts")

@@ -38,7 +38,7 @@ import torch
 
 import finsler
 from finsler.errors import InputError
-from learn.base import TrainResult, check_hidden
+from learn.base import LoadedPolicy, TrainResult, check_hidden
 from learn.config import MetricConfig, ensure_registered, package_versions
 from learn.env import (
     TIME_LIMITS,
@@ -97,14 +97,6 @@ class SeqConfig(MetricConfig):
     stable-baselines3's defaults (normalised advantages, orthogonal initialisation, log-std
     initialised at 0, no target KL, no value clipping)."""
 
-    env: str = "matsumoto"
-    """Registered metric name (``finsler.list_metrics()``)."""
-    metric_params: dict[str, Any] | None = None
-    """Parameters of the metric (``finsler.get_metric(env, **metric_params)``); None or {}
-    = its defaults. Completed to the full parameter set when the config is built."""
-    metric_class: str | None = None
-    """``module:qualname`` of a metric class registered outside the toolkit (filled in
-    automatically; re-imported when the run is loaded in another process)."""
     method: str = "seq"
     """Always ``seq``."""
     seed: int = 0
@@ -421,30 +413,15 @@ def _policy_kwargs(cfg: SeqConfig) -> dict[str, Any]:
     return {"net_arch": {"pi": list(cfg.hidden), "vf": list(cfg.hidden)}, "activation_fn": act}
 
 
-class SeqPolicy:
+class SeqPolicy(LoadedPolicy):
     """A trained Seq policy (deterministic mean actions) for one metric; generates paths
     like :class:`learn.policy.Policy`."""
 
     def __init__(self, policy: Any, config: SeqConfig, source: str = "",
                  checkpoint: str = "") -> None:
+        super().__init__(config, source, checkpoint)
         self.policy = policy
         self.policy.set_training_mode(False)
-        self.config = config
-        self.metric = config.metric
-        self.depth = config.max_depth
-        self.eps = config.eval_eps
-        self.source = source
-        self.checkpoint = checkpoint
-        """File the weights came from (``checkpoint_best.pt`` or ``checkpoint_latest.pt``)."""
-
-    def __repr__(self) -> str:
-        return f"SeqPolicy(env={self.metric.name!r}, depth={self.depth}, source={self.source!r})"
-
-    def _depth(self, depth: int | None) -> int:
-        d = self.depth if depth is None else depth
-        if not isinstance(d, (int, np.integer)) or isinstance(d, bool) or d < 0:
-            raise InputError(f"depth must be a non-negative integer, got {depth!r}")
-        return int(d)
 
     def generate(self, starts: Any, goals: Any, depth: int | None = None) -> np.ndarray:
         """Paths ``(K, dim)`` x2 -> ``(K, 2**D + 1, dim)`` float64 (D = ``depth`` or the
