@@ -257,7 +257,7 @@ class Metric(MetricHooks, ABC):
         ``key``, then the same object. The derived objects of this class are
         ``functools.cached_property`` attributes (the same per-instance storage); other
         packages keep theirs here under a key naming their module (``"certify.values"``,
-        ``"solvers.spray"``), never in module-level caches keyed by metric (which keep
+        ``"geometry.spray"``), never in module-level caches keyed by metric (which keep
         metrics alive and are a second scheme). Keys are strings; the object lives as long
         as the metric. Thread-safe enough for the toolkit: two threads racing on a key
         build it twice and keep one."""
