@@ -4,7 +4,10 @@ A concrete metric is a small frozen dataclass holding its parameters and
 implementing :meth:`Metric.F_sx`, the CasADi SX expression of ``F(x, v)``.
 From that single expression the class derives
 
-* the CasADi function used by IPOPT (``casadi_F``, exact derivatives),
+* the CasADi function used by IPOPT (``casadi_F``, exact derivatives), the fundamental
+  tensor ``casadi_hessian`` (Hessian in ``v`` of ``F**2 / 2``) and the Hessian of ``F`` in
+  ``x`` ``casadi_hessian_x``, each derived once (the spray of :mod:`finsler.geometry` is
+  built on the fundamental tensor),
 * vectorised numpy / torch evaluators obtained by *lowering* the SX
   instruction list (:mod:`finsler.lowering`), compiled once and cached,
 * the local costs of the paper: ``cost`` (eq. 4), ``cost_symmetric`` (eq. 59)
@@ -12,6 +15,10 @@ From that single expression the class derives
   lengths with an error estimate: ``segment_length_error`` / ``path_length_error``
   (adaptive Gauss-Kronrod to a tolerance),
 * a numerical convexity check of ``F(x, .)`` (the Finsler condition).
+
+Derived objects are built once per metric: ``functools.cached_property`` for what this
+class derives, :meth:`Metric.derived` for what other packages derive (the spray, the
+solvers' NLPs and graphs), never a module-level cache keyed by a metric.
 
 A metric's OPTIONAL capabilities (a smooth form of a non-smooth ``F``, a seeding plan, a
 height map or kinematics for figures, a closed-form distance) are declared, with their
@@ -226,19 +233,31 @@ class Metric(MetricHooks, ABC):
 
     @functools.cached_property
     def casadi_hessian(self) -> ca.Function:
-        """CasADi function: Hessian in ``v`` of ``F(x, v)**2 / 2`` (the fundamental tensor)."""
+        """CasADi function: Hessian in ``v`` of ``F(x, v)**2 / 2`` (the fundamental tensor
+        ``g(x, v)``, ``(dim, dim)``, dense). The spray (:mod:`finsler.geometry`) and the
+        convexity check use this one graph; call it on SX symbols to build on it."""
         x = ca.SX.sym("x", self.dim)
         v = ca.SX.sym("v", self.dim)
         e = 0.5 * self.F_sx(x, v) ** 2
         h, _ = ca.hessian(e, v)
         return ca.Function(f"g_{self._ident}", [x, v], [ca.densify(h)], ["x", "v"], ["g"])
 
+    @functools.cached_property
+    def casadi_hessian_x(self) -> ca.Function:
+        """CasADi function: Hessian in ``x`` of ``F(x, v)`` ``(dim, dim)``, dense (the
+        second derivative of a segment's length integrand, :meth:`path_length_bounds`).
+        Call it on SX symbols to differentiate further (``h = m.casadi_hessian_x(x, v)``)."""
+        x = ca.SX.sym("x", self.dim)
+        v = ca.SX.sym("v", self.dim)
+        h, _ = ca.hessian(self.F_sx(x, v), x)
+        return ca.Function(f"hx_{self._ident}", [x, v], [ca.densify(h)], ["x", "v"], ["hx"])
+
     def derived(self, key: str, build: Callable[[], Any]) -> Any:
         """The toolkit's one cache of derived geometry: ``build()`` once per metric and
         ``key``, then the same object. The derived objects of this class are
         ``functools.cached_property`` attributes (the same per-instance storage); other
         packages keep theirs here under a key naming their module (``"certify.values"``,
-        ``"solvers.spray"``), never in module-level caches keyed by metric (which keep
+        ``"geometry.spray"``), never in module-level caches keyed by metric (which keep
         metrics alive and are a second scheme). Keys are strings; the object lives as long
         as the metric. Thread-safe enough for the toolkit: two threads racing on a key
         build it twice and keep one."""
@@ -444,7 +463,7 @@ class Metric(MetricHooks, ABC):
         x = ca.SX.sym("x", self.dim)
         v = ca.SX.sym("v", self.dim)
         f = self.F_sx(x, v)
-        h, _ = ca.hessian(f, x)
+        h = self.casadi_hessian_x(x, v)
         return lower(ca.Function(f"len_{self._ident}", [x, v],
                                  [f, ca.densify(ca.mtimes([v.T, h, v]))]))
 

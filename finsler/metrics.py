@@ -205,23 +205,12 @@ class PandaPole(Metric):
     def frame_positions(self, q: Any) -> Any:
         """Hook: world positions of the ten frames, ``(N, 7)`` -> ``(N, 10, 3)`` (lowered CasADi
         forward kinematics; numpy or torch)."""
+        from finsler import panda
+
         qb = _as_batch(q, 7, "q")
-        (p,) = _lowered_panda_fk()(qb)
+        (p,) = panda.lowered_frame_positions()(qb)
         p = p.reshape(-1, 3, 10)  # CasADi stores the (10, 3) matrix column-major
         return p.transpose(1, 2) if hasattr(p, "detach") else p.transpose(0, 2, 1)
-
-
-_PANDA_FK = None
-
-
-def _lowered_panda_fk() -> Any:
-    global _PANDA_FK
-    if _PANDA_FK is None:
-        from finsler import panda
-        from finsler.lowering import lower
-
-        _PANDA_FK = lower(panda.frame_positions_function())
-    return _PANDA_FK
 
 
 # ----------------------------------------------------------------------------------------

@@ -23,6 +23,7 @@ import numpy as np
 import pinocchio
 
 from finsler.errors import InputError
+from finsler.lowering import LoweredFunction, lower
 
 __all__ = [
     "ARM_JOINT_NAMES",
@@ -33,6 +34,7 @@ __all__ = [
     "frame_positions_function",
     "frame_positions_sx",
     "load_panda_model",
+    "lowered_frame_positions",
     "model_frame_positions_sx",
     "pole_metric_sx",
 ]
@@ -279,6 +281,15 @@ def frame_positions_function() -> casadi.Function:
     """
     q = casadi.SX.sym("q", NQ)
     return casadi.Function("panda_fk", [q], [frame_positions_sx(q)], ["q"], ["P"])
+
+
+@functools.lru_cache(maxsize=1)
+def lowered_frame_positions() -> LoweredFunction:
+    """Cached lowered program of ``frame_positions_function`` (numpy or torch, batch-first):
+    q ``(N, 7)`` -> ``(N, 30)``, each row the (10, 3) positions flattened column-major (as
+    CasADi stores them). One per process, like the model: it does not depend on a metric's
+    parameters."""
+    return lower(frame_positions_function())
 
 
 def pole_metric_sx(q: casadi.SX, v: casadi.SX, pole: tuple[float, float] = (0.4, 0.0)) -> casadi.SX:

@@ -1,19 +1,13 @@
 """Exponential and logarithm maps of a Finsler metric: the geodesic initial-value problem
 and its inverse.
 
-The geodesic equation is derived symbolically, in CasADi, from the metric's one SX
-expression ``F(x, v)`` (no second formula of any metric). With the energy
-``E = F**2 / 2`` and the fundamental tensor ``g_ij = d2E / dv_i dv_j``, the Euler-Lagrange
-equation ``d/dt (dE/dv) = dE/dx`` reads::
-
-    g(x, x') x'' = dE/dx - (d2E / dv dx) x'      i.e.  x''^i + 2 G^i(x, x') = 0
-
-with the spray ``G = -1/2 g^{-1} (dE/dx - (d2E / dv dx) v)``. CasADi gives ``g``, the
-right-hand side and their derivatives in ``(x, v)`` exactly; the linear solve with ``g`` is
-done numerically (so a 7-D metric does not need a symbolic inverse). The equation is
-meaningful only where ``g(x, x')`` is positive definite (``F`` strongly convex, i.e.
-Finsler): :func:`exp_map` refuses a start where ``F(x, .)`` is not strongly convex and
-stops with status ``NOT_CONVEX`` when the curve reaches such a region.
+The geodesic equation ``g(x, x') x'' = b(x, x')`` (the spray) is derived symbolically
+from the metric's one SX expression ``F(x, v)`` and its fundamental tensor, once per
+metric, on the metric side: :class:`finsler.geometry.Spray` / :func:`finsler.geometry.spray`
+(re-exported here as ``solvers.expmap.Spray`` / ``spray``). The equation is meaningful only
+where ``g(x, x')`` is positive definite (``F`` strongly convex, i.e. Finsler):
+:func:`exp_map` refuses a start where ``F(x, .)`` is not strongly convex and stops with
+status ``NOT_CONVEX`` when the curve reaches such a region.
 
 :func:`exp_map` integrates the first-order system ``(x, v)' = (v, -2 G(x, v))`` with
 scipy's DOP853 (8th-order Runge-Kutta) at tight tolerances, stopping at the boundary of
@@ -26,17 +20,16 @@ equation, integrated alongside.
 
 from __future__ import annotations
 
-import functools
 import math
 import time
 from dataclasses import dataclass, field
 from typing import Any
 
-import casadi as ca
 import numpy as np
 from scipy.integrate import solve_ivp
 
 from finsler.errors import InputError, short
+from finsler.geometry import Spray, spray
 from finsler.limits import check_memory
 from finsler.metric import Metric
 from solvers.chebyshev import differentiation_matrix
@@ -45,7 +38,8 @@ from solvers.result import DistanceStatus, SolverError
 from solvers.spectral import distance
 from solvers.status import ExpStatus, LogStatus
 
-__all__ = ["ExpResult", "ExpStatus", "LogResult", "LogStatus", "exp_map", "log_map"]
+__all__ = ["ExpResult", "ExpStatus", "LogResult", "LogStatus", "Spray", "exp_map", "log_map",
+           "spray"]
 
 #: Default relative and absolute tolerances of the DOP853 integration.
 RTOL = 1e-13
@@ -171,69 +165,6 @@ class LogResult:
             "integrations": self.integrations,
             "wall_time": self.wall_time,
         }
-
-
-# ----------------------------------------------------------------------------------------
-# The spray, derived from F
-# ----------------------------------------------------------------------------------------
-class Spray:
-    """CasADi functions of the geodesic equation of ``metric``, built once per metric.
-
-    ``parts(x, v) -> (F, g (dim, dim), b (dim,))`` with ``g x'' = b`` the geodesic equation;
-    ``parts_jac(x, v) -> (dg/dz (dim*dim, 2 dim), db/dz (dim, 2 dim))`` with ``z = (x, v)``
-    (``g`` flattened column-major, as CasADi stores it); ``margin(x)`` the domain's
-    constraints as values that are ``>= 0`` inside.
-    """
-
-    def __init__(self, metric: Metric) -> None:
-        d = metric.dim
-        self.dim = d
-        x = ca.SX.sym("x", d)
-        v = ca.SX.sym("v", d)
-        z = ca.vertcat(x, v)
-        f = metric.F_sx(x, v)
-        e = 0.5 * f * f
-        g, ev = ca.hessian(e, v)
-        g = ca.densify(g)
-        ex = ca.gradient(e, x)
-        b = ex - ca.mtimes(ca.jacobian(ev, x), v)
-        self.parts = ca.Function("spray_parts", [x, v], [f, g, b])
-        self.parts_jac = ca.Function(
-            "spray_parts_jac", [x, v],
-            [ca.densify(ca.jacobian(ca.vec(g), z)), ca.densify(ca.jacobian(b, z))])
-        lo, hi = metric.domain.bounds()
-        rows = [x[i] - lo[i] for i in range(d) if np.isfinite(lo[i])]
-        rows += [hi[i] - x[i] for i in range(d) if np.isfinite(hi[i])]
-        for expr, lb, ub in metric.domain.constraints_sx(x):
-            if np.isfinite(float(ub)):
-                rows.append(ub - expr)
-            if np.isfinite(float(lb)):
-                rows.append(expr - lb)
-        self.n_margin = len(rows)
-        self.margin = ca.Function("margin", [x], [ca.vertcat(*rows) if rows else ca.SX(1, 1)])
-
-    def acceleration(self, x: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """``x'' = g^{-1} b`` ``(dim,)`` and ``g`` ``(dim, dim)``."""
-        _, g, b = self.parts(x, v)
-        g = np.asarray(g)
-        return np.linalg.solve(g, np.asarray(b).reshape(-1)), g
-
-    def pd_ratio(self, x: np.ndarray, v: np.ndarray) -> float:
-        """Smallest over largest eigenvalue of ``g(x, v)`` (<= 0: not positive definite)."""
-        _, g, _ = self.parts(x, v)
-        g = np.asarray(g)
-        lam = np.linalg.eigvalsh(0.5 * (g + g.T))
-        return float(lam[0] / lam[-1]) if lam[-1] > 0 else -1.0
-
-
-@functools.lru_cache(maxsize=16)
-def spray(metric: Metric) -> Spray:
-    """The :class:`Spray` of ``metric`` (cached: metrics are frozen dataclasses)."""
-    if not metric.smooth:
-        raise InputError(f"{metric.name}: F is not smooth ({metric.convexity_note}); the "
-                         "geodesic equation (spray) is not defined, so exp/log maps are not "
-                         "available for this metric")
-    return Spray(metric)
 
 
 # ----------------------------------------------------------------------------------------

@@ -12,7 +12,6 @@
 
 from __future__ import annotations
 
-import functools
 import math
 from dataclasses import dataclass
 
@@ -428,9 +427,13 @@ class GraphSeeder:
         return out
 
 
-@functools.lru_cache(maxsize=8)
 def graph_seeder(metric: Metric) -> GraphSeeder:
-    """The graph of ``metric``, built once per metric (sizes chosen for the speed targets)."""
+    """The graph of ``metric``, built once per metric (``metric.derived``; sizes chosen for
+    the speed targets)."""
+    return metric.derived("seeding.graph", lambda: _build_graph_seeder(metric))
+
+
+def _build_graph_seeder(metric: Metric) -> GraphSeeder:
     if metric.dim == 2:
         lo, hi = metric.domain.bounds()
         h = float(np.max(hi - lo)) / 48.0

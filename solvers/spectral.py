@@ -19,7 +19,6 @@ conservative estimate of the error of ``L_N``; a small rounding floor is added.
 
 from __future__ import annotations
 
-import functools
 import math
 import time
 from typing import Any
@@ -127,10 +126,10 @@ class SpectralNLP:
         return float(self.wq @ f), P
 
 
-@functools.lru_cache(maxsize=32)
 def spectral_nlp(metric: Metric, n: int) -> SpectralNLP:
-    """The degree-``n`` pseudospectral NLP of ``metric``, built once and cached."""
-    return SpectralNLP(metric, n)
+    """The degree-``n`` pseudospectral NLP of ``metric``, built once per metric and ``n``
+    (``metric.derived``)."""
+    return metric.derived(f"spectral.nlp.{n}", lambda: SpectralNLP(metric, n))
 
 
 def _nodes_from_path(points: np.ndarray, n: int) -> np.ndarray:

@@ -17,7 +17,6 @@ the formula lives only in the metric.
 
 from __future__ import annotations
 
-import functools
 from dataclasses import dataclass, field
 
 import casadi as ca
@@ -136,13 +135,17 @@ class _Path:
     slack_init: ca.Function  # (P (dim, n+1)) -> slack values
 
 
-@functools.lru_cache(maxsize=16)
 def _segment_functions(metric: Metric) -> tuple[ca.Function, ca.Function, ca.Function,
                                                  tuple, tuple, tuple, tuple]:
     """One segment's smooth square and slack constraints ``(x, y, w) -> (f2, g)``, its
     exact slack values ``(x, y) -> w`` and one point's domain constraints ``x -> c``, as
     SX functions (mapped over the segments of every size: the NLP graph is O(1) in ``n``),
-    with the bounds of ``w``, ``g`` and ``c``."""
+    with the bounds of ``w``, ``g`` and ``c``; built once per metric (``metric.derived``)."""
+    return metric.derived("transcription.segment", lambda: _build_segment_functions(metric))
+
+
+def _build_segment_functions(metric: Metric) -> tuple[ca.Function, ca.Function, ca.Function,
+                                                       tuple, tuple, tuple, tuple]:
     dim = metric.dim
     x = ca.SX.sym("x", dim)
     y = ca.SX.sym("y", dim)
@@ -370,17 +373,18 @@ class MinMaxNLP(_NLPBase):
         return self.z_to_points(r.z[:-self.nt], s, g), r.status, its, relaxed
 
 
-@functools.lru_cache(maxsize=32)
 def energy_nlp(metric: Metric, n: int, warm: bool = False) -> EnergyNLP:
-    """The energy NLP of ``metric`` with ``n`` segments, built once and cached (``warm``:
-    IPOPT options for starts that are nearly converged)."""
-    return EnergyNLP(metric, n, warm=warm)
+    """The energy NLP of ``metric`` with ``n`` segments, built once per metric, ``n`` and
+    ``warm`` (``metric.derived``; ``warm``: IPOPT options for starts that are nearly
+    converged)."""
+    return metric.derived(f"transcription.energy.{n}.{bool(warm)}",
+                          lambda: EnergyNLP(metric, n, warm=warm))
 
 
-@functools.lru_cache(maxsize=32)
 def minmax_nlp(metric: Metric, n: int) -> MinMaxNLP:
-    """The min-max NLP of ``metric`` with ``n`` segments, built once and cached."""
-    return MinMaxNLP(metric, n)
+    """The min-max NLP of ``metric`` with ``n`` segments, built once per metric and ``n``
+    (``metric.derived``)."""
+    return metric.derived(f"transcription.minmax.{n}", lambda: MinMaxNLP(metric, n))
 
 
 def _ident(name: str) -> str:
