@@ -6,6 +6,9 @@ from __future__ import annotations
 
 import dataclasses
 import difflib
+import threading
+from collections import OrderedDict
+from typing import Any
 
 from finsler.errors import InputError, UnknownMetricError
 from finsler.metric import Metric
@@ -21,7 +24,7 @@ from finsler.metrics import (
 )
 
 __all__ = ["check_name", "get_metric", "list_metrics", "metric_class", "register_metric",
-           "unregister_metric"]
+           "shared_instance", "unregister_metric"]
 
 _REGISTRY: dict[str, type[Metric]] = {}
 
@@ -88,4 +91,32 @@ def get_metric(name: str, **params: float) -> Metric:
             f"metric {name!r} has no parameter {', '.join(map(repr, unknown))}; "
             f"its parameters are: {', '.join(sorted(fields)) or '(none)'}"
         )
-    return cls(**params)
+    return shared_instance(cls, params)
+
+
+#: How many (class, parameters) instances :func:`shared_instance` keeps.
+SHARED_INSTANCES = 128
+
+_SHARED: OrderedDict[tuple, Metric] = OrderedDict()
+_SHARED_LOCK = threading.Lock()
+
+
+def shared_instance(cls: type[Metric], params: dict[str, Any]) -> Metric:
+    """``cls(**params)``, the same object for the same class and full parameter set (the
+    last :data:`SHARED_INSTANCES` of them): metrics are frozen, and what they derive
+    (lowered programs, NLPs, the spray: :meth:`Metric.derived`) lives on the instance, so a
+    metric asked for again, by name or by spec, reuses it instead of building it again.
+    A metric with unhashable parameter values is not shared."""
+    metric = cls(**params)
+    key = (cls, tuple((f.name, type(v).__name__, v) for f in dataclasses.fields(metric)
+                      for v in (getattr(metric, f.name),)))
+    try:
+        hash(key)
+    except TypeError:
+        return metric
+    with _SHARED_LOCK:
+        shared = _SHARED.setdefault(key, metric)
+        _SHARED.move_to_end(key)
+        while len(_SHARED) > SHARED_INSTANCES:
+            _SHARED.popitem(last=False)
+    return shared

@@ -195,7 +195,7 @@ class MetricSpec:
             mcls = registry.metric_class(self.name)
         args = {k: tuple(v) if isinstance(v, list) else v for k, v in self.params.items()}
         try:
-            return mcls(**args)
+            return registry.shared_instance(mcls, args)
         except InputError:
             raise
         except (TypeError, ValueError) as err:  # a metric's own check, not an InputError

@@ -126,7 +126,8 @@ def test_derived_geometry_is_built_once_per_metric() -> None:
     assert minmax_nlp(m, 4) is minmax_nlp(m, 4)
     assert spectral_nlp(m, 6) is spectral_nlp(m, 6)
     assert graph_seeder(m) is graph_seeder(m)
-    other = finsler.get_metric("matsumoto")  # its own cache, dropped with it
+    assert geometry.spray(finsler.get_metric("matsumoto")) is sp  # the registry shares m
+    other = type(m)()  # an equal metric, another instance: its own cache, dropped with it
     assert geometry.spray(other) is not sp and geometry.spray(other) is geometry.spray(other)
 
 

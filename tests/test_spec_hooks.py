@@ -139,8 +139,8 @@ def test_derived_geometry_is_built_once_per_metric_and_not_pickled() -> None:
 
     first = m.derived("test.thing", build)
     assert m.derived("test.thing", build) is first and builds == [1]
-    other = finsler.get_metric("matsumoto")
-    assert other.derived("test.thing", build) == [2]  # per metric, not per class
+    other = type(m)()  # an equal metric, another instance
+    assert other.derived("test.thing", build) == [2]  # per instance, not per class
     with pytest.raises(finsler.InputError, match="key"):
         m.derived("", build)
     x, v = np.array([[0.1, 0.2]]), np.array([[0.3, -0.1]])
@@ -148,3 +148,20 @@ def test_derived_geometry_is_built_once_per_metric_and_not_pickled() -> None:
     clone = pickle.loads(pickle.dumps(m))
     assert clone == m and "_derived" not in clone.__dict__ and "lowered_F" not in clone.__dict__
     assert np.array_equal(clone.F(x, v), f_before)
+
+
+def test_a_metric_asked_for_again_is_the_same_instance_with_its_derived_geometry() -> None:
+    from finsler import registry
+
+    m = finsler.get_metric("randers", wind_x=0.125)
+    assert finsler.get_metric("randers", wind_x=0.125) is m
+    assert MetricSpec.from_dict(MetricSpec.of(m).to_dict()).build() is m
+    assert finsler.get_metric("randers", wind_x=0.25) is not m
+    assert finsler.get_metric("randers", wind_x=0.25) == finsler.get_metric("randers",
+                                                                            wind_x=0.25)
+    built = m.derived("test.shared", lambda: object())
+    assert finsler.get_metric("randers", wind_x=0.125).derived("test.shared", object) is built
+    # bounded: the oldest instances are let go
+    for k in range(registry.SHARED_INSTANCES + 1):
+        finsler.get_metric("randers", wind_x=0.5, wind_y=0.001 * (k + 1))
+    assert finsler.get_metric("randers", wind_x=0.125) is not m
