@@ -157,8 +157,6 @@ def test_hessian_in_x_is_the_length_integrands_second_derivative() -> None:
 PENDING = {
     "solvers/certify.py:_values",
     "solvers/certify.py:_second_derivatives",
-    "validation/testing/metric.py:_cached_map",
-    "validation/testing/metric.py:_joint_second_derivative",
 }
 
 

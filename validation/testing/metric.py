@@ -13,7 +13,6 @@ domain scaled about its centre) or, if none, the convex core found by the map.
 
 from __future__ import annotations
 
-import functools
 import math
 from dataclasses import dataclass
 from typing import Any
@@ -150,17 +149,12 @@ class ConvexityMap:
                 f"{self.min_eigenvalue:.3g}){near}")
 
 
-@functools.lru_cache(maxsize=32)
-def _cached_map(m: Metric, samples: int, seed: int) -> ConvexityMap:
-    return _map(m, samples, seed)
-
-
 def convexity_map(metric: Metric, samples: int = MAP_SAMPLES, seed: int = 0) -> ConvexityMap:
-    """The :class:`ConvexityMap` of ``metric`` (cached per metric, samples and seed)."""
-    try:
-        return _cached_map(metric, int(samples), int(seed))
-    except TypeError:  # an unhashable user metric
-        return _map(metric, int(samples), int(seed))
+    """The :class:`ConvexityMap` of ``metric`` (cached on the metric per samples and seed:
+    :meth:`finsler.Metric.derived`)."""
+    samples, seed = int(samples), int(seed)
+    return metric.derived(f"testing.convexity_map.{samples}.{seed}",
+                          lambda: _map(metric, samples, seed))
 
 
 def _map(m: Metric, samples: int, seed: int) -> ConvexityMap:
@@ -453,11 +447,6 @@ def check_lowered_forms(metric: Metric, *, examples: int = 100, seed: int = 0,
                   rng=seeded(seed, "lowered-forms"))
 
 
-@functools.lru_cache(maxsize=32)
-def _joint_second_derivative(metric: Metric) -> ca.Function:
-    return _build_second_derivative(metric)
-
-
 def _build_second_derivative(metric: Metric) -> ca.Function:
     """``(z, u) -> u' Hess_z E(z) u`` with ``E = F(x, v)**2 / 2`` and ``z = (x, v)``, by
     CasADi's automatic differentiation of the metric's one expression."""
@@ -484,10 +473,7 @@ def check_smoothness(metric: Metric, *, examples: int = 100, seed: int = 0,
     if not m.smooth:
         return _not_smooth(m, name, claim, "exp/log refuse it and the solver uses its smooth "
                                            "reformulation")
-    try:
-        fn = _joint_second_derivative(m)
-    except TypeError:
-        fn = _build_second_derivative(m)
+    fn = m.derived("testing.joint_second_derivative", lambda: _build_second_derivative(m))
     d = m.dim
     lo, hi = m.domain.bounds()
     width = np.where(np.isfinite(hi - lo), hi - lo, 1.0)
