@@ -58,7 +58,6 @@ derivatives, the corrections and rows) and the refinement loop; the meshes are i
 
 from __future__ import annotations
 
-import functools
 import logging
 import math
 import time
@@ -260,17 +259,8 @@ class CertifyResult:
 
 
 # ----------------------------------------------------------------------------------------
-# derivatives of F (CasADi, lowered once per metric)
+# derivatives of F (CasADi, lowered once per metric and kept in the metric's own cache)
 # ----------------------------------------------------------------------------------------
-@functools.lru_cache(maxsize=8)
-def _values(metric: Metric) -> LoweredFunction:
-    """Lowered ``(x, v) -> F``, batch ``(N, 2)`` -> ``(N, 1)``."""
-    x = ca.SX.sym("x", 2)
-    v = ca.SX.sym("v", 2)
-    return lower(ca.Function(f"certify_F_{metric._ident}", [x, v], [metric.F_sx(x, v)]))
-
-
-@functools.lru_cache(maxsize=8)
 def _second_derivatives(metric: Metric) -> tuple[LoweredFunction, ...]:
     """Lowered functions whose interval enclosures bound the corrections:
 
@@ -279,7 +269,17 @@ def _second_derivatives(metric: Metric) -> tuple[LoweredFunction, ...]:
     * ``(x, v, d) -> (q, dq)``: ``q = d' Hess_v F(x, v) d`` (the second derivative of F
       along a chord of direction ``d``) and its gradient in ``(x, v)``;
     * ``(x, v) -> h`` and ``(x, v, d) -> q`` alone (the centres of the mean-value forms).
+
+    Built once per metric, in :meth:`finsler.Metric.derived` (the metric's one cache of
+    derived geometry). The values of F themselves are the metric's
+    :attr:`~finsler.Metric.lowered_F`.
     """
+    return metric.derived("certify.second_derivatives",
+                          lambda: _lower_second_derivatives(metric))
+
+
+def _lower_second_derivatives(metric: Metric) -> tuple[LoweredFunction, ...]:
+    """Build :func:`_second_derivatives` (CasADi Hessians of the metric's own ``F``)."""
     x = ca.SX.sym("x", 2)
     v = ca.SX.sym("v", 2)
     d = ca.SX.sym("d", 2)
@@ -299,7 +299,7 @@ def _second_derivatives(metric: Metric) -> tuple[LoweredFunction, ...]:
 
 def _eval_values(metric: Metric, x: np.ndarray, v: np.ndarray,
                  chunk: int = 200_000) -> np.ndarray:
-    fun = _values(metric)
+    fun = metric.lowered_F
     fs = []
     for a in range(0, x.shape[0], chunk):
         with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
