@@ -1,8 +1,9 @@
-"""Geometry of :func:`solvers.certify.certify` that is not part of the bound's arithmetic.
+"""The meshes :func:`solvers.certify.certify` computes its bound on, and a zigzag curve.
 
 Split out of :mod:`solvers.certify` (issue 23: below 800 lines, one home per idea) so that
 module keeps the bound code (values of F, interval enclosures of its second derivatives,
-the corrections) and this one the meshes the bound is computed on:
+the corrections, which also inflate for the rounding of the circumradii computed here)
+and this one the plain geometry:
 
 * the convex polygon covering the domain (:func:`_outline`) and point-in-polygon tests;
 * the first point set, a hexagonal lattice graded around the solver's path
@@ -29,12 +30,17 @@ from finsler.metric import Metric
 
 
 class _Grading(Protocol):
-    """The spacing settings of :class:`solvers.certify.MeshSpec` used here."""
+    """The spacing settings of :class:`solvers.certify.MeshSpec` used here (read-only, as
+    in the frozen dataclass)."""
 
-    h_path: float
-    corridor: float
-    grade: float
-    h_far: float
+    @property
+    def h_path(self) -> float: ...
+    @property
+    def corridor(self) -> float: ...
+    @property
+    def grade(self) -> float: ...
+    @property
+    def h_far(self) -> float: ...
 
 
 def _outline(metric: Metric) -> np.ndarray:
