@@ -50,11 +50,14 @@ Refinement: triangles are refined (edge midpoints, Delaunay again) where the LP'
 solution says the corrections cost most (``sum_rows y_r c_r``, the bound's sensitivity),
 starting from a mesh graded around the solver's path, until the gap reaches
 ``MeshSpec.target_gap`` or a size / round limit.
+
+Layout: this module holds the bound code (values of F, enclosures of its second
+derivatives, the corrections and rows) and the refinement loop; the meshes are in
+:mod:`solvers.certify_mesh`, the LPs in :mod:`solvers.certify_lp`.
 """
 
 from __future__ import annotations
 
-import functools
 import logging
 import math
 import time
@@ -64,12 +67,22 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from finsler.domains import Box, Disk
-from finsler.errors import InputError, short
+from finsler.errors import InputError
 from finsler.intervals import Interval, enclose, isqrt
 from finsler.limits import check_memory
 from finsler.lowering import LoweredFunction, lower
 from finsler.metric import Metric
+from solvers.certify_lp import INITIAL_DIRECTIONS as INITIAL_DIRECTIONS
+from solvers.certify_lp import LP_SOLVER, LPFailure, _initial_modes, _solve_lp
+from solvers.certify_lp import TIGHT_DUAL as TIGHT_DUAL
+from solvers.certify_lp import WINDOW_FRACTION as WINDOW_FRACTION
+from solvers.certify_lp import _Rays as _Rays
+from solvers.certify_lp import _window as _window
+from solvers.certify_mesh import _distance_to_path as _distance_to_path
+from solvers.certify_mesh import _hex_lattice as _hex_lattice
+from solvers.certify_mesh import _initial_points, _Mesh, _outline, _zigzag
+from solvers.certify_mesh import _inside_polygon as _inside_polygon
+from solvers.certify_mesh import _spacing as _spacing
 from solvers.inputs import SHORT_PAIR, as_metric, domain_scale, is_short_pair
 from solvers.status import CertifyStatus
 
@@ -77,10 +90,6 @@ __all__ = ["CertifyResult", "MeshSpec", "certify"]
 
 _LOG = logging.getLogger(__name__)
 
-#: cvxpy solver of the LPs (Clarabel: an interior-point method, far faster here than HiGHS).
-LP_SOLVER = "CLARABEL"
-#: Rows whose dual exceeds this fraction of the largest dual count as tight (refined).
-TIGHT_DUAL = 1e-7
 #: Refinements of triangles whose corrections exceed half of F, before the first LP.
 MAX_PRE_REFINE = 8
 #: Sub-box splitting (2 x 2 per level) of triangles whose enclosures are infinite or loose.
@@ -89,19 +98,6 @@ SPLIT_DEPTH = 2
 #: enclosures exceed this multiple of their values at the box's centre.
 SPLIT_FRACTION = 0.25
 SPLIT_OVERESTIMATE = 1.5
-#: Evenly spaced rays of the inner polygons that keep the vertices away from the path safe.
-INITIAL_DIRECTIONS = 8
-#: Directions an exact vertex starts with around the path's (or a tight edge's) direction:
-#: this fraction of the K sampled directions on each side (violated ones are added later).
-WINDOW_FRACTION = 1 / 64
-
-
-class LPFailure(RuntimeError):
-    """The LP solver failed on one round (turned into :attr:`CertifyStatus.LP_FAILED`)."""
-
-
-def _window(k: int) -> int:
-    return max(1, int(k * WINDOW_FRACTION))
 
 
 @dataclass(frozen=True)
@@ -263,17 +259,8 @@ class CertifyResult:
 
 
 # ----------------------------------------------------------------------------------------
-# derivatives of F (CasADi, lowered once per metric)
+# derivatives of F (CasADi, lowered once per metric and kept in the metric's own cache)
 # ----------------------------------------------------------------------------------------
-@functools.lru_cache(maxsize=8)
-def _values(metric: Metric) -> LoweredFunction:
-    """Lowered ``(x, v) -> F``, batch ``(N, 2)`` -> ``(N, 1)``."""
-    x = ca.SX.sym("x", 2)
-    v = ca.SX.sym("v", 2)
-    return lower(ca.Function(f"certify_F_{metric._ident}", [x, v], [metric.F_sx(x, v)]))
-
-
-@functools.lru_cache(maxsize=8)
 def _second_derivatives(metric: Metric) -> tuple[LoweredFunction, ...]:
     """Lowered functions whose interval enclosures bound the corrections:
 
@@ -282,7 +269,17 @@ def _second_derivatives(metric: Metric) -> tuple[LoweredFunction, ...]:
     * ``(x, v, d) -> (q, dq)``: ``q = d' Hess_v F(x, v) d`` (the second derivative of F
       along a chord of direction ``d``) and its gradient in ``(x, v)``;
     * ``(x, v) -> h`` and ``(x, v, d) -> q`` alone (the centres of the mean-value forms).
+
+    Built once per metric, in :meth:`finsler.Metric.derived` (the metric's one cache of
+    derived geometry). The values of F themselves are the metric's
+    :attr:`~finsler.Metric.lowered_F`.
     """
+    return metric.derived("certify.second_derivatives",
+                          lambda: _lower_second_derivatives(metric))
+
+
+def _lower_second_derivatives(metric: Metric) -> tuple[LoweredFunction, ...]:
+    """Build :func:`_second_derivatives` (CasADi Hessians of the metric's own ``F``)."""
     x = ca.SX.sym("x", 2)
     v = ca.SX.sym("v", 2)
     d = ca.SX.sym("d", 2)
@@ -302,7 +299,7 @@ def _second_derivatives(metric: Metric) -> tuple[LoweredFunction, ...]:
 
 def _eval_values(metric: Metric, x: np.ndarray, v: np.ndarray,
                  chunk: int = 200_000) -> np.ndarray:
-    fun = _values(metric)
+    fun = metric.lowered_F
     fs = []
     for a in range(0, x.shape[0], chunk):
         with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
@@ -499,221 +496,8 @@ class _PointData:
         return hz, ht
 
 
-def _zigzag(m: Metric, pts: np.ndarray, k: int, teeth: int = 2) -> np.ndarray | None:
-    """The polyline ``pts`` ``(n+1, 2)`` with each segment whose direction ``u`` is cheaper
-    as a combination ``a v_j + b v_l`` (``a, b >= 0``, two of ``k`` sampled directions;
-    ``a F(z, v_j) + b F(z, v_l) < F(z, u)`` at the segment's midpoint ``z``) replaced by
-    ``teeth`` zigzags along ``v_j`` and ``v_l``, projected into the domain; None if no
-    segment is. Any curve's length bounds the distance from above, so the zigzag is only a
-    candidate: its length is measured, not assumed."""
-    ang = 2 * np.pi * np.arange(k) / k
-    dirs = np.stack([np.cos(ang), np.sin(ang)], 1)
-    d = pts[1:] - pts[:-1]
-    n = d.shape[0]
-    length = np.linalg.norm(d, axis=1)
-    mids = 0.5 * (pts[1:] + pts[:-1])
-    ok = length > 0
-    fv = m.F(np.repeat(mids, k, axis=0), np.tile(dirs, (n, 1)), check=False).reshape(n, k)
-    u = d / np.where(ok, length, 1.0)[:, None]
-    fu = m.F(mids, u, check=False)
-    # every pair (j, l): solve a v_j + b v_l = u, keep a, b >= 0
-    cross = dirs[:, 0][:, None] * dirs[:, 1][None] - dirs[:, 1][:, None] * dirs[:, 0][None]
-    good = np.abs(cross) > 1e-9
-    safe = np.where(good, cross, 1.0)
-    out = [pts[:1]]
-    changed = False
-    for i in range(n):
-        if not ok[i]:
-            out.append(pts[i + 1:i + 2])
-            continue
-        # Cramer: a = (u x v_l) / (v_j x v_l), b = (v_j x u) / (v_j x v_l)
-        ux = u[i, 0] * dirs[:, 1] - u[i, 1] * dirs[:, 0]  # u x v
-        a = ux[None, :] / safe
-        b = -ux[:, None] / safe
-        cost = np.where(good & (a >= 0) & (b >= 0), a * fv[i][:, None] + b * fv[i][None, :],
-                        np.inf)
-        j, l_ = np.unravel_index(int(np.argmin(cost)), cost.shape)
-        if not cost[j, l_] < fu[i] * (1 - 1e-9):
-            out.append(pts[i + 1:i + 2])
-            continue
-        changed = True
-        step_a = length[i] * a[j, l_] * dirs[j] / teeth
-        step_b = length[i] * b[j, l_] * dirs[l_] / teeth
-        pieces = np.tile(np.stack([step_a, step_b]), (teeth, 1))
-        seg = pts[i] + np.cumsum(pieces, axis=0)
-        seg[-1] = pts[i + 1]
-        out.append(seg)
-    if not changed:
-        return None
-    zig = np.concatenate(out)
-    zig = np.asarray(m.domain.project(zig), dtype=np.float64)
-    zig[0], zig[-1] = pts[0], pts[-1]
-    return zig
-
-
 # ----------------------------------------------------------------------------------------
-# meshes
-# ----------------------------------------------------------------------------------------
-def _outline(metric: Metric) -> np.ndarray:
-    """Vertices ``(M, 2)`` (counter-clockwise) of a convex polygon containing the domain."""
-    dom = metric.domain
-    if isinstance(dom, Box):
-        (x0, y0), (x1, y1) = dom.low, dom.high
-        return np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]], float)
-    if isinstance(dom, Disk):
-        m = 64
-        r = dom.radius / math.cos(math.pi / m)  # circumscribed: the disk lies inside
-        a = 2 * np.pi * (np.arange(m) + 0.5) / m
-        return np.asarray(dom.center, float) + r * np.stack([np.cos(a), np.sin(a)], 1)
-    raise InputError(f"certify needs a 2-D box or disk domain, {metric.name} has "
-                     f"{dom.describe()}")
-
-
-def _inside_polygon(pts: np.ndarray, poly: np.ndarray, margin: float) -> np.ndarray:
-    """Points at least ``margin`` inside the convex counter-clockwise polygon."""
-    ok = np.ones(pts.shape[0], bool)
-    for a, b in zip(poly, np.roll(poly, -1, axis=0)):
-        e = b - a
-        normal = np.array([e[1], -e[0]]) / np.linalg.norm(e)  # outward for ccw
-        ok &= (pts - a) @ normal <= -margin
-    return ok
-
-
-def _distance_to_path(pts: np.ndarray, path: np.ndarray, chunk: int = 4096) -> np.ndarray:
-    """Euclidean distance of ``pts`` ``(P, 2)`` to the polyline ``path`` ``(n+1, 2)``."""
-    a, b = path[:-1], path[1:]
-    e = b - a
-    ee = np.maximum(np.einsum("ij,ij->i", e, e), 1e-300)
-    out = np.empty(pts.shape[0])
-    for s in range(0, pts.shape[0], chunk):
-        p = pts[s:s + chunk, None, :]
-        t = np.clip(np.einsum("pij,ij->pi", p - a[None], e) / ee, 0.0, 1.0)
-        d = p - (a[None] + t[..., None] * e[None])
-        out[s:s + chunk] = np.sqrt(np.min(np.einsum("pij,pij->pi", d, d), axis=1))
-    return out
-
-
-def _spacing(dist: np.ndarray, spec: MeshSpec) -> np.ndarray:
-    return np.minimum(spec.h_far, spec.h_path + spec.grade * np.maximum(dist - spec.corridor,
-                                                                          0.0))
-
-
-def _hex_lattice(lo: np.ndarray, hi: np.ndarray, h: float) -> np.ndarray:
-    """Hexagonal lattice of spacing ``h`` through the origin, covering ``[lo, hi]``; the
-    lattice of spacing ``2h`` is a subset of it (levels nest)."""
-    dy = h * math.sqrt(3) / 2
-    j = np.arange(math.floor(lo[1] / dy) - 1, math.ceil(hi[1] / dy) + 2)
-    i = np.arange(math.floor(lo[0] / h) - 2, math.ceil(hi[0] / h) + 3)
-    ii, jj = np.meshgrid(i, j)
-    x = h * (ii + 0.5 * jj)
-    y = dy * jj
-    pts = np.stack([x.ravel(), y.ravel()], 1)
-    keep = np.all((pts >= lo - h) & (pts <= hi + h), axis=1)
-    return pts[keep]
-
-
-def _initial_points(poly: np.ndarray, path: np.ndarray, s: np.ndarray, g: np.ndarray,
-                    spec: MeshSpec) -> np.ndarray:
-    lo, hi = poly.min(0), poly.max(0)
-    levels = max(0, math.ceil(math.log2(spec.h_far / spec.h_path)))
-    pieces = []
-    for lev in range(levels + 1):
-        h = spec.h_path * 2**lev
-        pts = _hex_lattice(lo, hi, h)
-        pts = pts[_inside_polygon(pts, poly, 0.3 * h)]
-        level = np.ceil(np.log2(_spacing(_distance_to_path(pts, path), spec) / spec.h_path
-                                - 1e-9))
-        level = np.clip(level, 0, levels)
-        pieces.append(pts[level == lev] if lev < levels else pts[level >= lev])
-    # the boundary: every polygon edge sampled at the local spacing
-    bnd = []
-    for a, b in zip(poly, np.roll(poly, -1, axis=0)):
-        length = float(np.linalg.norm(b - a))
-        t = np.linspace(0.0, 1.0, max(2, math.ceil(length / (0.5 * spec.h_path)) + 1))
-        cand = a + t[:, None] * (b - a)
-        h = _spacing(_distance_to_path(cand, path), spec)
-        keep, last = [0], 0.0
-        for i in range(1, len(t) - 1):
-            if (t[i] - last) * length >= h[i]:
-                keep.append(i)
-                last = t[i]
-        bnd.append(cand[keep])
-    pts = np.concatenate(pieces + bnd)
-    far = (np.linalg.norm(pts - s, axis=1) > 0.4 * spec.h_path) & (
-        np.linalg.norm(pts - g, axis=1) > 0.4 * spec.h_path)
-    return np.concatenate([s[None], g[None], pts[far]])
-
-
-class _Mesh:
-    """Delaunay triangulation with P2 unknowns: vertices, then one per edge (midpoint)."""
-
-    def __init__(self, points: np.ndarray) -> None:
-        from scipy.spatial import Delaunay, QhullError
-
-        self.points = points
-        try:
-            self.delaunay = Delaunay(points)
-        except QhullError as err:  # e.g. fewer than 3 distinct points
-            raise InputError(f"certify: the mesh of {points.shape[0]} points cannot be "
-                             "triangulated (is the spacing larger than the domain?)") from err
-        tri = self.delaunay.simplices
-        z = points[tri]
-        area2 = ((z[:, 1, 0] - z[:, 0, 0]) * (z[:, 2, 1] - z[:, 0, 1])
-                 - (z[:, 1, 1] - z[:, 0, 1]) * (z[:, 2, 0] - z[:, 0, 0]))
-        keep = np.abs(area2) > 1e-14 * np.max(np.abs(area2))  # drop slivers of zero area
-        self.simplex_row = np.cumsum(keep) - 1
-        self.simplex_row[~keep] = -1
-        tri = tri[keep]
-        self.tri = tri
-        nv = points.shape[0]
-        local = np.array([[0, 1], [1, 2], [2, 0]])
-        e = np.sort(tri[:, local].reshape(-1, 2), axis=1)
-        edges, inverse = np.unique(e, axis=0, return_inverse=True)
-        self.edges = edges
-        self.dofs = np.concatenate([tri, nv + inverse.reshape(-1, 3)], axis=1)  # (T, 6)
-        self.n_dofs = nv + edges.shape[0]
-        z = points[tri]  # (T, 3, 2)
-        jac = np.stack([z[:, 1] - z[:, 0], z[:, 2] - z[:, 0]], axis=2)  # columns
-        inv = np.linalg.inv(jac)  # rows: grad lambda_1, grad lambda_2
-        gl = np.stack([-(inv[:, 0] + inv[:, 1]), inv[:, 0], inv[:, 1]], axis=1)  # (T, 3, 2)
-        # gradient of the P2 potential at vertex m: C[T, m] (2, 6) times the local unknowns
-        c = np.zeros((tri.shape[0], 3, 2, 6))
-        for m in range(3):
-            for i in range(3):
-                c[:, m, :, i] = (4.0 * (i == m) - 1.0) * gl[:, i]
-            for e_idx, (i, j) in enumerate(local):
-                c[:, m, :, 3 + e_idx] = 4.0 * ((j == m) * gl[:, i] + (i == m) * gl[:, j])
-        self.grad = c
-        # circumradius squared
-        a = np.linalg.norm(z[:, 1] - z[:, 2], axis=1)
-        b = np.linalg.norm(z[:, 2] - z[:, 0], axis=1)
-        cc = np.linalg.norm(z[:, 0] - z[:, 1], axis=1)
-        area = 0.5 * np.abs(jac[:, 0, 0] * jac[:, 1, 1] - jac[:, 0, 1] * jac[:, 1, 0])
-        self.r2 = (a * b * cc / (4.0 * area)) ** 2
-        self.midpoints = 0.5 * (points[edges[:, 0]] + points[edges[:, 1]])
-        self.centroids = z.mean(axis=1)
-
-    @property
-    def n_tri(self) -> int:
-        return int(self.tri.shape[0])
-
-    def gradients(self, phi: np.ndarray) -> np.ndarray:
-        """Gradient of the potential at the vertices of every triangle ``(T, 3, 2)``."""
-        return np.einsum("tmid,td->tmi", self.grad, phi[self.dofs])
-
-    def locate(self, pts: np.ndarray) -> np.ndarray:
-        """Triangle (row of ``tri``) holding each point, -1 if none."""
-        simplex = self.delaunay.find_simplex(pts)
-        return np.where(simplex >= 0, self.simplex_row[simplex], -1)
-
-    def refine(self, marked: np.ndarray) -> np.ndarray:
-        """Points of a refined mesh: the marked triangles' edge midpoints added."""
-        e = np.unique(self.dofs[marked, 3:].ravel()) - self.points.shape[0]
-        return np.concatenate([self.points, self.midpoints[e]])
-
-
-# ----------------------------------------------------------------------------------------
-# the LP
+# the rows of the LP
 # ----------------------------------------------------------------------------------------
 def _row_bounds(mesh: _Mesh, data: _PointData) -> tuple[np.ndarray, np.ndarray]:
     """Right-hand sides ``b`` ``(T, 3, K)`` and the corrections ``c`` ``(T, K)`` (infinite
@@ -732,192 +516,6 @@ def _corrections(hz: np.ndarray, ht: np.ndarray, r2: np.ndarray) -> np.ndarray:
     corr = 0.5 * hz * r2[:, None] + np.maximum(ht, np.roll(ht, 1, axis=1)) / 8.0
     return corr * (1.0 + 1e-12)
 
-
-class _Rays:
-    """Inner polygons of the rows' feasible sets, one per triangle vertex ``(T, 3)``.
-
-    At vertex ``m`` of triangle ``T`` the rows allow the gradient set
-    ``P = {g : g . v_k <= b[T, m, k] for all k}``, convex and containing 0 (``b > 0``).
-    A ray from 0 at angle ``a`` leaves ``P`` at ``r(a) u(a)``,
-    ``r(a) = min_{k : u . v_k > 0} b_k / (u . v_k)``; the polygon through the exit points of
-    a few rays (in angular order, gaps below pi) lies inside ``P`` (it is a union of
-    triangles ``0, g_i, g_{i+1}``, each inside the convex ``P``), and so does the
-    intersection of its edges' half-planes. The LP uses those edges as rows: every
-    potential it returns satisfies every sampled row by construction (used for the vertices
-    away from the path; see :func:`_solve_lp`).
-    """
-
-    def __init__(self, n_vertices: int, rays: int = INITIAL_DIRECTIONS) -> None:
-        i = np.arange(rays)
-        self.vid = np.repeat(np.arange(n_vertices), rays)
-        self.ang = np.tile(2 * np.pi * i / rays + 1e-3, n_vertices)  # off the sampled angles
-        self.next = (self.vid * rays + np.tile((i + 1) % rays, n_vertices)).astype(np.int64)
-
-    def facets(self, b_flat: np.ndarray, dirs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Rows ``normal . g <= rhs`` (normals ``(R, 2)``, rhs ``(R,)``), one per ray (the edge
-        from this ray's exit point to the next's) of vertex ``vid``."""
-        u = np.stack([np.cos(self.ang), np.sin(self.ang)], 1)
-        r = np.full(self.vid.size, np.inf)
-        for a in range(0, self.vid.size, 20000):
-            sl = slice(a, a + 20000)
-            proj = u[sl] @ dirs.T  # (R, K)
-            with np.errstate(divide="ignore"):
-                q = np.where(proj > 1e-12, b_flat[self.vid[sl]] / np.where(proj > 1e-12, proj,
-                                                                             1.0), np.inf)
-            r[sl] = q.min(axis=1)
-        pts = r[:, None] * u
-        e = pts[self.next] - pts
-        normal = np.stack([e[:, 1], -e[:, 0]], 1)  # outward for counter-clockwise order
-        return normal, np.einsum("ri,ri->r", normal, pts)
-
-
-def _solve_lp(mesh: _Mesh, b: np.ndarray, dirs: np.ndarray, s_idx: int, g_idx: int,
-              upper: float, target: float, start: dict[str, np.ndarray],
-              max_iter: int = 30) -> dict[str, Any]:
-    """Maximise ``phi[g] - phi[s]`` under the rows ``(T, 3, K)`` (``g . v_k <= b``) at every
-    triangle vertex, in rounds.
-
-    A vertex is either SAFE: its gradient is kept in the inner polygon of 8 rays
-    (:class:`_Rays`), inside the rows' set, so it can never violate a row; or EXACT: it
-    has sampled rows ``g . v_k <= b_k`` directly, a set of directions grown in rounds by the
-    violated ones. A safe vertex whose polygon edge is tight (positive dual) becomes exact,
-    with the directions near that edge's normal and 16 evenly spaced ones. Each round's
-    potential, divided by its largest row ratio over ALL rows, is a valid potential; the
-    best one is returned. Stops when no vertex changes mode and no row is violated beyond
-    ``0.1 target``, when a potential certifies ``target``, or after ``max_iter`` rounds.
-    ``start``: ``exact`` ``(T*3,)`` bool and ``active`` ``(T*3, K)`` bool, the first
-    exact vertices and their directions.
-    """
-    import warnings
-
-    import cvxpy as cp
-    import scipy.sparse as sp
-
-    k = b.shape[2]
-    nv = 3 * mesh.n_tri
-    b_flat = b.reshape(nv, k)
-    gradc = mesh.grad.reshape(nv, 2, 6)
-    dofs = np.repeat(mesh.dofs, 3, axis=0)  # (T*3, 6)
-    rays = _Rays(nv)
-    safe_normal, safe_rhs = rays.facets(b_flat, dirs)
-    exact = start["exact"].copy()
-    active = start["active"].copy()
-    active[~exact] = False
-    coarse = np.zeros(k, bool)
-    coarse[:: max(1, k // 16)] = True
-    best: dict[str, Any] = {"lower": -np.inf}
-    n_iter = 0
-    lp_seconds = 0.0
-    while n_iter < max_iter:
-        n_iter += 1
-        safe_rows = ~exact[rays.vid]
-        s_vid = rays.vid[safe_rows]
-        s_normal, s_rhs = safe_normal[safe_rows], safe_rhs[safe_rows]
-        e_vid, e_k = np.nonzero(active & exact[:, None])
-        normal = np.concatenate([s_normal, dirs[e_k]])
-        rhs = np.concatenate([s_rhs, b_flat[e_vid, e_k]])
-        vid = np.concatenate([s_vid, e_vid])
-        coef = np.einsum("ri,rij->rj", normal, gradc[vid])
-        a = sp.csr_matrix((coef.ravel(), (np.repeat(np.arange(rhs.size), 6),
-                                          dofs[vid].ravel())), shape=(rhs.size, mesh.n_dofs))
-        x = cp.Variable(mesh.n_dofs)
-        cons = [a @ x <= rhs, x[s_idx] == 0]
-        prob = cp.Problem(cp.Maximize(x[g_idx]), cons)
-        t0 = time.perf_counter()
-        try:
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")  # "inaccurate" is in the status, checked below
-                prob.solve(solver=LP_SOLVER)
-        except cp.error.SolverError as err:
-            raise LPFailure(f"the LP solver failed: {short(str(err))}") from err
-        lp_seconds += time.perf_counter() - t0
-        status = str(prob.status)
-        if x.value is None:
-            raise LPFailure(f"the LP ended with status {status}")
-        phi = np.asarray(x.value, float)
-        duals = np.maximum(np.asarray(cons[0].dual_value, float), 0.0)
-        ratio = np.einsum("vi,ki->vk", np.einsum("vid,vd->vi", gradc, phi[dofs]), dirs) / b_flat
-        ratio_max = float(np.max(ratio))
-        scale = max(ratio_max, 1.0) * (1.0 + 1e-12)
-        lower = float(phi[g_idx] - phi[s_idx]) / scale
-        _LOG.debug("LP rows %d (%d exact vertices) %.2f s: value %.8f, max row ratio %.6f "
-                   "-> bound %.8f", rhs.size, int(exact.sum()), time.perf_counter() - t0,
-                   phi[g_idx] - phi[s_idx], ratio_max, lower)
-        if lower > best["lower"]:
-            ang = np.arctan2(normal[:, 1], normal[:, 0])
-            kk = np.mod(np.rint(ang / (2 * np.pi / k)).astype(np.int64), k)
-            best = {"phi": (phi - phi[s_idx]) / scale, "lower": lower, "status": status,
-                    "rows": np.stack([vid // 3, vid % 3, kk], 1), "duals": duals,
-                    "n_rows": int(rhs.size), "ratio": ratio_max}
-        if upper - lower <= target * upper:
-            break
-        # safe vertices with a tight edge become exact; violated exact rows are added
-        thr = TIGHT_DUAL * max(float(duals.max(initial=0.0)), 1e-300)
-        tight_safe = np.flatnonzero(duals[: s_vid.size] > thr)
-        promote = np.zeros(nv, bool)
-        promote[s_vid[tight_safe]] = True
-        promote &= ~exact
-        if promote.any():
-            pv = s_vid[tight_safe]
-            ang = np.arctan2(s_normal[tight_safe, 1], s_normal[tight_safe, 0])
-            kc = np.rint(ang / (2 * np.pi / k)).astype(np.int64)
-            for off in range(-_window(k), _window(k) + 1):
-                active[pv, (kc + off) % k] = True
-            active[promote] |= coarse
-            exact |= promote
-        viol = exact[:, None] & (ratio > 1.0 + 0.1 * target) & ~active
-        worst = np.argmax(np.where(exact[:, None], ratio, -np.inf), axis=1)
-        bad = exact & (ratio[np.arange(nv), worst] > 1.0 + 0.1 * target)
-        for off in (-1, 0, 1):
-            active[np.flatnonzero(bad), (worst[bad] + off) % k] = True
-        active |= viol
-        if not promote.any() and not bad.any():
-            break
-    best.update({"iterations": n_iter, "lp_seconds": lp_seconds, "solver": LP_SOLVER,
-                 "exact": exact, "active": active})
-    return best
-
-
-def _initial_modes(mesh: _Mesh, k: int, previous: tuple[_Mesh, dict[str, Any]] | None,
-                   path: np.ndarray, width: float) -> dict[str, np.ndarray]:
-    """Exact vertices and directions of the first LP of a mesh. First mesh: the vertices of
-    the triangles whose centroid is within ``width`` of the path, with 16 evenly spaced
-    directions and those within pi/8 of the path's local direction. After a refinement:
-    every vertex of a new triangle whose centroid lies in an old triangle with an exact
-    vertex, with the union of that triangle's directions."""
-    nv = 3 * mesh.n_tri
-    exact = np.zeros(nv, bool)
-    active = np.zeros((nv, k), bool)
-    if previous is None:
-        near = _distance_to_path(mesh.centroids, path) <= width
-        # the path's direction at the nearest path point of each near triangle
-        seg = path[1:] - path[:-1]
-        mids = 0.5 * (path[1:] + path[:-1])
-        c = mesh.centroids[near]
-        nearest = np.argmin(((c[:, None, :] - mids[None]) ** 2).sum(-1), axis=1)
-        ang = np.arctan2(seg[nearest, 1], seg[nearest, 0])
-        kc = np.rint(ang / (2 * np.pi / k)).astype(np.int64)
-        act = np.zeros((int(near.sum()), k), bool)
-        act[:, :: max(1, k // 16)] = True
-        rows = np.arange(act.shape[0])
-        for off in range(-_window(k), _window(k) + 1):
-            act[rows, (kc + off) % k] = True
-        tri_exact = near
-        exact = np.repeat(tri_exact, 3)
-        active[exact] = np.repeat(act, 3, axis=0)
-    else:
-        old, lp = previous
-        host = old.locate(mesh.centroids)
-        ok = host >= 0
-        old_exact = lp["exact"].reshape(-1, 3).any(axis=1)
-        old_active = (lp["active"] & lp["exact"][:, None]).reshape(-1, 3, k).any(axis=1)
-        new_exact = np.zeros(mesh.n_tri, bool)
-        new_exact[ok] = old_exact[host[ok]]
-        exact = np.repeat(new_exact, 3)
-        act = np.zeros((mesh.n_tri, k), bool)
-        act[ok] = old_active[host[ok]]
-        active = np.repeat(act, 3, axis=0)
-    return {"exact": exact, "active": active}
 
 
 def _convexity(m: Metric, points: np.ndarray) -> tuple[str, str]:

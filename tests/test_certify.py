@@ -4,8 +4,10 @@ errors and the CLI."""
 
 from __future__ import annotations
 
+import gc
 import importlib
 import json
+import weakref
 from dataclasses import dataclass
 from typing import ClassVar
 
@@ -221,6 +223,26 @@ def test_cli_certify_bad_input(args: list[str], message: str) -> None:
     res = runner.invoke(app, ["certify", *args])
     assert res.exit_code == 2
     assert message in res.output
+
+
+def test_derived_geometry_lives_in_the_metric() -> None:
+    # issue 23: the values of F are the metric's own lowered_F and the Hessian programs are
+    # built once in Metric.derived, not in module caches keyed by metric (which would keep
+    # the metric alive after its last use)
+    m = finsler.get_metric("randers")
+    lo, v = np.array([[0.1, 0.1], [-0.2, 0.3]]), np.array([[1.0, 0.0], [0.6, 0.8]])
+    w = np.array([[np.cos(0.1), np.sin(0.1)], [0.0, 1.0]])
+    certify_mod._bounds_on_boxes(m, lo, lo + 0.02, v, w)
+    progs = certify_mod._second_derivatives(m)
+    assert m.derived("certify.second_derivatives", lambda: pytest.fail("rebuilt")) is progs
+    f = certify_mod._eval_values(m, lo, v)
+    exact = m.F(lo, v)
+    assert np.all(f < exact) and np.allclose(f, exact, rtol=1e-14, atol=0)
+    assert not hasattr(certify_mod, "_values")
+    ref = weakref.ref(m)
+    del m
+    gc.collect()
+    assert ref() is None
 
 
 @pytest.mark.parametrize("name", ["matsumoto", "poincare", "randers"])
