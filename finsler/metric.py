@@ -256,7 +256,7 @@ class Metric(MetricHooks, ABC):
         """The toolkit's one cache of derived geometry: ``build()`` once per metric and
         ``key``, then the same object. The derived objects of this class are
         ``functools.cached_property`` attributes (the same per-instance storage); other
-        packages keep theirs here under a key naming their module (``"certify.values"``,
+        packages keep theirs here under a key naming their module (``"certify.second_derivatives"``,
         ``"geometry.spray"``), never in module-level caches keyed by metric (which keep
         metrics alive and are a second scheme). Keys are strings; the object lives as long
         as the metric. Thread-safe enough for the toolkit: two threads racing on a key

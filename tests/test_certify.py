@@ -229,7 +229,7 @@ def test_derived_geometry_lives_in_the_metric() -> None:
     # issue 23: the values of F are the metric's own lowered_F and the Hessian programs are
     # built once in Metric.derived, not in module caches keyed by metric (which would keep
     # the metric alive after its last use)
-    m = finsler.get_metric("randers")
+    m = type(finsler.get_metric("randers"))()  # its own instance (the registry shares its own)
     lo, v = np.array([[0.1, 0.1], [-0.2, 0.3]]), np.array([[1.0, 0.0], [0.6, 0.8]])
     w = np.array([[np.cos(0.1), np.sin(0.1)], [0.0, 1.0]])
     certify_mod._bounds_on_boxes(m, lo, lo + 0.02, v, w)

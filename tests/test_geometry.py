@@ -155,8 +155,6 @@ def test_hessian_in_x_is_the_length_integrands_second_derivative() -> None:
 #: Module caches keyed by a metric in files another branch owns (issue 23 part 4 moves them
 #: to ``metric.derived`` there); nothing else may add one.
 PENDING = {
-    "solvers/certify.py:_values",
-    "solvers/certify.py:_second_derivatives",
 }
 
 
