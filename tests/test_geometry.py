@@ -152,11 +152,6 @@ def test_hessian_in_x_is_the_length_integrands_second_derivative() -> None:
 
 
 # -- one caching scheme ----------------------------------------------------------------------
-#: Module caches keyed by a metric in files another branch owns (issue 23 part 4 moves them
-#: to ``metric.derived`` there); nothing else may add one.
-PENDING = {
-}
-
 
 def _is_cache_decorator(node: ast.expr) -> bool:
     target = node.func if isinstance(node, ast.Call) else node
@@ -209,4 +204,4 @@ def test_no_module_cache_is_keyed_by_a_metric() -> None:
     assert len(files) > 20
     found = {hit for p in files
              for hit in metric_keyed_caches(p.read_text(), str(p.relative_to(ROOT)))}
-    assert found - PENDING == set()
+    assert found == set()
