@@ -185,13 +185,13 @@ def solve_batch(
     that path is solved (the fast warm-start mode: a good path converges in a few IPOPT
     iterations); with ``True`` the global seeds are solved too and the lowest energy kept.
     ``tol``: every pair solved to that relative accuracy of its length
-    (:func:`solve_geodesic`).
+    (:func:`~solvers.geodesic.solve_geodesic`).
 
-    ``method`` / ``device``: as in :func:`solve_geodesic`. With the batched Newton method
-    (the default where it covers the metric) the pairs are solved in chunks of about
-    :data:`NEWTON_ROWS` (pair, seed) problems, every problem of a chunk in one batch; the
-    default ``workers`` is then 1 below :data:`NEWTON_POOL_MIN` pairs (the batch is
-    vectorised; processes pay off only for many chunks), else the CPU count.
+    ``method`` / ``device``: as in :func:`~solvers.geodesic.solve_geodesic`. With the
+    batched Newton method (the default where it covers the metric) the pairs are solved in
+    chunks of about :data:`NEWTON_ROWS` (pair, seed) problems, every problem of a chunk in
+    one batch; the default ``workers`` is then 1 below :data:`NEWTON_POOL_MIN` pairs (the
+    batch is vectorised; processes pay off only for many chunks), else the CPU count.
     """
     from tqdm.auto import tqdm
 

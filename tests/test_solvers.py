@@ -504,8 +504,8 @@ def test_solve_batch_warm_start_from_exact_paths() -> None:
 def test_solve_batch_initial_paths_reach_the_ray_chunks() -> None:
     """The Ray task body passes each pair's own initial path (checked without Ray: the
     chunk function is plain Python)."""
-    from solvers.distributed import _solve_chunk
     from solvers.batch_jobs import _chunk_worker, _metric_spec
+    from solvers.distributed import _solve_chunk
 
     m = finsler.get_metric("matsumoto")
     pairs = finsler.sample_pairs(m, 2, seed=5)
