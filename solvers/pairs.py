@@ -458,6 +458,7 @@ def _solve_ipopt(m: Metric, s: np.ndarray, g: np.ndarray, n: int, plan: SeedPlan
         **_finish(m, best.points),
     )
 
+
 def solve_pair(m: Metric, start: Any, goal: Any, n: int, *, seeds: SeedPlan | None = None,
                initial: Sequence[np.ndarray] = (), global_seeds: bool = True,
                minmax: bool = False, method: str = "newton", device: Any = None
