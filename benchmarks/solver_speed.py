@@ -248,11 +248,13 @@ def run_scale(k: int, sizes: list[int], full_max: int) -> None:
 
 
 def run_linear() -> None:
-    """Block Thomas against cyclic reduction (solvers.newton.block_tridiagonal_solve) on
-    random positive definite systems of the shapes the batched solve meets: many short
-    paths (the seeding levels) to a few long ones (4096 segments); CPU ms per solve, the
-    median of 5, with the local modification on (as the solver runs them)."""
-    from solvers.newton import _NUMPY_OPS, THOMAS_MAX_BLOCKS, block_tridiagonal_solve
+    """Block Thomas against cyclic reduction
+    (solvers.block_tridiagonal.block_tridiagonal_solve) on random positive definite systems
+    of the shapes the batched solve meets: many short paths (the seeding levels) to a few
+    long ones (4096 segments); CPU ms per solve, the median of 5, with the local
+    modification on (as the solver runs them)."""
+    from solvers.backends import _NUMPY_OPS
+    from solvers.block_tridiagonal import THOMAS_MAX_BLOCKS, block_tridiagonal_solve
 
     rng = np.random.default_rng(0)
     print(f"\n== block-tridiagonal solves, 2x2 blocks: CPU ms per solve (auto picks Thomas "

@@ -23,14 +23,9 @@ from typing import Any
 import numpy as np
 
 from finsler.metric import Metric
+from solvers.backends import backend_for
 from solvers.inputs import domain_scale
-from solvers.newton import (
-    NewtonOptions,
-    NewtonState,
-    NewtonStatus,
-    backend_for,
-    energy_residual,
-)
+from solvers.newton import NewtonOptions, NewtonState, NewtonStatus, energy_residual
 from solvers.seeding import SeedPlan, graph_seeder, perturbed_batch, resample, seed_batch
 
 __all__ = ["BatchOptions", "BatchSolution", "Rows", "covers", "solve_pairs_batched"]

@@ -12,13 +12,17 @@ at once through the lowering: no second formula.
 
 :func:`newton_energy` minimises ``E`` for a batch of paths ``(B, n+1, dim)``, each problem
 with its own step, damping and convergence test (:class:`NewtonState`); the Hessian is
-factorised by block cyclic reduction (:func:`block_tridiagonal_solve`), vectorised over
-problems and blocks: ``log2 n`` levels of array operations. Arrays are kept "structure of
-arrays": a field of ``d x d`` blocks is a ``d x d`` list of arrays ``(B, M)``, so every
-block operation is a few elementwise array operations (no tiny matrix products).
+factorised by block Thomas elimination or block cyclic reduction
+(:func:`~solvers.block_tridiagonal.block_tridiagonal_solve`), vectorised over problems and
+blocks. Arrays are kept "structure of arrays": a field of ``d x d`` blocks is a ``d x d``
+list of arrays ``(B, M)``, so every block operation is a few elementwise array operations
+(no tiny matrix products).
 
 The same code runs on numpy (float64, CPU) and on torch tensors on any device
-(``device="cuda"``); every array operation it needs goes through a small backend.
+(``device="cuda"``); every array operation it needs goes through a small backend
+(:func:`~solvers.backends.backend_for`). This module holds the energy terms, the
+iteration and its line search; ``backend_for`` and ``block_tridiagonal_solve`` are
+re-exported from here.
 """
 
 from __future__ import annotations
@@ -30,6 +34,8 @@ import numpy as np
 
 from finsler.errors import InputError
 from finsler.metric import Metric
+from solvers.backends import _NUMPY_OPS, backend_for
+from solvers.block_tridiagonal import Mat, Vec, all_rows, block_tridiagonal_solve, sum_
 from solvers.status import NewtonStatus
 
 __all__ = [
@@ -81,493 +87,6 @@ class NewtonOptions:
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
                 raise InputError(f"{name} must be a positive integer, got {v!r}")
-
-
-# ----------------------------------------------------------------------------------------
-# backends: the few array operations the solver needs, for numpy and for torch
-# ----------------------------------------------------------------------------------------
-class _Numpy:
-    name = "numpy"
-
-    def __init__(self) -> None:
-        from finsler.lowering import _NUMPY
-
-        self.lowering = _NUMPY
-
-    @staticmethod
-    def asarray(a: Any) -> np.ndarray:
-        return np.array(a, dtype=np.float64)  # a copy: never the caller's array
-
-    @staticmethod
-    def to_numpy(a: Any) -> np.ndarray:
-        return np.asarray(a)
-
-    @staticmethod
-    def zeros(shape: tuple[int, ...]) -> np.ndarray:
-        return np.zeros(shape)
-
-    @staticmethod
-    def full(shape: tuple[int, ...], value: float) -> np.ndarray:
-        return np.full(shape, value)
-
-    @staticmethod
-    def index(a: Any) -> np.ndarray:
-        return np.asarray(a, dtype=np.int64)
-
-    @staticmethod
-    def mask(a: Any) -> np.ndarray:
-        return np.asarray(a, dtype=bool)
-
-    @staticmethod
-    def cat(arrays: list[Any], axis: int) -> np.ndarray:
-        return np.concatenate(arrays, axis=axis)
-
-    @staticmethod
-    def contiguous(a: np.ndarray) -> np.ndarray:
-        return np.ascontiguousarray(a)
-
-    @staticmethod
-    def stack_cols(cols: list[Any]) -> np.ndarray:
-        return np.stack(cols, 1)
-
-    @staticmethod
-    def clip(a: np.ndarray, lo: float, hi: float) -> np.ndarray:
-        return np.clip(a, lo, hi)
-
-    sqrt = staticmethod(np.sqrt)
-    abs = staticmethod(np.abs)
-    where = staticmethod(np.where)
-    isfinite = staticmethod(np.isfinite)
-    maximum = staticmethod(np.maximum)
-
-
-class _Torch:
-    name = "torch"
-
-    def __init__(self, device: Any) -> None:
-        import torch
-
-        from finsler.lowering import _torch_backend
-
-        self.torch = torch
-        self.device = torch.device(device)
-        self.lowering = _torch_backend()
-
-    def asarray(self, a: Any) -> Any:
-        t = self.torch
-        if isinstance(a, t.Tensor):
-            return a.detach().to(device=self.device, dtype=t.float64).clone()
-        return t.tensor(np.asarray(a, dtype=np.float64), device=self.device)
-
-    @staticmethod
-    def to_numpy(a: Any) -> np.ndarray:
-        return a.detach().cpu().numpy() if hasattr(a, "detach") else np.asarray(a)
-
-    def zeros(self, shape: tuple[int, ...]) -> Any:
-        return self.torch.zeros(shape, dtype=self.torch.float64, device=self.device)
-
-    def full(self, shape: tuple[int, ...], value: float) -> Any:
-        return self.torch.full(shape, float(value), dtype=self.torch.float64,
-                               device=self.device)
-
-    def index(self, a: Any) -> Any:
-        return self.torch.as_tensor(np.asarray(a, dtype=np.int64), device=self.device)
-
-    def mask(self, a: Any) -> Any:
-        return self.torch.as_tensor(np.asarray(a, dtype=bool), device=self.device)
-
-    def cat(self, arrays: list[Any], axis: int) -> Any:
-        return self.torch.cat(arrays, dim=axis)
-
-    @staticmethod
-    def contiguous(a: Any) -> Any:
-        return a.contiguous()
-
-    def stack_cols(self, cols: list[Any]) -> Any:
-        return self.torch.stack(cols, 1)
-
-    def clip(self, a: Any, lo: float, hi: float) -> Any:
-        return self.torch.clamp(a, lo, hi)
-
-    def sqrt(self, a: Any) -> Any:
-        return self.torch.sqrt(a)
-
-    def abs(self, a: Any) -> Any:
-        return self.torch.abs(a)
-
-    def where(self, c: Any, a: Any, b: Any) -> Any:
-        t = self.torch
-        if not isinstance(a, t.Tensor):
-            a = t.as_tensor(a, dtype=t.float64, device=self.device)
-        if not isinstance(b, t.Tensor):
-            b = t.as_tensor(b, dtype=t.float64, device=self.device)
-        return t.where(c, a, b)
-
-    def isfinite(self, a: Any) -> Any:
-        return self.torch.isfinite(a)
-
-    def maximum(self, a: Any, b: Any) -> Any:
-        t = self.torch
-        if not isinstance(b, t.Tensor):
-            b = t.as_tensor(b, dtype=t.float64, device=self.device)
-        return t.maximum(a, b)
-
-
-_NUMPY_OPS = _Numpy()
-
-
-def backend_for(device: Any) -> Any:
-    """The array backend of ``device``: ``None`` -> numpy (CPU, float64); a torch device
-    (``"cpu"``, ``"cuda"``, ``"cuda:1"`` or a ``torch.device``) -> torch float64 there."""
-    if device is None:
-        return _NUMPY_OPS
-    import torch
-
-    try:
-        dev = torch.device(device)
-    except (TypeError, RuntimeError) as err:
-        raise InputError(f"device must be None (numpy) or a torch device such as 'cpu' or "
-                         f"'cuda', got {device!r}") from err
-    if dev.type == "cuda" and not torch.cuda.is_available():
-        raise InputError(f"device {device!r} asked for, but torch sees no CUDA device here")
-    return _Torch(dev)
-
-
-# ----------------------------------------------------------------------------------------
-# fields of small blocks, structure of arrays: a vector field is a list of d arrays, a
-# matrix field a d x d list of arrays, every array of the same shape (B, M)
-# ----------------------------------------------------------------------------------------
-Vec = list
-Mat = list
-
-#: A block that is not positive definite is shifted by TAU_FACTOR times (a bound of) its
-#: most negative eigenvalue: its curvature mirrored, the step there gradient-like.
-TAU_FACTOR = 2.0
-
-
-def _mmul(a: Mat, b: Mat) -> Mat:
-    d, k = len(a), len(b[0])
-    return [[sum_(a[i][j] * b[j][c] for j in range(len(b))) for c in range(k)]
-            for i in range(d)]
-
-
-def _mvec(a: Mat, v: Vec) -> Vec:
-    return [sum_(a[i][j] * v[j] for j in range(len(v))) for i in range(len(a))]
-
-
-def sum_(terms: Any) -> Any:
-    it = iter(terms)
-    out = next(it)
-    for t in it:
-        out = out + t
-    return out
-
-
-def _mT(a: Mat) -> Mat:
-    return [[a[j][i] for j in range(len(a))] for i in range(len(a[0]))]
-
-
-def _msub(a: Mat, b: Mat) -> Mat:
-    return [[x - y for x, y in zip(ra, rb)] for ra, rb in zip(a, b)]
-
-
-def _vsub(a: Vec, b: Vec) -> Vec:
-    return [x - y for x, y in zip(a, b)]
-
-
-def _msl(a: Mat, sl: Any) -> Mat:
-    return [[None if x is None else x[:, sl] for x in row] for row in a]
-
-
-def _vsl(a: Vec, sl: Any) -> Vec:
-    return [x[:, sl] for x in a]
-
-
-def _chol(ops: Any, a: Mat, scale: Any, local: bool) -> tuple[Mat, Any]:
-    """Cholesky factors of a field of symmetric blocks -> (lower factors, definite
-    ``(B, M)``). ``scale`` ``(B, 1)``: the problem's mean Hessian diagonal. A pivot that is
-    not positive (relative to ``1e-13 * scale``) makes its block not definite; with
-    ``local`` such a block is then shifted by ``tau I``, ``tau`` from Gershgorin's bound of
-    its smallest eigenvalue (the modified Cholesky of Gill and Murray, block by block: only
-    the blocks that need it), so every block factorises. Failed pivots are replaced by 1
-    so the arithmetic stays finite."""
-    low, ok = _chol_plain(ops, a, scale)
-    if not local:
-        return low, ok
-    bad = ~ok
-    if not bool(bad.any()):
-        return low, ok
-    d = len(a)
-    low_eig = None
-    for i in range(d):
-        r = a[i][i] - sum_(ops.abs(a[i][k]) for k in range(d) if k != i) if d > 1 else a[i][i]
-        low_eig = r if low_eig is None else ops.where(r < low_eig, r, low_eig)
-    floor = 1e-6 * scale
-    tau = ops.where(bad, ops.abs(low_eig) * TAU_FACTOR + floor, 0.0)
-    shifted = [[a[i][k] + tau if i == k else a[i][k] for k in range(d)] for i in range(d)]
-    return _chol_plain(ops, shifted, scale)
-
-
-def _chol_plain(ops: Any, a: Mat, scale: Any) -> tuple[Mat, Any]:
-    d = len(a)
-    low: Mat = [[None] * d for _ in range(d)]
-    ok = None
-    tiny = 1e-13 * scale
-    for j in range(d):
-        s = a[j][j]
-        for k in range(j):
-            s = s - low[j][k] * low[j][k]
-        good = s > tiny
-        ok = good if ok is None else ok & good
-        piv = ops.sqrt(ops.where(good, s, 1.0))
-        low[j][j] = piv
-        inv = 1.0 / piv
-        for i in range(j + 1, d):
-            t = a[i][j]
-            for k in range(j):
-                t = t - low[i][k] * low[j][k]
-            low[i][j] = t * inv
-    return low, ok
-
-
-def _chol_solve(low: Mat, rhs: Any) -> Any:
-    """Solve ``L L^T x = rhs`` for a field of factors and a vector field (list) or a matrix
-    field (list of lists, one column per inner entry)."""
-    if isinstance(rhs[0], list):
-        cols = [_chol_solve(low, [row[c] for row in rhs]) for c in range(len(rhs[0]))]
-        return [[cols[c][i] for c in range(len(cols))] for i in range(len(rhs))]
-    d = len(low)
-    y: list[Any] = [None] * d
-    for i in range(d):
-        t = rhs[i]
-        for k in range(i):
-            t = t - low[i][k] * y[k]
-        y[i] = t / low[i][i]
-    x: list[Any] = [None] * d
-    for i in reversed(range(d)):
-        t = y[i]
-        for k in range(i + 1, d):
-            t = t - low[k][i] * x[k]
-        x[i] = t / low[i][i]
-    return x
-
-
-#: Systems of at most this many blocks are solved in order (block Thomas: ``M`` steps on
-#: long vectors), longer ones by cyclic reduction (``log2 M`` levels); by the size alone,
-#: so a problem's arithmetic does not depend on the batch it is in (measured with
-#: ``benchmarks/solver_speed.py --metrics none --linear``: 3400 problems x 31 blocks 10 vs
-#: 23 ms, 200 x 63 7.3 vs 5.9 ms, 100 x 255 30 vs 11 ms, 4 x 4095 382 vs 9.5 ms).
-THOMAS_MAX_BLOCKS = 64
-
-
-def block_tridiagonal_solve(ops: Any, diag: Mat, off: Mat, rhs: Vec, scale: Any = None,
-                            local: bool = False, method: str = "auto") -> tuple[Vec, Any]:
-    """Solve symmetric block-tridiagonal systems ``H x = rhs`` by block cyclic reduction.
-
-    Fields (structure of arrays, every entry ``(B, M)``): ``diag`` the ``d x d`` diagonal
-    blocks, ``off`` the blocks coupling unknowns ``j`` and ``j + 1`` (column ``M - 1`` is
-    ignored), ``rhs`` the ``d`` right-hand sides. Returns (solution field, positive definite
-    ``(B,)``).
-
-    Odd-even reduction eliminates the even-indexed unknowns of every level at once, so a
-    system of ``M`` blocks takes ``log2 M`` levels of vectorised block operations. It is
-    block Gaussian elimination in an odd-even order: a system is positive definite
-    exactly when every pivot block met is. With ``local`` a pivot block that is not
-    definite is shifted (:func:`_chol`): that solves ``(H + E) x = rhs`` with ``E`` block
-    diagonal, non-zero only where ``H`` needed it, and positive definite.
-    """
-    b, m = rhs[0].shape
-    d = len(rhs)
-    if scale is None:
-        scale = ops.full((b, 1), 1.0)
-    if method == "auto":
-        method = "thomas" if m <= THOMAS_MAX_BLOCKS else "cyclic"
-    with np.errstate(all="ignore"):  # a system that is not definite may overflow: reported
-        if method == "thomas":
-            return _thomas(ops, diag, off, rhs, scale, local)
-        return _cyclic_padded(ops, diag, off, rhs, scale, local, b, m, d)
-
-
-def _cyclic_padded(ops: Any, diag: Mat, off: Mat, rhs: Vec, scale: Any, local: bool, b: int,
-                   m: int, d: int) -> tuple[Vec, Any]:
-    size = 1
-    while size < m:
-        size = 2 * size + 1
-    pad = size - m
-    if pad:
-        one, zero = ops.full((b, pad), 1.0), ops.zeros((b, pad))
-        diag = [[ops.cat([diag[i][k], one if i == k else zero], 1) for k in range(d)]
-                for i in range(d)]
-        rhs = [ops.cat([r, zero], 1) for r in rhs]
-    zc = ops.zeros((b, pad + 1))
-    off = [[ops.cat([off[i][k][:, : m - 1], zc], 1) for k in range(d)] for i in range(d)]
-    x, ok = _cyclic_reduction(ops, diag, off, rhs, scale, local)
-    return [xi[:, :m] for xi in x], ok
-
-
-def _inv_sym(ops: Any, a: Mat, scale: Any, local: bool) -> tuple[Mat, Any]:
-    """Inverses of a field of symmetric blocks (every entry ``(K,)`` or ``(K, M)``) ->
-    (inverses, definite). With ``local``, blocks that are not positive definite are first
-    shifted by ``tau I`` (Gershgorin bound; see :func:`_chol`)."""
-    d = len(a)
-    if d == 1:
-        x = a[0][0]
-        ok = x > 1e-13 * scale
-        if local:
-            x = ops.where(ok, x, ops.abs(x) * TAU_FACTOR + 1e-6 * scale)
-            ok = x > 0
-        return [[1.0 / ops.where(ok, x, 1.0)]], ok
-    if d == 2:
-        p, q, r = a[0][0], a[0][1], a[1][1]
-        det = p * r - q * q
-        tiny = 1e-13 * scale
-        ok = (p > tiny) & (det > tiny * ops.abs(r))
-        if local:
-            low_eig = ops.where(p < r, p, r) - ops.abs(q)
-            tau = ops.where(ok, 0.0, ops.abs(low_eig) * TAU_FACTOR + 1e-6 * scale)
-            p, r = p + tau, r + tau
-            det = p * r - q * q
-            ok = (p > 0) & (det > 0)
-        inv = 1.0 / ops.where(ok, det, 1.0)
-        off = -q * inv
-        return [[r * inv, off], [off, p * inv]], ok
-    low, ok = _chol(ops, a, scale, local)
-    # L^{-1} by forward substitution on the identity, then L^{-T} L^{-1}
-    inv_l: Mat = [[None] * d for _ in range(d)]
-    for j in range(d):
-        inv_l[j][j] = 1.0 / low[j][j]
-        for i in range(j + 1, d):
-            t = sum_(low[i][k] * inv_l[k][j] for k in range(j, i))
-            inv_l[i][j] = -t / low[i][i]
-    out: Mat = [[None] * d for _ in range(d)]
-    for i in range(d):
-        for j in range(i, d):
-            out[i][j] = sum_(inv_l[k][i] * inv_l[k][j] for k in range(j, d))
-            out[j][i] = out[i][j]
-    return out, ok
-
-
-def _thomas(ops: Any, a: Mat, off: Mat, r: Vec, scale: Any, local: bool) -> tuple[Vec, Any]:
-    """Block LDL^T elimination in order (the block Thomas algorithm): ``M`` sequential
-    steps, each a few operations on ``(B,)`` vectors (contiguous: the fields are taken
-    column by column). Cheaper than cyclic reduction when ``M`` is small against ``B``."""
-    d = len(r)
-    if d == 2:
-        return _thomas2(ops, a, off, r, scale, local)
-    m = r[0].shape[1]
-    sc = scale[:, 0]
-    col = [[ops.contiguous(x.T) for x in row] for row in a]
-    ocol = [[ops.contiguous(x.T) for x in row] for row in off]
-    rcol = [ops.contiguous(x.T) for x in r]
-    gs: list[Mat] = []
-    zs: list[Vec] = []
-    ok = None
-    s_blk = [[col[i][k][0] for k in range(d)] for i in range(d)]
-    y = [rc[0] for rc in rcol]
-    for j in range(m):
-        inv, good = _inv_sym(ops, s_blk, sc, local)
-        ok = good if ok is None else ok & good
-        z = [sum_(inv[i][k] * y[k] for k in range(d)) for i in range(d)]
-        zs.append(z)
-        if j == m - 1:
-            break
-        o = [[ocol[i][k][j] for k in range(d)] for i in range(d)]
-        g = [[sum_(inv[i][k] * o[k][c] for k in range(d)) for c in range(d)] for i in range(d)]
-        gs.append(g)
-        nxt: Mat = [[None] * d for _ in range(d)]
-        for i in range(d):
-            for c in range(i, d):
-                nxt[i][c] = col[i][c][j + 1] - sum_(o[k][i] * g[k][c] for k in range(d))
-                nxt[c][i] = nxt[i][c]
-        s_blk = nxt
-        y = [rcol[i][j + 1] - sum_(g[k][i] * y[k] for k in range(d)) for i in range(d)]
-    x_cols: list[Vec] = [None] * m  # type: ignore[list-item]
-    x_cols[m - 1] = zs[m - 1]
-    for j in range(m - 2, -1, -1):
-        g, xn = gs[j], x_cols[j + 1]
-        x_cols[j] = [zs[j][i] - sum_(g[i][k] * xn[k] for k in range(d)) for i in range(d)]
-    x = [ops.contiguous(ops.stack_cols([x_cols[j][i] for j in range(m)])) for i in range(d)]
-    return x, ok
-
-
-def _thomas2(ops: Any, a: Mat, off: Mat, r: Vec, scale: Any, local: bool
-             ) -> tuple[Vec, Any]:
-    """:func:`_thomas` written out for 2 x 2 blocks (the 2-D metrics: the common case,
-    where the generic loops' Python overhead is a third of the solve)."""
-    m = r[0].shape[1]
-    sc = scale[:, 0]
-    d00, d01, d11 = (ops.contiguous(x.T) for x in (a[0][0], a[0][1], a[1][1]))
-    o00, o01, o10, o11 = (ops.contiguous(x.T) for x in (off[0][0], off[0][1], off[1][0],
-                                                         off[1][1]))
-    r0, r1 = ops.contiguous(r[0].T), ops.contiguous(r[1].T)
-    p, q, w = d00[0], d01[0], d11[0]
-    y0, y1 = r0[0], r1[0]
-    gs, zs = [], []
-    ok = None
-    for j in range(m):
-        (i00, i01), (_, i11) = (inv := _inv_sym(ops, [[p, q], [q, w]], sc, local))[0]
-        ok = inv[1] if ok is None else ok & inv[1]
-        zs.append((i00 * y0 + i01 * y1, i01 * y0 + i11 * y1))
-        if j == m - 1:
-            break
-        a00, a01, a10, a11 = o00[j], o01[j], o10[j], o11[j]
-        g00 = i00 * a00 + i01 * a10
-        g01 = i00 * a01 + i01 * a11
-        g10 = i01 * a00 + i11 * a10
-        g11 = i01 * a01 + i11 * a11
-        gs.append((g00, g01, g10, g11))
-        p = d00[j + 1] - (a00 * g00 + a10 * g10)
-        q = d01[j + 1] - (a00 * g01 + a10 * g11)
-        w = d11[j + 1] - (a01 * g01 + a11 * g11)
-        y0, y1 = r0[j + 1] - (g00 * y0 + g10 * y1), r1[j + 1] - (g01 * y0 + g11 * y1)
-    x0, x1 = [None] * m, [None] * m
-    x0[m - 1], x1[m - 1] = zs[m - 1]
-    for j in range(m - 2, -1, -1):
-        g00, g01, g10, g11 = gs[j]
-        x0[j] = zs[j][0] - (g00 * x0[j + 1] + g01 * x1[j + 1])
-        x1[j] = zs[j][1] - (g10 * x0[j + 1] + g11 * x1[j + 1])
-    return [ops.stack_cols(x0), ops.stack_cols(x1)], ok
-
-
-def _all_rows(ops: Any, ok: Any) -> Any:
-    return ok.all(1) if hasattr(ok, "detach") else np.all(ok, 1)
-
-
-def _cyclic_reduction(ops: Any, a: Mat, off: Mat, r: Vec, scale: Any, local: bool
-                      ) -> tuple[Vec, Any]:
-    m = r[0].shape[1]
-    if m == 1:
-        low, ok = _chol(ops, a, scale, local)
-        return _chol_solve(low, r), _all_rows(ops, ok)
-    ev, od = slice(0, None, 2), slice(1, None, 2)
-    low, ok_e = _chol(ops, _msl(a, ev), scale, local)  # pivots of the even unknowns
-    low_l, low_r = _msl(low, slice(0, -1)), _msl(low, slice(1, None))
-    left, right, nxt = _msl(off, slice(0, m - 1, 2)), _msl(off, od), _msl(off, slice(2, None, 2))
-    r_e = _vsl(r, ev)
-    w_l = _chol_solve(low_l, left)  # A_{k-1}^{-1} B_{k-1}
-    w_r = _chol_solve(low_r, _mT(right))  # A_{k+1}^{-1} B_k^T
-    v_l = _chol_solve(low_l, _vsl(r_e, slice(0, -1)))
-    v_r = _chol_solve(low_r, _vsl(r_e, slice(1, None)))
-    left_t = _mT(left)
-    a2 = _msub(_msub(_msl(a, od), _mmul(left_t, w_l)), _mmul(right, w_r))
-    off2 = [[-x for x in row] for row in _mmul(_mT(w_r), nxt)]
-    r2 = _vsub(_vsub(_vsl(r, od), _mvec(left_t, v_l)), _mvec(right, v_r))
-    xk, ok_k = _cyclic_reduction(ops, a2, off2, r2, scale, local)
-    b = r[0].shape[0]
-    zero = ops.zeros((b, 1))
-    xpad = [ops.cat([zero, x, zero], 1) for x in xk]
-    prev = [[ops.cat([zero, x[:, od]], 1) for x in row] for row in off]
-    cur = _msl(off, ev)
-    rhs_e = _vsub(_vsub(r_e, _mvec(_mT(prev), _vsl(xpad, slice(0, -1)))),
-                  _mvec(cur, _vsl(xpad, slice(1, None))))
-    xe = _chol_solve(low, rhs_e)
-    x = []
-    for i in range(len(r)):
-        xi = ops.zeros((b, m))
-        xi[:, ev] = xe[i]
-        xi[:, od] = xk[i]
-        x.append(xi)
-    return x, _all_rows(ops, ok_e) & ok_k
 
 
 # ----------------------------------------------------------------------------------------
@@ -781,7 +300,7 @@ class NewtonState:
         ops = self.ops
         ok = ops.isfinite(t.energy)
         for a in (*t.grad, *(x for r in t.diag for x in r), *(x for r in t.off for x in r)):
-            ok = ok & _all_rows(ops, ops.isfinite(a))
+            ok = ok & all_rows(ops, ops.isfinite(a))
         return ops.to_numpy(ok).astype(bool)
 
     def _held(self, pts: Vec, grad: Vec) -> list[Any] | None:
@@ -888,7 +407,7 @@ class NewtonState:
                 sol, ok = block_tridiagonal_solve(ops, dg, off_f, neg, sc, local=True)
             fin = ops.to_numpy(ok).astype(bool)
             for s in sol:
-                fin &= ops.to_numpy(_all_rows(ops, ops.isfinite(s))).astype(bool)
+                fin &= ops.to_numpy(all_rows(ops, ops.isfinite(s))).astype(bool)
             return sol, fin
         last = self.delta[idx]
         delta = np.where(last > 0, last / 3.0, 0.0)
@@ -906,7 +425,7 @@ class NewtonState:
                     ops, dg, [[x[sub] for x in r] for r in off_f], [g[sub] for g in neg], sc)
                 ok = ops.to_numpy(ok).astype(bool)
                 for s in sol:
-                    ok &= ops.to_numpy(_all_rows(ops, ops.isfinite(s))).astype(bool)
+                    ok &= ops.to_numpy(all_rows(ops, ops.isfinite(s))).astype(bool)
                 good = todo[ok]
                 if good.size:
                     kk, src = ops.index(good), ops.index(np.flatnonzero(ok))

@@ -242,14 +242,14 @@ def test_trivial_pair() -> None:
 
 def test_non_convergence_is_a_status_and_strict_raises(monkeypatch) -> None:
     """With a 2-iteration IPOPT budget nothing converges: the result says so, strict raises."""
-    import solvers.geodesic as sg
+    import solvers.pairs as sp  # the module whose solves call energy_nlp / BatchOptions
     from solvers.transcription import EnergyNLP
 
     assert Status.from_ipopt("Maximum_Iterations_Exceeded") is Status.MAX_ITERATIONS
     assert Status.from_ipopt("something new") is Status.UNKNOWN
     m = finsler.get_metric("matsumoto")
     s, g = np.array([0.6, 0.1]), np.array([-0.5, -0.3])
-    monkeypatch.setattr(sg, "energy_nlp",
+    monkeypatch.setattr(sp, "energy_nlp",
                         lambda metric, n, warm=False: EnergyNLP(metric, n, max_iter=2))
     r = solvers.solve_geodesic(m, s, g, 16, method="ipopt")
     assert r.status is Status.MAX_ITERATIONS and not r.converged and r.method == "ipopt"
@@ -261,7 +261,7 @@ def test_non_convergence_is_a_status_and_strict_raises(monkeypatch) -> None:
     from solvers.batched import BatchOptions
     from solvers.newton import NewtonOptions
 
-    monkeypatch.setattr(sg, "BatchOptions", lambda device=None: BatchOptions(
+    monkeypatch.setattr(sp, "BatchOptions", lambda device=None: BatchOptions(
         newton=NewtonOptions(max_iter=2), device=device))
     r = solvers.solve_geodesic(m, s, g, 16)
     assert r.status is Status.MAX_ITERATIONS and not r.converged and r.method == "ipopt"
@@ -504,8 +504,8 @@ def test_solve_batch_warm_start_from_exact_paths() -> None:
 def test_solve_batch_initial_paths_reach_the_ray_chunks() -> None:
     """The Ray task body passes each pair's own initial path (checked without Ray: the
     chunk function is plain Python)."""
+    from solvers.batch_jobs import _chunk_worker, _metric_spec
     from solvers.distributed import _solve_chunk
-    from solvers.geodesic import _chunk_worker, _metric_spec
 
     m = finsler.get_metric("matsumoto")
     pairs = finsler.sample_pairs(m, 2, seed=5)

@@ -1,0 +1,283 @@
+"""Many pairs in one call (:func:`solve_batch`): the pairs cut into chunks, the chunks solved
+in this process, in worker processes or as Ray tasks, every finished pair saved at once
+so an interrupted batch resumes.
+
+A chunk is one batched solve of its pairs (:func:`solvers.pairs.solve_pairs`; with
+``tol`` each pair refined on its own, :func:`solvers.tolerance.solve_to_tol`); a worker
+process rebuilds the metric from its :class:`~finsler.spec.MetricSpec` once
+(:func:`_cached_metric`). The one vectorised Newton solve of many (pair, seed) problems
+is :mod:`solvers.batched`; this module only schedules and stores.
+"""
+
+from __future__ import annotations
+
+import functools
+import os
+import time
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from finsler.errors import InputError
+from finsler.files import OutputError, atomic_write_bytes
+from finsler.metric import Metric
+from finsler.pool import ProcessPool
+from finsler.spec import MetricSpec
+from solvers.backends import backend_for
+from solvers.inputs import as_metric, check_pairs, check_segments
+from solvers.pairs import check_initial_paths, resolve_method, solve_pairs
+from solvers.result import GeodesicResult
+from solvers.seeding import SeedPlan
+from solvers.tolerance import TOL_MAX_SEGMENTS, solve_to_tol
+
+__all__ = ["NEWTON_POOL_MIN", "NEWTON_ROWS", "solve_batch"]
+
+
+def _metric_spec(m: Metric) -> MetricSpec:
+    """What a worker process rebuilds the metric from (finsler's identity of a metric)."""
+    return MetricSpec.of(m)
+
+
+def _chunk_worker(args: tuple) -> list[tuple[int, GeodesicResult]]:
+    """Solve one chunk of pairs in a worker process or Ray task: ``args`` = (metric spec,
+    pair indices, pairs ``(k, 2, dim)``, segments, plan, minmax, initial paths or None,
+    global_seeds, tol, method, device) -> ``[(index, result)]``."""
+    spec, ks, pairs, n, plan, minmax, inits, global_seeds, tol, method, device = args
+    m = _cached_metric(spec)
+    return _solve_chunk(m, ks, pairs, n, plan, minmax, inits, global_seeds, tol, method,
+                        device)
+
+
+def _solve_chunk(m: Metric, ks: Sequence[int], pairs: np.ndarray, n: int, plan: SeedPlan,
+                 minmax: bool, inits: np.ndarray | None, global_seeds: bool,
+                 tol: float | None, method: str, device: Any
+                 ) -> list[tuple[int, GeodesicResult]]:
+    """The pairs of a chunk: one batched solve (each pair refined on its own with
+    ``tol``)."""
+    if tol is not None:
+        return [(k, solve_to_tol(m, p[0], p[1], n, tol, TOL_MAX_SEGMENTS,
+                                 time.perf_counter(), seeds=plan,
+                                 initial=() if inits is None else (inits[i],),
+                                 global_seeds=global_seeds, minmax=minmax, strict=False,
+                                 method=method, device=device))
+                for i, (k, p) in enumerate(zip(ks, pairs, strict=True))]
+    given = [[] if inits is None else [("initial0", inits[i])] for i in range(len(ks))]
+    res = solve_pairs(m, np.asarray(pairs), n, plan, given, global_seeds, method, device,
+                      minmax)
+    return list(zip(ks, res, strict=True))
+
+
+@functools.lru_cache(maxsize=8)
+def _cached_metric(spec: MetricSpec) -> Metric:
+    """The metric of ``spec``, built once per process (a worker or Ray task process serves
+    many chunks of the same metric; a few specs are kept for processes that outlive a
+    batch)."""
+    return spec.build()
+
+
+#: Rows (pair x seed problems) per batched Newton solve of :func:`solve_batch`: enough
+#: that array operations dominate Python overhead (measured with ``benchmarks/peers.py
+#: --throughput``: Randers, 3 seeds per pair, 0.53 / 0.35 / 0.27 ms per pair with 192 /
+#: 384 / 1536 rows); the pairs of a chunk are saved together.
+NEWTON_ROWS = 16384
+
+
+def _chunk_pairs(plan: SeedPlan, global_seeds: bool) -> int:
+    """Pairs per batched chunk: :data:`NEWTON_ROWS` over the plan's seeds per pair."""
+    seeds = (1 + 2 * len(plan.bulges) + plan.random + int(plan.graph) + plan.restarts
+             if global_seeds else 1)
+    return int(np.clip(NEWTON_ROWS // max(seeds, 1), 16, 4096))
+
+
+#: ``solve_batch`` with the Newton method uses worker processes by default only from this
+#: many pairs on (starting a process costs seconds of imports).
+NEWTON_POOL_MIN = 1024
+
+
+class _BatchStore:
+    """Per-pair result files of a resumable :func:`solve_batch` (pickle, atomic rename)."""
+
+    def __init__(self, folder: Any, metric: Metric, n: int, plan: SeedPlan, minmax: bool,
+                 global_seeds: bool = True, tol: float | None = None):
+        import pathlib
+
+        self.folder = pathlib.Path(folder)
+        try:
+            self.folder.mkdir(parents=True, exist_ok=True)
+        except OSError as err:
+            raise OutputError(f"cannot create the folder of resumable parts {self.folder}: "
+                              f"{err.strerror}") from err
+        self.key = (repr(metric), int(n), repr(plan), bool(minmax), bool(global_seeds),
+                    None if tol is None else float(tol))
+
+    def _path(self, k: int) -> Any:
+        return self.folder / f"pair_{k:07d}.pkl"
+
+    def load(self, k: int, pair: np.ndarray, init: np.ndarray | None = None
+             ) -> GeodesicResult | None:
+        """The saved result of pair ``k`` if it was solved from the same pair ``(2, dim)``
+        and initial path (``None``: none), else ``None``."""
+        import pickle
+
+        path = self._path(k)
+        if not path.is_file():
+            return None
+        try:
+            with path.open("rb") as fh:
+                key, saved_pair, saved_init, result = pickle.load(fh)
+        except Exception:  # a corrupt or foreign file is recomputed, never trusted
+            return None
+        if key != self.key or not np.array_equal(saved_pair, pair):
+            return None
+        if (saved_init is None) != (init is None) or (
+                init is not None and not np.array_equal(saved_init, init)):
+            return None
+        return result
+
+    def save(self, k: int, pair: np.ndarray, result: GeodesicResult,
+             init: np.ndarray | None = None) -> None:
+        import pickle
+
+        saved_init = None if init is None else np.array(init)
+        atomic_write_bytes(self._path(k), pickle.dumps((self.key, np.array(pair), saved_init,
+                                                        result)), "resumable part")
+
+
+def solve_batch(
+    metric: Metric | str,
+    pairs: Any,
+    segments: int | None = None,
+    *,
+    seeds: SeedPlan | None = None,
+    minmax: bool = False,
+    workers: int | None = None,
+    progress: bool = True,
+    checkpoint_dir: str | os.PathLike[str] | None = None,
+    ray_address: str | None = None,
+    chunk_size: int | None = None,
+    initial_paths: Any = None,
+    global_seeds: bool = True,
+    tol: float | None = None,
+    method: str = "auto",
+    device: Any = None,
+) -> list[GeodesicResult]:
+    """Solve every pair of ``pairs`` ``(K, 2, dim)``; results in the order of the pairs.
+
+    ``workers`` processes (default: the CPU count, at most ``K``; ``1`` runs in this
+    process); each worker builds the NLP once and reuses it for all its pairs. A tqdm bar
+    shows progress unless ``progress=False``. Same inputs give the same results.
+
+    With ``checkpoint_dir``, every finished pair is saved there at once (written, then
+    renamed), and a rerun with the same pairs, segments, seeds and ``minmax`` reuses
+    them: an interrupted batch resumes without losing finished work. Files saved for
+    other inputs are ignored and recomputed.
+
+    With ``ray_address`` (``"local"`` starts a local Ray instance of ``workers`` CPUs;
+    ``"auto"`` or ``"HOST:6379"`` joins a running cluster) the pairs are solved as Ray
+    tasks of ``chunk_size`` pairs (default: about four chunks per CPU of the cluster, at
+    most 64 pairs) by :mod:`solvers.distributed`; every finished chunk's pairs are saved
+    as the same parts as above, and the results equal the local ones.
+
+    ``initial_paths`` ``(K, m+1, dim)``: one caller-given initial path per pair (e.g. a
+    learned policy's paths, or exact paths of another size ``m``: resampled to ``n + 1``
+    points), solved as ``solve_geodesic(initial=[path])``. With ``global_seeds=False`` only
+    that path is solved (the fast warm-start mode: a good path converges in a few IPOPT
+    iterations); with ``True`` the global seeds are solved too and the lowest energy kept.
+    ``tol``: every pair solved to that relative accuracy of its length
+    (:func:`~solvers.geodesic.solve_geodesic`).
+
+    ``method`` / ``device``: as in :func:`~solvers.geodesic.solve_geodesic`. With the
+    batched Newton method (the default where it covers the metric) the pairs are solved in
+    chunks of about :data:`NEWTON_ROWS` (pair, seed) problems, every problem of a chunk in
+    one batch; the default ``workers`` is then 1 below :data:`NEWTON_POOL_MIN` pairs (the
+    batch is vectorised; processes pay off only for many chunks), else the CPU count.
+    """
+    from tqdm.auto import tqdm
+
+    m = as_metric(metric)
+    arr = check_pairs(m, pairs)
+    n = check_segments(m, segments)
+    how = resolve_method(m, method)
+    if device is not None:
+        backend_for(device)  # a bad device fails here, before any work
+    plan = seeds if seeds is not None else SeedPlan.default(m, how)
+    if not isinstance(plan, SeedPlan):
+        raise InputError(f"seeds must be a SeedPlan, got {type(plan).__name__}")
+    if workers is None:
+        workers = os.cpu_count() or 1
+        if how == "newton" and arr.shape[0] < NEWTON_POOL_MIN:
+            workers = 1
+    if isinstance(workers, bool) or not isinstance(workers, (int, np.integer)) or workers < 1:
+        raise InputError(f"workers must be a positive integer, got {workers!r}")
+    if chunk_size is not None and (isinstance(chunk_size, bool)
+                                   or not isinstance(chunk_size, (int, np.integer))
+                                   or chunk_size < 1):
+        raise InputError(f"chunk_size must be a positive integer, got {chunk_size!r}")
+    if ray_address is not None:
+        from finsler.cluster import probe_address, require_ray
+
+        require_ray()  # before any file is made
+        probe_address(ray_address)  # a wrong address fails in seconds
+    if not isinstance(global_seeds, (bool, np.bool_)):
+        raise InputError(f"global_seeds must be True or False, got {global_seeds!r}")
+    inits = check_initial_paths(m, arr, n, initial_paths)
+    if not global_seeds and inits is None:
+        raise InputError("global_seeds=False needs initial_paths (one path per pair)")
+    if tol is not None and (isinstance(tol, bool) or not isinstance(tol, (int, float))
+                            or not (np.isfinite(tol) and 0 < tol < 1)):
+        raise InputError(f"tol must be a relative tolerance in (0, 1), got {tol!r}")
+    store = (_BatchStore(checkpoint_dir, m, n, plan, minmax, bool(global_seeds), tol)
+             if checkpoint_dir else None)
+    results: list[GeodesicResult | None] = [None] * arr.shape[0]
+
+    def init_of(k: int) -> np.ndarray | None:
+        return None if inits is None else inits[k]
+
+    if store is not None:
+        for k in range(arr.shape[0]):
+            results[k] = store.load(k, arr[k], init_of(k))
+    todo = [k for k in range(arr.shape[0]) if results[k] is None]
+    size = 1
+    if how == "newton":
+        size = _chunk_pairs(plan, bool(global_seeds))
+        if workers > 1:  # several chunks per worker: balanced, and finished work is kept
+            size = max(1, min(size, -(-len(todo) // (4 * workers))))
+    chunks = [todo[i:i + size] for i in range(0, len(todo), size)]
+    workers = int(min(workers, max(len(chunks), 1)))
+    spec = _metric_spec(m)
+
+    def job(ks: list[int]) -> tuple:
+        return (spec, ks, arr[ks], n, plan, minmax, None if inits is None else inits[ks],
+                bool(global_seeds), tol, how, device)
+
+    bar = tqdm(total=arr.shape[0], desc=f"solve {m.name}", disable=not progress, unit="pair",
+               initial=arr.shape[0] - len(todo))
+
+    def take(done: list[tuple[int, GeodesicResult]]) -> None:
+        for k, res in done:
+            results[k] = res
+            if store is not None:
+                store.save(k, arr[k], res, init_of(k))
+        bar.update(len(done))
+
+    try:
+        if ray_address is not None and todo:
+            from solvers.distributed import solve_chunks_ray
+
+            local_cpus = int(min(workers, len(todo)))
+            for done in solve_chunks_ray(ray_address, _chunk_worker, job, todo,
+                                         chunk_size, num_cpus=local_cpus):
+                take(done)
+        elif workers == 1 or len(chunks) <= 1:
+            for ks in chunks:
+                take(_solve_chunk(m, ks, arr[ks], n, plan, minmax,
+                                  None if inits is None else inits[ks], bool(global_seeds),
+                                  tol, how, device))
+        else:
+            with ProcessPool(workers) as pool:
+                for done in pool.map_unordered(_chunk_worker, [job(ks) for ks in chunks]):
+                    take(done)
+    finally:
+        bar.close()
+    return [r for r in results if r is not None]
