@@ -5,13 +5,13 @@ so an interrupted batch resumes.
 A chunk is one batched solve of its pairs (:func:`solvers.pairs.solve_pairs`; with
 ``tol`` each pair refined on its own, :func:`solvers.tolerance.solve_to_tol`); a worker
 process rebuilds the metric from its :class:`~finsler.spec.MetricSpec` once
-(:func:`_cached_metric`). The one vectorised Newton solve of many (pair, seed) problems
-is :mod:`solvers.batched`; this module only schedules and stores.
+(``spec.build()`` returns the registry's shared instance, with what it derived). The
+one vectorised Newton solve of many (pair, seed) problems is :mod:`solvers.batched`; this
+module only schedules and stores.
 """
 
 from __future__ import annotations
 
-import functools
 import os
 import time
 from collections.abc import Sequence
@@ -44,7 +44,7 @@ def _chunk_worker(args: tuple) -> list[tuple[int, GeodesicResult]]:
     pair indices, pairs ``(k, 2, dim)``, segments, plan, minmax, initial paths or None,
     global_seeds, tol, method, device) -> ``[(index, result)]``."""
     spec, ks, pairs, n, plan, minmax, inits, global_seeds, tol, method, device = args
-    m = _cached_metric(spec)
+    m = spec.build()
     return _solve_chunk(m, ks, pairs, n, plan, minmax, inits, global_seeds, tol, method,
                         device)
 
@@ -66,14 +66,6 @@ def _solve_chunk(m: Metric, ks: Sequence[int], pairs: np.ndarray, n: int, plan: 
     res = solve_pairs(m, np.asarray(pairs), n, plan, given, global_seeds, method, device,
                       minmax)
     return list(zip(ks, res, strict=True))
-
-
-@functools.lru_cache(maxsize=8)
-def _cached_metric(spec: MetricSpec) -> Metric:
-    """The metric of ``spec``, built once per process (a worker or Ray task process serves
-    many chunks of the same metric; a few specs are kept for processes that outlive a
-    batch)."""
-    return spec.build()
 
 
 #: Rows (pair x seed problems) per batched Newton solve of :func:`solve_batch`: enough
