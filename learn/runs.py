@@ -33,6 +33,7 @@ from typing import Any
 
 from finsler.errors import InputError
 from learn.loop import read_config_section
+from learn.policy import load_policy, shipped_policies
 from learn.registry import find_variant, get_method, method_of_run, variants
 from learn.storage import (
     BEST_FILE,
@@ -125,19 +126,18 @@ def warm_start_paths(source: str | Path, metric: Any, pairs: Any,
     :class:`InputError` naming the difference. ``pairs`` ``(K, 2, dim)``. ``search``: the
     route search's paths (:meth:`learn.Policy.search`) instead of the plain generation.
     """
-    import learn
     from finsler import MetricSpec
 
     src = str(source)
     path = Path(source)
     if path.is_dir():
         pol = load_any_policy(path, checkpoint=checkpoint)
-    elif src in learn.shipped_policies():
-        pol = learn.load_policy(src, checkpoint=checkpoint)
+    elif src in shipped_policies():
+        pol = load_policy(src, checkpoint=checkpoint)
     else:
         import finsler
 
-        known = ", ".join(learn.shipped_policies()) or "none"
+        known = ", ".join(shipped_policies()) or "none"
         if src in finsler.list_metrics():
             raise InputError(f"--warm-start {src}: no shipped policy for {src!r} (shipped: "
                              f"{known}); train one with `geodesics train` and pass its run "
