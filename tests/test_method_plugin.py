@@ -3,11 +3,13 @@ trains, resumes, evaluates and sweeps through the CLI like a built-in method."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import re
 import shutil
 import sys
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -17,6 +19,7 @@ from typer.testing import CliRunner
 import finsler
 import learn
 from learn import registry
+from learn.config import MetricConfig
 from learn.storage import read_metrics
 from validation.cli import app
 
@@ -205,3 +208,23 @@ def test_the_readme_commands_run(runs, tmp_path) -> None:
     assert learn.load_policy(tmp_path / "toy").metric.name == "matsumoto"
     rows = read_metrics(tmp_path / "toy" / "metrics.csv")
     assert rows[-1]["timesteps"] >= 400000 // 12  # resumed to the second budget
+
+
+@pytest.mark.parametrize("as_text", [False, True])
+def test_a_method_config_checks_the_field_types_it_knows(as_text) -> None:
+    """A user config's fields are type-checked whether its annotations are types or text
+    (``from __future__ import annotations``); other field types are left to the config."""
+    spec = [("env", str, "euclidean"), ("metric_params", dict[str, Any] | None, None),
+            ("metric_class", str | None, None), ("seed", int, 0),
+            ("width", tuple[int, ...], (4,)), ("weights", list[float], None)]
+    fields = [(name, (t.__name__ if isinstance(t, type) else str(t)) if as_text else t,
+               dataclasses.field(default=d)) for name, t, d in spec]
+    cls = dataclasses.make_dataclass("UserConfig", fields, bases=(MetricConfig,),
+                                     namespace={"__post_init__": MetricConfig._check_types})
+    assert cls(weights=[0.5]).metric_params == {"n": 2}
+    with pytest.raises(finsler.InputError, match="config field seed must be int, got 'x'"):
+        cls(seed="x")
+    with pytest.raises(finsler.InputError, match=r"width must be tuple\[int, \.\.\.\]"):
+        cls(width=(1, "a"))
+    with pytest.raises(finsler.InputError, match="metric_class must be str"):
+        cls(metric_class=3)
