@@ -12,7 +12,7 @@ counted in ``timesteps``. The run directory, resume, budget, minutes, signals, m
 rows and checkpoints are the run loop's (``learn.loop.RunLoop``).
 """
 
-from __future__ import annotations  # the config's field types are checked by name
+from __future__ import annotations
 
 from dataclasses import dataclass
 from typing import Any
