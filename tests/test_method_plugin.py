@@ -156,6 +156,17 @@ def test_sweep_a_plugin_method(runs, tmp_path) -> None:
     assert {r["action"] for r in json.loads(res.output)} == {"skipped"}
 
 
+def test_a_plugin_policy_warm_starts_an_exact_solve(runs) -> None:
+    run = runs["root"] / "run"
+    res = _cli("solve", "--metric", ENV, "--start", "0.1,0.2", "--goal", "-0.5,0.3",
+               "--warm-start", run, "--method-module", PLUGIN, "--json")
+    assert res.exit_code == 0, res.output
+    doc = json.loads(res.output)
+    assert doc["warm_start"]["policy"] == str(run) and not doc["warm_start"]["global_seeds"]
+    assert doc["results"][0]["status"] == "success"
+    assert doc["results"][0]["length"] == pytest.approx(np.hypot(0.6, 0.1), rel=1e-9)
+
+
 def _one_line_error(res, *parts: str) -> None:
     assert res.exit_code == 2, res.output
     text = res.output.strip()

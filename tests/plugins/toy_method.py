@@ -104,6 +104,10 @@ class ToyPolicy:
         with torch.no_grad():
             return toy_paths(self.net, self.metric, s, g, d).numpy()
 
+    def midpoint(self, starts: Any, goals: Any) -> np.ndarray:
+        """Predicted midpoints ``(K, dim)``."""
+        return self.generate(starts, goals, depth=1)[:, 1]
+
     def evaluate(self, pairs: Any = None, eps: float | None = None,
                  depth: int | None = None) -> Any:
         """Section 5.1 evaluation on ``pairs`` ``(K, 2, dim)`` (default: the default set)."""
