@@ -24,7 +24,7 @@ from torch.nn.utils import parameters_to_vector, vector_to_parameters
 
 import finsler
 from finsler.errors import InputError
-from learn.base import check_hidden
+from learn.base import LoadedPolicy, check_hidden
 from learn.config import MetricConfig
 from learn.loop import RunLoop, best_record, eval_columns, load_run, load_weights
 from learn.policy import check_pairs, evaluate_paths
@@ -36,9 +36,7 @@ from learn.tree import build_tree
 class ToyConfig(MetricConfig):
     """Every setting of a toy run (saved in the run's ``config.json``)."""
 
-    env: str = "matsumoto"  # the run-control fields every method has
-    metric_params: dict[str, Any] | None = None
-    metric_class: str | None = None
+    # env, metric_params, metric_class: MetricConfig's; then the fields every method has
     method: str = "toy"
     seed: int = 0
     timesteps: int = 20_000  # budget: evaluations of C, all-inclusive
@@ -85,24 +83,22 @@ def toy_paths(net: nn.Module, metric: finsler.Metric, s: torch.Tensor, g: torch.
     return build_tree(s, g, depth, midpoint)
 
 
-class ToyPolicy:
-    """A trained toy policy: ``generate`` and ``evaluate`` as the built-in policies."""
+class ToyPolicy(LoadedPolicy):
+    """A trained toy policy: ``generate``, ``midpoint`` and ``evaluate`` as the built-in
+    policies (``config``, ``metric``, ``depth``, ``eps``, ``source``, ``checkpoint``:
+    LoadedPolicy's)."""
 
     def __init__(self, net: nn.Module, config: ToyConfig, source: str = "",
                  checkpoint: str = "") -> None:
-        self.net, self.config, self.metric = net.eval(), config, config.metric
-        self.depth, self.eps = config.max_depth, config.eval_eps
-        self.source, self.checkpoint = source, checkpoint
+        super().__init__(config, source, checkpoint)
+        self.net = net.eval()
 
     def generate(self, starts: Any, goals: Any, depth: int | None = None) -> np.ndarray:
         """``(K, dim)`` x2 -> paths ``(K, 2**D + 1, dim)`` (D: ``depth`` or the task's)."""
         s = torch.as_tensor(self.metric.domain.check(starts, "starts"), dtype=torch.float64)
         g = torch.as_tensor(self.metric.domain.check(goals, "goals"), dtype=torch.float64)
-        d = self.depth if depth is None else depth
-        if not isinstance(d, int) or d < 0:
-            raise InputError(f"depth must be a non-negative integer, got {depth!r}")
         with torch.no_grad():
-            return toy_paths(self.net, self.metric, s, g, d).numpy()
+            return toy_paths(self.net, self.metric, s, g, self._depth(depth)).numpy()
 
     def midpoint(self, starts: Any, goals: Any) -> np.ndarray:
         """Predicted midpoints ``(K, dim)``."""
