@@ -97,6 +97,9 @@ class ToyPolicy(LoadedPolicy):
         """``(K, dim)`` x2 -> paths ``(K, 2**D + 1, dim)`` (D: ``depth`` or the task's)."""
         s = torch.as_tensor(self.metric.domain.check(starts, "starts"), dtype=torch.float64)
         g = torch.as_tensor(self.metric.domain.check(goals, "goals"), dtype=torch.float64)
+        if s.ndim != 2 or s.shape != g.shape:
+            raise InputError(f"starts and goals must both be (K, dim), got {tuple(s.shape)}, "
+                             f"{tuple(g.shape)}")
         with torch.no_grad():
             return toy_paths(self.net, self.metric, s, g, self._depth(depth)).numpy()
 
