@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import json
 import math
+import sys
 import time
 from abc import ABC, abstractmethod
 from collections.abc import Sequence
@@ -238,6 +239,9 @@ class RunLoop(ABC):
         module = type(self).__module__
         if module.split(".")[0] != "learn":  # a method registered outside the toolkit
             doc["method_module"] = module
+            where = getattr(sys.modules.get(module), "__file__", None)
+            if where:  # to say what to import when the module is not importable
+                doc["method_file"] = str(Path(where).resolve())
         return json.dumps(doc, indent=2)
 
     def _wall(self) -> float:

@@ -8,8 +8,9 @@ sweeps, its named :class:`Variant` s. Nothing else names it: ``geodesics train -
 find it here. The toolkit's own methods (:mod:`learn.train`: midpoint / inter /
 two-to-one, :mod:`learn.pg`, :mod:`learn.seq`) are imported on first need; a method in a
 user's file is imported with ``--method-module FILE.py`` (:func:`import_method_modules`)
-and its module is recorded in each run's ``config.json`` (``method_module``) so that
-loading the run re-imports it (when it is importable).
+and its module is recorded in each run's ``config.json`` (``method_module``, and the file
+in ``method_file``) so that loading the run re-imports it (when it is importable; else the
+error names the file to pass with ``--method-module``).
 """
 
 from __future__ import annotations
@@ -33,6 +34,7 @@ __all__ = [
     "list_methods",
     "method_of_run",
     "register_method",
+    "unregister_method",
     "variants",
 ]
 
@@ -120,6 +122,17 @@ def register_method(method: Method) -> Method:
     return method
 
 
+def unregister_method(name: str) -> None:
+    """Remove the method registered under ``name`` (all of its ``config_methods``), e.g.
+    after a test; an unknown name is an :class:`InputError`."""
+    if name not in _METHODS:
+        raise InputError(f"method {name!r} is not registered")
+    method = _METHODS[name]
+    for key in method.config_methods:
+        if _METHODS.get(key) is method:
+            del _METHODS[key]
+
+
 def _import_builtins(until: str | None = None) -> None:
     """Import the toolkit's method modules (all, or until ``until`` is registered)."""
     for module in BUILTIN_MODULES:
@@ -168,32 +181,48 @@ def find_variant(name: str) -> tuple[Method, Variant]:
     for m in _entries():
         if name in m.variants:
             return m, m.variants[name]
-    raise InputError(f"unknown variant {name!r}; known: {', '.join(variants())}")
+    raise InputError(f"unknown variant {name!r}; known: {', '.join(variants())} (a method "
+                     "of your own: --method-module FILE.py)")
 
 
 def method_of_run(run_dir: str | Path, section: Mapping[str, Any]) -> Method:
     """The method of a run directory whose ``config`` section is ``section`` (default
     ``midpoint``): registered, or registered by importing the ``method_module`` the run's
-    ``config.json`` records."""
+    ``config.json`` records (never its ``method_file``, which only names the file to pass
+    with ``--method-module`` when the module cannot be imported)."""
     from learn.storage import CONFIG_FILE, read_json
 
     name = section.get("method", "midpoint")
     if isinstance(name, str) and name not in _METHODS:
         _import_builtins(until=name)
-        module = read_json(Path(run_dir) / CONFIG_FILE).get("method_module")
+        doc = read_json(Path(run_dir) / CONFIG_FILE)
+        module = doc.get("method_module")
         if name not in _METHODS and isinstance(module, str):
             try:
                 import_user_module(module, f"method {name!r}: module")
             except InputError as err:
-                raise InputError(
-                    f"run {run_dir} was trained by method {name!r} of module {module!r}, "
-                    f"which cannot be imported ({err}): pass --method-module FILE.py (or "
-                    "put the module on PYTHONPATH)") from err
+                where = doc.get("method_file")
+                hint = where if isinstance(where, str) else f"FILE.py of module {module!r}"
+                raise InputError(f"cannot import module {module!r} of the run's method "
+                                 f"{name!r}; pass --method-module {hint}") from err
     return get_method(str(name))
 
 
 def import_method_modules(items: Iterable[str] | None) -> list[str]:
     """Import every ``--method-module`` (a dotted module name, or a ``.py`` file whose
     folder is put first on ``sys.path`` and which is imported by its stem, so that worker
-    processes and later loads import it by that name too); returns the module names."""
-    return [import_user_module(item, "--method-module").__name__ for item in items or []]
+    processes and later loads import it by that name too); returns the module names.
+    A module that registers no method (none registered while importing it, none whose
+    trainer it defines) is an :class:`InputError`."""
+    names = []
+    for item in items or []:
+        before = dict(_METHODS)
+        name = import_user_module(item, "--method-module").__name__
+        added = any(_METHODS[k] is not before.get(k) for k in _METHODS)
+        defines = any(m.module == name or m.module.startswith(name + ".")
+                      for m in _METHODS.values())
+        if not (added or defines):
+            raise InputError(f"--method-module {item}: registers no learning method (call "
+                             "learn.registry.register_method(Method(...)) in it)")
+        names.append(name)
+    return names

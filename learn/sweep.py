@@ -133,12 +133,13 @@ def _jsonable(obj: Any) -> Any:
     return json.loads(json.dumps(obj, default=list))
 
 
-def _names(what: str, items: Iterable[str], known: Sequence[str]) -> tuple[str, ...]:
+def _names(what: str, items: Iterable[str], known: Sequence[str],
+           hint: str = "") -> tuple[str, ...]:
     out: list[str] = []
     for item in items:
         name = str(item).strip()
         if name not in known:
-            raise InputError(f"unknown {what} {name!r}; known: {', '.join(known)}")
+            raise InputError(f"unknown {what} {name!r}; known: {', '.join(known)}{hint}")
         if name in out:
             raise InputError(f"{what} {name!r} is listed twice")
         out.append(name)
@@ -164,7 +165,8 @@ def plan_sweep(envs: Iterable[str], variants: Iterable[str], seeds: int,
     import finsler
 
     env_t = _names("environment", envs, finsler.list_metrics())
-    var_t = _names("variant", variants, list(VARIANTS))
+    var_t = _names("variant", variants, list(VARIANTS),
+                   " (a method of your own: --method-module FILE.py)")
     if isinstance(seeds, bool) or not isinstance(seeds, int) or seeds < 1:
         raise InputError(f"seeds must be a positive integer (runs use seeds 0..N-1), "
                          f"got {seeds!r}")

@@ -34,6 +34,8 @@ PATHS = ["out.json", "x" * 300 + ".json", "missing/deep/f.json", "garbage.npy", 
 METRICS = ["matsumoto", "euclidean", "poincare", "nosuch", "", "MATSUMOTO", "carlike"]
 MODULES = ["raises.py", "syntax.py", "nul.py", "exits.py", "..", "folder", "nosuch_mod",
            "a.b..c", "missing.py"]
+#: ... where a learning method's module is expected (plain.py registers none).
+METHOD_MODULES = [*MODULES, "plain.py"]
 SETS = ["hidden=[100000000]", "hidden=[]", "lr=nan", "nosuch=1", "epochs=-1", "=", "env=x",
         "hidden=[\"a\"]", "timesteps=1e400"]
 
@@ -52,7 +54,8 @@ OPTIONS: dict[str, dict[str, list[str]]] = {
     "solve": {"--metric": METRICS, "--start": POINTS, "--goal": POINTS, "--pairs": PATHS,
               "--segments": ["0", "1", "-1", "100000000", "3", "x"], "--out": PATHS,
               "--tol": NUMBERS, "--workers": ["0", "-1", "x"],
-              "--metric-module": MODULES},
+              "--metric-module": MODULES, "--warm-start": PATHS,
+              "--method-module": METHOD_MODULES},
     "certify": {"--metric": [*METRICS, "panda-pole"], "--start": POINTS, "--goal": POINTS,
                 "--mesh": ["coarse", "nosuch", ""], "--h": NUMBERS,
                 "--directions": ["7", "100000000", "-1"], "--target-gap": NUMBERS,
@@ -60,18 +63,21 @@ OPTIONS: dict[str, dict[str, list[str]]] = {
     "train": {"--env": METRICS, "--out": PATHS, "--timesteps": ["0", "-5", "x", "100"],
               "--minutes": NUMBERS, "--method": ["nosuch", "seq", "pg", ""],
               "--device": ["cuda:7", "tpu", ""], "--set": SETS,
-              "--metric-module": MODULES},
+              "--metric-module": MODULES, "--method-module": METHOD_MODULES},
     "evaluate": {"--run": PATHS, "--env": METRICS, "--pairs": PATHS, "--eps": NUMBERS,
                  "--depth": ["-1", "40", "x"], "--checkpoint": ["nosuch", ""],
-                 "--metric-module": MODULES},
+                 "--metric-module": MODULES, "--method-module": METHOD_MODULES},
     "report": {"--out": PATHS, "--env": METRICS, "--run": PATHS, "--pairs": PATHS,
                "--workers": ["0", "-1"], "--certify": ["-1", "x"],
-               "--checkpoint": ["nosuch"], "--metric-module": MODULES},
+               "--checkpoint": ["nosuch"], "--metric-module": MODULES,
+               "--method-module": METHOD_MODULES},
     "sweep": {"--envs": [*METRICS, "matsumoto,nosuch", ","], "--methods": ["nosuch", ""],
               "--seeds": ["0", "-1", "x"], "--out": PATHS, "--timesteps": ["0", "-3"],
-              "--workers": ["0", "-2"], "--set": SETS, "--metric-module": MODULES},
+              "--workers": ["0", "-2"], "--set": SETS, "--metric-module": MODULES,
+              "--method-module": METHOD_MODULES},
     "plot-curves": {"--out": [*PATHS, "fig.png", "fig.gif"], "--column": ["nosuch", ""]},
     "check": {"--metric": METRICS, "--metric-module": MODULES, "--run": PATHS,
+              "--method-module": METHOD_MODULES,
               "--examples": ["0", "-1", "x", "2147483648"], "--seed": ["-1", "x", "1e23"],
               "--metric-param": ["a=1", "height=nan", "x", "=1"], "--json": []},
 }
@@ -94,7 +100,8 @@ OUTPUT_OPTIONS = ("--out",)
 MODULE_FILES = {"raises.py": "raise RuntimeError('boom ' * 50)\n",
                 "syntax.py": "def f(:\n",
                 "nul.py": "x = 1\x00\n",
-                "exits.py": "import sys\nsys.exit(3)\n"}
+                "exits.py": "import sys\nsys.exit(3)\n",
+                "plain.py": "X = 1\n"}
 
 
 def make_workdir(root: Path) -> None:

@@ -23,6 +23,7 @@ import typer
 
 from finsler.errors import InputError
 from validation.cli_common import (
+    MethodModuleOption,
     MetricModuleOption,
     MetricParamOption,
     fail,
@@ -60,6 +61,7 @@ def check_command(
                        ] = False,
     metric_param: MetricParamOption = None,
     metric_module: MetricModuleOption = None,
+    method_module: MethodModuleOption = None,
 ) -> None:
     """Property-based checks of a metric (Finsler axioms, lowered forms, smoothness, solved
     distances) and of a policy (--run): a table with minimal counterexamples; exit 1 when a
@@ -78,6 +80,10 @@ def check_command(
                          ("--midpoint-tol", midpoint_tol)):
             if not val > 0 or val == float("inf"):
                 raise InputError(f"{opt} must be positive and finite, got {val}")
+        if method_module:
+            from learn.registry import import_method_modules
+
+            import_method_modules(method_module)
         policy = None
         if run is not None:
             import learn

@@ -38,7 +38,7 @@ METRIC_PARAM_HELP = ("Metric parameter NAME=VALUE (repeatable; numbers parsed), 
 METRIC_MODULE_HELP = ("Module (dotted name) or FILE.py to import first, so that the "
                       "metrics it registers (@finsler.register_metric) can be used "
                       "(repeatable; a file's folder is put on sys.path).")
-#: Help of the ``--method-module`` option (``train``, ``evaluate``, ``sweep``).
+#: Help of the ``--method-module`` option (every command that trains or reads a run).
 METHOD_MODULE_HELP = ("Module (dotted name) or FILE.py to import first, so that the "
                       "learning methods it registers (learn.registry.register_method) can "
                       "be used (repeatable; a file's folder is put on sys.path, so sweep "
@@ -48,6 +48,8 @@ MetricParamOption = Annotated[list[str] | None, typer.Option(
     "--metric-param", metavar="NAME=VALUE", help=METRIC_PARAM_HELP)]
 MetricModuleOption = Annotated[list[str] | None, typer.Option(
     "--metric-module", metavar="MODULE", help=METRIC_MODULE_HELP)]
+MethodModuleOption = Annotated[list[str] | None, typer.Option(
+    "--method-module", metavar="MODULE", help=METHOD_MODULE_HELP)]
 
 
 #: Longest error line the commands print (characters, after ``error: ``).

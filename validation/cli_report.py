@@ -12,6 +12,7 @@ from finsler.errors import InputError
 from finsler.files import check_input_dir, check_output_dir
 from validation.cli_common import (
     METRIC_MODULE_HELP,
+    MethodModuleOption,
     fail,
     import_metric_modules,
     parse_metric_params,
@@ -50,6 +51,7 @@ def report_command(
              "run's own parameters are always used).")] = None,
     metric_module: Annotated[list[str] | None, typer.Option(
         "--metric-module", metavar="MODULE", help=METRIC_MODULE_HELP)] = None,
+    method_module: MethodModuleOption = None,
     search: Annotated[bool, typer.Option(
         "--search/--no-search",
         help="Also report the policy with the route search (learn.search: candidate "
@@ -63,6 +65,7 @@ def report_command(
 ) -> None:
     """Benchmark a learned policy against exact geodesics and the straight-line baseline:
     success rates, length ratios, midpoint errors, timing, figures."""
+    from learn.registry import import_method_modules
     from validation.report import build_report
 
     try:
@@ -72,6 +75,7 @@ def report_command(
         if run is not None:
             check_input_dir(run, "--run")
         import_metric_modules(metric_module)
+        import_method_modules(method_module)
         params = parse_metric_params(metric_param)
         doc = build_report(env, out, run=run, pairs=pairs, quick=quick, continuum=continuum,
                            workers=workers, progress=progress, checkpoint=checkpoint,

@@ -36,6 +36,7 @@ import solvers
 from finsler.errors import InputError
 from finsler.pool import PoolInterrupted
 from validation.cli_common import (
+    MethodModuleOption,
     MetricModuleOption,
     MetricParamOption,
     fail,
@@ -168,6 +169,7 @@ def solve_command(
              "is not seen) is below TOL * length, e.g. 1e-7.")] = None,
     metric_param: MetricParamOption = None,
     metric_module: MetricModuleOption = None,
+    method_module: MethodModuleOption = None,
 ) -> None:
     """Exact discrete geodesics (globally seeded; the batched Newton method, IPOPT where
     it does not cover the metric or cannot finish a pair) with min-max refinement.
@@ -216,6 +218,10 @@ def solve_command(
             m.domain.check(arr[0, 0], "--start")
             m.domain.check(arr[0, 1], "--goal")
         n = solvers.check_segments(m, segments)
+        if method_module:
+            from learn.registry import import_method_modules
+
+            import_method_modules(method_module)
         inits, warm = _warm_start(warm_start, m, arr, keep_global_seeds, warm_search)
         # With --out, finished pairs are kept beside it (parts) until the JSON is written,
         # so an interrupted run resumes where it stopped when the same command is run again.
