@@ -328,8 +328,8 @@ def _markdown(doc: dict[str, Any], figures: list[str], metric: Metric) -> str:
                 lines.append(f"| {r['pair']} | no certificate: {r['error']} |")
                 continue
             lines.append(f"| {r['pair']} | {r['lower']:.6f} | {r['upper']:.6f} | "
-                         f"{r['gap']:.2e} | {100 * r['learned_excess_bound']:.2f}% |"
-                         + (f" {100 * r['searched_excess_bound']:.2f}% |" if has_s else "")
+                         f"{r['gap']:.2e} | {_excess(r.get('learned_excess_bound'))} |"
+                         + (f" {_excess(r.get('searched_excess_bound'))} |" if has_s else "")
                          + f" {r['stopped_by']} | {r['seconds']:.0f} |")
         if done:
             lines += ["", f"Convexity: {done[0]['convexity']} (where F(x, .) is not convex "
@@ -506,8 +506,8 @@ def _build_report(env: str | None, out: Path, *, run: str | Path | None,
     doc["time_to_success"] = time_to_success(doc["learning_curve"])
     doc["learned_length_ratio_per_pair"] = [
         None if not np.isfinite(x) else float(x) for x in cmp.ratios("learned")]
-    cert = certified_intervals(cmp, metric, 2 if quick else 5 if certify is None
-                               else int(certify), quick)
+    n_cert = (2 if quick else 5) if certify is None else int(certify)
+    cert = certified_intervals(cmp, metric, n_cert, quick)
     if cert is not None:
         doc["certified"] = cert
     figures = write_figures(cmp, metric, out, doc["learning_curve"], floor,
@@ -530,6 +530,11 @@ def _build_report(env: str | None, out: Path, *, run: str | Path | None,
     return doc
 
 
+def _excess(bound: float | None) -> str:
+    """A proven excess bound as a percentage (``-`` where none is finite: no lower bound)."""
+    return f"{100 * bound:.2f}%" if bound is not None and math.isfinite(bound) else "-"
+
+
 def certified_intervals(cmp: Comparison, metric: Metric, count: int, quick: bool
                         ) -> dict[str, Any] | None:
     """Certified intervals ``lower <= d <= upper`` (:func:`solvers.certify`) for the first
@@ -539,8 +544,11 @@ def certified_intervals(cmp: Comparison, metric: Metric, count: int, quick: bool
     (:meth:`Metric.path_length_bounds`) over the certified lower bound. ``quick``: the
     coarse mesh, else the default mesh; the meshes' work budgets (rounds, triangles) decide
     the refinement, never a wall-clock limit, so the same report gives the same intervals
-    on any machine under any load. A pair whose certificate fails (the LP solver) is listed
-    with its ``error``. None where the metric is not 2-D or ``count`` is 0."""
+    on any machine under any load. Each row has the certificate's ``status``
+    (:class:`solvers.CertifyStatus`; a failed refinement keeps the best interval proven,
+    lower bound 0 if none, and an infinite excess bound); a pair that cannot be certified
+    (bad input, e.g. start and goal too close) is listed with its ``error``. None where the
+    metric is not 2-D or ``count`` is 0."""
     if metric.dim != 2 or count <= 0:
         return None
     mesh = "coarse" if quick else "default"
@@ -550,18 +558,18 @@ def certified_intervals(cmp: Comparison, metric: Metric, count: int, quick: bool
         try:
             c = solvers.certify(metric, cmp.pairs[i, 0], cmp.pairs[i, 1], mesh,
                                 path=cmp.exact.paths[i])
-        except (InputError, RuntimeError) as err:
+        except InputError as err:  # e.g. start and goal too close to certify
             rows.append({"pair": i, "error": str(err), "seconds": time.perf_counter() - t0})
             continue
         row = {"pair": i, "lower": c.lower, "upper": c.upper, "gap": c.gap,
                "exact_length_proven_upper": c.path_upper, "convexity": c.convexity,
                "triangles": c.triangles, "stopped_by": c.stopped_by,
-               "seconds": time.perf_counter() - t0}
+               "status": c.status.label, "seconds": time.perf_counter() - t0}
         for w in ("learned", "searched"):
             ps = getattr(cmp, w, None)
             if ps is not None:
                 up = metric.path_length_bounds(ps.paths[i]).upper
                 row[f"{w}_length_proven_upper"] = up
-                row[f"{w}_excess_bound"] = up / c.lower - 1.0
+                row[f"{w}_excess_bound"] = up / c.lower - 1.0 if c.lower > 0 else math.inf
         rows.append(row)
     return {"mesh": mesh, "pairs": rows}
