@@ -1,0 +1,201 @@
+"""The evaluation counting of the midpoint learner (issue 22, mutation testing):
+``Trainer.collect`` and ``Trainer.update`` called directly on a tiny Euclidean trainer,
+their counters against hand counts, their targets against the closed-form costs and their
+losses against a replay of the same minibatches. Fast: no training runs."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+import torch
+
+import finsler
+import learn
+from learn.term import ActorTerm, TermOutput
+from learn.train import Trainer
+
+
+def _trainer(tmp_path: Path, **over: Any) -> Trainer:
+    base = dict(timesteps=10_000, collection_size=40, minibatch_size=16, epochs=1,
+                eval_every=1, depth=2, hidden=(8, 8), eval_pairs=4,
+                depth_schedule="full", path_energy_weight=0.0)
+    base.update(over)
+    cfg = learn.default_config("euclidean", **base)
+    return Trainer(cfg, tmp_path / "run", progress=False)
+
+
+def _norm(s: torch.Tensor, g: torch.Tensor) -> torch.Tensor:
+    return torch.linalg.norm(g - s, dim=-1)
+
+
+# ---- collect -----------------------------------------------------------------------------
+@pytest.mark.parametrize("zero_pairs", [True, False])
+def test_collect_counts_trees_pairs_and_leaf_evaluations(tmp_path: Path,
+                                                         zero_pairs: bool) -> None:
+    """Depth 2: a tree has 1 + 2 + 4 = 7 pairs, plus 2**2 + 1 = 5 zero pairs when asked:
+    ceil(40 / 12) = 4 trees (ceil(40 / 7) = 6 without), 4 leaves each evaluated."""
+    tr = _trainer(tmp_path, zero_pairs=zero_pairs)
+    s, g, c, ts = tr.collect()
+    per_tree = 12 if zero_pairs else 7
+    n_trees = math.ceil(40 / per_tree)
+    assert ts == n_trees * 4 and tr.trees == n_trees
+    n_pairs = n_trees * per_tree
+    assert s.shape == g.shape == (n_pairs, 2) and c.shape == (n_pairs,)
+    assert s.dtype == g.dtype == c.dtype == torch.float64
+    # levels in order: n_trees roots, 2 n_trees, 4 n_trees leaves (each tree's in order)
+    a, b = n_trees, 3 * n_trees
+    leaves = slice(b, b + 4 * n_trees)
+    assert torch.allclose(c[leaves], _norm(s[leaves], g[leaves]), rtol=1e-12, atol=0)
+    # a tree's leaves are a chain from its root's start to its goal; the Monte-Carlo
+    # target of every pair is the sum of the leaf costs below it
+    ls, lg, lc = (t[leaves].reshape(n_trees, 4, *t.shape[1:]) for t in (s, g, c))
+    assert torch.equal(ls[:, 1:], lg[:, :-1])
+    assert torch.equal(ls[:, 0], s[:a]) and torch.equal(lg[:, -1], g[:a])
+    assert torch.allclose(c[:a], lc.sum(1), rtol=1e-12, atol=0)
+    mid = c[a:b].reshape(n_trees, 2)
+    assert torch.allclose(mid, lc.reshape(n_trees, 2, 2).sum(-1), rtol=1e-12, atol=0)
+    assert torch.all(c[:a] >= _norm(s[:a], g[:a]) * (1 - 1e-12))
+    if zero_pairs:
+        z = slice(b + 4 * n_trees, None)
+        assert torch.equal(s[z], g[z]) and torch.all(c[z] == 0)
+        assert s[z].shape[0] == 5 * n_trees
+    # the next collection draws new trees and counts them too
+    s2, _, _, ts2 = tr.collect()
+    assert ts2 == ts and tr.trees == 2 * n_trees and not torch.equal(s2[:a], s[:a])
+
+
+def test_collect_follows_the_paper_depth_schedule(tmp_path: Path) -> None:
+    """Paper schedule, D = 2, T = 14: c_d = floor(14 / 7) + 1 = 3 trees per depth; with
+    one tree per collection (collection_size 1) the depths are 0, 0, 0, 1, 1, 1, 2, 2."""
+    tr = _trainer(tmp_path, depth_schedule="paper", timesteps=14, collection_size=1,
+                  zero_pairs=False)
+    got = []
+    for _ in range(8):
+        s, _, _, ts = tr.collect()
+        depth = round(math.log2(ts))
+        assert ts == 2**depth and s.shape[0] == 2 ** (depth + 1) - 1
+        got.append(depth)
+    assert got == [0, 0, 0, 1, 1, 1, 2, 2] and tr.trees == 8
+
+
+def test_collect_td_targets_with_lambda_one_are_the_monte_carlo_ones(tmp_path: Path) -> None:
+    mc = _trainer(tmp_path / "a", targets="mc", zero_pairs=False)
+    td = _trainer(tmp_path / "b", targets="td", td_lambda=1.0, zero_pairs=False)
+    out_mc, out_td = mc.collect(), td.collect()
+    for x, y in zip(out_mc, out_td, strict=True):
+        if isinstance(x, torch.Tensor):
+            assert torch.allclose(x, y, rtol=1e-12, atol=1e-15)
+        else:
+            assert x == y
+    # lambda 0: the targets of the upper levels are the critic's values of the children
+    t0 = _trainer(tmp_path / "c", targets="td", td_lambda=0.0, zero_pairs=False)
+    s, g, c, _ = t0.collect()
+    n = s.shape[0] // 7
+    leaves = slice(3 * n, 7 * n)
+    assert torch.allclose(c[leaves], _norm(s[leaves], g[leaves]), rtol=1e-12)
+    with torch.no_grad():
+        v = t0.critic(s[n:3 * n].float(), g[n:3 * n].float()).double().reshape(n, 2)
+    assert torch.allclose(c[:n], v.sum(1), rtol=1e-6)
+    assert not torch.allclose(c[:n], out_mc[2][:n], rtol=1e-3)
+
+
+# ---- update ------------------------------------------------------------------------------
+class _Counted(ActorTerm):
+    """A term with known counts: ``prepare`` 7 evaluations, every step 3 (2 of them
+    differentiated), and 5 critic pairs of its own."""
+
+    name = "counted-test"
+
+    def __init__(self) -> None:
+        self.steps = 0
+
+    def prepare(self, trainer: Any) -> int:
+        return 7
+
+    def critic_data(self, trainer: Any) -> tuple[torch.Tensor, ...]:
+        s = torch.zeros(5, 2, dtype=torch.float64)
+        return s, s + 0.5, torch.full((5,), 0.5 * math.sqrt(2), dtype=torch.float64)
+
+    def step(self, trainer: Any) -> TermOutput:
+        self.steps += 1
+        return TermOutput(None, evaluations=3, derivative=2)
+
+
+@pytest.mark.parametrize(("epochs", "n"), [(1, 16), (3, 35), (2, 11)])
+def test_update_counts_every_step_of_every_epoch(tmp_path: Path, epochs: int,
+                                                  n: int) -> None:
+    tr = _trainer(tmp_path, epochs=epochs)
+    term = _Counted()
+    tr.terms = [term]
+    s, g, c, _ = tr.collect()
+    s, g, c = s[:n], g[:n], c[:n]
+    before = (tr.timesteps, tr.timesteps_derivative, tr.updates)
+    lc, la = tr.update(s, g, c)
+    steps = epochs * math.ceil((n + 5) / 16)  # the term's 5 critic pairs join the batch
+    assert term.steps == steps and tr.updates == before[2] + steps
+    assert tr.timesteps == before[0] + 7 + 3 * steps
+    assert tr.timesteps_derivative == before[1] + 2 * steps
+    assert math.isfinite(lc) and math.isfinite(la) and lc >= 0
+    tr.update(s, g, c)
+    assert tr.updates == before[2] + 2 * steps and tr.timesteps == before[0] + 2 * (7 + 3 * steps)
+
+
+def test_update_losses_are_the_means_over_its_minibatches(tmp_path: Path) -> None:
+    """With the optimiser steps switched off the networks stay fixed, so the returned
+    losses are the means over the minibatches (replayed with the same random stream) of
+    the critic's squared error (eq. 5) and the actor's loss (eq. 6)."""
+    tr = _trainer(tmp_path, epochs=2, minibatch_size=16)
+    tr.terms = []
+    tr._step_if_finite = lambda *a: None  # type: ignore[method-assign]
+    s, g, c, _ = tr.collect()
+    s, g, c = s[:40], g[:40], c[:40]
+    replay = torch.Generator().manual_seed(0)
+    replay.set_state(tr.gen.get_state())
+    s32, g32 = s.float(), g.float()
+    target = tr.critic.to_raw(c).float()
+    lcs, las = [], []
+    with torch.no_grad():
+        for _ in range(2):
+            perm = torch.randperm(40, generator=replay)
+            for k in range(0, 40, 16):
+                idx = perm[k:k + 16]
+                bs, bg = s32[idx], g32[idx]
+                lcs.append(float(((tr.critic.raw(bs, bg) - target[idx]) ** 2).mean()))
+                m = tr.actor(bs, bg, generator=replay)
+                mp = m.double().numpy()
+                v1 = tr.critic(bs, m)
+                v2 = tr.critic(m, bg)
+                las.append(float((v1**2 + v2**2).mean()))  # eq. (6)
+                assert np.all(np.isfinite(mp))
+    assert len(lcs) == 6
+    lc, la = tr.update(s, g, c)
+    assert lc == pytest.approx(np.mean(lcs), rel=1e-6)
+    assert la == pytest.approx(np.mean(las), rel=1e-6)
+    assert tr.updates == 6 and tr.skipped_steps == 0
+
+
+def test_update_with_the_real_terms_counts_what_they_evaluate(tmp_path: Path,
+                                                               monkeypatch) -> None:
+    """Path energy (8 pairs, depth 2: 32 differentiated evaluations per actor step) and
+    route search (4 pairs, 2 candidates: 4 * 4 * 3 = 48 per collection), 2 epochs of
+    ceil(24 / 16) = 2 steps: 48 + 4 * 32 = 176 evaluations, 128 differentiated; a spy
+    on the torch costs sees exactly as many."""
+    seen = [0]
+    real = finsler.Metric.path_costs
+
+    def spy(self: finsler.Metric, points: Any, check: Any = None) -> Any:
+        if isinstance(points, torch.Tensor):
+            seen[0] += points.shape[0] * (points.shape[1] - 1)
+        return real(self, points, check=check)
+
+    tr = _trainer(tmp_path, epochs=2, path_energy_weight=1.0, path_energy_pairs=8,
+                  route_candidates=2, route_pairs=4)
+    s, g, c, _ = tr.collect()
+    monkeypatch.setattr(finsler.Metric, "path_costs", spy)
+    tr.update(s[:24], g[:24], c[:24])
+    assert tr.timesteps == 176 and seen[0] == 176
+    assert tr.timesteps_derivative == 128 and tr.updates == 4
