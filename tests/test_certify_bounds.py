@@ -38,16 +38,37 @@ class _Cone(finsler.Metric):
 
 
 @dataclass(frozen=True)
-class _Root(finsler.Metric):
-    """F(x, v) = sqrt(x_1 + 1) |v|: NaN (numpy) left of ``x_1 = -1``."""
+class _Singular(finsler.Metric):
+    """F not finite at ``x_1 = -2``, by a floating-point error of each kind: ``invalid``
+    (sqrt of a negative number, NaN), ``divide`` (by zero, inf), ``over`` (exp overflow)."""
 
-    name: ClassVar[str] = "root-bounds-test"
+    kind: str = "invalid"
+    name: ClassVar[str] = "singular-bounds-test"
     task: ClassVar[finsler.Task] = finsler.Task(depth=4, eps=0.2)
     reversible: ClassVar[bool] = True
     domain = property(lambda self: finsler.Disk(radius=1.0))
 
     def F_sx(self, x: ca.SX, v: ca.SX) -> ca.SX:
-        return ca.sqrt(x[0] + 1) * ca.sqrt(ca.dot(v, v))
+        norm = ca.sqrt(ca.dot(v, v))
+        if self.kind == "invalid":
+            return ca.sqrt(x[0] + 1) * norm
+        if self.kind == "divide":
+            return norm / (x[0] + 2)
+        return ca.exp(-1000 * x[0]) * norm
+
+
+@dataclass(frozen=True)
+class _Ridge(finsler.Metric):
+    """F(x, v) = (1 + 4 x_1**2) |v|: ``Hess_z F`` constant (a tight enclosure), ``Hess_v F``
+    growing with ``x_1`` (a loose one over wide boxes)."""
+
+    name: ClassVar[str] = "ridge-bounds-test"
+    task: ClassVar[finsler.Task] = finsler.Task(depth=4, eps=0.2)
+    reversible: ClassVar[bool] = True
+    domain = property(lambda self: finsler.Disk(radius=1.0))
+
+    def F_sx(self, x: ca.SX, v: ca.SX) -> ca.SX:
+        return (1 + 4 * x[0] ** 2) * ca.sqrt(ca.dot(v, v))
 
 
 def _hessians(m: finsler.Metric) -> tuple[ca.Function, ca.Function]:
@@ -85,10 +106,10 @@ def _boxes(n: int, half: float, radius: float, seed: int, k: int = 64
 # ---- _corrections ----------------------------------------------------------------------
 def test_corrections_are_the_formula_inflated_by_a_hair() -> None:
     hz = np.array([[1.0, 2.0, 3.0, 4.0], [0.0, 0.0, 0.0, 0.0]])
-    ht = np.array([[8.0, 0.0, 16.0, 0.0], [0.0, 24.0, 0.0, 0.0]])
+    ht = np.array([[0.0, 0.0, 16.0, 8.0], [0.0, 24.0, 0.0, 0.0]])
     r2 = np.array([0.5, 2.0])
-    # Hz R**2 / 2 + max(Ht_{k-1}, Ht_k) / 8, k-1 taken cyclically
-    exact = np.array([[0.25 + 1.0, 0.5 + 1.0, 0.75 + 2.0, 1.0 + 2.0],
+    # Hz R**2 / 2 + max(Ht_{k-1}, Ht_k) / 8, k-1 taken cyclically within each triangle
+    exact = np.array([[0.25 + 1.0, 0.5 + 0.0, 0.75 + 2.0, 1.0 + 2.0],
                       [0.0, 3.0, 3.0, 0.0]])
     corr = cm._corrections(hz, ht, r2)
     assert corr.shape == (2, 4)
@@ -144,6 +165,11 @@ def test_centered_is_the_mean_value_form() -> None:
     # 6 + [-2.5, 2.5] + [-2, 2]
     assert out.lo[0] <= 1.5 and out.lo[0] == pytest.approx(1.5, rel=1e-14)
     assert out.hi[0] >= 10.5 and out.hi[0] == pytest.approx(10.5, rel=1e-14)
+    # a centre off the middle: f(c) + [1, 2] * [0, 0.5] = 3 + [0, 1]
+    out = cm._centered(Interval(np.array([3.0])), [Interval(np.array([1.0]), np.array([2.0]))],
+                       [Interval(np.array([0.0]), np.array([0.5]))])
+    assert out.lo[0] == pytest.approx(3.0, rel=1e-14) and out.lo[0] <= 3.0
+    assert out.hi[0] == pytest.approx(4.0, rel=1e-14) and out.hi[0] >= 4.0
     with pytest.raises(ValueError):
         cm._centered(Interval(np.array([0.0])), [Interval(np.array([1.0]))], [])
 
@@ -160,6 +186,9 @@ def test_bounds_on_boxes_hold_at_sampled_points(name: str, radius: float) -> Non
     # an infinite enclosure is allowed (certify then splits the box), a wrong one is not
     assert np.mean(np.isfinite(hz) & np.isfinite(ht)) > 0.9
     hx, hv = _hessians(m)
+    if name == "randers":  # Hess_z F = 0: the bounds are 0 up to rounding, not inflated
+        hz_c = cm._bounds_on_boxes(m, lo, hi, v, w, with_centre=True)[2]
+        assert np.all(hz < 1e-100) and np.all(hz_c < 1e-100)
     seen_z, seen_t = np.zeros(60), np.zeros(60)
     for j in range(12):
         t = rng.uniform(0, 1, (60, 2))
@@ -281,12 +310,16 @@ def _meets_brute(lo: np.ndarray, hi: np.ndarray, tri: np.ndarray) -> bool:
                for i in range(4) for j in range(3))
 
 
-def test_box_meets_triangle_agrees_with_brute_force_geometry() -> None:
+@pytest.mark.parametrize("scale", [1.0, 1 / 64])
+def test_box_meets_triangle_agrees_with_brute_force_geometry(scale: float) -> None:
+    """Small integers (and the same over 64: exact binary fractions, so that the brute
+    force stays exact, with areas below 1 as in a mesh)."""
     rng = np.random.default_rng(5)
-    n = 3000
+    n = 1500
     lo = rng.integers(-6, 6, (n, 2)).astype(float)
     hi = lo + rng.integers(0, 5, (n, 2))
     tri = rng.integers(-8, 8, (n, 3, 2)).astype(float)
+    lo, hi, tri = lo * scale, hi * scale, tri * scale
     area = ((tri[:, 1, 0] - tri[:, 0, 0]) * (tri[:, 2, 1] - tri[:, 0, 1])
             - (tri[:, 1, 1] - tri[:, 0, 1]) * (tri[:, 2, 0] - tri[:, 0, 0]))
     keep = area != 0
@@ -336,17 +369,62 @@ def test_eval_values_are_lowered_by_16_ulp_and_chunked() -> None:
     assert np.all(out < ref) and np.allclose(out, ref * (1 - 16 * EPS), rtol=4 * EPS, atol=0)
 
 
-def test_eval_values_refuse_non_finite_values() -> None:
-    m = _Root()
+@pytest.mark.parametrize("kind", ["invalid", "divide", "over"])
+def test_eval_values_refuse_non_finite_values(kind: str) -> None:
+    """The clear error, whatever the caller's numpy error state (the floating-point error
+    itself is silenced: under ``np.errstate(all="raise")`` it would otherwise escape as a
+    FloatingPointError)."""
+    m = _Singular(kind)
     x = np.array([[0.0, 0.0], [-2.0, 0.0]])
     v = np.array([[1.0, 0.0], [1.0, 0.0]])
-    with pytest.raises(InputError, match="not finite on the mesh"):
+    msg = (r"^singular-bounds-test: F is not finite on the mesh \(the polygon covering the "
+           r"domain reaches a singularity of F\?\)$")
+    with np.errstate(all="raise"), pytest.raises(InputError, match=msg):
         cm._eval_values(m, x, v)
     out = cm._eval_values(m, x[:1], v[:1])
-    assert out[0] == 1.0 - 16 * EPS
+    assert out[0] == {"invalid": 1.0, "divide": 0.5, "over": 1.0}[kind] * (1.0 - 16 * EPS)
 
 
 # ---- _PointData ----------------------------------------------------------------------------
+class _Clock:
+    """``time.perf_counter`` advancing by one second per call."""
+
+    def __init__(self) -> None:
+        self.now = 100.0
+
+    def perf_counter(self) -> float:
+        self.now += 1.0
+        return self.now
+
+
+def test_point_data_time_is_summed_over_the_calls_that_compute(monkeypatch) -> None:
+    monkeypatch.setattr(cm, "time", _Clock())
+    data = cm._PointData(finsler.get_metric("poincare"), 4)
+    data.rows(np.array([[0.1, 0.2]]))
+    assert data.seconds == 1.0
+    data.rows(np.array([[0.1, 0.2]]))  # nothing new: not timed
+    assert data.seconds == 1.0
+    data.rows(np.array([[0.3, 0.2], [0.1, 0.2]]))
+    assert data.seconds == 2.0
+    tri = np.array([[[0.0, 0.0], [0.1, 0.0], [0.0, 0.1]]])
+    data.triangle_bounds(tri, np.ones((1, 4)), np.array([1e-4]))
+    assert data.seconds == 3.0
+    data.triangle_bounds(tri, np.ones((1, 4)), np.array([1e-4]))
+    assert data.seconds == 3.0
+
+
+def test_point_data_triangles_are_keyed_by_all_their_coordinates() -> None:
+    """Two triangles with the same x coordinates are different triangles."""
+    m = finsler.get_metric("poincare")
+    data = cm._PointData(m, 8)
+    a = np.array([[0.0, 0.0], [0.2, 0.0], [0.0, 0.2]])
+    b = a + np.array([0.0, 0.5])
+    hz, _ = data.triangle_bounds(np.stack([a, b]), np.ones((2, 8)), np.full(2, 1e-4))
+    assert len(data.tri_index) == 2 and np.all(hz[1] > hz[0])
+    hz_b, _ = data.triangle_bounds(b[None], np.ones((1, 8)), np.full(1, 1e-4))
+    assert np.array_equal(hz_b[0], hz[1])
+
+
 def test_point_data_rows_cache_values_per_point() -> None:
     m = finsler.get_metric("poincare")
     data = cm._PointData(m, 8)
@@ -413,29 +491,40 @@ def test_point_data_triangle_bounds_hold_inside_and_are_cached() -> None:
         assert np.array_equal(hz[t], bz) and np.array_equal(ht[t], bt)
 
 
-def _split_reference(m: finsler.Metric, dirs: np.ndarray, lo: np.ndarray, hi: np.ndarray,
-                     tri: np.ndarray, j: int, fmin: float, r2: float, depth: int
-                     ) -> tuple[float, float]:
-    """One element's bound by the documented rule, box by box (brute-force geometry)."""
+def _split_reference(m: finsler.Metric, dirs: np.ndarray, items: list[tuple], depth: int
+                     ) -> list[tuple[float, float]]:
+    """Bounds of elements ``(lo, hi, tri, j, fmin, r2)`` by the documented rule, box by box
+    (brute-force geometry), the boxes of one level evaluated together."""
+    if not items:
+        return []
     k = dirs.shape[0]
-    hz, ht, hz_c, ht_c = (float(np.ravel(a)[0]) for a in cm._bounds_on_boxes(
-        m, lo[None], hi[None], dirs[[j]], dirs[[(j + 1) % k]], with_centre=True))
-    if depth >= cm.SPLIT_DEPTH:
-        return hz, ht
-    large = not (0.5 * hz * r2 + ht / 8.0 <= cm.SPLIT_FRACTION * fmin)
-    over = not (hz <= cm.SPLIT_OVERESTIMATE * hz_c + 1e-12 * fmin
-                and ht <= cm.SPLIT_OVERESTIMATE * ht_c + 1e-12 * fmin)
-    if not (large and over):
-        return hz, ht
-    mid = 0.5 * (lo + hi)
-    best = (-np.inf, -np.inf)
-    for xs in ((lo[0], mid[0]), (mid[0], hi[0])):
-        for ys in ((lo[1], mid[1]), (mid[1], hi[1])):
-            sl, sh = np.array([xs[0], ys[0]]), np.array([xs[1], ys[1]])
-            if _meets_brute(sl, sh, tri):
-                sub = _split_reference(m, dirs, sl, sh, tri, j, fmin, r2, depth + 1)
-                best = (max(best[0], sub[0]), max(best[1], sub[1]))
-    return best
+    j = np.array([it[3] for it in items])
+    hz, ht, hz_c, ht_c = (np.broadcast_to(a, (len(items),)) for a in cm._bounds_on_boxes(
+        m, np.array([it[0] for it in items]), np.array([it[1] for it in items]), dirs[j],
+        dirs[(j + 1) % k], with_centre=True))
+    out: list[tuple[float, float]] = []
+    children: list[tuple] = []
+    owner: list[int] = []
+    for i, (lo, hi, tri, jj, fmin, r2) in enumerate(items):
+        out.append((float(hz[i]), float(ht[i])))
+        if depth >= cm.SPLIT_DEPTH:
+            continue
+        large = not (0.5 * hz[i] * r2 + ht[i] / 8.0 <= cm.SPLIT_FRACTION * fmin)
+        over = not (hz[i] <= cm.SPLIT_OVERESTIMATE * hz_c[i] + 1e-12 * fmin
+                    and ht[i] <= cm.SPLIT_OVERESTIMATE * ht_c[i] + 1e-12 * fmin)
+        if not (large and over):
+            continue
+        out[i] = (-np.inf, -np.inf)
+        mid = 0.5 * (lo + hi)
+        for xs in ((lo[0], mid[0]), (mid[0], hi[0])):
+            for ys in ((lo[1], mid[1]), (mid[1], hi[1])):
+                sl, sh = np.array([xs[0], ys[0]]), np.array([xs[1], ys[1]])
+                if _meets_brute(sl, sh, tri):
+                    children.append((sl, sh, tri, jj, fmin, r2))
+                    owner.append(i)
+    for i, (a, b) in zip(owner, _split_reference(m, dirs, children, depth + 1), strict=True):
+        out[i] = (max(out[i][0], a), max(out[i][1], b))
+    return out
 
 
 def test_point_data_splits_loose_boxes_by_the_documented_rule() -> None:
@@ -456,9 +545,9 @@ def test_point_data_splits_loose_boxes_by_the_documented_rule() -> None:
                                  np.roll(data.dirs, -1, axis=0))
     assert np.all(hz[0] <= bz) and np.all(ht[0] <= bt)
     assert np.all(hz[0] < 0.8 * bz)  # split, and it pays
-    for j in (0, 3, 6):  # (the reference is slow)
-        want = _split_reference(m, data.dirs, tri.min(0), tri.max(0), tri, j, fmin[j], r2, 0)
-        assert hz[0, j] == want[0] and ht[0, j] == want[1], j
+    want = _split_reference(m, data.dirs, [(tri.min(0), tri.max(0), tri, j, fmin[j], r2)
+                                           for j in range(k)], 0)
+    assert [(hz[0, j], ht[0, j]) for j in range(k)] == want
     hx, hv = _hessians(m)
     rng = np.random.default_rng(2)
     z = _triangle_samples(tri, rng, 200)
@@ -468,6 +557,76 @@ def test_point_data_splits_loose_boxes_by_the_documented_rule() -> None:
         s = rng.uniform(0, 1, (len(z), 1))
         assert _lam_max(hx, z, v).max() <= hz[0, j] * (1 + 1e-12)
         assert _chord_q(hv, z, (1 - s) * v + s * w, w - v).max() <= ht[0, j] * (1 + 1e-12)
+
+
+@pytest.mark.parametrize("metric", [finsler.get_metric("poincare"), _Cone(), _Ridge()],
+                         ids=["poincare", "cone", "ridge"])
+def test_split_decisions_follow_the_documented_rule(metric: finsler.Metric) -> None:
+    """Elements on both sides of each test of the rule: corrections small or large against
+    F (``fmin`` and ``r2`` from tiny to huge), enclosures tight or loose (the cone: Hz loose
+    and Ht tight; the ridge: Hz tight and Ht loose), each bound compared with the rule
+    applied box by box."""
+    k = 256  # short chords: Ht tight where F(x, .) varies little over the box
+    data = cm._PointData(metric, k)
+    tris = {"near": np.array([[0.1, 0.1], [0.3, 0.1], [0.1, 0.3]]),
+            "mid": np.array([[0.15, 0.15], [0.45, 0.15], [0.15, 0.45]]),
+            "wide": np.array([[0.05, 0.0], [0.6, 0.05], [0.0, 0.6]])}
+    lo, hi, tri, kidx, fmin, r2 = [], [], [], [], [], []
+    for j, (t, f, r) in enumerate([(t, f, r) for t in tris.values()
+                                   for f, r in ((1e-13, 1e-6), (1e3, 1e3), (1.0, 1e-6))]):
+        lo.append(t.min(0))
+        hi.append(t.max(0))
+        tri.append(t)
+        kidx.append(3 * j % k)
+        fmin.append(f)
+        r2.append(r)
+    # and at the threshold of "large": just below / above it, with the Ht term a good part
+    for t in tris.values():
+        j = 1
+        hz, ht = cm._bounds_on_boxes(metric, t.min(0)[None], t.max(0)[None], data.dirs[[j]],
+                                     data.dirs[[j + 1]])
+        if not (np.isfinite(hz[0]) and np.isfinite(ht[0]) and ht[0] > 0):
+            continue
+        r = 0.25 * ht[0] / max(hz[0], 1e-300)  # the Hz term is as large as Ht / 8 / 2
+        for ratio in (0.9, 1.1):
+            lo.append(t.min(0))
+            hi.append(t.max(0))
+            tri.append(t)
+            kidx.append(j)
+            r2.append(r)
+            fmin.append((0.5 * hz[0] * r + ht[0] / 8.0) / (cm.SPLIT_FRACTION * ratio))
+    lo, hi, tri = np.array(lo), np.array(hi), np.array(tri)
+    kidx, fmin, r2 = np.array(kidx), np.array(fmin), np.array(r2)
+    hz, ht = data._split_bounds(lo, hi, tri, kidx, fmin, r2, 0)
+    want = _split_reference(metric, data.dirs, list(zip(lo, hi, tri, kidx, fmin, r2,
+                                                        strict=True)), 0)
+    assert list(zip(hz, ht, strict=True)) == want
+    whole = cm._bounds_on_boxes(metric, lo, hi, data.dirs[kidx], data.dirs[(kidx + 1) % k])
+    split = (hz != whole[0]) | (ht != whole[1])
+    assert 0 < split.sum() < len(lo)  # both kinds present
+
+
+def test_triangle_bounds_evaluate_each_element_once_whatever_the_chunk(monkeypatch) -> None:
+    m = finsler.get_metric("poincare")
+    rows = [0]
+    real = cm._bounds_on_boxes
+
+    def counted(metric, lo, hi, v, w, with_centre=False):
+        rows[0] += lo.shape[0]
+        return real(metric, lo, hi, v, w, with_centre=with_centre)
+
+    monkeypatch.setattr(cm, "_bounds_on_boxes", counted)
+    corners = np.array([[[0.0, 0.0], [0.1, 0.0], [0.0, 0.1]],
+                        [[0.2, 0.2], [0.3, 0.2], [0.2, 0.3]]])
+    ref = None
+    for chunk in (32768, 5, 1):
+        data = cm._PointData(m, 8)
+        rows[0] = 0
+        out = data.triangle_bounds(corners, np.full((2, 8), 1e3), np.full(2, 1e-4), chunk=chunk)
+        assert rows[0] == 16, chunk  # no split (small corrections): 2 triangles x 8
+        if ref is None:
+            ref = out
+        assert np.array_equal(out[0], ref[0]) and np.array_equal(out[1], ref[1])
 
 
 # ---- _row_bounds -------------------------------------------------------------------------
