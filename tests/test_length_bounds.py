@@ -152,11 +152,26 @@ def test_bad_input_is_an_input_error() -> None:
     m = finsler.get_metric("poincare")
     pts = np.array([[0.0, 0.0], [0.3, 0.0]])
     for bad in (pts[:1], pts[:, :1], pts[None], np.zeros(2)):
-        with pytest.raises(InputError, match="points must have shape"):
+        shape = str(bad.shape).replace("(", r"\(").replace(")", r"\)")
+        with pytest.raises(InputError, match=rf"^points must have shape \(n\+1, 2\) with n >= 1, "
+                                             rf"got {shape}$"):
             m.path_length_bounds(bad)
     for rtol in (0.0, 1.0, -1e-3, 2.0, True, "1e-3", None):
         with pytest.raises(InputError, match="rtol must be in"):
             m.path_length_bounds(pts, rtol=rtol)
     assert m.path_length_bounds(pts, rtol=0.5).converged
-    with pytest.raises(InputError):
+    with pytest.raises(InputError, match=r"^points row 1 = \(0.9, 0.0\) lies outside"):
         m.path_length_bounds(np.array([[0.0, 0.0], [0.9, 0.0]]))  # outside the disk
+
+
+def test_any_real_input_is_taken_as_float64() -> None:
+    """float32 or integer points: the bounds of the same points in float64 (the
+    arithmetic is float64 whatever the input's type)."""
+    m = finsler.get_metric("poincare")
+    p32 = np.array([[0.1, -0.2], [0.3, 0.5], [-0.6, 0.1]], dtype=np.float32)
+    assert m.path_length_bounds(p32) == m.path_length_bounds(p32.astype(np.float64))
+    e = finsler.get_metric("euclidean")
+    ints = [[0, 0], [1, 0], [1, 1], [-1, 1]]
+    bd = e.path_length_bounds(ints)
+    assert bd == e.path_length_bounds(np.array(ints, float))
+    assert bd.lower <= 4.0 <= bd.upper
