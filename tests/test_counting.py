@@ -17,7 +17,7 @@ import torch
 
 import finsler
 import learn
-from learn.methods import RouteSearch
+from learn.methods import PathEnergy, RouteSearch
 from learn.term import ActorTerm, TermOutput
 from learn.train import Trainer
 from learn.tree import build_tree
@@ -324,3 +324,21 @@ def test_route_search_targets_the_pairs_a_stitched_path_shortens(tmp_path: Path)
     tr.metric = _FixedSamples(tr.metric, dom_pts)
     far.prepare(tr)
     assert far.target is None
+
+
+def test_path_energy_step_is_the_weighted_mean_energy(tmp_path: Path) -> None:
+    """Euclidean, depth 2: the energy of a path of 4 segments is 4 * sum of the squared
+    segment lengths; the step's loss is the weight times its mean over the pairs."""
+    tr = _trainer(tmp_path, depth=2)
+    term = PathEnergy(weight=3.0, pairs=5)
+    rng = copy.deepcopy(tr.np_rng)
+    out = term.step(tr)
+    ends = tr.metric.domain.sample(10, rng).reshape(5, 2, 2)
+    e = torch.as_tensor(ends, dtype=torch.float32)
+    with torch.no_grad():
+        pts = build_tree(e[:, 0], e[:, 1], 2,
+                         lambda a, b: tr.actor(a, b, deterministic=True)).double().numpy()
+    seg = np.linalg.norm(np.diff(pts, axis=1), axis=2)
+    energy = 4 * (seg**2).sum(1)
+    assert float(out.loss.detach()) == pytest.approx(3.0 * energy.mean(), rel=1e-5)
+    assert out.evaluations == out.derivative == 5 * 4
