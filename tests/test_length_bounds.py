@@ -175,3 +175,26 @@ def test_any_real_input_is_taken_as_float64() -> None:
     bd = e.path_length_bounds(ints)
     assert bd == e.path_length_bounds(np.array(ints, float))
     assert bd.lower <= 4.0 <= bd.upper
+
+
+def test_non_finite_enclosures_of_either_sign_give_zero_and_inf(monkeypatch) -> None:
+    """Whatever the enclosures hold (+inf, -inf, both, on different pieces), the bounds
+    are the trivially valid ``[0, inf]``, never an exception or a NaN. The enclosures are
+    faked by position along the x axis: F in [+inf, +inf] left, a second derivative in
+    [-inf, inf] in the middle, F in [-inf, -inf] right."""
+    import finsler.intervals as fi
+
+    def fake(fn, x, v):
+        n = x[0].lo.shape[0]
+        mid = x[0].lo
+        f = np.where(mid < -0.3, np.inf, np.where(mid > 0.3, -np.inf, 1.0))
+        q_lo = np.where(np.abs(mid) <= 0.3, -np.inf, 0.0)
+        q_hi = np.where(np.abs(mid) <= 0.3, np.inf, 0.0)
+        return [fi.Interval(f + np.zeros(n))], [fi.Interval(q_lo + np.zeros(n), q_hi)]
+
+    monkeypatch.setattr(fi, "enclose", fake)
+    m = finsler.get_metric("euclidean")
+    pts = np.array([[-0.9, 0.0], [-0.5, 0.0], [-0.1, 0.0], [0.1, 0.0], [0.5, 0.0],
+                    [0.9, 0.0]])
+    bd = m.path_length_bounds(pts)
+    assert bd.lower == 0.0 and bd.upper == math.inf and not bd.converged
