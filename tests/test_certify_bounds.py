@@ -71,6 +71,20 @@ class _Ridge(finsler.Metric):
         return (1 + 4 * x[0] ** 2) * ca.sqrt(ca.dot(v, v))
 
 
+@dataclass(frozen=True)
+class _Tilt(finsler.Metric):
+    """F(x, v) = (1 + x_1 + x_2 / 2) |v|: ``Hess_z F = 0`` (Hz and its centre value both 0
+    up to rounding), ``Hess_v F`` varying mildly with x (a tight Ht)."""
+
+    name: ClassVar[str] = "tilt-bounds-test"
+    task: ClassVar[finsler.Task] = finsler.Task(depth=4, eps=0.2)
+    reversible: ClassVar[bool] = True
+    domain = property(lambda self: finsler.Disk(radius=1.0))
+
+    def F_sx(self, x: ca.SX, v: ca.SX) -> ca.SX:
+        return (1 + x[0] + 0.5 * x[1]) * ca.sqrt(ca.dot(v, v))
+
+
 def _hessians(m: finsler.Metric) -> tuple[ca.Function, ca.Function]:
     """Reference ``(z, v) -> lambda_max(Hess_z F)`` pieces: ``Hess_z F`` and ``Hess_v F``
     as CasADi functions (the VM, not the lowered numpy code certify uses)."""
@@ -559,13 +573,14 @@ def test_point_data_splits_loose_boxes_by_the_documented_rule() -> None:
         assert _chord_q(hv, z, (1 - s) * v + s * w, w - v).max() <= ht[0, j] * (1 + 1e-12)
 
 
-@pytest.mark.parametrize("metric", [finsler.get_metric("poincare"), _Cone(), _Ridge()],
-                         ids=["poincare", "cone", "ridge"])
+@pytest.mark.parametrize("metric", [finsler.get_metric("poincare"), _Cone(), _Ridge(),
+                                    _Tilt()], ids=["poincare", "cone", "ridge", "tilt"])
 def test_split_decisions_follow_the_documented_rule(metric: finsler.Metric) -> None:
     """Elements on both sides of each test of the rule: corrections small or large against
     F (``fmin`` and ``r2`` from tiny to huge), enclosures tight or loose (the cone: Hz loose
-    and Ht tight; the ridge: Hz tight and Ht loose), each bound compared with the rule
-    applied box by box."""
+    and Ht tight; the ridge: Hz tight and Ht loose; the tilt: Hz 0 and Ht tight, where the
+    ``1e-12 F`` allowance decides), each bound compared with the rule applied box by
+    box."""
     k = 256  # short chords: Ht tight where F(x, .) varies little over the box
     data = cm._PointData(metric, k)
     tris = {"near": np.array([[0.1, 0.1], [0.3, 0.1], [0.1, 0.3]]),
@@ -603,7 +618,10 @@ def test_split_decisions_follow_the_documented_rule(metric: finsler.Metric) -> N
     assert list(zip(hz, ht, strict=True)) == want
     whole = cm._bounds_on_boxes(metric, lo, hi, data.dirs[kidx], data.dirs[(kidx + 1) % k])
     split = (hz != whole[0]) | (ht != whole[1])
-    assert 0 < split.sum() < len(lo)  # both kinds present
+    if isinstance(metric, _Tilt):  # both enclosures tight: nothing is split
+        assert split.sum() == 0
+    else:
+        assert 0 < split.sum() < len(lo)  # both kinds present
 
 
 def test_triangle_bounds_evaluate_each_element_once_whatever_the_chunk(monkeypatch) -> None:
