@@ -13,6 +13,7 @@ from typing import ClassVar
 import casadi as ca
 import numpy as np
 import pytest
+from singular_metrics import Cone
 
 import finsler
 from finsler.errors import InputError
@@ -21,20 +22,6 @@ from finsler.intervals import Interval
 # the module (``solvers.certify`` the attribute is the function of the same name)
 cm = importlib.import_module("solvers.certify")
 EPS = np.finfo(float).eps
-
-
-@dataclass(frozen=True)
-class _Cone(finsler.Metric):
-    """F(x, v) = (1 + |x|) |v|: F is finite everywhere, ``Hess_v F`` too, but ``Hess_x F``
-    is unbounded at the origin (an infinite enclosure of Hz alone)."""
-
-    name: ClassVar[str] = "cone-bounds-test"
-    task: ClassVar[finsler.Task] = finsler.Task(depth=4, eps=0.2)
-    reversible: ClassVar[bool] = True
-    domain = property(lambda self: finsler.Disk(radius=1.0))
-
-    def F_sx(self, x: ca.SX, v: ca.SX) -> ca.SX:
-        return (1 + ca.sqrt(ca.dot(x, x))) * ca.sqrt(ca.dot(v, v))
 
 
 @dataclass(frozen=True)
@@ -274,7 +261,7 @@ def test_bounds_on_boxes_are_tighter_than_the_natural_extension_alone() -> None:
 
 
 def test_bounds_on_boxes_infinite_where_one_enclosure_is() -> None:
-    m = _Cone()
+    m = Cone()
     lo = np.array([[-0.1, -0.1], [0.3, 0.3]])
     hi = np.array([[0.1, 0.1], [0.4, 0.4]])
     v = np.array([[1.0, 0.0], [1.0, 0.0]])
@@ -573,7 +560,7 @@ def test_point_data_splits_loose_boxes_by_the_documented_rule() -> None:
         assert _chord_q(hv, z, (1 - s) * v + s * w, w - v).max() <= ht[0, j] * (1 + 1e-12)
 
 
-@pytest.mark.parametrize("metric", [finsler.get_metric("poincare"), _Cone(), _Ridge(),
+@pytest.mark.parametrize("metric", [finsler.get_metric("poincare"), Cone(), _Ridge(),
                                     _Tilt()], ids=["poincare", "cone", "ridge", "tilt"])
 def test_split_decisions_follow_the_documented_rule(metric: finsler.Metric) -> None:
     """Elements on both sides of each test of the rule: corrections small or large against

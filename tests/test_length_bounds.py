@@ -7,30 +7,15 @@ from __future__ import annotations
 
 import itertools
 import math
-from dataclasses import dataclass
-from typing import ClassVar
 
-import casadi as ca
 import numpy as np
 import pytest
 from scipy.integrate import quad
+from singular_metrics import Cone
 
 import finsler
 from finsler.errors import InputError
 from finsler.metric import MAX_LENGTH_HALVINGS
-
-
-@dataclass(frozen=True)
-class _Cone(finsler.Metric):
-    """F(x, v) = (1 + |x|) |v|: Hess_x F unbounded at the origin."""
-
-    name: ClassVar[str] = "cone-length-test"
-    task: ClassVar[finsler.Task] = finsler.Task(depth=4, eps=0.2)
-    reversible: ClassVar[bool] = True
-    domain = property(lambda self: finsler.Disk(radius=1.0))
-
-    def F_sx(self, x: ca.SX, v: ca.SX) -> ca.SX:
-        return (1 + ca.sqrt(ca.dot(x, x))) * ca.sqrt(ca.dot(v, v))
 
 
 def _quad_length(m: finsler.Metric, pts: np.ndarray) -> float:
@@ -130,7 +115,7 @@ def test_bounds_of_a_segment_split_by_hand_agree() -> None:
 
 
 def test_unbounded_second_derivative_gives_an_infinite_not_a_wrong_bound() -> None:
-    m = _Cone()
+    m = Cone()
     pts = np.array([[-0.5, 0.0], [0.5, 0.0]])  # through the origin
     bd = m.path_length_bounds(pts)
     assert bd.lower == 0.0 and bd.upper == math.inf
