@@ -171,3 +171,11 @@ def test_recheck_above_resolves_the_untrusted_pairs_globally(tmp_path: Path) -> 
         warm["results"][k]["energy"] for k in others]
     bad = r.invoke(app, [*base, "--recheck-above", "0.5"])
     assert bad.exit_code == 2 and "ratio >= 1" in bad.output
+
+
+def test_cli_warm_start_from_a_folder_that_is_no_run_names_the_option(tmp_path: Path) -> None:
+    res = CliRunner().invoke(app, ["solve", "--metric", "matsumoto", "--start", "0.1,0.2",
+                                   "--goal", "0.3,0.1", "--warm-start", str(tmp_path)])
+    assert res.exit_code == 2
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 1 and "--warm-start" in lines[0] and "config.json" in lines[0]

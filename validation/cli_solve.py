@@ -88,7 +88,12 @@ def _warm_start(source: str | None, metric: finsler.Metric, pairs: np.ndarray,
         return None, None
     from learn.runs import warm_start_paths
 
-    paths, pol = warm_start_paths(source, metric, pairs, search=search)
+    try:
+        paths, pol = warm_start_paths(source, metric, pairs, search=search)
+    except InputError as err:  # name the option: the run's own message names a file in it
+        if "--warm-start" in str(err):
+            raise
+        raise InputError(f"--warm-start {source!r}: {err}") from err
     return paths, {"policy": str(pol.source), "checkpoint": str(pol.checkpoint),
                    "segments": int(paths.shape[1] - 1), "route_search": bool(search),
                    "global_seeds": bool(keep_global_seeds)}
