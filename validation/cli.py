@@ -20,6 +20,7 @@ from validation.cli_common import (
     fail,
     json_text,
     metric_from_options,
+    one_line,
     parse_point,
 )
 from validation.text import text_table
@@ -145,13 +146,36 @@ def _register_optional_commands() -> None:
 _register_optional_commands()
 
 
-def main() -> None:
-    """Console-script entry point."""
+def _click_error(name: str) -> type[Exception]:
+    """click's exception class ``name`` as the installed typer uses it (recent typers
+    vendor click, older ones use the click package: the class is found from typer's own
+    ``BadParameter``, which derives from both)."""
+    return next(c for c in typer.BadParameter.__mro__ if c.__name__ == name)
+
+
+def main(args: list[str] | None = None) -> None:
+    """Console-script entry point. A usage error (unknown option or command, missing or
+    malformed value) is one line, ``error: ... (see 'geodesics CMD --help')``, exit 2, like
+    every other bad input, instead of click's boxed usage panel; no command at all prints
+    the help (exit 2)."""
+    argv = sys.argv[1:] if args is None else list(args)
     try:
-        app()
-    except KeyboardInterrupt:  # pragma: no cover - interactive
+        code = app(args=argv, standalone_mode=False)
+    except _click_error("UsageError") as err:
+        if type(err).__name__ == "NoArgsIsHelpError":  # the help is printed already
+            sys.exit(2)
+        ctx = getattr(err, "ctx", None)
+        where = ctx.command_path if ctx is not None else "geodesics"
+        typer.echo(f"error: {one_line(err.format_message())} (see '{where} --help')",
+                   err=True)
+        sys.exit(2)
+    except _click_error("ClickException") as err:  # pragma: no cover - other click errors
+        typer.echo(f"error: {one_line(err.format_message())}", err=True)
+        sys.exit(getattr(err, "exit_code", 1))
+    except (KeyboardInterrupt, typer.Abort):  # pragma: no cover - interactive
         typer.echo("interrupted", err=True)
         sys.exit(130)
+    sys.exit(code if isinstance(code, int) else 0)
 
 
 if __name__ == "__main__":  # pragma: no cover
