@@ -288,3 +288,15 @@ def test_exp_that_stops_early_says_so_on_stderr(velocity: str, status: str) -> N
     lines = [ln for ln in res.stderr.splitlines() if ln.strip()]
     assert len(lines) == 1 and lines[0].startswith("note: the geodesic stopped") \
         and status in lines[0]
+
+
+def test_a_refused_warm_start_leaves_no_output_folders(tmp_path: Path,
+                                                        monkeypatch: pytest.MonkeyPatch) -> None:
+    """Found by the tour: `solve --out no/such/o.json --warm-start RUN` with a run of another
+    metric created `no/such/` before refusing the warm start."""
+    monkeypatch.chdir(tmp_path)
+    res = CliRunner().invoke(app, ["solve", "--metric", "matsumoto", "--start", "0.1,0.2",
+                                   "--goal", "0.3,0.1", "--out", "no/such/o.json",
+                                   "--warm-start", "carlike"])
+    assert res.exit_code == 2 and "not for 'matsumoto'" in res.stderr
+    assert list(tmp_path.iterdir()) == []

@@ -201,17 +201,6 @@ def solve_command(
         fail("--recheck-above needs a ratio >= 1, without --keep-global-seeds (which "
              f"already solves every pair with the global seeds); got {recheck_above}")
     parts = None
-    if out is not None:
-        # checked before any work: a bad --out must not cost a batch of solves
-        try:
-            out = finsler.check_output_path(out, "--out")
-            if pairs is not None:
-                parts = out.with_name(out.name + ".parts")
-                if parts.exists() and not parts.is_dir():
-                    raise finsler.OutputError(f"{parts} (the resumable parts of --out) "
-                                              "exists and is not a folder")
-        except InputError as err:
-            fail(str(err))
     if pairs is not None:
         arr = _pairs_or_fail(pairs, m)
     else:
@@ -228,6 +217,15 @@ def solve_command(
 
             import_method_modules(method_module)
         inits, warm = _warm_start(warm_start, m, arr, keep_global_seeds, warm_search)
+        if out is not None:
+            # checked (its folder created) after every other input and before any solve:
+            # a bad --out must not cost a batch of solves, bad input must not leave folders
+            out = finsler.check_output_path(out, "--out")
+            if pairs is not None:
+                parts = out.with_name(out.name + ".parts")
+                if parts.exists() and not parts.is_dir():
+                    raise finsler.OutputError(f"{parts} (the resumable parts of --out) "
+                                              "exists and is not a folder")
         # With --out, finished pairs are kept beside it (parts) until the JSON is written,
         # so an interrupted run resumes where it stopped when the same command is run again.
         results = solvers.solve_batch(
