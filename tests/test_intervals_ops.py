@@ -386,3 +386,65 @@ def test_integer_powers_contain_the_exact_value(n: int) -> None:
     for xi, lo, hi in zip(x, enc.lo, enc.hi, strict=True):
         exact = Fraction(float(xi)) ** n
         assert Fraction(float(lo)) <= exact <= Fraction(float(hi)), (n, xi)
+
+
+@pytest.mark.parametrize("scale", [-1e5, -1e3, 1e3, 1e5])
+def test_extremum_test_has_the_documented_slack(scale: float) -> None:
+    """``_contains_point`` answers "in doubt: yes" within 1e-9 (1 + |x|) of a box's end: an
+    extremum (located with pi to 60 digits) half that slack past lo or hi is reported, one
+    slack + 0.5e-9 past it is not (sin / cos then get the tight bound sin(end) < 1, visible
+    at |x| = 1e3: 1 - sin = 5e-13)."""
+    from decimal import Decimal
+
+    from finsler.intervals import _contains_point
+
+    for phase_s, phase in (("0.5", 0.5 * np.pi), ("1.5", 1.5 * np.pi), ("0", 0.0)):
+        for x in scale * np.array([1.0, 1.7, 3.1]):
+            t = Decimal(_extremum_near(x, phase_s)[0])  # within 1 ulp of the extremum
+            s = 1e-9 * (1.0 + abs(float(t)))
+            for d, inside in ((0.5 * s, True), (s + 0.5e-9, False)):
+                lo = float(t + Decimal(d))  # extremum d below lo
+                assert _contains_point(Interval(lo, lo + 1.0), phase) == inside, (x, d)
+                hi = float(t - Decimal(d))  # extremum d above hi
+                assert _contains_point(Interval(hi - 1.0, hi), phase) == inside, (x, d)
+                if not inside and phase_s == "0.5":  # the bound is sin(end), not 1
+                    enc = _BACKEND.sin(Interval(lo, lo + 1.0))
+                    assert np.sin(lo) <= enc.hi < 1.0
+
+
+def test_bounds_are_float64_whatever_the_input_dtype() -> None:
+    """float32 bounds (a torch pipeline's) are taken as float64: float32 arithmetic would
+    round by 6e-8 while the widening is a few float64 ulp, so the sum of two float32 points
+    would miss its exact value (checked with fractions)."""
+    from fractions import Fraction
+
+    rng = np.random.default_rng(RNG_SEED + 6)
+    a, b = rng.uniform(0.1, 1.0, (2, 200)).astype(np.float32)
+    for iv in (Interval(a), Interval(a, b + np.float32(1.0))):
+        assert iv.lo.dtype == np.float64 and iv.hi.dtype == np.float64
+    s = Interval(a) + Interval(b)
+    exact = [Fraction(float(p)) + Fraction(float(q)) for p, q in zip(a, b, strict=True)]
+    assert all(Fraction(float(lo)) <= e <= Fraction(float(hi))
+               for lo, e, hi in zip(s.lo, exact, s.hi, strict=True))
+
+
+def test_reciprocal_of_a_box_ending_at_zero_is_the_whole_line() -> None:
+    """1 / x is undefined at x = 0, so on [lo, 0] (and [0, hi]) the result is the whole line,
+    as the module promises, not just the part (-inf, 1/lo] where it is defined."""
+    for zero in (0.0, -0.0):
+        for box in (Interval(-1.0, zero), Interval(zero, 2.0), Interval(zero, zero)):
+            for r in (box.reciprocal(), Interval(1.0) / box):
+                assert r.lo == -np.inf and r.hi == np.inf, (box, r)
+
+
+def test_integer_powers_overflow_silently_to_infinite_bounds() -> None:
+    """x ** n beyond the largest float: an infinite bound, without an overflow warning (a
+    warning per box would flood certification)."""
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        for n in (3, 4, 5, 64):
+            assert Interval(1e200, 1e201).power(float(n)).hi == np.inf, n
+            lo = Interval(-1e201, -1e200).power(float(n))
+            assert (lo.hi if n % 2 == 0 else -lo.lo) == np.inf, n
