@@ -300,3 +300,21 @@ def test_a_refused_warm_start_leaves_no_output_folders(tmp_path: Path,
                                    "--warm-start", "carlike"])
     assert res.exit_code == 2 and "not for 'matsumoto'" in res.stderr
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("cmd", [["report", "--env", "matsumoto"],
+                                 ["train", "--env", "euclidean"],
+                                 ["sweep", "--envs", "euclidean", "--methods", "midpoint",
+                                  "--seeds", "1"],
+                                 ["plot-curves", "."]])
+def test_an_empty_out_is_refused_not_the_current_folder(
+        cmd: list[str], tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """Found by the tour: `report --out ''` wrote the report into the current folder
+    (``Path('')`` is ``.``)."""
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(SystemExit) as exc:
+        main([*cmd, "--out", ""])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert exc.value.code == 2 and len(err) == 1 and "--out" in err[0] and "empty" in err[0]
+    assert list(tmp_path.iterdir()) == []

@@ -4,6 +4,7 @@ point parsing and metric look-up. The command modules import this, never ``cli``
 from __future__ import annotations
 
 import json
+from pathlib import Path
 from typing import Annotated, Any
 
 import numpy as np
@@ -166,3 +167,14 @@ def parse_overrides(items: list[str]) -> dict[str, Any]:
             value = raw
         out[key] = tuple(value) if isinstance(value, list) else value
     return out
+
+
+def output_path(value: str | Path) -> Path:
+    """typer parser of an output path option (``--out``): the text the user typed as a
+    path, refused when empty (``Path("")`` is the current folder, so ``--out ""`` would
+    write there unasked)."""
+    if isinstance(value, Path):
+        return value
+    if value.strip() == "":
+        raise typer.BadParameter("an empty path names no file or folder")
+    return Path(value)

@@ -24,6 +24,7 @@ from validation.cli_common import (
     fail,
     import_metric_modules,
     json_text,
+    output_path,
     parse_metric_params,
     parse_overrides,
 )
@@ -33,7 +34,8 @@ __all__ = ["evaluate_command", "register", "train_command"]
 
 def train_command(
     env: Annotated[str, typer.Option(help="Environment (metric) name, e.g. matsumoto.")],
-    out: Annotated[Path, typer.Option(help="Run directory to create (or resume).")],
+    out: Annotated[Path, typer.Option(parser=output_path,
+                                      help="Run directory to create (or resume).")],
     metric_param: Annotated[list[str] | None, typer.Option(
         "--metric-param", metavar="NAME=VALUE", help=METRIC_PARAM_HELP)] = None,
     metric_module: Annotated[list[str] | None, typer.Option(

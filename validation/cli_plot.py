@@ -9,7 +9,7 @@ from typing import Annotated, Any
 import typer
 
 from finsler.errors import InputError
-from validation.cli_common import fail
+from validation.cli_common import fail, output_path
 
 __all__ = ["FORMATS", "plot_curves", "plot_curves_command", "register"]
 
@@ -49,6 +49,7 @@ def plot_curves_command(
     sweep_dir: Annotated[Path, typer.Argument(
         metavar="DIR", help="Sweep directory: DIR/<env>/<variant>/seed-<s>/metrics.csv.")],
     out: Annotated[Path, typer.Option(
+        parser=output_path,
         help="Figure file (.png, .pdf or .svg); the numbers go to the same name with "
              ".csv.")],
     column: Annotated[str, typer.Option(

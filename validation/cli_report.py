@@ -15,6 +15,7 @@ from validation.cli_common import (
     MethodModuleOption,
     fail,
     import_metric_modules,
+    output_path,
     parse_metric_params,
 )
 
@@ -22,8 +23,10 @@ __all__ = ["register", "report_command"]
 
 
 def report_command(
-    out: Annotated[Path, typer.Option(help="Output folder for report.md, report.json and "
-                                      "the PNG figures (created if missing).")],
+    out: Annotated[Path, typer.Option(
+        parser=output_path,
+        help="Output folder for report.md, report.json and the PNG figures (created if "
+             "missing).")],
     env: Annotated[str | None, typer.Option(
         help="Environment (see `geodesics metrics`); uses its shipped policy unless --run "
              "is given.")] = None,

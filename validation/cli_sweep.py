@@ -18,6 +18,7 @@ from validation.cli_common import (
     fail,
     import_metric_modules,
     json_text,
+    output_path,
     parse_metric_params,
     parse_overrides,
 )
@@ -83,6 +84,7 @@ def sweep_command(
              "seq, pg, or those of a method of --method-module.")],
     seeds: Annotated[int, typer.Option(help="Number of seeds N: runs use seeds 0..N-1.")],
     out: Annotated[Path, typer.Option(
+        parser=output_path,
         help="Sweep folder: runs go to OUT/<env>/<variant>/seed-<s>/, the plan and the "
              "status of every run to OUT/sweep.json.")],
     timesteps: Annotated[int | None, typer.Option(
