@@ -15,17 +15,21 @@ shipped one, or ``--runs ENV=DIR[,DIR...]``, e.g. one run per training seed):
 * the per-pair length ratio learned / exact (sum of C), mean, median, 95th percentile, max;
 * time per path (batched) and evaluations of C per path.
 
+Without ``--runs`` the rows are the shipped policy and, where ``--previous`` (default
+``benchmarks/previous_policies``) holds one for the environment, the policy it replaced
+(issue 25: old against new, same pairs, same references).
+
 With several runs per environment the last lines give mean +- standard error over them.
 Exact ceilings (the min-max refined exact paths' success) are printed beside.
 
 Usage::
 
     python benchmarks/learned_quality.py [--envs matsumoto,carlike,panda-pole] [--pairs 500]
-        [--seed 777] [--exact-pairs N] [--runs matsumoto=DIR1,DIR2] [--checkpoint best]
-        [--workers 2] [--cache DIR] [--json out.json]
+        [--seed 777] [--exact-pairs N|ENV=N,...] [--runs matsumoto=DIR1,DIR2]
+        [--checkpoint best] [--previous DIR] [--workers 2] [--cache DIR] [--json out.json]
 
-``--exact-pairs N`` solves only the first N pairs exactly (ratios on those; success on
-all). One torch thread.
+``--exact-pairs N`` (or ``carlike=100``: per environment) solves only the first N pairs
+exactly (ratios on those; success on all). One torch thread.
 """
 
 from __future__ import annotations
@@ -94,6 +98,19 @@ def measure(pol: learn.Policy, pairs: np.ndarray, exact: np.ndarray, eps: tuple[
     return out
 
 
+def exact_count(spec: str | None, env: str, pairs: int, ap: argparse.ArgumentParser) -> int:
+    """Pairs of ``env`` solved exactly: ``--exact-pairs N`` or ``ENV=N[,ENV=N]``."""
+    if not spec:
+        return pairs
+    try:
+        if "=" not in spec:
+            return min(pairs, int(spec))
+        given = {e: int(n) for e, n in (item.split("=") for item in spec.split(","))}
+    except ValueError:
+        ap.error(f"--exact-pairs takes N or ENV=N[,ENV=N], got {spec!r}")
+    return min(pairs, given.get(env, pairs))
+
+
 def line(label: str, row: dict) -> str:
     succ = " ".join(f"{100 * v:5.1f}%" for v in row["success"].values())
     r = row["ratio"]
@@ -106,12 +123,16 @@ def main() -> None:
     ap.add_argument("--envs", default="matsumoto,carlike,panda-pole")
     ap.add_argument("--pairs", type=int, default=500)
     ap.add_argument("--seed", type=int, default=777)
-    ap.add_argument("--exact-pairs", type=int, default=None)
+    ap.add_argument("--exact-pairs", default=None, metavar="N|ENV=N[,ENV=N]",
+                    help="solve only the first N pairs exactly (all envs, or per env)")
     ap.add_argument("--runs", action="append", default=[], metavar="ENV=DIR[,DIR...]")
     ap.add_argument("--checkpoint", default="best", choices=("best", "latest"))
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--cache", type=Path, default=Path("benchmark-cache"))
     ap.add_argument("--json", default=None)
+    ap.add_argument("--previous", type=Path,
+                    default=Path(__file__).resolve().parent / "previous_policies",
+                    help="folder of replaced shipped policies, one sub-folder per env")
     args = ap.parse_args()
     torch.set_num_threads(1)
     runs: dict[str, list[str]] = {}
@@ -125,7 +146,7 @@ def main() -> None:
     for env in args.envs.split(","):
         m = finsler.get_metric(env)
         pairs = finsler.sample_pairs(m, args.pairs, args.seed)
-        k = args.exact_pairs or args.pairs
+        k = exact_count(args.exact_pairs, env, args.pairs, ap)
         exact, mm = exact_reference(m, pairs[:k], args.cache / f"exact-{env}-{args.seed}-{k}",
                                     args.workers)
         eps = EPS.get(env, (m.task.eps,))
@@ -135,6 +156,8 @@ def main() -> None:
         print(f"{'policy / paths':44s} {'success':>{7 * len(eps)}s}  ratio: mean median p95"
               "    max     ms/path  C/path")
         sources = runs.get(env) or [env]
+        if not runs.get(env) and (args.previous / env / "config.json").is_file():
+            sources = [str(args.previous / env), env]
         rows = []
         for src in sources:
             pol = (learn.load_policy(src) if src == env
@@ -143,9 +166,11 @@ def main() -> None:
                 raise SystemExit(f"{src}: the route search needs a midpoint policy")
             row = measure(pol, pairs, exact, eps)
             rows.append({"source": str(src), "checkpoint": pol.checkpoint, **row})
+            name = ("shipped" if src == env else "previous" if Path(src).parent ==
+                    args.previous else Path(src).name)
             for how in HOWS:
-                print(line(f"{Path(src).name} ({pol.checkpoint}) {how}", row[how]), flush=True)
-        if len(rows) > 1:
+                print(line(f"{name} ({pol.checkpoint}) {how}", row[how]), flush=True)
+        if len(rows) > 1 and env in runs:
             for how in HOWS:
                 for key in ("mean", "p95", "max"):
                     v = np.array([r[how]["ratio"][key] for r in rows])

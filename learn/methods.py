@@ -30,6 +30,9 @@ class TrainConfig(Protocol):
     method: str
     path_energy_weight: float
     path_energy_pairs: int
+    path_energy_scale: str
+    path_energy_power: float
+    path_energy_schedule: str
     route_candidates: int
     route_pairs: int
     route_weight: float
@@ -95,6 +98,18 @@ def _path_costs_safe(metric: Any, pts: torch.Tensor) -> torch.Tensor:
     return torch.where(same[..., 0], torch.zeros_like(c), c)
 
 
+def _p_energy(c: torch.Tensor, p: float) -> torch.Tensor:
+    """``(n**(p-1) sum_i c_i**p)**(2/p)`` per row of ``c`` ``(K, n)``; ``n sum c**2`` for
+    ``p = 2`` (computed so, bit for bit). For ``p > 2`` the sum is taken relative to the
+    row's largest cost (no overflow, and no 0/0 in the gradient of a zero row)."""
+    n = c.shape[1]
+    if p == 2:
+        return n * (c**2).sum(1)
+    top = c.detach().amax(1, keepdim=True).clamp_min(1e-300)
+    r = (c / top) ** p
+    return (n ** (p - 1) * r.sum(1)).clamp_min(1e-300) ** (2.0 / p) * top[:, 0] ** 2
+
+
 @dataclass
 class PathEnergy(ActorTerm):
     """Beyond the paper: ``weight * n * sum_i C(x_i, x_i+1)**2``, the discrete energy of the
@@ -109,6 +124,14 @@ class PathEnergy(ActorTerm):
     """``none`` or ``straight``: each pair's energy divided by that of the straight
     coordinate path between its ends (a constant; ``pairs * 2**D`` more evaluations of C,
     values only)."""
+    power: float = 2.0
+    """``p``: the energy is ``(n**(p-1) sum_i C_i**p)**(2/p)`` (``p = 2``: the plain
+    energy ``n sum C_i**2``). Equal to the squared length for equal segment costs, so
+    every ``p > 1`` has the same minimisers, but a larger ``p`` weights the costliest
+    segments more (``p -> inf``: the squared largest segment times ``n**2``)."""
+    schedule: str = "constant"
+    """``constant`` or ``lr``: the weight multiplied by the run's learning-rate factor
+    (``lr / cfg.lr``), so that it decays with the learning rate."""
     name: ClassVar[str] = "path_energy"
     uses_derivative_of_C: ClassVar[bool] = True
 
@@ -122,7 +145,7 @@ class PathEnergy(ActorTerm):
         pts = build_tree(e[:, 0], e[:, 1], depth,
                          lambda a, b: trainer.actor(a, b, deterministic=True)).double()
         c = _path_costs_safe(trainer.metric, pts)
-        energy = c.shape[1] * (c**2).sum(1)
+        energy = _p_energy(c, self.power)
         if self.scale == "straight":
             with torch.no_grad():
                 t = torch.linspace(0.0, 1.0, c.shape[1] + 1, dtype=torch.float64,
@@ -130,14 +153,17 @@ class PathEnergy(ActorTerm):
                 e64 = e.double()
                 line = e64[:, :1] + t * (e64[:, 1:] - e64[:, :1])
                 cs = _path_costs_safe(trainer.metric, line)
-                ref = (c.shape[1] * (cs**2).sum(1)).clamp_min(1e-300)
+                ref = _p_energy(cs, self.power).clamp_min(1e-300)
             energy = energy / ref
         return energy.float()
 
     def step(self, trainer: Trainer) -> TermOutput:
         n = self.pairs * 2**trainer.depth_max
         evals = 2 * n if self.scale == "straight" else n
-        return TermOutput(self.weight * self.energy(trainer).mean(), evaluations=evals,
+        w = self.weight
+        if self.schedule == "lr":
+            w *= trainer.lr / trainer.cfg.lr
+        return TermOutput(w * self.energy(trainer).mean(), evaluations=evals,
                           derivative=n)
 
 
@@ -199,7 +225,8 @@ def actor_terms(cfg: TrainConfig) -> list[ActorTerm]:
     terms: list[ActorTerm] = []
     if cfg.path_energy_weight > 0:
         terms.append(PathEnergy(cfg.path_energy_weight, cfg.path_energy_pairs,
-                                cfg.path_energy_scale))
+                                cfg.path_energy_scale, cfg.path_energy_power,
+                                cfg.path_energy_schedule))
     if cfg.route_candidates > 0:
         terms.append(RouteSearch(cfg.route_candidates, cfg.route_pairs, cfg.route_weight))
     if cfg.expert_weight > 0:  # expert iteration (learn.expert): values of C only

@@ -26,6 +26,8 @@ class Trainer(Protocol):
     dim: int
     depth_max: int
     cfg: Any
+    lr: float
+    """The learning rate of the current iteration (``cfg.lr`` times the schedule's factor)."""
 
 
 @dataclass

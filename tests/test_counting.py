@@ -342,3 +342,53 @@ def test_path_energy_step_is_the_weighted_mean_energy(tmp_path: Path) -> None:
     energy = 4 * (seg**2).sum(1)
     assert float(out.loss.detach()) == pytest.approx(3.0 * energy.mean(), rel=1e-5)
     assert out.evaluations == out.derivative == 5 * 4
+
+
+@pytest.mark.parametrize("power", [3.0, 4.0, 8.0])
+def test_path_energy_power_is_the_power_mean_of_the_segments(tmp_path: Path,
+                                                             power: float) -> None:
+    """``path_energy_power = p``: each pair's term is ``n**2 M_p(C)**2`` with ``M_p`` the
+    power mean of its segment lengths (computed here in numpy from the same path); at
+    least the plain energy ``n sum C**2`` (power means grow with p), with the schedule
+    ``lr`` scaled by the learning-rate factor, and the same count of evaluations."""
+    tr = _trainer(tmp_path, depth=2)
+    tr.lr = tr.cfg.lr * 0.25
+    term = PathEnergy(weight=3.0, pairs=5, power=power, schedule="lr")
+    rng = copy.deepcopy(tr.np_rng)
+    out = term.step(tr)
+    ends = tr.metric.domain.sample(10, rng).reshape(5, 2, 2)
+    e = torch.as_tensor(ends, dtype=torch.float32)
+    with torch.no_grad():
+        pts = build_tree(e[:, 0], e[:, 1], 2,
+                         lambda a, b: tr.actor(a, b, deterministic=True)).double().numpy()
+    seg = np.linalg.norm(np.diff(pts, axis=1), axis=2)
+    mean_p = np.mean(seg**power, axis=1) ** (1 / power)
+    energy = 16 * mean_p**2
+    assert np.all(energy >= 4 * (seg**2).sum(1) * (1 - 1e-12))
+    assert float(out.loss.detach()) == pytest.approx(0.25 * 3.0 * energy.mean(), rel=1e-5)
+    assert out.evaluations == out.derivative == 5 * 4
+
+
+def test_path_energy_power_equal_segments_give_the_squared_length() -> None:
+    """Whatever p, a path of equal segment costs L/n has energy L**2 (same minimisers as
+    the plain energy); p = 2 is ``n sum C**2`` bit for bit; a zero path has a finite
+    gradient."""
+    from learn.methods import _p_energy
+    c = torch.full((3, 64), 0.05, dtype=torch.float64)
+    for p in (1.5, 2.0, 4.0, 16.0, 64.0):
+        assert torch.allclose(_p_energy(c, p), torch.full((3,), 3.2**2, dtype=torch.float64))
+    r = torch.rand(4, 32, dtype=torch.float64)
+    assert torch.equal(_p_energy(r, 2.0), 32 * (r**2).sum(1))
+    z = torch.zeros(2, 8, dtype=torch.float64, requires_grad=True)
+    _p_energy(z, 4.0).sum().backward()
+    assert torch.isfinite(z.grad).all()
+
+
+@pytest.mark.parametrize("bad", [{"path_energy_power": 1.0}, {"path_energy_power": True},
+                                 {"path_energy_power": float("nan")},
+                                 {"path_energy_power": 100.0},
+                                 {"path_energy_schedule": "cosine"}])
+def test_path_energy_options_are_checked(bad: dict) -> None:
+    name = next(iter(bad))
+    with pytest.raises(finsler.InputError, match=name):
+        learn.default_config("euclidean", **bad)
