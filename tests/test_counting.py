@@ -326,6 +326,17 @@ def test_route_search_targets_the_pairs_a_stitched_path_shortens(tmp_path: Path)
     assert far.target is None
 
 
+def _actor_path_segments(tr: Trainer, rng: Any) -> np.ndarray:
+    """Segment lengths ``(5, 4)`` of the actor's depth-2 paths between the 5 pairs the
+    path-energy term draws from ``rng`` (a copy of the trainer's generator)."""
+    ends = tr.metric.domain.sample(10, rng).reshape(5, 2, 2)
+    e = torch.as_tensor(ends, dtype=torch.float32)
+    with torch.no_grad():
+        pts = build_tree(e[:, 0], e[:, 1], 2,
+                         lambda a, b: tr.actor(a, b, deterministic=True)).double().numpy()
+    return np.linalg.norm(np.diff(pts, axis=1), axis=2)
+
+
 def test_path_energy_step_is_the_weighted_mean_energy(tmp_path: Path) -> None:
     """Euclidean, depth 2: the energy of a path of 4 segments is 4 * sum of the squared
     segment lengths; the step's loss is the weight times its mean over the pairs."""
@@ -333,12 +344,7 @@ def test_path_energy_step_is_the_weighted_mean_energy(tmp_path: Path) -> None:
     term = PathEnergy(weight=3.0, pairs=5)
     rng = copy.deepcopy(tr.np_rng)
     out = term.step(tr)
-    ends = tr.metric.domain.sample(10, rng).reshape(5, 2, 2)
-    e = torch.as_tensor(ends, dtype=torch.float32)
-    with torch.no_grad():
-        pts = build_tree(e[:, 0], e[:, 1], 2,
-                         lambda a, b: tr.actor(a, b, deterministic=True)).double().numpy()
-    seg = np.linalg.norm(np.diff(pts, axis=1), axis=2)
+    seg = _actor_path_segments(tr, rng)
     energy = 4 * (seg**2).sum(1)
     assert float(out.loss.detach()) == pytest.approx(3.0 * energy.mean(), rel=1e-5)
     assert out.evaluations == out.derivative == 5 * 4
@@ -356,12 +362,7 @@ def test_path_energy_power_is_the_power_mean_of_the_segments(tmp_path: Path,
     term = PathEnergy(weight=3.0, pairs=5, power=power, schedule="lr")
     rng = copy.deepcopy(tr.np_rng)
     out = term.step(tr)
-    ends = tr.metric.domain.sample(10, rng).reshape(5, 2, 2)
-    e = torch.as_tensor(ends, dtype=torch.float32)
-    with torch.no_grad():
-        pts = build_tree(e[:, 0], e[:, 1], 2,
-                         lambda a, b: tr.actor(a, b, deterministic=True)).double().numpy()
-    seg = np.linalg.norm(np.diff(pts, axis=1), axis=2)
+    seg = _actor_path_segments(tr, rng)
     mean_p = np.mean(seg**power, axis=1) ** (1 / power)
     energy = 16 * mean_p**2
     assert np.all(energy >= 4 * (seg**2).sum(1) * (1 - 1e-12))
