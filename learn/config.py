@@ -47,6 +47,7 @@ _LR_SCHEDULES = ("constant", "linear", "cosine")
 _TRANSFORMS = ("none", "log1p")
 _ACTIVATIONS = ("relu", "tanh")
 _ENERGY_SCALES = ("none", "straight")
+_ENERGY_SCHEDULES = ("constant", "lr")
 
 
 # ----------------------------------------------------------------------------------------
@@ -287,7 +288,7 @@ class TrainConfig(MetricConfig):
         check_choice("critic_transform", self.critic_transform, _TRANSFORMS)
         check_choice("activation", self.activation, _ACTIVATIONS)
         check_choice("path_energy_scale", self.path_energy_scale, _ENERGY_SCALES)
-        check_choice("path_energy_schedule", self.path_energy_schedule, ("constant", "lr"))
+        check_choice("path_energy_schedule", self.path_energy_schedule, _ENERGY_SCHEDULES)
         if not (isinstance(self.path_energy_power, (int, float)) and not isinstance(
                 self.path_energy_power, bool) and 1 < self.path_energy_power <= 64):
             raise InputError(f"path_energy_power must be a number in (1, 64], got "

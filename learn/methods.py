@@ -112,8 +112,9 @@ def _p_energy(c: torch.Tensor, p: float) -> torch.Tensor:
 
 @dataclass
 class PathEnergy(ActorTerm):
-    """Beyond the paper: ``weight * n * sum_i C(x_i, x_i+1)**2``, the discrete energy of the
-    actor's own deterministic depth-D path between ``pairs`` fresh uniform pairs,
+    """Beyond the paper: ``weight * n * sum_i C(x_i, x_i+1)**2`` (with ``power`` p: the
+    p-energy of :func:`_p_energy`), the discrete energy of the actor's own deterministic
+    depth-D path between ``pairs`` fresh uniform pairs,
     differentiated through every level of the tree with the lowered torch cost (float64).
     Smallest for a shortest path with equal segment costs: the recursive geodesic midpoints.
     Uses the derivative of C (``pairs * 2**D`` evaluations per actor step)."""
