@@ -104,10 +104,13 @@ def exact_count(spec: str | None, env: str, pairs: int, ap: argparse.ArgumentPar
         return pairs
     try:
         if "=" not in spec:
-            return min(pairs, int(spec))
-        given = {e: int(n) for e, n in (item.split("=") for item in spec.split(","))}
+            given = {env: int(spec)}
+        else:
+            given = {e: int(n) for e, n in (item.split("=") for item in spec.split(","))}
     except ValueError:
         ap.error(f"--exact-pairs takes N or ENV=N[,ENV=N], got {spec!r}")
+    if min(given.values()) < 1:
+        ap.error(f"--exact-pairs counts must be >= 1, got {spec!r}")
     return min(pairs, given.get(env, pairs))
 
 
