@@ -41,7 +41,7 @@ import numpy as np
 from finsler.domains import Domain, _as_batch, is_torch
 from finsler.errors import InputError
 from finsler.hooks import MetricHooks
-from finsler.limits import check_memory
+from finsler.limits import MAX_BYTES, check_memory
 from finsler.lowering import LoweredFunction, lower
 
 __all__ = ["LengthBounds", "LengthEstimate", "Metric", "Task"]
@@ -417,10 +417,14 @@ class Metric(MetricHooks, ABC):
         n = max(xb.shape[0], yb.shape[0])
         xb = np.broadcast_to(xb, (n, self.dim))
         d = np.broadcast_to(yb, (n, self.dim)) - xb
-        check_memory((n, int(max_intervals), 15, self.dim), "adaptive quadrature",
-                     hint="use fewer segments or a smaller max_intervals", copies=2)
-        value, error, intervals = _adaptive_gk(self._eval_F, xb, d, float(rtol), float(atol),
-                                               int(max_intervals))
+        # segments are independent: evaluated in parts whose worst case (every segment
+        # bisected to max_intervals) fits the memory limit; one segment must fit
+        check_memory((1, int(max_intervals), 15, self.dim), "adaptive quadrature",
+                     hint="use a smaller max_intervals", copies=2)
+        rows = max(1, MAX_BYTES // (int(max_intervals) * 15 * self.dim * 8 * 2))
+        parts = [_adaptive_gk(self._eval_F, xb[a:a + rows], d[a:a + rows], float(rtol),
+                              float(atol), int(max_intervals)) for a in range(0, max(n, 1), rows)]
+        value, error, intervals = (np.concatenate(c) for c in zip(*parts, strict=True))
         tol = np.maximum(atol, rtol * np.abs(value))
         converged = error <= tol
         if single:

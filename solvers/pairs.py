@@ -40,9 +40,6 @@ __all__ = [
 
 #: Relative energy difference under which two seeds count as agreeing with the best.
 AGREE_RTOL = 1e-6
-#: Segments per call of the adaptive quadrature of the reported lengths (its worst-case
-#: memory is checked against the limit).
-QUAD_SEGMENTS = 4096
 
 
 def check_initial_paths(metric: Metric, pairs: np.ndarray, n: int, paths: Any
@@ -80,12 +77,9 @@ def _finish_many(metric: Metric, paths: np.ndarray, residual: np.ndarray | None 
     everywhere), first-order residual (``residual``: known ones, NaN where unknown)."""
     k, n1, dim = paths.shape
     costs = metric.path_costs(paths, check=False)
-    # adaptive quadrature with its error, in parts whose worst case fits the memory limit
-    step = max(1, QUAD_SEGMENTS // (n1 - 1))
-    parts = [metric.path_length_error(paths[a:a + step], check=False)
-             for a in range(0, k, step)]
-    quad_value = np.concatenate([np.atleast_1d(q.value) for q in parts])
-    quad_error = np.concatenate([np.atleast_1d(q.error) for q in parts])
+    # adaptive quadrature with its error (in parts that fit the memory limit)
+    quad = metric.path_length_error(paths, check=False)
+    quad_value, quad_error = np.atleast_1d(quad.value), np.atleast_1d(quad.error)
     nonconvex = np.zeros(k, dtype=np.int64)
     if not metric.convex_everywhere:
         nonconvex = np.sum(metric.convexity(paths.reshape(-1, dim)).reshape(k, n1) < 0.0, 1)

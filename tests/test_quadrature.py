@@ -71,6 +71,29 @@ def test_batch_shapes_zero_segments_and_paths() -> None:
     np.testing.assert_allclose(batch.value, [0.9, 0.9], rtol=1e-14)
 
 
+def test_many_segments_are_evaluated_in_parts_that_fit_memory() -> None:
+    # 150 Panda paths of 32 segments: 4800 segments whose worst case (1024 subintervals of
+    # 15 nodes in 7 joints) is ~8 GiB at once, over the 4 GiB limit. `solve_batch` of 100
+    # Panda pairs died on it (found measuring issue 25); segments are independent, so the
+    # batch is evaluated in parts and equals the paths measured one at a time
+    m = finsler.get_metric("panda-pole")
+    rng = np.random.default_rng(5)
+    ends = PANDA_LOW + rng.random((150, 2, 7)) * (PANDA_HIGH - PANDA_LOW)
+    t = np.linspace(0.0, 1.0, 33)[None, :, None]
+    paths = ends[:, :1] + t * (ends[:, 1:] - ends[:, :1])
+    paths[:, 1:-1] += 0.05 * rng.standard_normal((150, 31, 7))
+    paths = np.clip(paths, PANDA_LOW, PANDA_HIGH)
+    batch = m.path_length_error(paths)
+    assert batch.value.shape == (150,)
+    for k in (0, 77, 149):
+        one = m.path_length_error(paths[k])
+        assert batch.value[k] == pytest.approx(one.value, rel=1e-15)
+        assert batch.error[k] == pytest.approx(one.error, rel=1e-12)
+    # one segment that cannot fit is still refused with the figure
+    with pytest.raises(InputError, match="adaptive quadrature would need"):
+        m.segment_length_error(PANDA_LOW, PANDA_HIGH, max_intervals=10**8)
+
+
 def test_non_smooth_metric_kink_resolved() -> None:
     # car-like F has a kink (max(., 0)) along this segment: the estimate still contains a
     # reference from 4096 pieces of order 16
