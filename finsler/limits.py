@@ -9,7 +9,7 @@ from collections.abc import Sequence
 
 from finsler.errors import InputError
 
-__all__ = ["MAX_BYTES", "check_memory"]
+__all__ = ["MAX_BYTES", "check_memory", "rows_that_fit"]
 
 #: Largest working set (bytes) a single request may need: 4 GiB.
 MAX_BYTES = 4 * 1024**3
@@ -25,3 +25,13 @@ def check_memory(shape: Sequence[int], what: str, hint: str = "", itemsize: int 
                          f"{tuple(int(s) for s in shape)}), over the limit of "
                          f"{MAX_BYTES / 1024**3:g} GiB" + (f"; {hint}" if hint else ""))
     return need
+
+
+def rows_that_fit(row_shape: Sequence[int], what: str, hint: str = "", itemsize: int = 8,
+                  copies: int = 1) -> int:
+    """How many independent rows of ``row_shape`` (``copies`` arrays of ``itemsize`` bytes
+    per element) fit :data:`MAX_BYTES` at once, at least 1: the part size of work that is
+    split into rows. Raises :class:`InputError` (:func:`check_memory`) if one row does not
+    fit."""
+    need = check_memory((1, *row_shape), what, hint, itemsize, copies)
+    return max(1, MAX_BYTES // max(need, 1))

@@ -41,7 +41,7 @@ import numpy as np
 from finsler.domains import Domain, _as_batch, is_torch
 from finsler.errors import InputError
 from finsler.hooks import MetricHooks
-from finsler.limits import MAX_BYTES, check_memory
+from finsler.limits import check_memory, rows_that_fit
 from finsler.lowering import LoweredFunction, lower
 
 __all__ = ["LengthBounds", "LengthEstimate", "Metric", "Task"]
@@ -419,9 +419,8 @@ class Metric(MetricHooks, ABC):
         d = np.broadcast_to(yb, (n, self.dim)) - xb
         # segments are independent: evaluated in parts whose worst case (every segment
         # bisected to max_intervals) fits the memory limit; one segment must fit
-        check_memory((1, int(max_intervals), 15, self.dim), "adaptive quadrature",
-                     hint="use a smaller max_intervals", copies=2)
-        rows = max(1, MAX_BYTES // (int(max_intervals) * 15 * self.dim * 8 * 2))
+        rows = rows_that_fit((int(max_intervals), 15, self.dim), "adaptive quadrature",
+                             hint="use a smaller max_intervals", copies=2)
         parts = [_adaptive_gk(self._eval_F, xb[a:a + rows], d[a:a + rows], float(rtol),
                               float(atol), int(max_intervals)) for a in range(0, max(n, 1), rows)]
         value, error, intervals = (np.concatenate(c) for c in zip(*parts, strict=True))

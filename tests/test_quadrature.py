@@ -94,6 +94,16 @@ def test_many_segments_are_evaluated_in_parts_that_fit_memory() -> None:
         m.segment_length_error(PANDA_LOW, PANDA_HIGH, max_intervals=10**8)
 
 
+def test_rows_that_fit_the_memory_limit() -> None:
+    from finsler.limits import rows_that_fit
+    # 7-D quadrature rows: 1024 subintervals x 15 nodes x 7 coordinates, float64, 2 copies
+    # = 1,720,320 bytes; 4 GiB holds 2496 of them
+    assert rows_that_fit((1024, 15, 7), "q", copies=2) == 2496
+    assert rows_that_fit((0,), "empty") >= 1
+    with pytest.raises(InputError, match="q would need about 8 GiB"):
+        rows_that_fit((2**30,), "q")
+
+
 def test_non_smooth_metric_kink_resolved() -> None:
     # car-like F has a kink (max(., 0)) along this segment: the estimate still contains a
     # reference from 4096 pieces of order 16
