@@ -98,20 +98,26 @@ def measure(pol: learn.Policy, pairs: np.ndarray, exact: np.ndarray, eps: tuple[
     return out
 
 
-def exact_count(spec: str | None, env: str, pairs: int, ap: argparse.ArgumentParser) -> int:
-    """Pairs of ``env`` solved exactly: ``--exact-pairs N`` or ``ENV=N[,ENV=N]``."""
+def exact_counts(spec: str | None, envs: list[str], pairs: int,
+                 ap: argparse.ArgumentParser) -> dict[str, int]:
+    """Pairs of each environment solved exactly: ``--exact-pairs N`` (every environment) or
+    ``ENV=N[,ENV=N]`` (the others: all ``pairs``); an environment not in ``--envs`` is an
+    error (a misspelt name would silently solve every pair)."""
     if not spec:
-        return pairs
+        return dict.fromkeys(envs, pairs)
     try:
         if "=" not in spec:
-            given = {env: int(spec)}
+            given = dict.fromkeys(envs, int(spec))
         else:
             given = {e: int(n) for e, n in (item.split("=") for item in spec.split(","))}
     except ValueError:
         ap.error(f"--exact-pairs takes N or ENV=N[,ENV=N], got {spec!r}")
     if min(given.values()) < 1:
         ap.error(f"--exact-pairs counts must be >= 1, got {spec!r}")
-    return min(pairs, given.get(env, pairs))
+    unknown = sorted(set(given) - set(envs))
+    if unknown:
+        ap.error(f"--exact-pairs names {', '.join(unknown)}, not in --envs {','.join(envs)}")
+    return {env: min(pairs, given.get(env, pairs)) for env in envs}
 
 
 def line(label: str, row: dict) -> str:
@@ -146,10 +152,12 @@ def main() -> None:
         runs.setdefault(env, []).extend(d for d in dirs.split(",") if d)
     doc: dict = {"seed": args.seed, "pairs": args.pairs, "search": learn.SearchSpec().to_dict(),
                  "checkpoint": args.checkpoint, "envs": {}}
-    for env in args.envs.split(","):
+    envs = args.envs.split(",")
+    counts = exact_counts(args.exact_pairs, envs, args.pairs, ap)
+    for env in envs:
         m = finsler.get_metric(env)
         pairs = finsler.sample_pairs(m, args.pairs, args.seed)
-        k = exact_count(args.exact_pairs, env, args.pairs, ap)
+        k = counts[env]
         exact, mm = exact_reference(m, pairs[:k], args.cache / f"exact-{env}-{args.seed}-{k}",
                                     args.workers)
         eps = EPS.get(env, (m.task.eps,))
