@@ -97,6 +97,10 @@ CASES = [
     (["train", "--env", "euclidean", "--out", "x", "--set", "lr=fast"], 2, ["lr must be float"]),
     (["train", "--env", "euclidean", "--out", "x", "--set", "hidden"], 2, ["FIELD=VALUE"]),
     (["train", "--env", "euclidean", "--out", "x", "--set", "env=carlike"], 2, ["use --env"]),
+    # these collided with the options of the same name (a TypeError traceback)
+    (["train", "--env", "euclidean", "--out", "x", "--set", "timesteps=5"], 2,
+     ["--set timesteps=... is not allowed; use --timesteps"]),
+    (["train", "--env", "euclidean", "--out", "x", "--set", "seed=3"], 2, ["use --seed"]),
     (["train", "--env", "matsumoto", "--metric-param", "bogus=1", "--out", "x"], 2,
      ["has no parameter 'bogus'", "height (float)"]),
     (["train", "--env", "matsumoto", "--metric-param", "height=abc", "--out", "x"], 2,

@@ -186,6 +186,7 @@ def parse_settings(items: list[str], cls: type | None = None) -> dict[str, objec
 
     names = [f.name for f in dataclasses.fields(cls or learn.TrainConfig)]
     reserved = {"env": "--env", "device": "--device", "minutes": "--minutes",
+                "seed": "--seed", "timesteps": "--timesteps", "method": "--method",
                 "metric_params": "--metric-param NAME=VALUE",
                 "metric_class": "--metric-module MODULE"}
     for item in items:  # the run-control fields have options of their own
