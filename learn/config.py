@@ -193,6 +193,9 @@ class TrainConfig(MetricConfig):
     """Scale coordinates to [-1, 1] by the domain's bounds before the networks."""
     actor_residual: bool = False
     """Actor mean = (s + g) / 2 + network output (scaled) instead of the raw output."""
+    actor_relative: bool = False
+    """Actor sees (centre, unit direction, length r) of the pair and predicts its offset
+    from the coordinate midpoint and its std as multiples of r (a residual mean)."""
     symmetric_critic: bool = False
     """For reversible metrics: V(s, g) = (net(s, g) + net(g, s)) / 2 exactly."""
     log_std_min: float = -20.0

@@ -66,9 +66,14 @@ class Actor(nn.Module):
 
     With ``residual`` the mean is ``(s + g) / 2 + half_range * out`` (the network predicts a
     correction to the coordinate midpoint); otherwise the mean is the raw output, mapped
-    back from normalised coordinates. With ``explore_std > 0`` the standard deviation is
-    at least ``explore_std * |g - s|`` (the learned one otherwise collapses to its clamp
-    and exploration stops). Samples and means are projected into the domain.
+    back from normalised coordinates. With ``relative`` (implies a residual mean) the
+    network sees the pair as centre, unit direction and length ``r`` of ``g - s`` in
+    normalised coordinates, and its offset and standard deviation are multiples of
+    ``r``: a sub-pair deep in the tree gets the same relative precision as the top pair
+    (with an absolute offset its correction is a few hundredths of the output's scale).
+    With ``explore_std > 0`` the standard deviation is at least ``explore_std * |g - s|``
+    (the learned one otherwise collapses to its clamp and exploration stops). Samples and
+    means are projected into the domain.
     """
 
     def __init__(
@@ -78,6 +83,7 @@ class Actor(nn.Module):
         activation: str = "relu",
         normalize_inputs: bool = False,
         residual: bool = False,
+        relative: bool = False,
         log_std_min: float = -20.0,
         log_std_max: float = 2.0,
         init_log_std: float | None = None,
@@ -87,11 +93,13 @@ class Actor(nn.Module):
         self.domain = metric.domain
         self.explore_std = float(explore_std)
         self.dim = metric.dim
-        self.residual = residual
+        self.residual = residual or relative
+        self.relative = relative
         self.log_std_min = float(log_std_min)
         self.log_std_max = float(log_std_max)
         self.scaler = _Scaler(metric.domain, normalize_inputs)
-        self.net = mlp(2 * self.dim, 2 * self.dim, hidden, activation)
+        n_in = 2 * self.dim + 1 if relative else 2 * self.dim
+        self.net = mlp(n_in, 2 * self.dim, hidden, activation)
         if init_log_std is not None:
             last = self.net[-1]
             with torch.no_grad():
@@ -100,10 +108,18 @@ class Actor(nn.Module):
 
     def distribution(self, s: torch.Tensor, g: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """Unprojected Gaussian mean ``(N, dim)`` and standard deviation ``(N, dim)``."""
-        out = self.net(torch.cat([self.scaler(s), self.scaler(g)], -1))
+        half = self.scaler.span
+        if self.relative:
+            d = (g - s) / half
+            # smooth at d = 0 (the gradient of |d| is not): 1e-6 is far below any pair's
+            # length in normalised coordinates, and a zero pair keeps mean = s, std = 0
+            r = torch.sqrt((d * d).sum(-1, keepdim=True) + 1e-12)
+            out = self.net(torch.cat([self.scaler(0.5 * (s + g)), d / r, r], -1))
+            half = half * r
+        else:
+            out = self.net(torch.cat([self.scaler(s), self.scaler(g)], -1))
         mu, log_std = out[:, : self.dim], out[:, self.dim :]
         log_std = log_std.clamp(self.log_std_min, self.log_std_max)
-        half = self.scaler.span
         mean = 0.5 * (s + g) + half * mu if self.residual else self.scaler.center + half * mu
         std = half * log_std.exp()
         if self.explore_std > 0:

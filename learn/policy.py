@@ -50,6 +50,7 @@ def build_actor(cfg: TrainConfig, metric: finsler.Metric | None = None) -> Actor
         activation=cfg.activation,
         normalize_inputs=cfg.normalize_inputs,
         residual=cfg.actor_residual,
+        relative=cfg.actor_relative,
         log_std_min=cfg.log_std_min,
         log_std_max=cfg.log_std_max,
         init_log_std=cfg.init_log_std,

@@ -180,6 +180,56 @@ def test_exploration_floor_scales_with_the_pair_distance() -> None:
     assert plain.distribution(s, g)[1].max() < 1e-4
 
 
+def test_relative_actor_offset_and_std_are_multiples_of_the_pair_length() -> None:
+    """``actor_relative``: with a constant network output (mu, log_std) the mean is
+    (s + g) / 2 + span * r * mu and the std span * r * exp(log_std), r the pair's length
+    in normalised coordinates (span = the domain's half-widths): closed forms, for pairs
+    at every scale; a zero pair keeps mean = s and a ~0 std, with a finite gradient."""
+    m = finsler.get_metric("carlike")  # box domain with unequal sides: span is not 1
+    cfg = learn.default_config("carlike", actor_relative=True)
+    actor = build_actor(cfg, m)
+    with torch.no_grad():
+        actor.net[-1].weight.zero_()
+        actor.net[-1].bias.copy_(torch.tensor([0.1, -0.2, 0.3, -1.0, -2.0, -3.0]))
+    span = actor.scaler.span
+    s = torch.tensor([[0.1, 0.2, 0.3], [0.1, 0.2, 0.3], [-0.4, 0.5, -0.2], [0.3, 0.3, 0.3]])
+    g = torch.tensor([[0.5, -0.1, 0.9], [0.104, 0.197, 0.306], [0.2, 0.5, 0.1],
+                      [0.3, 0.3, 0.3]])
+    mean, std = actor.distribution(s, g)
+    r = ((g - s) / span).norm(dim=1, keepdim=True)
+    torch.testing.assert_close(mean, 0.5 * (s + g) + span * r * torch.tensor([0.1, -0.2, 0.3]))
+    torch.testing.assert_close(std, span * r * torch.exp(torch.tensor([-1.0, -2.0, -3.0])))
+    # a pair 100x shorter (same centre and direction) has a 100x smaller offset
+    off = mean - 0.5 * (s + g)
+    torch.testing.assert_close(off[1] / off[0], (r[1] / r[0]).expand(3), rtol=1e-4, atol=0)
+    assert torch.allclose(mean[3], s[3]) and std[3].max() < 1e-5
+    # the network sees centre, direction and length: n_in = 2 dim + 1
+    assert actor.net[0].in_features == 7 and build_actor(
+        cfg.replace(actor_relative=False), m).net[0].in_features == 6
+    # gradients through coincident points (the path-energy term) are finite
+    pts = s.clone().requires_grad_(True)
+    actor(pts, pts.detach().clone().requires_grad_(True), deterministic=True).sum().backward()
+    assert torch.isfinite(pts.grad).all()
+
+
+def test_relative_actor_policy_saves_and_loads(tmp_path) -> None:
+    """A run with ``actor_relative`` trains, and the policy loaded from its directory
+    predicts the trainer's own midpoints (the field is in config.json; older runs without
+    it load as absolute residual actors)."""
+    cfg = learn.default_config("euclidean", depth=2, timesteps=20_000, collection_size=1024,
+                               minibatch_size=256, eval_every=1000, actor_relative=True)
+    tr = Trainer(cfg, tmp_path / "run", progress=False)
+    tr.run()
+    pol = learn.load_policy(tmp_path / "run", checkpoint="latest")
+    assert pol.actor.relative and pol.config.actor_relative
+    pairs = finsler.sample_pairs(tr.metric, 50, seed=3)
+    own = learn.Policy(tr.actor, cfg).midpoint(pairs[:, 0], pairs[:, 1])
+    np.testing.assert_array_equal(pol.midpoint(pairs[:, 0], pairs[:, 1]), own)
+    d = cfg.to_dict()
+    d.pop("actor_relative")
+    assert learn.TrainConfig.from_dict(d).actor_relative is False
+
+
 def test_route_search_returns_only_real_improvements() -> None:
     cfg = learn.default_config("euclidean", depth=3, route_candidates=16, route_pairs=40)
     tr = Trainer(cfg, _tmp_run_dir(), progress=False)
