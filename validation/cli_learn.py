@@ -90,8 +90,8 @@ def train_command(
     of 16384 pairs, minibatches of 1024. matsumoto: 1e8 evaluations of C, one pass per
     collection, fused Adam, path energy (weight 1, 4 pairs per actor step; 1.8x the
     trees' evaluations), the actor relative to each pair's length; carlike: path energy
-    with p = 4, MLPs 128-128, 16 pairs and 4e8 (13.4x); panda-pole: 1e7, MLPs 128-128,
-    symmetric critic, 3 epochs, model-free.
+    with p = 4, MLPs 128-128, 16 pairs and 4e8 (13.4x), the relative actor; panda-pole:
+    1e7, MLPs 128-128, symmetric critic, 3 epochs, model-free.
 
     ANY METRIC: --metric-param NAME=VALUE sets the metric's parameters (recorded in
     config.json, used to evaluate, report and resume); --metric-module imports a user's
