@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import subprocess
 import sys
 from dataclasses import dataclass
@@ -109,7 +110,7 @@ def test_cli_param_parsing() -> None:
         parse_metric_params(["a=1", "a=2"])
 
 
-def test_old_configs_without_the_field_load_with_the_defaults() -> None:
+def test_old_configs_without_the_field_load_with_the_defaults(tmp_path: Path) -> None:
     cfg = TrainConfig.from_dict({"env": "matsumoto"})
     assert cfg.metric_params == {"height": 1.0, "radius": 1.0} and cfg.metric_class is None
     # policies written before the field existed: the shipped ones of that time and the
@@ -118,6 +119,14 @@ def test_old_configs_without_the_field_load_with_the_defaults() -> None:
     folders += sorted(p for p in (ROOT / "benchmarks" / "previous_policies").iterdir()
                       if p.is_dir())
     old = [f for f in folders if "metric_params" not in read_json(f / CONFIG_FILE)["config"]]
+    # every car-like policy kept is newer: the shipped one with the fields taken out of
+    # its config stands for the old car-like files
+    stripped = tmp_path / "carlike"
+    shutil.copytree(ROOT / "learn" / "policies" / "carlike", stripped)
+    doc = read_json(stripped / CONFIG_FILE)
+    del doc["config"]["metric_params"], doc["config"]["metric_class"]
+    (stripped / CONFIG_FILE).write_text(json.dumps(doc))
+    old.append(stripped)
     assert {f.name for f in old} >= {"matsumoto", "carlike", "panda-pole"}
     for folder in old:
         pol = learn.load_policy(folder)
