@@ -138,6 +138,17 @@ def test_shipped_policy_evaluates_as_recorded(env, tmp_path) -> None:
     assert pol.generate(p[:, 0], p[:, 1]).shape == (3, 2**pol.depth + 1, pol.metric.dim)
 
 
+@pytest.mark.parametrize("env, said", [("matsumoto", "selected on the validation set"),
+                                        ("panda-pole", "default evaluation pairs")])
+def test_evaluate_says_where_a_shipped_checkpoint_was_selected(env, said) -> None:
+    """On the default pairs the note names the set the shipped checkpoint was chosen on
+    (Matsumoto and car-like: the validation set since issue 25; Panda: these pairs)."""
+    res = _run("evaluate", "--env", env, "--json")
+    assert res.exit_code == 0, res.output
+    note = json.loads(res.output)["pairs_note"]
+    assert said in note and ("optimistic" in note) == (env == "panda-pole")
+
+
 def test_load_policy_rejects_env_mismatch() -> None:
     import learn
     from finsler.errors import InputError

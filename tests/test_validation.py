@@ -397,6 +397,13 @@ def test_the_learning_curve_names_the_pairs_it_was_evaluated_on(report_dir: Path
     old = Path(__file__).resolve().parents[1] / "benchmarks" / "previous_policies"
     assert curve_set(old / "matsumoto") == "default"
     assert curve_set(Path(learn.load_policy("panda-pole").source)) == "default"
+    # the sentence naming a shipped policy says the same (it said "default" for all)
+    from validation.report import load_report_policy
+
+    _, _, note = load_report_policy("matsumoto", None, False, tmp_path)
+    assert "selected on the validation set" in note and "default evaluation" not in note
+    _, _, note = load_report_policy("panda-pole", None, False, tmp_path)
+    assert "selected on the default evaluation set" in note
 
 
 def test_time_to_success_needs_a_running_mean_of_five() -> None:

@@ -209,14 +209,14 @@ def evaluate_command(
         help="Environment: evaluates its shipped policy (unless --run is given).")] = None,
     pairs: Annotated[Path | None, typer.Option(
         help="PAIRS.npy of shape (K, 2, dim); default: the environment's 100 default "
-             "evaluation pairs (on which the SHIPPED policies' checkpoints were selected: "
+             "evaluation pairs (on which the shipped Panda policy's checkpoint was selected: "
              "give fresh pairs for honest figures of a shipped policy).")] = None,
     eps: Annotated[float | None, typer.Option(help="Success threshold (default: task's).")
                    ] = None,
     depth: Annotated[int | None, typer.Option(help="Tree depth D (default: task's).")] = None,
     checkpoint: Annotated[str, typer.Option(
         help="best (selected on the validation set during training; for the shipped "
-             "policies, on the default evaluation set) or latest (the last one, no "
+             "Panda policy, on the default evaluation set) or latest (the last one, no "
              "selection).")] = "best",
     as_json: Annotated[bool, typer.Option("--json", help="Print JSON.")] = False,
     metric_param: Annotated[list[str] | None, typer.Option(
@@ -236,7 +236,7 @@ def evaluate_command(
 
     The default pairs are the environment's default evaluation set. A run trained today
     never sees it (its checkpoints are selected on a separate validation set); the SHIPPED
-    policies' best checkpoints were selected on it, so their figures there are optimistic
+    Panda policy's best checkpoint was selected on it, so its figures there are optimistic
     (the output says so): give --pairs of a fresh seed for honest ones. The output names
     the checkpoint file used."""
     import learn
@@ -284,8 +284,16 @@ def evaluate_command(
     mp = getattr(policy.config, "metric_params", None) or {}
     note = None
     if run is None and pairs is None and checkpoint == "best":
-        note = ("the shipped policy's checkpoint was selected on these default evaluation "
-                "pairs: the figures are optimistic; give --pairs of a fresh seed")
+        from validation.report import curve_set
+
+        src = Path(policy.source)
+        if curve_set(src if src.is_dir() else None) == "default":
+            note = ("the shipped policy's checkpoint was selected on these default evaluation "
+                    "pairs: the figures are optimistic; give --pairs of a fresh seed")
+        else:
+            note = ("the shipped policy's checkpoint was selected on the validation set, not "
+                    "on these pairs; figures on pairs of a fresh seed are in "
+                    "learn/policies/README.md")
     out = {"env": policy.metric.name, "metric_params": mp, "source": policy.source,
            "checkpoint": policy.checkpoint, "pairs_note": note, **res.to_dict()}
     if searched is not None:

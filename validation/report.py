@@ -68,9 +68,12 @@ def load_report_policy(
     if env in learn.shipped_policies():
         pol = learn.load_policy(env, checkpoint=checkpoint, metric_params=metric_params)
         src = Path(pol.source)
+        chosen_on = ("the default evaluation set (optimistic there)"
+                     if curve_set(src if src.is_dir() else None) == "default"
+                     else "the validation set, not on these pairs")
         return pol, src if src.is_dir() else None, (
             f"shipped policy for {env} ({src}, {pol.checkpoint}; its checkpoint was selected "
-            "on the default evaluation set, see learn/policies/README.md for fresh pairs)")
+            f"on {chosen_on}; see learn/policies/README.md for fresh pairs)")
     if quick:
         if env != "matsumoto":
             raise InputError(f"--quick trains a small policy only for matsumoto; {env!r} has "
