@@ -284,10 +284,9 @@ def evaluate_command(
     mp = getattr(policy.config, "metric_params", None) or {}
     note = None
     if run is None and pairs is None and checkpoint == "best":
-        from validation.report import curve_set
+        from validation.report import selected_on_default_set
 
-        src = Path(policy.source)
-        if curve_set(src if src.is_dir() else None) == "default":
+        if selected_on_default_set(policy):
             note = ("the shipped policy's checkpoint was selected on these default evaluation "
                     "pairs: the figures are optimistic; give --pairs of a fresh seed")
         else:

@@ -69,8 +69,7 @@ def load_report_policy(
         pol = learn.load_policy(env, checkpoint=checkpoint, metric_params=metric_params)
         src = Path(pol.source)
         chosen_on = ("the default evaluation set (optimistic there)"
-                     if curve_set(src if src.is_dir() else None) == "default"
-                     else "the validation set, not on these pairs")
+                     if selected_on_default_set(pol) else "the validation set")
         return pol, src if src.is_dir() else None, (
             f"shipped policy for {env} ({src}, {pol.checkpoint}; its checkpoint was selected "
             f"on {chosen_on}; see learn/policies/README.md for fresh pairs)")
@@ -139,6 +138,13 @@ def curve_set(run_dir: Path | None) -> str:
     except Exception:  # no or unreadable config: the loader has already judged the run
         return "validation"
     return "default" if "DEFAULT evaluation set" in selection else "validation"
+
+
+def selected_on_default_set(policy: Any) -> bool:
+    """Whether ``policy``'s best checkpoint was chosen on the default evaluation set (the
+    shipped policies trained before the validation set existed), so that its figures
+    there are optimistic."""
+    return curve_set(Path(policy.source)) == "default"
 
 
 CURVE_SETS = {"validation": "the validation pairs (finsler.validation_pairs)",
