@@ -251,35 +251,46 @@ def run_linear() -> None:
     """Block Thomas against cyclic reduction
     (solvers.block_tridiagonal.block_tridiagonal_solve) on random positive definite systems
     of the shapes the batched solve meets: many short paths (the seeding levels) to a few
-    long ones (4096 segments); CPU ms per solve, the median of 5, with the local
+    long ones (4096 segments), 2 x 2 blocks (the 2-D metrics) and 7 x 7 (Panda: one pair's
+    6 seeds to a batch of 100 pairs); CPU ms per solve, the median of 5, with the local
     modification on (as the solver runs them)."""
     from solvers.backends import _NUMPY_OPS
-    from solvers.block_tridiagonal import THOMAS_MAX_BLOCKS, block_tridiagonal_solve
+    from solvers.block_tridiagonal import (
+        THOMAS_MAX_BLOCKS,
+        THOMAS_MAX_BLOCKS_WIDE,
+        block_tridiagonal_solve,
+        elimination_for,
+    )
 
     rng = np.random.default_rng(0)
-    print(f"\n== block-tridiagonal solves, 2x2 blocks: CPU ms per solve (auto picks Thomas "
-          f"up to {THOMAS_MAX_BLOCKS} blocks: by the size alone, so that a problem's "
-          "arithmetic does not depend on its batch)")
-    print(f"{'problems':>8s} {'blocks':>6s} {'thomas':>9s} {'cyclic':>9s}  auto")
-    for b, m in [(16384, 15), (3400, 31), (1000, 63), (200, 63), (100, 255), (12, 255),
-                 (4, 1023), (4, 4095), (1, 4095)]:
-        a = rng.normal(size=(b, m, 2, 2))
-        a = a @ np.swapaxes(a, -1, -2) + 5 * np.eye(2)
-        o = rng.normal(size=(b, m, 2, 2)) * 0.5
-        r = rng.normal(size=(b, m, 2))
-        diag = [[np.ascontiguousarray(a[..., i, k]) for k in range(2)] for i in range(2)]
-        off = [[np.ascontiguousarray(o[..., i, k]) for k in range(2)] for i in range(2)]
-        rhs = [np.ascontiguousarray(r[..., i]) for i in range(2)]
-        out = []
-        for method in ("thomas", "cyclic"):
-            times = []
-            for _ in range(5):
-                c0 = time.process_time()
-                block_tridiagonal_solve(_NUMPY_OPS, diag, off, rhs, method=method, local=True)
-                times.append(time.process_time() - c0)
-            out.append(float(np.median(times)) * 1e3)
-        auto = "thomas" if m <= THOMAS_MAX_BLOCKS else "cyclic"
-        print(f"{b:8d} {m:6d} {out[0]:9.2f} {out[1]:9.2f}  {auto}")
+    shapes = {2: [(16384, 15), (3400, 31), (1000, 63), (200, 63), (100, 255), (12, 255),
+                  (4, 1023), (4, 4095), (1, 4095)],
+              7: [(6, 31), (600, 31), (6, 63), (6, 255), (6, 1023), (1, 1023)]}
+    for d, sizes in shapes.items():
+        most = THOMAS_MAX_BLOCKS if d <= 2 else THOMAS_MAX_BLOCKS_WIDE
+        print(f"\n== block-tridiagonal solves, {d}x{d} blocks: CPU ms per solve (auto picks "
+              f"Thomas up to {most} blocks: by the size alone, so that a "
+              "problem's arithmetic does not depend on its batch)")
+        print(f"{'problems':>8s} {'blocks':>6s} {'thomas':>9s} {'cyclic':>9s}  auto")
+        for b, m in sizes:
+            a = rng.normal(size=(b, m, d, d))
+            a = a @ np.swapaxes(a, -1, -2) + 5 * np.eye(d)
+            o = rng.normal(size=(b, m, d, d)) * 0.5
+            r = rng.normal(size=(b, m, d))
+            diag = [[np.ascontiguousarray(a[..., i, k]) for k in range(d)] for i in range(d)]
+            off = [[np.ascontiguousarray(o[..., i, k]) for k in range(d)] for i in range(d)]
+            rhs = [np.ascontiguousarray(r[..., i]) for i in range(d)]
+            out = []
+            for method in ("thomas", "cyclic"):
+                times = []
+                for _ in range(5):
+                    c0 = time.process_time()
+                    block_tridiagonal_solve(_NUMPY_OPS, diag, off, rhs, method=method,
+                                            local=True)
+                    times.append(time.process_time() - c0)
+                out.append(float(np.median(times)) * 1e3)
+            auto = elimination_for(m, d)
+            print(f"{b:8d} {m:6d} {out[0]:9.2f} {out[1]:9.2f}  {auto}")
 
 
 def main() -> None:

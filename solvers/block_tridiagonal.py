@@ -5,9 +5,10 @@ Fields of small blocks are kept "structure of arrays": a vector field is a list 
 arrays, a matrix field a ``d x d`` list of arrays, every array ``(B, M)`` (``B`` systems
 of ``M`` blocks), so every block operation is a few elementwise array operations on a
 backend (:mod:`solvers.backends`). :func:`block_tridiagonal_solve` factorises by block
-Thomas elimination (short systems) or block cyclic reduction (long ones: ``log2 M``
-levels), optionally shifting pivot blocks that are not positive definite (a block-wise
-modified Cholesky).
+Thomas elimination (short systems; blocks larger than 2 x 2 as dense ``(B, d, d)``
+stacks, LAPACK's Cholesky where every block is definite) or block cyclic reduction (long
+ones: ``log2 M`` levels), optionally shifting pivot blocks that are not positive definite
+(a block-wise modified Cholesky).
 """
 
 from __future__ import annotations
@@ -16,8 +17,8 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["TAU_FACTOR", "THOMAS_MAX_BLOCKS", "Mat", "Vec", "all_rows", "block_tridiagonal_solve",
-           "sum_"]
+__all__ = ["TAU_FACTOR", "THOMAS_MAX_BLOCKS", "THOMAS_MAX_BLOCKS_WIDE", "Mat", "Vec", "all_rows",
+           "block_tridiagonal_solve", "elimination_for", "sum_"]
 
 Vec = list
 Mat = list
@@ -140,6 +141,16 @@ def _chol_solve(low: Mat, rhs: Any) -> Any:
 #: ``benchmarks/solver_speed.py --metrics none --linear``: 3400 problems x 31 blocks 10 vs
 #: 23 ms, 200 x 63 7.3 vs 5.9 ms, 100 x 255 30 vs 11 ms, 4 x 4095 382 vs 9.5 ms).
 THOMAS_MAX_BLOCKS = 64
+#: The same for blocks larger than 2 x 2 (the dense-block Thomas elimination: 7 x 7, 6
+#: systems of 255 blocks 11 vs 27 ms, of 1023 blocks 43 vs 48 ms).
+THOMAS_MAX_BLOCKS_WIDE = 256
+
+
+def elimination_for(m: int, d: int) -> str:
+    """``"thomas"`` or ``"cyclic"``: the elimination order ``method="auto"`` takes for
+    systems of ``m`` blocks of size ``d x d`` (by the size alone)."""
+    return "thomas" if m <= (THOMAS_MAX_BLOCKS if d <= 2 else THOMAS_MAX_BLOCKS_WIDE) \
+        else "cyclic"
 
 
 def block_tridiagonal_solve(ops: Any, diag: Mat, off: Mat, rhs: Vec, scale: Any = None,
@@ -163,7 +174,7 @@ def block_tridiagonal_solve(ops: Any, diag: Mat, off: Mat, rhs: Vec, scale: Any 
     if scale is None:
         scale = ops.full((b, 1), 1.0)
     if method == "auto":
-        method = "thomas" if m <= THOMAS_MAX_BLOCKS else "cyclic"
+        method = elimination_for(m, d)
     with np.errstate(all="ignore"):  # a system that is not definite may overflow: reported
         if method == "thomas":
             return _thomas(ops, diag, off, rhs, scale, local)
@@ -188,88 +199,115 @@ def _cyclic_padded(ops: Any, diag: Mat, off: Mat, rhs: Vec, scale: Any, local: b
 
 
 def _inv_sym(ops: Any, a: Mat, scale: Any, local: bool) -> tuple[Mat, Any]:
-    """Inverses of a field of symmetric blocks (every entry ``(K,)`` or ``(K, M)``) ->
-    (inverses, definite). With ``local``, blocks that are not positive definite are first
-    shifted by ``tau I`` (Gershgorin bound; see :func:`_chol`)."""
-    d = len(a)
-    if d == 1:
-        x = a[0][0]
-        ok = x > 1e-13 * scale
-        if local:
-            x = ops.where(ok, x, ops.abs(x) * TAU_FACTOR + 1e-6 * scale)
-            ok = x > 0
-        return [[1.0 / ops.where(ok, x, 1.0)]], ok
-    if d == 2:
-        p, q, r = a[0][0], a[0][1], a[1][1]
+    """Inverses of a field of symmetric 2 x 2 blocks (every entry ``(K,)``) -> (inverses,
+    definite). With ``local``, blocks that are not positive definite are first shifted by
+    ``tau I`` (Gershgorin bound; see :func:`_chol`)."""
+    p, q, r = a[0][0], a[0][1], a[1][1]
+    det = p * r - q * q
+    tiny = 1e-13 * scale
+    ok = (p > tiny) & (det > tiny * ops.abs(r))
+    if local:
+        low_eig = ops.where(p < r, p, r) - ops.abs(q)
+        tau = ops.where(ok, 0.0, ops.abs(low_eig) * TAU_FACTOR + 1e-6 * scale)
+        p, r = p + tau, r + tau
         det = p * r - q * q
-        tiny = 1e-13 * scale
-        ok = (p > tiny) & (det > tiny * ops.abs(r))
-        if local:
-            low_eig = ops.where(p < r, p, r) - ops.abs(q)
-            tau = ops.where(ok, 0.0, ops.abs(low_eig) * TAU_FACTOR + 1e-6 * scale)
-            p, r = p + tau, r + tau
-            det = p * r - q * q
-            ok = (p > 0) & (det > 0)
-        inv = 1.0 / ops.where(ok, det, 1.0)
-        off = -q * inv
-        return [[r * inv, off], [off, p * inv]], ok
-    low, ok = _chol(ops, a, scale, local)
-    # L^{-1} by forward substitution on the identity, then L^{-T} L^{-1}
-    inv_l: Mat = [[None] * d for _ in range(d)]
+        ok = (p > 0) & (det > 0)
+    inv = 1.0 / ops.where(ok, det, 1.0)
+    off = -q * inv
+    return [[r * inv, off], [off, p * inv]], ok
+
+
+def _chol_dense(ops: Any, a: Any, tiny: Any) -> tuple[Any, Any]:
+    """Cholesky factors of dense symmetric blocks ``(K, d, d)`` -> (lower factors,
+    definite ``(K,)``): the pivots of :func:`_chol_plain` (not positive relative to
+    ``tiny`` ``(K,)``: not definite, replaced by 1), one column at a time over all blocks."""
+    d = a.shape[-1]
+    low = a * 0.0
+    ok = None
     for j in range(d):
-        inv_l[j][j] = 1.0 / low[j][j]
-        for i in range(j + 1, d):
-            t = sum_(low[i][k] * inv_l[k][j] for k in range(j, i))
-            inv_l[i][j] = -t / low[i][i]
-    out: Mat = [[None] * d for _ in range(d)]
+        s = a[:, j, j] - (low[:, j, :j] * low[:, j, :j]).sum(-1)
+        good = s > tiny
+        ok = good if ok is None else ok & good
+        piv = ops.sqrt(ops.where(good, s, 1.0))
+        low[:, j, j] = piv
+        if j + 1 < d:
+            t = a[:, j + 1:, j] - (low[:, j + 1:, :j] * low[:, j, None, :j]).sum(-1)
+            low[:, j + 1:, j] = t / piv[:, None]
+    return low, ok
+
+
+def _inv_dense(ops: Any, a: Any, scale: Any, local: bool) -> tuple[Any, Any]:
+    """Inverses of dense symmetric blocks ``(K, d, d)`` -> (inverses, definite ``(K,)``),
+    by the Cholesky factor; with ``local`` the blocks that are not positive definite are
+    shifted by ``tau I`` first, ``tau`` from Gershgorin's bound of the smallest eigenvalue
+    (as :func:`_chol`)."""
+    d = a.shape[-1]
+    low = ops.cholesky(a)  # LAPACK where every block is definite (the common case) ...
+    if low is not None:
+        piv = low.diagonal(0, -2, -1)
+        ok = ((piv * piv) > (1e-13 * scale)[:, None]).all(-1)
+        if bool(ok.all()):
+            inv_l = ops.inv(low)
+            return inv_l.mT @ inv_l, ok
+    low, ok = _chol_dense(ops, a, 1e-13 * scale)  # ... else pivot by pivot
+    if local and not bool(ok.all()):
+        diag = a.diagonal(0, -2, -1)
+        rest = ops.abs(a).sum(-1) - ops.abs(diag)
+        low_eig = (diag - rest).min(-1) if d > 1 else diag[:, 0]
+        low_eig = low_eig.values if hasattr(low_eig, "values") else low_eig
+        tau = ops.where(ok, 0.0, ops.abs(low_eig) * TAU_FACTOR + 1e-6 * scale)
+        shifted = a * 1.0
+        for i in range(d):
+            shifted[:, i, i] = a[:, i, i] + tau
+        low, ok = _chol_dense(ops, shifted, 1e-13 * scale)
+    # L^{-1} row by row (forward substitution on the identity), then L^{-T} L^{-1}
+    inv_l = a * 0.0
     for i in range(d):
-        for j in range(i, d):
-            out[i][j] = sum_(inv_l[k][i] * inv_l[k][j] for k in range(j, d))
-            out[j][i] = out[i][j]
-    return out, ok
+        row = -(low[:, i, :i, None] * inv_l[:, :i, :]).sum(1)
+        row[:, i] = row[:, i] + 1.0
+        inv_l[:, i, :] = row / low[:, i, i, None]
+    return inv_l.mT @ inv_l, ok
 
 
 def _thomas(ops: Any, a: Mat, off: Mat, r: Vec, scale: Any, local: bool) -> tuple[Vec, Any]:
     """Block LDL^T elimination in order (the block Thomas algorithm): ``M`` sequential
-    steps, each a few operations on ``(B,)`` vectors (contiguous: the fields are taken
-    column by column). Cheaper than cyclic reduction when ``M`` is small against ``B``."""
+    steps, each a few batched ``d x d`` matrix products over the ``B`` systems (the blocks
+    as dense ``(M, B, d, d)`` arrays; element by element the Python overhead of a 7 x 7
+    block was most of a one-pair Panda solve). Cheaper than cyclic reduction when ``M`` is
+    small against ``B``."""
     d = len(r)
     if d == 2:
         return _thomas2(ops, a, off, r, scale, local)
     m = r[0].shape[1]
     sc = scale[:, 0]
-    col = [[ops.contiguous(x.T) for x in row] for row in a]
-    ocol = [[ops.contiguous(x.T) for x in row] for row in off]
-    rcol = [ops.contiguous(x.T) for x in r]
-    gs: list[Mat] = []
-    zs: list[Vec] = []
+
+    def dense(field: Mat) -> Any:  # d x d field of (B, M) -> (M, B, d, d)
+        return ops.stack([ops.stack([x.T for x in row], -1) for row in field], -2)
+
+    col, ocol = dense(a), dense(off)
+    rcol = ops.stack([x.T for x in r], -1)[..., None]  # (M, B, d, 1)
+    gs: list[Any] = []
+    zs: list[Any] = []
     ok = None
-    s_blk = [[col[i][k][0] for k in range(d)] for i in range(d)]
-    y = [rc[0] for rc in rcol]
+    s_blk, y = col[0], rcol[0]
     for j in range(m):
-        inv, good = _inv_sym(ops, s_blk, sc, local)
+        inv, good = _inv_dense(ops, s_blk, sc, local)
         ok = good if ok is None else ok & good
-        z = [sum_(inv[i][k] * y[k] for k in range(d)) for i in range(d)]
-        zs.append(z)
+        zs.append(inv @ y)
         if j == m - 1:
             break
-        o = [[ocol[i][k][j] for k in range(d)] for i in range(d)]
-        g = [[sum_(inv[i][k] * o[k][c] for k in range(d)) for c in range(d)] for i in range(d)]
+        o = ocol[j]
+        g = inv @ o
         gs.append(g)
-        nxt: Mat = [[None] * d for _ in range(d)]
-        for i in range(d):
-            for c in range(i, d):
-                nxt[i][c] = col[i][c][j + 1] - sum_(o[k][i] * g[k][c] for k in range(d))
-                nxt[c][i] = nxt[i][c]
-        s_blk = nxt
-        y = [rcol[i][j + 1] - sum_(g[k][i] * y[k] for k in range(d)) for i in range(d)]
-    x_cols: list[Vec] = [None] * m  # type: ignore[list-item]
+        nxt = col[j + 1] - o.mT @ g
+        s_blk = 0.5 * (nxt + nxt.mT)
+        y = rcol[j + 1] - g.mT @ y
+    x_cols: list[Any] = [None] * m
     x_cols[m - 1] = zs[m - 1]
     for j in range(m - 2, -1, -1):
-        g, xn = gs[j], x_cols[j + 1]
-        x_cols[j] = [zs[j][i] - sum_(g[i][k] * xn[k] for k in range(d)) for i in range(d)]
-    x = [ops.contiguous(ops.stack_cols([x_cols[j][i] for j in range(m)])) for i in range(d)]
-    return x, ok
+        x_cols[j] = zs[j] - gs[j] @ x_cols[j + 1]
+    x = ops.stack(x_cols, 1)[..., 0]  # (B, M, d)
+    return [ops.contiguous(x[..., i]) for i in range(d)], ok
 
 
 def _thomas2(ops: Any, a: Mat, off: Mat, r: Vec, scale: Any, local: bool

@@ -50,7 +50,7 @@ def _fields(ops, a, o, r, convert):
 
 
 @pytest.mark.parametrize("shape", [(3, 13, 2), (2, 1, 3), (4, 16, 7), (2, 63, 2), (1, 2, 1),
-                                   (5, 9, 3), (2, 100, 2)])
+                                   (5, 9, 3), (2, 100, 2), (2, 255, 7)])
 @pytest.mark.parametrize("method", ["thomas", "cyclic"])
 @pytest.mark.parametrize("device", [None, "cpu"])
 def test_block_tridiagonal_solve_matches_dense(shape, method, device) -> None:
@@ -78,25 +78,33 @@ def test_block_tridiagonal_solve_matches_dense(shape, method, device) -> None:
                 np.abs(ref)))
 
 
-def test_local_modification_solves_a_definite_neighbour() -> None:
+@pytest.mark.parametrize("d", [2, 7])
+def test_local_modification_solves_a_definite_neighbour(d) -> None:
     """With ``local`` every system factorises, and the solution solves (H + E) x = r with E
-    block diagonal, zero on the blocks that were definite: checked by recovering E."""
+    block diagonal, zero on the blocks that were definite: checked by recovering E (2 x 2
+    blocks: their own elimination; 7 x 7: the dense one). A definite system solved in the
+    same batch is solved exactly (nothing of it is modified)."""
     rng = np.random.default_rng(3)
-    b, m, d = 1, 9, 2
+    b, m = 2, 9
     a = rng.normal(size=(b, m, d, d))
     a = a @ np.swapaxes(a, -1, -2) + 3.0 * np.eye(d)
-    a[0, 4] = np.array([[-2.0, 0.5], [0.5, 1.0]])  # one indefinite block
+    a[0, 4] = np.eye(d) + 0.5 * (np.eye(d, k=1) + np.eye(d, k=-1))
+    a[0, 4, 0, 0] = -2.0  # one indefinite block in the first system
+    assert np.linalg.eigvalsh(a[0, 4]).min() < 0
     o = rng.normal(size=(b, m, d, d)) * 0.3
+    assert np.linalg.eigvalsh(_dense(a[1], o[1])).min() > 0
     r = rng.normal(size=(b, m, d))
     x, ok = block_tridiagonal_solve(_NUMPY_OPS, *_fields(_NUMPY_OPS, a, o, r, lambda v: v),
                                     method="thomas", local=True)
     assert ok.all()
-    x = np.stack(x, -1)[0]
-    resid = (r[0].reshape(-1) - _dense(a[0], o[0]) @ x.reshape(-1)).reshape(m, d)
+    x = np.stack(x, -1)
+    resid = (r[0].reshape(-1) - _dense(a[0], o[0]) @ x[0].reshape(-1)).reshape(m, d)
     # H x + E x = r: the residual is E x, non-zero only where a block was modified
     nonzero = np.flatnonzero(np.max(np.abs(resid), axis=1) > 1e-10)
     assert nonzero.size >= 1
     assert set(nonzero) <= {3, 4, 5}  # the modified pivot's block (Schur complements near it)
+    ref = np.linalg.solve(_dense(a[1], o[1]), r[1].reshape(-1))
+    np.testing.assert_allclose(x[1].reshape(-1), ref, rtol=0, atol=1e-12 * np.abs(ref).max())
 
 
 @pytest.mark.parametrize("name", ["matsumoto", "randers", "poincare", "panda-pole"])
