@@ -182,4 +182,6 @@ def test_model_free_flag_switches_off_the_derivative_terms(tmp_path) -> None:
     res = _run("train", "--env", "euclidean", "--out", str(tmp_path / "x"), "--paper",
                "--model-free")
     assert res.exit_code == 2 and "one of --paper, --model-free" in res.output
-    assert learn.default_config("matsumoto").model_free is False
+    # the car-like defaults differentiate C (path energy); Matsumoto's are model-free
+    assert learn.default_config("carlike").model_free is False
+    assert learn.default_config("matsumoto").model_free is True
