@@ -367,8 +367,9 @@ def paper_config(env: str, **overrides: Any) -> TrainConfig:
 # Beyond the paper (measured, see benchmarks/learn_ablation.py and the closing notes):
 # full depth from the start, big collections and minibatches with few epochs (vectorised
 # trees), a higher learning rate with cosine decay, log1p critic targets, inputs scaled to
-# [-1, 1] and a residual actor mean around the coordinate midpoint; for Matsumoto and
-# car-like also the path-energy actor term with one pass per collection.
+# [-1, 1] and a residual actor mean around the coordinate midpoint; for car-like also the
+# path-energy actor term with one pass per collection (Matsumoto's until issue 25); for
+# Matsumoto and car-like the actor relative to each pair's length.
 _OURS_COMMON: dict[str, Any] = dict(
     depth_schedule="full",
     critic_transform="log1p",
@@ -384,8 +385,9 @@ _OURS_COMMON: dict[str, Any] = dict(
     log_std_max=1.0,
 )
 _OURS: dict[str, dict[str, Any]] = {
-    # one pass per collection plus the path-energy term. Budgets count every evaluation of C
-    # (all-inclusive). Matsumoto: the energy of the actor's paths between 4 fresh pairs per
+    # one pass per collection plus the path-energy term (car-like; Matsumoto's defaults until
+    # issue 25, see below). Budgets count every evaluation of C (all-inclusive). Matsumoto
+    # then: the energy of the actor's paths between 4 fresh pairs per
     # actor step (5504 in trees + 17 steps * 4 pairs * 64 = 9856 per collection, 1.79x the
     # trees' count): at the paper's 2e7 budget 98% on tuning pairs against 96% with 8 pairs
     # and 95.5% with 16 (session-4 note), so 1e8 trains on about the 6e7 trees' evaluations

@@ -253,8 +253,8 @@ def _inv_dense(ops: Any, a: Any, scale: Any, local: bool) -> tuple[Any, Any]:
     if local and not bool(ok.all()):
         diag = a.diagonal(0, -2, -1)
         rest = ops.abs(a).sum(-1) - ops.abs(diag)
-        low_eig = (diag - rest).min(-1) if d > 1 else diag[:, 0]
-        low_eig = low_eig.values if hasattr(low_eig, "values") else low_eig
+        low_eig = (diag - rest).min(-1)  # numpy: the minima; torch: (values, indices)
+        low_eig = getattr(low_eig, "values", low_eig)
         tau = ops.where(ok, 0.0, ops.abs(low_eig) * TAU_FACTOR + 1e-6 * scale)
         shifted = a * 1.0
         for i in range(d):

@@ -81,16 +81,17 @@ def train_command(
     and `timesteps_derivative` the evaluations whose derivative was used. Checkpoints are
     selected on a validation pair set, never on the default evaluation set.
 
-    MODEL-FREE OR NOT: the paper's method uses values of C only. The Matsumoto and
-    car-like defaults add the path-energy actor term, which DIFFERENTIATES C (model-based);
-    --model-free (or --paper) switches it off; config.json says which ("model_free").
+    MODEL-FREE OR NOT: the paper's method uses values of C only, and so do the Matsumoto
+    and Panda defaults. The car-like defaults add the path-energy actor term, which
+    DIFFERENTIATES C (model-based); --model-free (or --paper) switches it off; config.json
+    says which ("model_free").
 
     Defaults per environment (learn.default_config): full depth, lr 1e-3 cosine-decayed to
     5%, log1p critic targets, inputs scaled to [-1, 1], residual actor mean, collections
-    of 16384 pairs, minibatches of 1024. matsumoto: 1e8 evaluations of C, one pass per
-    collection, fused Adam, path energy (weight 1, 4 pairs per actor step; 1.8x the
-    trees' evaluations), the actor relative to each pair's length; carlike: path energy
-    with p = 4, MLPs 128-128, 16 pairs and 4e8 (13.4x), the relative actor; panda-pole:
+    of 16384 pairs, minibatches of 1024. matsumoto: 1e8 evaluations of C, 3 passes per
+    collection, fused Adam, the actor relative to each pair's length, model-free; carlike:
+    one pass, path energy with p = 4, MLPs 128-128, 16 pairs per actor step and 4e8
+    (13.4x the trees' evaluations), the relative actor; panda-pole:
     1e7, MLPs 128-128, symmetric critic, 3 epochs, model-free.
 
     ANY METRIC: --metric-param NAME=VALUE sets the metric's parameters (recorded in
