@@ -196,6 +196,19 @@ class TrainConfig(MetricConfig):
     actor_relative: bool = False
     """Actor sees (centre, unit direction, length r) of the pair and predicts its offset
     from the coordinate midpoint and its std as multiples of r (a residual mean)."""
+    actor_heads: int = 1
+    """Beyond the paper: the actor predicts this many candidate midpoints per pair (each
+    its own Gaussian) and a score per candidate; the policy is the best-scored one (one
+    forward pass, so generation still makes 2**D - 1 predictions). In training every
+    candidate descends the actor loss on its own and the scores learn which candidate the
+    critic rates best (cross-entropy, weight ``actor_head_weight``): two routes around an
+    obstacle are two candidates, not one average of them. Values of C only."""
+    actor_head_weight: float = 0.1
+    """Weight of the candidates' score loss (used when ``actor_heads > 1``)."""
+    actor_head_share: float = 1.0
+    """Weight of the actor loss of the heads the critic does not rate best, relative to
+    the best one's (1: every head descends on its own; below 1: relaxed winner-take-all,
+    the losing heads stay where they are as alternatives)."""
     symmetric_critic: bool = False
     """For reversible metrics: V(s, g) = (net(s, g) + net(g, s)) / 2 exactly."""
     log_std_min: float = -20.0
@@ -319,6 +332,16 @@ class TrainConfig(MetricConfig):
             raise InputError(f"route_weight must be finite and >= 0, got {self.route_weight!r}")
         if not (0.0 <= self.explore_std < float("inf")):
             raise InputError(f"explore_std must be finite and >= 0, got {self.explore_std!r}")
+        if not isinstance(self.actor_heads, int) or isinstance(
+                self.actor_heads, bool) or not 1 <= self.actor_heads <= 64:
+            raise InputError(f"actor_heads must be an integer in [1, 64], got "
+                             f"{self.actor_heads!r}")
+        if not (0.0 <= self.actor_head_weight < float("inf")):
+            raise InputError(f"actor_head_weight must be finite and >= 0, got "
+                             f"{self.actor_head_weight!r}")
+        if not (0.0 <= self.actor_head_share <= 1.0):
+            raise InputError(f"actor_head_share must be in [0, 1], got "
+                             f"{self.actor_head_share!r}")
         check_choice("expert_search", self.expert_search, ("local", "full"))
         if not (0.0 <= self.expert_weight < float("inf")):
             raise InputError(f"expert_weight must be finite and >= 0, got "

@@ -72,8 +72,10 @@ class Actor(nn.Module):
     ``r``: a sub-pair deep in the tree gets the same relative precision as the top pair
     (with an absolute offset its correction is a few hundredths of the output's scale).
     With ``explore_std > 0`` the standard deviation is at least ``explore_std * |g - s|``
-    (the learned one otherwise collapses to its clamp and exploration stops). Samples and
-    means are projected into the domain.
+    (the learned one otherwise collapses to its clamp and exploration stops). With
+    ``heads > 1`` the network gives that many Gaussians and a score each
+    (:meth:`candidates`); the policy is the best-scored head's. Samples and means are
+    projected into the domain.
     """
 
     def __init__(
@@ -88,8 +90,10 @@ class Actor(nn.Module):
         log_std_max: float = 2.0,
         init_log_std: float | None = None,
         explore_std: float = 0.0,
+        heads: int = 1,
     ) -> None:
         super().__init__()
+        self.heads = int(heads)
         self.domain = metric.domain
         self.explore_std = float(explore_std)
         self.dim = metric.dim
@@ -99,15 +103,26 @@ class Actor(nn.Module):
         self.log_std_max = float(log_std_max)
         self.scaler = _Scaler(metric.domain, normalize_inputs)
         n_in = 2 * self.dim + 1 if relative else 2 * self.dim
-        self.net = mlp(n_in, 2 * self.dim, hidden, activation)
-        if init_log_std is not None:
-            last = self.net[-1]
-            with torch.no_grad():
-                last.weight[self.dim :] *= 0.01
-                last.bias[self.dim :] = float(init_log_std)
+        # per head: dim means then dim log-stds; then one score per head (heads > 1)
+        n_out = self.heads * 2 * self.dim + (self.heads if self.heads > 1 else 0)
+        self.net = mlp(n_in, n_out, hidden, activation)
+        last = self.net[-1]
+        with torch.no_grad():
+            if init_log_std is not None:
+                for k in range(self.heads):
+                    rows = slice((2 * k + 1) * self.dim, (2 * k + 2) * self.dim)
+                    last.weight[rows] *= 0.01
+                    last.bias[rows] = float(init_log_std)
+            # distinct starts: head k >= 1 begins offset along +-axis (k - 1) // 2 by a
+            # quarter of the output scale, so the candidates descend into different basins
+            for k in range(1, self.heads):
+                axis, sign = ((k - 1) // 2) % self.dim, 1.0 if k % 2 else -1.0
+                last.bias[2 * k * self.dim + axis] += 0.25 * sign
 
-    def distribution(self, s: torch.Tensor, g: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """Unprojected Gaussian mean ``(N, dim)`` and standard deviation ``(N, dim)``."""
+    def candidates(self, s: torch.Tensor, g: torch.Tensor
+                   ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor | None]:
+        """Every head's unprojected Gaussian: means ``(N, H, dim)``, standard deviations
+        ``(N, H, dim)`` and scores ``(N, H)`` (None for one head)."""
         half = self.scaler.span
         if self.relative:
             d = (g - s) / half
@@ -118,16 +133,31 @@ class Actor(nn.Module):
             half = half * r
         else:
             out = self.net(torch.cat([self.scaler(s), self.scaler(g)], -1))
-        mu, log_std = out[:, : self.dim], out[:, self.dim :]
+        n, h, dim = out.shape[0], self.heads, self.dim
+        gauss = out[:, : 2 * h * dim].reshape(n, h, 2 * dim)
+        scores = out[:, 2 * h * dim :] if h > 1 else None
+        mu, log_std = gauss[..., :dim], gauss[..., dim:]
         log_std = log_std.clamp(self.log_std_min, self.log_std_max)
-        mean = 0.5 * (s + g) + half * mu if self.residual else self.scaler.center + half * mu
+        half = half.unsqueeze(-2) if half.dim() == 2 else half
+        base = 0.5 * (s + g).unsqueeze(1) if self.residual else self.scaler.center
+        mean = base + half * mu
         std = half * log_std.exp()
         if self.explore_std > 0:
             # exploration floor proportional to the pair's coordinate distance, so every
             # level of the tree keeps exploring at its own scale
-            gap = (g - s).norm(dim=-1, keepdim=True)
+            gap = (g - s).norm(dim=-1, keepdim=True).unsqueeze(1)
             std = torch.maximum(std, self.explore_std * gap)
-        return mean, std
+        return mean, std, scores
+
+    def distribution(self, s: torch.Tensor, g: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Unprojected Gaussian mean ``(N, dim)`` and standard deviation ``(N, dim)`` (of
+        the best-scored head when there are several)."""
+        mean, std, scores = self.candidates(s, g)
+        if scores is None:
+            return mean[:, 0], std[:, 0]
+        pick = scores.argmax(-1)
+        rows = torch.arange(mean.shape[0], device=mean.device)
+        return mean[rows, pick], std[rows, pick]
 
     def forward(
         self, s: torch.Tensor, g: torch.Tensor, generator: torch.Generator | None = None,

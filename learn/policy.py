@@ -55,6 +55,7 @@ def build_actor(cfg: TrainConfig, metric: finsler.Metric | None = None) -> Actor
         log_std_max=cfg.log_std_max,
         init_log_std=cfg.init_log_std,
         explore_std=cfg.explore_std,
+        heads=cfg.actor_heads,
     )
 
 

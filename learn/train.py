@@ -225,8 +225,7 @@ class Trainer(RunLoop):
                 self._step_if_finite(self.opt_critic, self.critic, "critic")
                 # actor step: the method's loss with the critic held fixed, plus the terms
                 self.critic.requires_grad_(False)
-                m = self.actor(bs, bg, generator=self.gen)
-                la = self.loss(self.critic(bs, m), self.critic(m, bg)).mean()
+                la = self._actor_loss(bs, bg)
                 for term in self.terms:
                     out = term.step(self)
                     self.timesteps += out.evaluations
@@ -242,6 +241,28 @@ class Trainer(RunLoop):
                 steps += 1
         self.updates += steps
         return lc_sum / max(steps, 1), la_sum / max(steps, 1)
+
+    def _actor_loss(self, s: torch.Tensor, g: torch.Tensor) -> torch.Tensor:
+        """The method's loss at a sampled midpoint (critic held fixed). With several actor
+        heads every head's sample gets the loss (each descends into its own basin), and
+        the scores learn, by cross-entropy, the head whose sample the critic rates best."""
+        if self.actor.heads == 1:
+            m = self.actor(s, g, generator=self.gen)
+            return self.loss(self.critic(s, m), self.critic(m, g)).mean()
+        mean, std, scores = self.actor.candidates(s, g)
+        n, h, dim = mean.shape
+        noise = torch.randn(mean.shape, generator=self.gen, device=mean.device,
+                            dtype=mean.dtype)
+        m = self.actor.domain.project((mean + std * noise).reshape(n * h, dim))
+        s_rep = s.repeat_interleave(h, 0)
+        g_rep = g.repeat_interleave(h, 0)
+        per = self.loss(self.critic(s_rep, m), self.critic(m, g_rep)).reshape(n, h)
+        best = per.detach().argmin(-1)
+        choice = torch.nn.functional.cross_entropy(scores, best)
+        share = self.cfg.actor_head_share
+        weight = torch.full_like(per, share)
+        weight.scatter_(1, best[:, None], 1.0)
+        return (weight * per).sum(-1).mean() + self.cfg.actor_head_weight * choice
 
     def _step_if_finite(self, opt: torch.optim.Optimizer, net: torch.nn.Module,
                         what: str) -> None:

@@ -230,6 +230,126 @@ def test_relative_actor_policy_saves_and_loads(tmp_path) -> None:
     assert learn.TrainConfig.from_dict(d).actor_relative is False
 
 
+def test_multi_head_actor_policy_is_the_best_scored_head() -> None:
+    """``actor_heads``: with a constant network output, :meth:`Actor.candidates` gives each
+    head's Gaussian by the same closed form as one head (relative actor: offset and std
+    multiples of the pair's length), and the policy's mean and sample are the head with
+    the largest score, per pair; one head keeps the single-head layout (no score)."""
+    m = finsler.get_metric("carlike")
+    cfg = learn.default_config("carlike", actor_relative=True, actor_heads=3)
+    actor = build_actor(cfg, m)
+    assert actor.net[-1].out_features == 3 * 6 + 3
+    mus = torch.tensor([[0.1, -0.2, 0.3], [-0.3, 0.0, 0.2], [0.0, 0.4, -0.1]])
+    log_stds = torch.tensor([[-1.0, -2.0, -3.0], [-2.0, -2.0, -2.0], [-4.0, -1.0, -1.5]])
+    span = actor.scaler.span
+    s = torch.tensor([[0.1, 0.2, 0.3], [-0.4, 0.5, -0.2]])
+    g = torch.tensor([[0.5, -0.1, 0.9], [0.2, 0.5, 0.1]])
+    r = ((g - s) / span).norm(dim=1, keepdim=True)
+    for best in range(3):
+        scores = torch.full((3,), -1.0)
+        scores[best] = 2.0
+        with torch.no_grad():
+            actor.net[-1].weight.zero_()
+            actor.net[-1].bias.copy_(torch.cat([torch.cat([mus, log_stds], 1).reshape(-1),
+                                                scores]))
+        mean, std, sc = actor.candidates(s, g)
+        assert mean.shape == std.shape == (2, 3, 3) and sc.shape == (2, 3)
+        for k in range(3):
+            torch.testing.assert_close(mean[:, k], 0.5 * (s + g) + span * r * mus[k])
+            torch.testing.assert_close(std[:, k], span * r * torch.exp(log_stds[k]))
+        m_pol, s_pol = actor.distribution(s, g)
+        torch.testing.assert_close(m_pol, mean[:, best])
+        torch.testing.assert_close(s_pol, std[:, best])
+        torch.testing.assert_close(actor(s, g, deterministic=True), m.domain.project(
+            mean[:, best]))
+    one = build_actor(cfg.replace(actor_heads=1), m)
+    assert one.net[-1].out_features == 6 and one.candidates(s, g)[2] is None
+
+
+def test_multi_head_actor_starts_its_heads_apart() -> None:
+    """The heads start at distinct offsets, so that they can descend into different
+    basins: PyTorch's initialisation of the same network, plus 0.25 along +x, -x, +y, -y
+    for heads 1-4 (head 0 and the stds and scores untouched); one head is PyTorch's
+    initialisation alone."""
+    from learn.networks import mlp
+
+    m = finsler.get_metric("matsumoto")
+    cfg = learn.default_config("matsumoto", actor_heads=5)
+    for heads, n_out in ((5, 5 * 4 + 5), (1, 4)):
+        torch.manual_seed(0)
+        actor = build_actor(cfg.replace(actor_heads=heads), m)
+        torch.manual_seed(0)
+        ref = mlp(actor.net[0].in_features, n_out, cfg.hidden, cfg.activation)
+        shift = (actor.net[-1].bias - ref[-1].bias).detach()
+        want = torch.zeros(n_out)
+        if heads == 5:
+            want[[4, 8, 13, 17]] = torch.tensor([0.25, -0.25, 0.25, -0.25])
+        torch.testing.assert_close(shift, want, rtol=0, atol=1e-7)
+        torch.testing.assert_close(actor.net[-1].weight, ref[-1].weight, rtol=0, atol=0)
+
+
+def _distance_critic(tr: Trainer) -> None:
+    """Replace the critic with the exact Euclidean distance (``critic(s, g)``)."""
+    tr.critic = lambda a, b: (b - a).norm(dim=-1)  # type: ignore[assignment]
+
+
+def test_multi_head_actor_loss_scores_the_head_the_critic_rates_best() -> None:
+    """With the exact Euclidean distance as critic and two heads, one exactly at the
+    midpoint and one offset: the scores' gradient raises the midpoint head's score and
+    lowers the other's, the midpoint head (the winner) gets no mean gradient (its loss is
+    at its minimum), and the loser's mean gradient scales with ``actor_head_share``: the
+    same at share 1 as a head trained alone, 1/20 of it at 0.05."""
+    grads = {}
+    for share in (1.0, 0.05):
+        cfg = learn.default_config("euclidean", depth=2, actor_heads=2,
+                                   actor_head_share=share, actor_head_weight=1.0,
+                                   log_std_min=-20.0)
+        tr = Trainer(cfg, _tmp_run_dir(), progress=False)
+        with torch.no_grad():
+            last = tr.actor.net[-1]
+            last.weight.zero_()
+            last.bias.zero_()
+            last.bias[2:4] = -20.0  # head 0: mean (s + g) / 2, std ~0
+            last.bias[4] = 0.1  # head 1: offset along x
+            last.bias[6:8] = -20.0
+        _distance_critic(tr)
+        s = torch.tensor([[-0.5, 0.2], [0.3, -0.4], [0.0, 0.0]])
+        g = torch.tensor([[0.5, -0.1], [-0.2, 0.6], [0.1, 0.7]])
+        tr.actor.zero_grad()
+        tr._actor_loss(s, g).backward()
+        b = last.bias.grad.clone()
+        assert b[8] < 0 < b[9]  # descent raises score 0 (the winner), lowers score 1
+        torch.testing.assert_close(b[0:2], torch.zeros(2), atol=1e-5, rtol=0)
+        assert b[4].abs() > 1e-3
+        grads[share] = b[4:6]
+    torch.testing.assert_close(grads[0.05], 0.05 * grads[1.0], rtol=1e-5, atol=1e-8)
+
+
+def test_multi_head_policy_saves_and_loads(tmp_path) -> None:
+    """A run with ``actor_heads`` trains, and the policy loaded from its directory
+    predicts the trainer's own midpoints; a config.json without the field loads as one
+    head; impossible values are refused by name."""
+    cfg = learn.default_config("euclidean", depth=2, timesteps=20_000, collection_size=1024,
+                               minibatch_size=256, eval_every=1000, actor_relative=True,
+                               actor_heads=2)
+    tr = Trainer(cfg, tmp_path / "run", progress=False)
+    tr.run()
+    pol = learn.load_policy(tmp_path / "run", checkpoint="latest")
+    assert pol.actor.heads == 2 and pol.config.actor_heads == 2
+    pairs = finsler.sample_pairs(tr.metric, 50, seed=3)
+    own = learn.Policy(tr.actor, cfg).midpoint(pairs[:, 0], pairs[:, 1])
+    np.testing.assert_array_equal(pol.midpoint(pairs[:, 0], pairs[:, 1]), own)
+    d = cfg.to_dict()
+    for k in ("actor_heads", "actor_head_weight", "actor_head_share"):
+        d.pop(k)
+    assert learn.TrainConfig.from_dict(d).actor_heads == 1
+    for field, bad in (("actor_heads", 0), ("actor_heads", 2.5), ("actor_heads", True),
+                       ("actor_head_weight", -1.0), ("actor_head_weight", float("nan")),
+                       ("actor_head_share", 1.5)):
+        with pytest.raises(finsler.InputError, match=field):
+            learn.default_config("euclidean", **{field: bad})
+
+
 def test_route_search_returns_only_real_improvements() -> None:
     cfg = learn.default_config("euclidean", depth=3, route_candidates=16, route_pairs=40)
     tr = Trainer(cfg, _tmp_run_dir(), progress=False)
