@@ -138,7 +138,7 @@ class Actor(nn.Module):
         scores = out[:, 2 * h * dim :] if h > 1 else None
         mu, log_std = gauss[..., :dim], gauss[..., dim:]
         log_std = log_std.clamp(self.log_std_min, self.log_std_max)
-        half = half.unsqueeze(-2) if half.dim() == 2 else half
+        half = half.unsqueeze(-2)  # (N, 1, dim) or (1, dim): the same scale for every head
         base = 0.5 * (s + g).unsqueeze(1) if self.residual else self.scaler.center
         mean = base + half * mu
         std = half * log_std.exp()
