@@ -47,15 +47,15 @@ def check_choice(name: str, value: str, allowed: tuple[str, ...]) -> None:
         raise InputError(f"{name} must be one of {', '.join(allowed)}; got {value!r}")
 
 
-def check_hidden(hidden: tuple[int, ...], dim: int = 8) -> None:
-    """Raise :class:`InputError` unless ``hidden`` are positive layer widths whose MLPs
-    (inputs ~ ``2 * dim`` + a few) fit in memory (:func:`finsler.limits.check_memory`,
-    before any network is built)."""
+def check_hidden(hidden: tuple[int, ...], dim: int = 8, name: str = "hidden") -> None:
+    """Raise :class:`InputError` unless ``hidden`` (the config field ``name``) are positive
+    layer widths whose MLPs (inputs ~ ``2 * dim`` + a few) fit in memory
+    (:func:`finsler.limits.check_memory`, before any network is built)."""
     if not hidden or any(h < 1 for h in hidden):
-        raise InputError(f"hidden sizes must be positive, got {hidden!r}")
+        raise InputError(f"{name} sizes must be positive, got {hidden!r}")
     widths = [2 * dim + 4, *hidden, 2 * dim]
     weights = sum((a + 1) * b for a, b in itertools.pairwise(widths))
-    check_memory((weights,), f"hidden {list(hidden)} (about {weights:.3g} weights per "
+    check_memory((weights,), f"{name} {list(hidden)} (about {weights:.3g} weights per "
                  "network)", hint="choose smaller layers", itemsize=4, copies=4)
 
 

@@ -164,6 +164,10 @@ class TrainConfig(MetricConfig):
     """Success threshold for the evaluations logged during training; None = the task's."""
     hidden: tuple[int, ...] = (64, 64)
     """Hidden layer sizes of both MLPs (paper: 64, 64)."""
+    critic_hidden: tuple[int, ...] | None = None
+    """Beyond the paper: the critic's hidden layer sizes when they differ from ``hidden``
+    (None: ``hidden``). Generation calls only the actor, so a larger critic costs training
+    time, not generation time."""
     activation: str = "relu"
     """``relu`` (paper) or ``tanh``."""
     lr: float = 3e-5
@@ -209,6 +213,13 @@ class TrainConfig(MetricConfig):
     """Weight of the actor loss of the heads the critic does not rate best, relative to
     the best one's (1: every head descends on its own; below 1: relaxed winner-take-all,
     the losing heads stay where they are as alternatives)."""
+    actor_pairs: int = 0
+    """Beyond the paper (0 = off): per actor step, this many fresh uniform pairs (the
+    distribution of the trees' top level) join the minibatch of the actor loss. The
+    collected data holds one top-level pair per tree beside 2**D - 1 shorter sub-pairs and
+    2**D + 1 zero pairs, so the actor's long pairs, where the route and the bend are
+    chosen, are rare. The actor loss needs the critic only, so these pairs cost no
+    evaluation of C (values only, model-free)."""
     symmetric_critic: bool = False
     """For reversible metrics: V(s, g) = (net(s, g) + net(g, s)) / 2 exactly."""
     log_std_min: float = -20.0
@@ -292,6 +303,8 @@ class TrainConfig(MetricConfig):
     def __post_init__(self) -> None:
         self._check_types()
         self.hidden = tuple(int(h) for h in self.hidden)
+        if self.critic_hidden is not None:
+            self.critic_hidden = tuple(int(h) for h in self.critic_hidden)
         self.validate()
 
     def validate(self) -> None:
@@ -322,6 +335,8 @@ class TrainConfig(MetricConfig):
         if self.eps is not None and not (self.eps > 0 and self.eps < float("inf")):
             raise InputError(f"eps must be positive and finite, got {self.eps!r}")
         check_hidden(self.hidden)
+        if self.critic_hidden is not None:
+            check_hidden(self.critic_hidden, name="critic_hidden")
         if not (self.lr > 0 and self.lr < 1):
             raise InputError(f"lr must be in (0, 1), got {self.lr!r}")
         if not (0 < self.lr_final_fraction <= 1):
@@ -339,6 +354,8 @@ class TrainConfig(MetricConfig):
         if not (0.0 <= self.actor_head_weight < float("inf")):
             raise InputError(f"actor_head_weight must be finite and >= 0, got "
                              f"{self.actor_head_weight!r}")
+        if not isinstance(self.actor_pairs, int) or self.actor_pairs < 0:
+            raise InputError(f"actor_pairs must be an integer >= 0, got {self.actor_pairs!r}")
         if not (0.0 <= self.actor_head_share <= 1.0):
             raise InputError(f"actor_head_share must be in [0, 1], got "
                              f"{self.actor_head_share!r}")

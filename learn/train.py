@@ -99,7 +99,8 @@ class Trainer(RunLoop):
             torch.manual_seed(cfg.seed)
             self.actor = build_actor(cfg, self.metric).to(self.device)
             self.critic = Critic(
-                self.metric, hidden=cfg.hidden, activation=cfg.activation,
+                self.metric, hidden=cfg.critic_hidden or cfg.hidden,
+                activation=cfg.activation,
                 normalize_inputs=cfg.normalize_inputs, transform=cfg.critic_transform,
                 symmetric=cfg.symmetric_critic,
             ).to(self.device)
@@ -245,7 +246,14 @@ class Trainer(RunLoop):
     def _actor_loss(self, s: torch.Tensor, g: torch.Tensor) -> torch.Tensor:
         """The method's loss at a sampled midpoint (critic held fixed). With several actor
         heads every head's sample gets the loss (each descends into its own basin), and
-        the scores learn, by cross-entropy, the head whose sample the critic rates best."""
+        the scores learn, by cross-entropy, the head whose sample the critic rates best.
+        With ``actor_pairs`` that many fresh uniform pairs join the minibatch (no
+        evaluation of C)."""
+        if self.cfg.actor_pairs:
+            k = self.cfg.actor_pairs
+            ends = self.metric.domain.sample(2 * k, self.np_rng).reshape(k, 2, self.dim)
+            e = torch.as_tensor(ends, dtype=s.dtype, device=s.device)
+            s, g = torch.cat([s, e[:, 0]]), torch.cat([g, e[:, 1]])
         if self.actor.heads == 1:
             m = self.actor(s, g, generator=self.gen)
             return self.loss(self.critic(s, m), self.critic(m, g)).mean()

@@ -350,6 +350,70 @@ def test_multi_head_policy_saves_and_loads(tmp_path) -> None:
             learn.default_config("euclidean", **{field: bad})
 
 
+def test_actor_pairs_join_the_actor_minibatch_without_evaluating_c(monkeypatch) -> None:
+    """``actor_pairs``: the actor loss is the method's loss over the minibatch followed by
+    ``actor_pairs`` fresh uniform pairs drawn from the run's numpy generator (recomputed
+    here with actor_pairs off on the concatenated batch, the same noise), and an update
+    with them evaluates C nowhere (every evaluation would be counted in timesteps)."""
+    cfg = learn.default_config("euclidean", depth=2, actor_pairs=7, actor_relative=True)
+    tr = Trainer(cfg, _tmp_run_dir(), progress=False)
+    _distance_critic(tr)
+    s = torch.tensor([[-0.5, 0.2], [0.3, -0.4], [0.0, 0.0]])
+    g = torch.tensor([[0.5, -0.1], [-0.2, 0.6], [0.0, 0.0]])
+    np_state, torch_state = tr.np_rng.bit_generator.state, tr.gen.get_state()
+    loss = tr._actor_loss(s, g)
+    after = tr.np_rng.bit_generator.state
+    ref_rng = np.random.default_rng()
+    ref_rng.bit_generator.state = np_state
+    ends = torch.as_tensor(tr.metric.domain.sample(14, ref_rng).reshape(7, 2, 2),
+                           dtype=torch.float32)
+    assert ref_rng.bit_generator.state == after
+    tr.gen.set_state(torch_state)
+    tr.cfg = cfg.replace(actor_pairs=0)
+    ref = tr._actor_loss(torch.cat([s, ends[:, 0]]), torch.cat([g, ends[:, 1]]))
+    torch.testing.assert_close(loss, ref, rtol=0, atol=0)
+    tr.cfg = cfg
+    # an update with the pairs: C is never evaluated, timesteps stay what they were
+    s64, g64, c64, _ = tr.collect()
+    tr.critic = Trainer(cfg, _tmp_run_dir(), progress=False).critic
+
+    def no_cost(*_: object) -> None:
+        raise AssertionError("C evaluated by an actor_pairs update")
+
+    monkeypatch.setattr(type(tr.metric), "cost", no_cost)
+    monkeypatch.setattr(type(tr.metric), "path_costs", no_cost)
+    before = tr.timesteps
+    tr.update(s64, g64, c64)
+    assert tr.timesteps == before
+    for bad in (-1, 2.5, True):
+        with pytest.raises(finsler.InputError, match="actor_pairs"):
+            learn.default_config("euclidean", actor_pairs=bad)
+
+
+def test_critic_hidden_sizes_the_critic_alone(tmp_path) -> None:
+    """``critic_hidden`` gives the critic its own layer widths (the actor keeps
+    ``hidden``); such a run resumes from its checkpoint; a config.json without the field
+    loads with the critic as wide as the actor; impossible widths are refused by name."""
+    cfg = learn.default_config("euclidean", depth=2, hidden=(16, 16), critic_hidden=(24, 8),
+                               timesteps=8_000, collection_size=1024, minibatch_size=256,
+                               eval_every=2)
+    tr = Trainer(cfg, tmp_path / "run", progress=False)
+    widths = [m.out_features for m in tr.critic.net if isinstance(m, torch.nn.Linear)]
+    assert widths == [24, 8, 1]
+    assert [m.out_features for m in tr.actor.net
+            if isinstance(m, torch.nn.Linear)][:2] == [16, 16]
+    tr.run()
+    resumed = Trainer(cfg, tmp_path / "run", resume=True, progress=False)
+    for a, b in zip(resumed.critic.parameters(), tr.critic.parameters(), strict=True):
+        torch.testing.assert_close(a, b, rtol=0, atol=0)
+    d = cfg.to_dict()
+    d.pop("critic_hidden")
+    assert learn.TrainConfig.from_dict(d).critic_hidden is None
+    for bad in ((0, 8), (), "wide"):
+        with pytest.raises(finsler.InputError, match="critic_hidden"):
+            learn.default_config("euclidean", critic_hidden=bad)
+
+
 def test_route_search_returns_only_real_improvements() -> None:
     cfg = learn.default_config("euclidean", depth=3, route_candidates=16, route_pairs=40)
     tr = Trainer(cfg, _tmp_run_dir(), progress=False)
