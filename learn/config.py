@@ -44,7 +44,7 @@ METHODS = ("midpoint", "inter", "two-to-one")
 _TARGETS = ("mc", "td")
 _SCHEDULES = ("paper", "full")
 _LR_SCHEDULES = ("constant", "linear", "cosine")
-_TRANSFORMS = ("none", "log1p")
+_TRANSFORMS = ("none", "log1p", "relative")
 _ACTIVATIONS = ("relu", "tanh")
 _ENERGY_SCALES = ("none", "straight")
 _ENERGY_SCHEDULES = ("constant", "lr")
@@ -190,7 +190,10 @@ class TrainConfig(MetricConfig):
     td_lambda: float = 0.95
     """lambda of eq. (8) (used when ``targets == "td"``)."""
     critic_transform: str = "none"
-    """Critic regresses ``none``: c, or ``log1p``: log(1 + c) (distance = expm1(output))."""
+    """Critic regresses ``none``: c, or ``log1p``: log(1 + c) (distance = expm1(output)),
+    or, beyond the paper, ``relative``: log(c / r) from the pair's centre, direction and
+    coordinate length r (distance = r * exp(output), the same relative precision at every
+    level of the tree; zero pairs are exact and carry no target)."""
     zero_pairs: bool = True
     """Include the pairs (p, p, 0) of every tree point in the data (Alg. 1 does)."""
     normalize_inputs: bool = False

@@ -181,6 +181,14 @@ class Critic(nn.Module):
     :meth:`raw` returns the network output on the regression scale (``log(1 + c)`` for the
     ``log1p`` transform); :meth:`forward` returns the distance estimate. With
     ``symmetric`` the output is ``(net(s, g) + net(g, s)) / 2`` (reversible metrics).
+
+    The ``relative`` transform (beyond the paper) is the critic's counterpart of the
+    relative actor: the network sees the pair as centre, unit direction and length ``r``
+    of ``g - s`` in normalised coordinates and predicts ``log(c / r)``, so
+    ``V = r * exp(net)``: the log of the path's mean speed, a bounded function, learned at
+    the same relative precision for a sub-pair deep in the tree as for the top pair (with
+    ``log1p`` a short pair's absolute error is a large fraction of its cost), and
+    ``V(p, p) = 0`` by construction (zero pairs carry no regression target).
     """
 
     def __init__(
@@ -193,27 +201,43 @@ class Critic(nn.Module):
         symmetric: bool = False,
     ) -> None:
         super().__init__()
-        if transform not in ("none", "log1p"):
+        if transform not in ("none", "log1p", "relative"):
             raise finsler.InputError(f"unknown critic transform {transform!r}")
         self.transform = transform
         self.symmetric = symmetric
         self.scaler = _Scaler(metric.domain, normalize_inputs)
-        self.net = mlp(2 * metric.dim, 1, hidden, activation)
+        n_in = 2 * metric.dim + 1 if transform == "relative" else 2 * metric.dim
+        self.net = mlp(n_in, 1, hidden, activation)
+
+    def _length(self, s: torch.Tensor, g: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Normalised coordinate difference ``(N, dim)`` and its length ``(N, 1)`` (smooth
+        at 0, as the relative actor's)."""
+        d = (g - s) / self.scaler.span
+        return d, torch.sqrt((d * d).sum(-1, keepdim=True) + 1e-12)
 
     def raw(self, s: torch.Tensor, g: torch.Tensor) -> torch.Tensor:
+        if self.transform == "relative":
+            d, r = self._length(s, g)
+            c = self.scaler(0.5 * (s + g))
+            out = self.net(torch.cat([c, d / r, r], -1))[:, 0]
+            if self.symmetric:
+                out = 0.5 * (out + self.net(torch.cat([c, -d / r, r], -1))[:, 0])
+            return out
         a, b = self.scaler(s), self.scaler(g)
         out = self.net(torch.cat([a, b], -1))[:, 0]
         if self.symmetric:
             out = 0.5 * (out + self.net(torch.cat([b, a], -1))[:, 0])
         return out
 
-    def to_raw(self, c: torch.Tensor) -> torch.Tensor:
-        """Map distances (targets) to the regression scale."""
+    def to_raw(self, c: torch.Tensor, s: torch.Tensor, g: torch.Tensor) -> torch.Tensor:
+        """Map distances ``c`` between ``s`` and ``g`` (targets) to the regression scale
+        (``-inf`` for a zero cost under ``relative``: no target there)."""
+        if self.transform == "relative":
+            return torch.log(c) - torch.log(self._length(s, g)[1][:, 0].to(c.dtype))
         return torch.log1p(c) if self.transform == "log1p" else c
 
-    def from_raw(self, z: torch.Tensor) -> torch.Tensor:
-        """Map network outputs back to distances."""
-        return torch.expm1(z) if self.transform == "log1p" else z
-
     def forward(self, s: torch.Tensor, g: torch.Tensor) -> torch.Tensor:
-        return self.from_raw(self.raw(s, g))
+        z = self.raw(s, g)
+        if self.transform == "relative":
+            return self._length(s, g)[1][:, 0] * torch.exp(z)
+        return torch.expm1(z) if self.transform == "log1p" else z

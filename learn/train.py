@@ -209,7 +209,10 @@ class Trainer(RunLoop):
             g = torch.cat([g, *(d[1] for d in extra)])
             c = torch.cat([c, *(d[2] for d in extra)])
         s32, g32 = s.float(), g.float()
-        target = self.critic.to_raw(c).float()
+        target = self.critic.to_raw(c, s, g).float()
+        # the relative critic has no target at a zero pair (log 0): it is exact there
+        keep = torch.isfinite(target)
+        keep = None if bool(keep.all()) else keep
         n = s.shape[0]
         mb = self.cfg.minibatch_size
         lc_sum = la_sum = 0.0
@@ -220,7 +223,12 @@ class Trainer(RunLoop):
                 idx = perm[k : k + mb]
                 bs, bg = s32[idx], g32[idx]
                 # critic step, eq. (5)
-                lc = ((self.critic.raw(bs, bg) - target[idx]) ** 2).mean()
+                err = self.critic.raw(bs, bg) - target[idx]
+                if keep is None:
+                    lc = (err**2).mean()
+                else:
+                    k = keep[idx]
+                    lc = (err.where(k, 0.0) ** 2).sum() / k.sum().clamp_min(1)
                 self.opt_critic.zero_grad(set_to_none=True)
                 lc.backward()
                 self._step_if_finite(self.opt_critic, self.critic, "critic")
