@@ -218,7 +218,8 @@ def test_update_losses_are_the_means_over_its_minibatches(tmp_path: Path, epochs
     replay.set_state(tr.gen.get_state())
     s32 = torch.cat([s, extra[0]]).float()
     g32 = torch.cat([g, extra[1]]).float()
-    target = tr.critic.to_raw(torch.cat([c, extra[2]])).float()
+    target = tr.critic.to_raw(torch.cat([c, extra[2]]), torch.cat([s, extra[0]]),
+                              torch.cat([g, extra[1]])).float()
     lcs, las = [], []
     with torch.no_grad():
         for _ in range(epochs):
