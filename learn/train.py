@@ -210,8 +210,9 @@ class Trainer(RunLoop):
             c = torch.cat([c, *(d[2] for d in extra)])
         s32, g32 = s.float(), g.float()
         target = self.critic.to_raw(c, s, g).float()
-        # the relative critic has no target at a zero pair (log 0): it is exact there
-        keep = torch.isfinite(target)
+        # the relative critic has no target at a zero pair (log 0 = -inf): it is exact there
+        # (a NaN target still reaches the loss, and its step is skipped and counted)
+        keep = ~torch.isneginf(target)
         keep = None if bool(keep.all()) else keep
         n = s.shape[0]
         mb = self.cfg.minibatch_size
@@ -227,8 +228,8 @@ class Trainer(RunLoop):
                 if keep is None:
                     lc = (err**2).mean()
                 else:
-                    k = keep[idx]
-                    lc = (err.where(k, 0.0) ** 2).sum() / k.sum().clamp_min(1)
+                    has = keep[idx]
+                    lc = (err.where(has, 0.0) ** 2).sum() / has.sum().clamp_min(1)
                 self.opt_critic.zero_grad(set_to_none=True)
                 lc.backward()
                 self._step_if_finite(self.opt_critic, self.critic, "critic")

@@ -447,7 +447,8 @@ def test_relative_critic_is_length_times_exp_of_its_output() -> None:
 
 def test_relative_critic_skips_zero_pairs_and_learns_a_distance() -> None:
     """The relative critic's loss is the mean squared error of log(c / r) over the
-    pairs with a cost (zero pairs: log 0, no target; an update stays finite), and on the
+    pairs with a cost (zero pairs: log 0, no target; an update stays finite; a NaN cost is
+    not dropped but skips the step), and on the
     Euclidean plane critic steps on exact distances fit them to within 1% on pairs not
     trained on."""
     cfg = learn.default_config("euclidean", depth=2, critic_transform="relative", epochs=1,
@@ -464,6 +465,11 @@ def test_relative_critic_skips_zero_pairs_and_learns_a_distance() -> None:
     lc, _ = tr.update(s, g, c)
     assert math.isfinite(lc)
     assert lc == pytest.approx(float(want), rel=1e-6)
+    # a NaN cost is not a zero pair: it reaches the loss and the critic's step is skipped
+    bad = c.clone()
+    bad[0] = float("nan")
+    tr.update(s, g, bad)
+    assert tr.skipped_steps == 1
     cfg = cfg.replace(minibatch_size=256, epochs=40)
     tr = Trainer(cfg, _tmp_run_dir(), progress=False)
     tr.update(s, g, c)
