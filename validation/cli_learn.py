@@ -90,9 +90,8 @@ def train_command(
     5%, log1p critic targets, inputs scaled to [-1, 1], residual actor mean, collections
     of 16384 pairs, minibatches of 1024. matsumoto: 1e8 evaluations of C, 3 passes per
     collection, fused Adam, the actor and the critic (log(c / r)) relative to each pair's
-    length, model-free; carlike:
-    one pass, path energy with p = 4, MLPs 128-128, 16 pairs per actor step and 4e8
-    (13.4x the trees' evaluations), the relative actor; panda-pole:
+    length, model-free; carlike: one pass, path energy with p = 4, MLPs 128-128, 16 pairs
+    per actor step and 4e8 (13.4x the trees' evaluations), the relative actor; panda-pole:
     1e7, MLPs 128-128, symmetric critic, 3 epochs, model-free.
 
     ANY METRIC: --metric-param NAME=VALUE sets the metric's parameters (recorded in
