@@ -145,6 +145,13 @@ class TrainConfig(MetricConfig):
 
     method: str = "midpoint"
     """Actor loss: ``midpoint`` (eq. 6), ``inter`` (eq. 17) or ``two-to-one`` (eq. 18)."""
+    actor_loss_power: float = 2.0
+    """Beyond the paper, model-free (the critic's values only): ``p`` of the midpoint loss
+    ``2**(1 - 2/p) (|V(s, m)|**p + |V(m, g)|**p)**(2/p)``; ``p = 2`` is eq. (6) itself.
+    Every ``p > 1`` has eq. (6)'s minimiser for an exact critic (the geodesic midpoint:
+    both halves ``d/2``, the loss ``d**2 / 2``), but a larger ``p`` makes an uneven split
+    cost more against a longer route, so critic and actor errors end in better-balanced
+    halves (success bounds the largest segment). ``method="midpoint"`` only."""
     timesteps: int = 20_000_000
     """Budget T of evaluations of C, all-inclusive: the collected trees (the paper's
     timesteps) and every evaluation an extra actor term makes, in every epoch; also the
@@ -326,6 +333,12 @@ class TrainConfig(MetricConfig):
                 self.path_energy_power, bool) and 1 < self.path_energy_power <= 64):
             raise InputError(f"path_energy_power must be a number in (1, 64], got "
                              f"{self.path_energy_power!r}")
+        p = self.actor_loss_power
+        if not (isinstance(p, (int, float)) and not isinstance(p, bool) and 1 < p <= 64):
+            raise InputError(f"actor_loss_power must be a number in (1, 64], got {p!r}")
+        if p != 2 and self.method != "midpoint":
+            raise InputError(f"actor_loss_power applies to method 'midpoint' only (eq. 6); "
+                             f"method {self.method!r} needs actor_loss_power=2")
         for name in ("timesteps", "minibatch_size", "collection_size", "epochs", "threads",
                      "eval_every", "eval_pairs", "path_energy_pairs", "route_pairs",
                      "expert_pairs", "expert_every", "expert_keep"):

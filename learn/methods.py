@@ -28,6 +28,7 @@ class TrainConfig(Protocol):
     """The fields of :class:`learn.TrainConfig` that choose the loss and the terms."""
 
     method: str
+    actor_loss_power: float
     path_energy_weight: float
     path_energy_pairs: int
     path_energy_scale: str
@@ -237,11 +238,30 @@ def actor_terms(cfg: TrainConfig) -> list[ActorTerm]:
     return terms
 
 
-def actor_loss_of(method: str) -> ActorLoss:
-    """The :class:`ActorLoss` of a method name (``midpoint``, ``inter``, ``two-to-one``)."""
+def _midpoint_power(p: float) -> ActorLoss:
+    """Eq. (6) with power ``p``: ``2**(1 - 2/p) (|a|**p + |b|**p)**(2/p)`` (``a**2 + b**2``
+    at ``p = 2``; equal to it, ``d**2 / 2``, wherever ``a = b = d / 2``)."""
+    c = 2.0 ** (1.0 - 2.0 / p)
+
+    def fn(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+        # relative to the larger of the two: no overflow, and no 0/0 in the gradient
+        top = torch.maximum(a.abs(), b.abs()).detach().clamp_min(1e-30)
+        r = (a / top).abs() ** p + (b / top).abs() ** p  # in [1, 2] unless both are 0
+        return c * r.clamp_min(torch.finfo(r.dtype).tiny) ** (2.0 / p) * top**2
+
+    return ActorLoss("midpoint", f"eq. (6) with power p = {p:g}", fn)
+
+
+def actor_loss_of(method: str, power: float = 2.0) -> ActorLoss:
+    """The :class:`ActorLoss` of a method name (``midpoint``, ``inter``, ``two-to-one``);
+    ``power`` != 2 (``midpoint`` only): :func:`_midpoint_power`."""
     if method not in ACTOR_LOSSES:
         raise InputError(f"unknown method {method!r}; known: {', '.join(ACTOR_LOSSES)}")
-    return ACTOR_LOSSES[method]
+    if power == 2:
+        return ACTOR_LOSSES[method]
+    if method != "midpoint":
+        raise InputError(f"a loss power applies to method 'midpoint' only, not {method!r}")
+    return _midpoint_power(float(power))
 
 
 def derivative_terms(cfg: TrainConfig) -> list[str]:
@@ -251,7 +271,7 @@ def derivative_terms(cfg: TrainConfig) -> list[str]:
 
 def describe(cfg: TrainConfig) -> dict[str, Any]:
     """What ``config.json`` says about the method: loss, terms, model-free or not."""
-    loss = actor_loss_of(cfg.method)
+    loss = actor_loss_of(cfg.method, cfg.actor_loss_power)
     uses = derivative_terms(cfg)
     return {
         "actor_loss": f"{loss.name} ({loss.equation})",

@@ -91,7 +91,7 @@ class Trainer(RunLoop):
         self.dim = self.metric.dim
         self.depth_max = cfg.max_depth
         self.eval_pairs = finsler.validation_pairs(self.metric, cfg.eval_pairs)
-        self.loss = actor_loss_of(cfg.method)
+        self.loss = actor_loss_of(cfg.method, cfg.actor_loss_power)
         self.terms = actor_terms(cfg)
 
         # networks, initialised from the seed without touching the global RNG

@@ -520,6 +520,48 @@ def test_actor_losses(method: str) -> None:
     assert torch.equal(actor_loss(method, a, b), want)
 
 
+def test_midpoint_loss_power_is_eq6_at_2_and_the_power_mean_otherwise() -> None:
+    """``actor_loss_power``: eq. (6) itself at p = 2; otherwise ``2**(1-2/p) (a**p +
+    b**p)**(2/p)``, equal to eq. (6) for an even split, with its minimiser over the split
+    of a fixed length at the even split and an uneven split costing about p - 1 times
+    more than at p = 2 (against a longer route, which costs the same)."""
+    from learn.methods import ACTOR_LOSSES, actor_loss_of
+
+    assert actor_loss_of("midpoint", 2.0) is ACTOR_LOSSES["midpoint"]
+    a = torch.tensor([1.0, 2.0, 0.0, 5.0], dtype=torch.float64)
+    b = torch.tensor([3.0, 0.5, 0.0, 5.0], dtype=torch.float64)
+    for p in (3.0, 4.0, 8.0):
+        want = 2 ** (1 - 2 / p) * (a**p + b**p) ** (2 / p)
+        torch.testing.assert_close(actor_loss_of("midpoint", p)(a, b), want, rtol=1e-12,
+                                   atol=1e-100)  # 0 at a = b = 0, up to 1e-200
+    d, x = 2.0, torch.tensor(1e-3, dtype=torch.float64)
+    h = torch.tensor(d / 2, dtype=torch.float64)
+    even = {p: actor_loss_of("midpoint", p)(h, h) for p in (2.0, 4.0)}
+    assert float(even[2.0]) == d**2 / 2
+    assert float(even[4.0]) == pytest.approx(d**2 / 2, rel=1e-14)
+    uneven = {p: float(actor_loss_of("midpoint", p)(d / 2 + x, d / 2 - x) - even[p])
+              for p in (2.0, 4.0)}
+    assert uneven[4.0] / uneven[2.0] == pytest.approx(3.0, rel=1e-3)
+    longer = {p: float(actor_loss_of("midpoint", p)(d / 2 + x, d / 2 + x) - even[p])
+              for p in (2.0, 4.0)}
+    assert longer[4.0] == pytest.approx(longer[2.0], rel=1e-12)
+    t = torch.linspace(0.05, 0.95, 181, dtype=torch.float64)
+    assert float(t[actor_loss_of("midpoint", 4.0)(t * d, (1 - t) * d).argmin()]) == \
+        pytest.approx(0.5)
+    z = torch.zeros(3, dtype=torch.float64, requires_grad=True)
+    actor_loss_of("midpoint", 4.0)(z, z.detach()).sum().backward()
+    assert torch.isfinite(z.grad).all()
+
+
+@pytest.mark.parametrize("bad", [dict(actor_loss_power=1.0), dict(actor_loss_power=True),
+                                 dict(actor_loss_power=float("nan")),
+                                 dict(actor_loss_power=65.0),
+                                 dict(actor_loss_power=4.0, method="inter")])
+def test_actor_loss_power_rejects_impossible_values(bad: dict) -> None:
+    with pytest.raises(finsler.InputError, match="actor_loss_power"):
+        learn.TrainConfig(env="matsumoto", **bad)
+
+
 # ----------------------------------------------------------------------------------------
 # determinism, learning, resume
 # ----------------------------------------------------------------------------------------
