@@ -361,9 +361,12 @@ def read_run_config(run_dir: str | Path) -> TrainConfig:
 
 # -- the registry entry of the midpoint family ---------------------------------------------
 def _model_free(method: str) -> Any:
+    # eqs. (17) / (18) have no power: a default actor_loss_power (Panda's) is eq. (6)'s
+    plain = {} if method == "midpoint" else {"actor_loss_power": 2.0}
+
     def make(env: str, **fields: Any) -> TrainConfig:
         return default_config(env, **{**model_free_overrides(env), "method": method,
-                                      **fields})
+                                      **plain, **fields})
     return make
 
 

@@ -876,3 +876,17 @@ def test_non_finite_gradient_skips_the_step_and_is_counted(tmp_path) -> None:
     tr._step_if_finite(tr.opt_actor, tr.actor, "actor")
     assert tr.skipped_steps == 1
     assert not all(torch.equal(a, b) for a, b in zip(before, tr.actor.parameters()))
+
+
+def test_inter_and_two_to_one_variants_build_where_the_defaults_set_a_loss_power() -> None:
+    """Panda's defaults use eq. (6) with p = 8; the sweep's eq. (17) / (18) variants, which
+    have no power, still build (with p = 2) and keep the other model-free defaults."""
+    from learn.registry import get_method
+
+    variants = get_method("midpoint").variants
+    assert learn.default_config("panda-pole").actor_loss_power == 8.0
+    for name in ("inter", "two-to-one"):
+        cfg = variants[name].make("panda-pole")
+        assert (cfg.method, cfg.actor_loss_power) == (name, 2.0)
+        assert cfg.symmetric_critic and cfg.path_energy_weight == 0.0
+    assert variants["midpoint-free"].make("panda-pole").actor_loss_power == 8.0
