@@ -375,11 +375,12 @@ def test_report_names_its_checkpoint_and_running_mean_times(report_dir: Path) ->
 
 
 def test_the_learning_curve_names_the_pairs_it_was_evaluated_on(report_dir: Path,
-                                                                 tmp_path: Path) -> None:
-    """A policy trained before the validation set existed (the replaced Matsumoto policy,
-    the shipped Panda one) has its curve on the default set; the shipped Matsumoto policy
-    (issue 25) and a run trained now are on the validation set, and the report says
-    which."""
+                                                                 tmp_path: Path,
+                                                                 monkeypatch) -> None:
+    """A policy trained before the validation set existed (the replaced Matsumoto and
+    Panda policies) has its curve on the default set; the shipped Matsumoto and Panda
+    policies (issue 25) and a run trained now are on the validation set, and the report
+    says which."""
     import learn
     from validation.report import curve_set
 
@@ -396,12 +397,17 @@ def test_the_learning_curve_names_the_pairs_it_was_evaluated_on(report_dir: Path
     assert curve_set(Path(learn.load_policy("matsumoto").source)) == "validation"
     old = Path(__file__).resolve().parents[1] / "benchmarks" / "previous_policies"
     assert curve_set(old / "matsumoto") == "default"
-    assert curve_set(Path(learn.load_policy("panda-pole").source)) == "default"
+    assert curve_set(old / "panda-pole") == "default"
+    assert curve_set(Path(learn.load_policy("panda-pole").source)) == "validation"
     # the sentence naming a shipped policy says the same (it said "default" for all)
     from validation.report import load_report_policy
 
     _, _, note = load_report_policy("matsumoto", None, False, tmp_path)
     assert "selected on the validation set" in note and "default evaluation" not in note
+    _, _, note = load_report_policy("panda-pole", None, False, tmp_path)
+    assert "selected on the validation set" in note and "default evaluation" not in note
+    # a shipped policy chosen on the default set (the replaced Panda one) is named so
+    monkeypatch.setattr(learn.policy, "_shipped_dir", lambda name: old / name)
     _, _, note = load_report_policy("panda-pole", None, False, tmp_path)
     assert "selected on the default evaluation set" in note
 

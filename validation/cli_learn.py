@@ -92,7 +92,8 @@ def train_command(
     collection, fused Adam, the actor and the critic (log(c / r)) relative to each pair's
     length, model-free; carlike: one pass, path energy with p = 4, MLPs 128-128, 16 pairs
     per actor step and 4e8 (13.4x the trees' evaluations), the relative actor; panda-pole:
-    1e7, MLPs 128-128, symmetric critic, 3 epochs, model-free.
+    1e7, MLPs 128-128, symmetric critic, 3 epochs, eq. (6) as a power mean with p = 8
+    (actor_loss_power), model-free.
 
     ANY METRIC: --metric-param NAME=VALUE sets the metric's parameters (recorded in
     config.json, used to evaluate, report and resume); --metric-module imports a user's
@@ -210,14 +211,15 @@ def evaluate_command(
         help="Environment: evaluates its shipped policy (unless --run is given).")] = None,
     pairs: Annotated[Path | None, typer.Option(
         help="PAIRS.npy of shape (K, 2, dim); default: the environment's 100 default "
-             "evaluation pairs (on which the shipped Panda policy's checkpoint was selected: "
-             "give fresh pairs for honest figures of a shipped policy).")] = None,
+             "evaluation pairs (no shipped policy's checkpoint was selected on them; the "
+             "replaced policies of benchmarks/previous_policies were, and the output says "
+             "so for any such policy).")] = None,
     eps: Annotated[float | None, typer.Option(help="Success threshold (default: task's).")
                    ] = None,
     depth: Annotated[int | None, typer.Option(help="Tree depth D (default: task's).")] = None,
     checkpoint: Annotated[str, typer.Option(
-        help="best (selected on the validation set during training; for the shipped "
-             "Panda policy, on the default evaluation set) or latest (the last one, no "
+        help="best (selected on the validation set during training; for runs older "
+             "than that set, on the default evaluation set) or latest (the last one, no "
              "selection).")] = "best",
     as_json: Annotated[bool, typer.Option("--json", help="Print JSON.")] = False,
     metric_param: Annotated[list[str] | None, typer.Option(
@@ -236,10 +238,10 @@ def evaluate_command(
     """Evaluate a trained policy (section 5.1): success rate, mean length, max segment cost.
 
     The default pairs are the environment's default evaluation set. A run trained today
-    never sees it (its checkpoints are selected on a separate validation set); the SHIPPED
-    Panda policy's best checkpoint was selected on it, so its figures there are optimistic
-    (the output says so): give --pairs of a fresh seed for honest ones. The output names
-    the checkpoint file used."""
+    never sees it (its checkpoints are selected on a separate validation set), nor did the
+    shipped policies'; a run older than the validation set had its best checkpoint
+    selected on it, so its figures there are optimistic (the output says so): give --pairs
+    of a fresh seed for honest ones. The output names the checkpoint file used."""
     import learn
     from learn.registry import import_method_modules
     from learn.runs import load_any_policy
