@@ -18,7 +18,7 @@ import finsler
 from finsler.errors import InputError
 from finsler.spec import MetricSpec, class_path, ensure_registered
 from learn.base import RunConfig, check_choice, check_hidden
-from learn.methods import derivative_terms, describe
+from learn.methods import actor_loss_of, derivative_terms, describe
 
 __all__ = [
     "METHODS",
@@ -336,9 +336,7 @@ class TrainConfig(MetricConfig):
         p = self.actor_loss_power
         if not (isinstance(p, (int, float)) and not isinstance(p, bool) and 1 < p <= 64):
             raise InputError(f"actor_loss_power must be a number in (1, 64], got {p!r}")
-        if p != 2 and self.method != "midpoint":
-            raise InputError(f"actor_loss_power applies to method 'midpoint' only (eq. 6); "
-                             f"method {self.method!r} needs actor_loss_power=2")
+        actor_loss_of(self.method, p)  # the power applies to method 'midpoint' only
         for name in ("timesteps", "minibatch_size", "collection_size", "epochs", "threads",
                      "eval_every", "eval_pairs", "path_energy_pairs", "route_pairs",
                      "expert_pairs", "expert_every", "expert_keep"):

@@ -260,7 +260,8 @@ def actor_loss_of(method: str, power: float = 2.0) -> ActorLoss:
     if power == 2:
         return ACTOR_LOSSES[method]
     if method != "midpoint":
-        raise InputError(f"a loss power applies to method 'midpoint' only, not {method!r}")
+        raise InputError(f"actor_loss_power applies to method 'midpoint' only (eq. 6); "
+                         f"method {method!r} needs actor_loss_power=2")
     return _midpoint_power(float(power))
 
 
