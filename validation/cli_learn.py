@@ -211,9 +211,8 @@ def evaluate_command(
         help="Environment: evaluates its shipped policy (unless --run is given).")] = None,
     pairs: Annotated[Path | None, typer.Option(
         help="PAIRS.npy of shape (K, 2, dim); default: the environment's 100 default "
-             "evaluation pairs (no shipped policy's checkpoint was selected on them; the "
-             "replaced policies of benchmarks/previous_policies were, and the output says "
-             "so for any such policy).")] = None,
+             "evaluation pairs (no shipped policy's checkpoint was selected on them; older "
+             "runs' were, and the output says so for such a policy).")] = None,
     eps: Annotated[float | None, typer.Option(help="Success threshold (default: task's).")
                    ] = None,
     depth: Annotated[int | None, typer.Option(help="Tree depth D (default: task's).")] = None,
@@ -239,7 +238,7 @@ def evaluate_command(
 
     The default pairs are the environment's default evaluation set. A run trained today
     never sees it (its checkpoints are selected on a separate validation set), nor did the
-    shipped policies'; a run older than the validation set had its best checkpoint
+    shipped policies' runs; a run older than the validation set had its best checkpoint
     selected on it, so its figures there are optimistic (the output says so): give --pairs
     of a fresh seed for honest ones. The output names the checkpoint file used."""
     import learn
