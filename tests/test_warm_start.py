@@ -142,9 +142,10 @@ def test_bad_warm_start_is_refused_clearly(tmp_path: Path) -> None:
 
 
 def test_recheck_above_resolves_the_untrusted_pairs_globally(tmp_path: Path) -> None:
-    """Panda, 20 fresh pairs: the learned path passes the pole on the other side on some;
-    --recheck-above 1.3 re-solves exactly the pairs whose learned energy is above 1.3x the
-    warm optimum, and those end at or below the globally seeded energy."""
+    """Panda, 20 fresh pairs: --recheck-above 1.15 re-solves exactly the pairs whose learned
+    energy is above 1.15x the warm optimum (with the policy shipped in issue 25, 3 of the 20:
+    1.17-1.25x; the next is 1.12x, and none is above the 1.3 this test used before), and
+    those end at or below the globally seeded energy."""
     m = finsler.get_metric("panda-pole")
     pairs = finsler.sample_pairs(m, 21, 777)[1:]
     pfile = tmp_path / "pairs.npy"
@@ -153,14 +154,14 @@ def test_recheck_above_resolves_the_untrusted_pairs_globally(tmp_path: Path) -> 
     base = ["solve", "--metric", "panda-pole", "--pairs", str(pfile), "--warm-start",
             "panda-pole", "--workers", "1", "--no-progress", "--json"]
     warm = json.loads(r.invoke(app, base).output)
-    res = r.invoke(app, [*base, "--recheck-above", "1.3"])
+    res = r.invoke(app, [*base, "--recheck-above", "1.15"])
     assert res.exit_code == 0, res.output
     doc = json.loads(res.output)
     redo = doc["warm_start"]["rechecked"]
     # the flags, recomputed by hand: learned energy (same n) over the warm optimum
     paths, _ = warm_start_paths("panda-pole", m, pairs)
     learned = np.sum(m.path_costs(paths) ** 2, axis=1)
-    want = [k for k, row in enumerate(warm["results"]) if learned[k] > 1.3 * row["energy"]]
+    want = [k for k, row in enumerate(warm["results"]) if learned[k] > 1.15 * row["energy"]]
     assert redo == want and 0 < len(redo) < len(pairs)
     glob = solvers.solve_batch(m, pairs[redo], workers=1, progress=False)
     for k, g in zip(redo, glob):
