@@ -143,9 +143,9 @@ def test_bad_warm_start_is_refused_clearly(tmp_path: Path) -> None:
 
 def test_recheck_above_resolves_the_untrusted_pairs_globally(tmp_path: Path) -> None:
     """Panda, 20 fresh pairs: --recheck-above 1.15 re-solves exactly the pairs whose learned
-    energy is above 1.15x the warm optimum (with the policy shipped in issue 25, 3 of the 20:
-    1.17-1.25x; the next is 1.12x, and none is above the 1.3 this test used before), and
-    those end at or below the globally seeded energy."""
+    energy is above 1.15x the warm optimum (with the policy shipped last in issue 25, 3 of
+    the 20: 1.18, 1.56 and 1.96x, the next 1.14x; with the 128-128 actor shipped before, 3:
+    1.17-1.25x, the next 1.12x), and those end at or below the globally seeded energy."""
     m = finsler.get_metric("panda-pole")
     pairs = finsler.sample_pairs(m, 21, 777)[1:]
     pfile = tmp_path / "pairs.npy"
