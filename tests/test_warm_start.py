@@ -142,10 +142,12 @@ def test_bad_warm_start_is_refused_clearly(tmp_path: Path) -> None:
 
 
 def test_recheck_above_resolves_the_untrusted_pairs_globally(tmp_path: Path) -> None:
-    """Panda, 20 fresh pairs: --recheck-above 1.15 re-solves exactly the pairs whose learned
-    energy is above 1.15x the warm optimum (with the policy shipped last in issue 25, 3 of
-    the 20: 1.18, 1.56 and 1.96x, the next 1.14x; with the 128-128 actor shipped before, 3:
-    1.17-1.25x, the next 1.12x), and those end at or below the globally seeded energy."""
+    """Panda, 20 fresh pairs: --recheck-above R re-solves exactly the pairs whose learned
+    energy is above R times the warm optimum, and those end at or below the globally seeded
+    energy. R is set between the 3rd and 4th largest ratio of these pairs, so the test
+    re-solves some pairs and keeps others whatever policy is shipped (it used fixed values
+    that each retrain outgrew; the policy shipped last in issue 25 has 1.96, 1.56, 1.18,
+    then 1.14x)."""
     m = finsler.get_metric("panda-pole")
     pairs = finsler.sample_pairs(m, 21, 777)[1:]
     pfile = tmp_path / "pairs.npy"
@@ -154,14 +156,19 @@ def test_recheck_above_resolves_the_untrusted_pairs_globally(tmp_path: Path) -> 
     base = ["solve", "--metric", "panda-pole", "--pairs", str(pfile), "--warm-start",
             "panda-pole", "--workers", "1", "--no-progress", "--json"]
     warm = json.loads(r.invoke(app, base).output)
-    res = r.invoke(app, [*base, "--recheck-above", "1.15"])
+    # the flags, computed by hand: learned energy (same n) over the warm optimum
+    paths, _ = warm_start_paths("panda-pole", m, pairs)
+    ratio = np.sum(m.path_costs(paths) ** 2, axis=1) / np.array(
+        [row["energy"] for row in warm["results"]])
+    top = np.sort(ratio)[::-1]
+    assert top[2] > top[3] * 1.01, "no clear gap to place the threshold in"
+    R = float(top[2] + top[3]) / 2
+    assert R > 1.0
+    want = [k for k in range(len(pairs)) if ratio[k] > R]
+    res = r.invoke(app, [*base, "--recheck-above", repr(R)])
     assert res.exit_code == 0, res.output
     doc = json.loads(res.output)
     redo = doc["warm_start"]["rechecked"]
-    # the flags, recomputed by hand: learned energy (same n) over the warm optimum
-    paths, _ = warm_start_paths("panda-pole", m, pairs)
-    learned = np.sum(m.path_costs(paths) ** 2, axis=1)
-    want = [k for k, row in enumerate(warm["results"]) if learned[k] > 1.15 * row["energy"]]
     assert redo == want and 0 < len(redo) < len(pairs)
     glob = solvers.solve_batch(m, pairs[redo], workers=1, progress=False)
     for k, g in zip(redo, glob):
