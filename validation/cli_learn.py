@@ -89,11 +89,12 @@ def train_command(
     Defaults per environment (learn.default_config): full depth, lr 1e-3 cosine-decayed to
     5%, log1p critic targets, inputs scaled to [-1, 1], residual actor mean, collections
     of 16384 pairs, minibatches of 1024. matsumoto: 1e8 evaluations of C, 3 passes per
-    collection, fused Adam, the actor and the critic (log(c / r)) relative to each pair's
-    length, model-free; carlike: one pass, path energy with p = 4, MLPs 128-128, 16 pairs
-    per actor step and 4e8 (13.4x the trees' evaluations), the relative actor; panda-pole:
-    2e7 (the paper's budget), actor MLP 256-256-256, critic 128-128 (symmetric), 3
-    epochs, eq. (6) as a power mean with p = 8 (actor_loss_power), model-free.
+    collection, fused Adam, actor MLP 128-128-128, critic 64-64, the actor and the critic
+    (log(c / r)) relative to each pair's length, model-free; carlike: one pass, path
+    energy with p = 4, MLPs 128-128, 16 pairs per actor step and 4e8 (13.4x the trees'
+    evaluations), the relative actor; panda-pole: 2e7 (the paper's budget), actor MLP
+    256-256-256, critic 128-128 (symmetric), 3 epochs, eq. (6) as a power mean with p = 8
+    (actor_loss_power), model-free.
 
     ANY METRIC: --metric-param NAME=VALUE sets the metric's parameters (recorded in
     config.json, used to evaluate, report and resume); --metric-module imports a user's
