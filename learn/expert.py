@@ -29,6 +29,7 @@ from typing import Any, ClassVar
 
 import torch
 
+from learn.networks import predictor
 from learn.search import SearchSpec, search_paths
 from learn.term import ActorTerm, TermOutput, Trainer
 
@@ -88,12 +89,9 @@ class SearchImitation(ActorTerm):
         actor = trainer.actor
         was_training = actor.training
         actor.eval()
-
-        def predict(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
-            return actor(a.float(), b.float(), deterministic=True).double()
-
         try:
-            found = search_paths(trainer.metric, predict, e[:, 0], e[:, 1], depth,
+            found = search_paths(trainer.metric, predictor(actor, trainer.metric),
+                                 e[:, 0], e[:, 1], depth,
                                  float(trainer.cfg.eval_eps), self.spec)
         finally:
             actor.train(was_training)

@@ -8,7 +8,6 @@ generates paths by ``D`` batched actor calls.
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
@@ -22,7 +21,7 @@ from finsler.errors import InputError
 from learn.base import LoadedPolicy
 from learn.config import METHODS, TrainConfig
 from learn.loop import load_run, load_weights, read_config_section
-from learn.networks import Actor, resolve_device
+from learn.networks import Actor, predictor, resolve_device
 from learn.registry import method_of_run
 from learn.search import SearchResult, SearchSpec, search_paths
 from learn.storage import BEST_FILE, CONFIG_FILE, LATEST_FILE, POLICY_FILE, load_checkpoint
@@ -69,19 +68,6 @@ def generate_paths(
     with torch.no_grad():
         return build_tree(starts.to(torch.float64), goals.to(torch.float64), depth,
                           predictor(actor, metric))
-
-
-def predictor(actor: Actor, metric: finsler.Metric
-              ) -> Callable[[torch.Tensor, torch.Tensor], torch.Tensor]:
-    """``(s, g) -> m``: the actor's deterministic mean (float32 network), cast to float64
-    and projected into the domain (call under ``torch.no_grad()``)."""
-    param = next(actor.parameters())
-
-    def predict(s: torch.Tensor, g: torch.Tensor) -> torch.Tensor:
-        m = actor(s.to(param), g.to(param), deterministic=True)
-        return metric.domain.project(m.to(torch.float64)).to(s.device)
-
-    return predict
 
 
 @dataclass

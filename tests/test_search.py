@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import torch
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from typer.testing import CliRunner
@@ -19,7 +20,8 @@ import finsler
 import learn
 import solvers
 from finsler.errors import InputError
-from learn.search import SearchSpec, _regenerate_windows, equalize_paths
+from learn.networks import predictor
+from learn.search import SearchSpec, _regenerate_windows, equalize_paths, search_paths
 from validation.cli import app
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -121,6 +123,33 @@ def test_search_in_seven_dimensions() -> None:
     assert np.all(m.path_costs(res.paths).sum(1) <= m.path_costs(plain).sum(1) * (1 + 1e-12))
     again = pol.search(pairs[:, 0], pairs[:, 1], spec)
     np.testing.assert_array_equal(again.paths, res.paths)  # same seed, same result
+
+
+def test_actor_in_pieces_predicts_what_one_call_does(matsumoto) -> None:
+    """The search and generation call the actor in pieces of PREDICT_ROWS rows on a CPU
+    (for speed); the midpoints, and so the searched paths, are those of one call."""
+    m = matsumoto.metric
+    pairs = torch.as_tensor(finsler.sample_pairs(m, 50, 8))
+    one = predictor(matsumoto.actor, m, rows=None)
+    with torch.no_grad():
+        ref = one(pairs[:, 0], pairs[:, 1])
+        for rows in (1, 7, 49, 50, 4096):
+            got = predictor(matsumoto.actor, m, rows=rows)(pairs[:, 0], pairs[:, 1])
+            assert got.dtype == torch.float64 and got.shape == (50, 2)
+            np.testing.assert_allclose(got.numpy(), ref.numpy(), rtol=0, atol=1e-6)
+        m.domain.check(ref.numpy(), "predicted midpoints")  # projected into the domain
+    spec = SearchSpec(levels=1, directions=4, radii=(0.5,), windows=1)
+    a = search_paths(m, one, pairs[:6, 0], pairs[:6, 1], 4, matsumoto.eps, spec)
+    b = search_paths(m, predictor(matsumoto.actor, m, rows=5), pairs[:6, 0], pairs[:6, 1],
+                     4, matsumoto.eps, spec)
+    np.testing.assert_allclose(b.paths, a.paths, rtol=0, atol=1e-6)
+    assert a.evaluations == b.evaluations > 0
+
+
+@pytest.mark.parametrize("rows", [0, -3, 2.5, True, "64"])
+def test_predictor_rejects_bad_rows(matsumoto, rows) -> None:
+    with pytest.raises(InputError, match="rows"):
+        predictor(matsumoto.actor, matsumoto.metric, rows=rows)
 
 
 @pytest.mark.parametrize("bad", [
