@@ -245,12 +245,15 @@ class Critic(nn.Module):
         return torch.expm1(z) if self.transform == "log1p" else z
 
 
-#: Rows per actor call in :func:`predictor` on a CPU. One call for 1e5 pairs keeps each
-#: layer's activations (1e5 x width floats) out of cache; calls of 4096 rows were 2.2x
-#: faster for the 128-128-128 Matsumoto actor, 2.1x for car-like's 128-128 and 1.4x for
-#: Panda's 256-256-256 (CPU time, one thread), with the same midpoints bit for bit (each
-#: row's product does not depend on the others). The route search and the warm starts
-#: make 1e4-1e6 predictions per call; a plain tree of a few pairs is one call as before.
+#: Rows per actor call in :func:`predictor` on a CPU. One call for 1e5 pairs allocates
+#: each layer's activations (1e5 x width floats, tens of MB) afresh, which the allocator
+#: maps page by page (about half of such a call's CPU time is system time) and which do
+#: not stay in cache; calls of 4096 rows were 2.6x faster for the 128-128-128 Matsumoto
+#: actor and car-like's 128-128, 1.8x for Panda's 256-256-256 (``benchmarks/
+#: predict_rows.py``, quiet, CPU time incl. system, one thread), with the same midpoints
+#: bit for bit (each row's product does not depend on the others). The route search and
+#: the warm starts make 1e4-1e6 predictions per call; a plain tree of a few pairs is one
+#: call as before.
 PREDICT_ROWS = 4096
 
 
