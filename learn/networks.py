@@ -5,6 +5,8 @@
   differentiable torch projection. Evaluation uses the mean.
 * :class:`Critic`: MLP on ``(s, g)`` -> distance estimate ``V(s, g)``, optionally through a
   target transform (``log1p``: the network regresses ``log(1 + c)``).
+* :func:`predictor`: the actor as ``predict(s, g)`` -> float64 projected midpoints, the one
+  form generation, the route search, warm starts and the expert term call it in.
 
 Networks work in float32; callers cast to float64 for costs and success checks.
 """
