@@ -231,6 +231,21 @@ class TrainConfig(MetricConfig):
     2**D + 1 zero pairs, so the actor's long pairs, where the route and the bend are
     chosen, are rare. The actor loss needs the critic only, so these pairs cost no
     evaluation of C (values only, model-free)."""
+    polish_steps: int = 0
+    """Beyond the paper (0 = off): after the budget of evaluations of C is spent, this many
+    actor steps against the frozen critic (the method's actor loss at the deterministic
+    midpoints, Adam at ``polish_lr``), each on the sub-pairs of the policy's own
+    deterministic trees between ``polish_pairs`` fresh pairs: the pairs generation meets,
+    without the sampling noise of the collected trees. The critic only, so no evaluation
+    of C (values only, model-free); validated every ``polish_eval_every`` steps, and the
+    best checkpoint is chosen over the whole run as usual. A finished run resumed with
+    polish settings polishes as a new run with them would."""
+    polish_lr: float = 1e-4
+    """Learning rate of the polish (a fresh Adam)."""
+    polish_pairs: int = 64
+    """Pairs per polish step (each gives its tree's 2**D - 1 sub-pairs)."""
+    polish_eval_every: int = 250
+    """Polish steps between two validation rows (and checkpoints)."""
     symmetric_critic: bool = False
     """For reversible metrics: V(s, g) = (net(s, g) + net(g, s)) / 2 exactly."""
     log_std_min: float = -20.0
@@ -371,6 +386,12 @@ class TrainConfig(MetricConfig):
                              f"{self.actor_head_weight!r}")
         if not isinstance(self.actor_pairs, int) or self.actor_pairs < 0:
             raise InputError(f"actor_pairs must be an integer >= 0, got {self.actor_pairs!r}")
+        for name, low in (("polish_steps", 0), ("polish_pairs", 1), ("polish_eval_every", 1)):
+            val = getattr(self, name)
+            if isinstance(val, bool) or not isinstance(val, int) or val < low:
+                raise InputError(f"{name} must be an integer >= {low}, got {val!r}")
+        if not (0.0 < self.polish_lr < float("inf")):
+            raise InputError(f"polish_lr must be positive and finite, got {self.polish_lr!r}")
         if not (0.0 <= self.actor_head_share <= 1.0):
             raise InputError(f"actor_head_share must be in [0, 1], got "
                              f"{self.actor_head_share!r}")

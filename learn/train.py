@@ -35,6 +35,7 @@ import numpy as np
 import torch
 
 import finsler
+from finsler.errors import InputError
 from learn.base import TrainResult
 from learn.config import (
     METHODS,
@@ -55,6 +56,7 @@ from learn.policy import (
     load_midpoint_policy,
 )
 from learn.registry import Method, Variant, register_method
+from learn.storage import CONFIG_FILE, LATEST_FILE, atomic_write_text, load_checkpoint
 from learn.tree import build_tree, level_pairs, mc_targets, td_lambda_targets
 
 __all__ = ["TrainResult", "Trainer", "actor_loss", "read_run_config", "resolve_device",
@@ -76,12 +78,22 @@ def paper_depth(trees_before: int, total_timesteps: int, max_depth: int) -> int:
     return min(trees_before // c_d, max_depth)
 
 
+#: The polish settings (:class:`learn.config.TrainConfig`): free on resume until the polish
+#: begins; after that only ``polish_steps`` (where it stops) may change.
+_POLISH_FIELDS = ("polish_steps", "polish_lr", "polish_pairs", "polish_eval_every")
+
+
 class Trainer(RunLoop):
     """Run Algorithm 1 for a :class:`TrainConfig` into a run directory (the loop:
     :class:`learn.loop.RunLoop`)."""
 
     config_class = TrainConfig
     label = "train"
+    free_on_resume = (*RunLoop.free_on_resume, *_POLISH_FIELDS)
+    """A finished run may be resumed with polish settings (the polish starts after the
+    budget, so it is the polish a new run with them would make); once the polish has
+    begun only ``polish_steps`` may change."""
+    _config_changed = False  # set by _resume_config (called before setup)
 
     def setup(self) -> None:
         cfg = self.cfg
@@ -107,6 +119,7 @@ class Trainer(RunLoop):
         adam = dict(fused=True) if cfg.fused_adam else {}
         self.opt_actor = torch.optim.Adam(self.actor.parameters(), lr=cfg.lr, **adam)
         self.opt_critic = torch.optim.Adam(self.critic.parameters(), lr=cfg.lr, **adam)
+        self.opt_polish = torch.optim.Adam(self.actor.parameters(), lr=cfg.polish_lr, **adam)
         self.np_rng = np.random.default_rng(cfg.seed)
         self.gen = torch.Generator(device=self.device)
         self.gen.manual_seed(cfg.seed + 1)
@@ -115,6 +128,7 @@ class Trainer(RunLoop):
         self.updates = 0
         self.skipped_steps = 0
         self.lr = cfg.lr
+        self.polished = 0
         self._losses: list[tuple[float, float]] = []
 
     # -- state ----------------------------------------------------------------------------
@@ -124,10 +138,11 @@ class Trainer(RunLoop):
             "critic": self.critic.state_dict(),
             "opt_actor": self.opt_actor.state_dict(),
             "opt_critic": self.opt_critic.state_dict(),
+            "opt_polish": self.opt_polish.state_dict(),
             "np_rng": self.np_rng.bit_generator.state,
             "torch_rng": self.gen.get_state(),
             "counters": {"trees": self.trees, "updates": self.updates,
-                         "skipped_steps": self.skipped_steps},
+                         "skipped_steps": self.skipped_steps, "polished": self.polished},
             "terms": {t.name: st for t in self.terms if (st := t.state()) is not None},
         }
 
@@ -141,6 +156,9 @@ class Trainer(RunLoop):
         c = st["counters"]
         self.trees, self.updates = int(c["trees"]), int(c["updates"])
         self.skipped_steps = int(c.get("skipped_steps", 0))
+        self.polished = int(c.get("polished", 0))  # checkpoints from before the polish: 0
+        if "opt_polish" in st:
+            self.opt_polish.load_state_dict(st["opt_polish"])
         for t in self.terms:  # extra actor terms with state (expert iteration's buffer)
             if t.name in st.get("terms", {}):
                 t.load(st["terms"][t.name], self.device)
@@ -152,7 +170,7 @@ class Trainer(RunLoop):
         return run_document(self.cfg)
 
     def result_extra(self) -> dict[str, Any]:
-        return {"skipped_steps": self.skipped_steps}
+        return {"skipped_steps": self.skipped_steps, "polish_steps": self.polished}
 
     # -- the algorithm --------------------------------------------------------------------
     def depth_for(self, trees_before: int) -> int:
@@ -312,12 +330,80 @@ class Trainer(RunLoop):
                 group["lr"] = lr
         return lr
 
+    # -- the polish after the budget (values of the critic only) ----------------------------
+    def _resume_config(self, cfg: TrainConfig) -> TrainConfig:
+        resumed = super()._resume_config(cfg)
+        saved = TrainConfig.from_dict(read_config_section(self.run_dir))
+        changed = [k for k in _POLISH_FIELDS if getattr(saved, k) != getattr(resumed, k)]
+        fixed = [k for k in changed if k != "polish_steps"]
+        latest = self.run_dir / LATEST_FILE
+        if fixed and latest.is_file():
+            polished = int(load_checkpoint(latest).get("counters", {}).get("polished", 0))
+            if polished:
+                raise InputError(
+                    f"cannot resume with different {', '.join(fixed)}: the run's polish has "
+                    f"begun ({polished} steps) with " + ", ".join(
+                        f"{k}={getattr(saved, k)!r}" for k in fixed)
+                    + "; only polish_steps may change now (nothing was changed)")
+        self._config_changed = bool(changed)
+        return resumed
+
+    def _polishing(self) -> bool:
+        return self.timesteps >= self.cfg.timesteps
+
+    def has_budget(self) -> bool:
+        return self.timesteps < self.cfg.timesteps or self.polished < self.cfg.polish_steps
+
+    def evaluation_due(self) -> bool:
+        if self._polishing():  # the trained policy's row when the budget ends, then the
+            # polish's (a finished run resumed with a polish has the same rows)
+            return self.polished % self.cfg.polish_eval_every == 0
+        return super().evaluation_due()
+
+    def polish_step(self) -> float:
+        """One actor step of the polish (``TrainConfig.polish_steps``): the method's actor
+        loss at the deterministic midpoints of the sub-pairs of the policy's own
+        deterministic trees between ``polish_pairs`` fresh pairs, the critic frozen. No
+        evaluation of C. Returns the loss."""
+        cfg = self.cfg
+        k = cfg.polish_pairs
+        ends = self.metric.domain.sample(2 * k, self.np_rng).reshape(k, 2, self.dim)
+        e = torch.as_tensor(ends, dtype=torch.float64, device=self.device)
+        self.actor.eval()
+        pts = generate_paths(self.actor, self.metric, e[:, 0], e[:, 1], self.depth_max)
+        self.actor.train()
+        pairs = [level_pairs(pts, i) for i in range(self.depth_max)]
+        s = torch.cat([a.reshape(-1, self.dim) for a, _ in pairs]).float()
+        g = torch.cat([b.reshape(-1, self.dim) for _, b in pairs]).float()
+        self.critic.requires_grad_(False)
+        try:
+            m = self.actor(s, g, deterministic=True)
+            loss = self.loss(self.critic(s, m), self.critic(m, g)).mean()
+            for group in self.opt_polish.param_groups:
+                group["lr"] = cfg.polish_lr
+            self.opt_polish.zero_grad(set_to_none=True)
+            loss.backward()
+            self._step_if_finite(self.opt_polish, self.actor, "actor (polish)")
+        finally:
+            self.critic.requires_grad_(True)
+        self.polished += 1
+        return float(loss.detach())
+
     # -- one iteration and its evaluation (the loop calls these) ----------------------------
     def begin(self) -> None:
         self.lr = self._set_lr()
+        if self._config_changed:  # a resume with new polish settings: record them
+            atomic_write_text(self.run_dir / CONFIG_FILE, self._config_json())
+            self._config_changed = False
 
     def iterate(self) -> None:
-        """Collect a batch of trees (the paper's timesteps), then :meth:`update`."""
+        """Collect a batch of trees (the paper's timesteps), then :meth:`update`; after
+        the budget, one :meth:`polish_step`."""
+        if self._polishing():
+            self.lr = self.cfg.polish_lr
+            self._losses.append((float("nan"), self.polish_step()))
+            self.iteration += 1
+            return
         self.lr = self._set_lr()
         s, g, c, ts = self.collect()
         self.timesteps += ts
