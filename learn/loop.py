@@ -100,9 +100,11 @@ def best_record(ev: Any, **more: Any) -> dict[str, Any]:
             "mean_length": ev.mean_length, **more}
 
 
-def _selection_key(record: dict[str, Any]) -> tuple[float, float]:
-    """Best checkpoint: higher validation success, ties by lower mean max segment cost."""
-    return (record["success_rate"], -record["mean_max_segment_cost"])
+def _selection_key(record: dict[str, Any]) -> tuple[float, float, float]:
+    """Best checkpoint: higher validation success (at a method's selection tolerance first,
+    ``selection_success``, where it keeps one), ties by lower mean max segment cost."""
+    return (record.get("selection_success", record["success_rate"]), record["success_rate"],
+            -record["mean_max_segment_cost"])
 
 
 class RunLoop(ABC):

@@ -426,7 +426,12 @@ class Trainer(RunLoop):
         self._losses = []
         columns = {"depth": self.depth_for(self.trees), **eval_columns(ev),
                    "critic_loss": float(lc), "actor_loss": float(la), "lr": self.lr}
-        return columns, best_record(ev, timesteps=self.timesteps)
+        more: dict[str, Any] = {"timesteps": self.timesteps}
+        if self.cfg.select_eps is not None:  # TrainConfig.select_eps
+            sel = float((ev.max_segment_cost <= self.cfg.select_eps).mean())
+            columns["success_rate_select"] = sel
+            more["selection_success"] = sel
+        return columns, best_record(ev, **more)
 
     def progress_fields(self, row: dict[str, Any]) -> dict[str, Any]:
         return {"success": f"{row['success_rate']:.2f}",

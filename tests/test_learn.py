@@ -752,6 +752,29 @@ def test_polish_settings_are_fixed_once_the_polish_began(tmp_path) -> None:
     assert more.history[-1]["iteration"] - more.history[-2]["iteration"] == 5
 
 
+def test_select_eps_keeps_the_checkpoint_best_at_the_tighter_tolerance(tmp_path) -> None:
+    cfg = _small(timesteps=12_000, eval_every=1)
+    tight = 0.6 * cfg.eval_eps
+    learn.train(cfg.replace(select_eps=tight), tmp_path / "r", progress=False)
+    rows = learn.storage.read_metrics(tmp_path / "r" / "metrics.csv")
+    assert len(rows) > 5 and all("success_rate_select" in r for r in rows)
+    # the rule: success at select_eps, then at eps, then the lowest mean largest segment
+    want = max(rows, key=lambda r: (r["success_rate_select"], r["success_rate"],
+                                    -r["mean_max_segment_cost"]))
+    best = learn.storage.load_checkpoint(tmp_path / "r" / learn.storage.BEST_FILE)["eval"]
+    assert best["selection_success"] == want["success_rate_select"]
+    assert best["timesteps"] == want["timesteps"]
+    # and the recorded figure is the policy's: recomputed from its paths
+    pol = learn.load_policy(tmp_path / "r")
+    pairs = finsler.validation_pairs(pol.metric, cfg.eval_pairs)
+    costs = pol.metric.path_costs(pol.generate(pairs[:, 0], pairs[:, 1]))
+    assert (costs.max(1) <= tight).mean() == pytest.approx(best["selection_success"])
+    doc = learn.storage.read_json(tmp_path / "r" / "config.json")
+    assert "select_eps" in doc["selection"] and doc["beyond_paper"]["select_eps"]["used"] == tight
+    with pytest.raises(finsler.InputError, match="select_eps"):
+        learn.train(cfg.replace(select_eps=None), tmp_path / "r", resume=True, progress=False)
+
+
 def test_resume_refuses_changed_settings(tmp_path) -> None:
     cfg = _small(timesteps=5_000)
     learn.train(cfg, tmp_path / "r", progress=False)
@@ -780,6 +803,10 @@ def test_resume_refuses_changed_settings(tmp_path) -> None:
         (dict(polish_eval_every=0), "polish_eval_every"),
         (dict(polish_lr=0.0), "polish_lr"),
         (dict(polish_lr=float("inf")), "polish_lr"),
+        (dict(select_eps=0.0), "select_eps"),
+        (dict(select_eps=float("nan")), "select_eps"),
+        (dict(select_eps=-1.0), "select_eps"),
+        (dict(select_eps=True), "select_eps"),
     ],
 )
 def test_config_rejects_impossible_options(over: dict, match: str) -> None:
