@@ -28,10 +28,12 @@ DEFAULT_EVAL_SEED = 20240531
 VALIDATION_SEED = 20240607
 
 
-def sample_pairs(metric: Metric, k: int, seed: int) -> np.ndarray:
+def sample_pairs(metric: Metric, k: int, seed: int | np.random.Generator) -> np.ndarray:
     """``k`` start/goal pairs, both endpoints uniform on the domain -> ``(k, 2, dim)``.
 
-    Deterministic for a given seed (numpy's PCG64 stream is stable across versions).
+    Deterministic for a given seed (numpy's PCG64 stream is stable across versions). A
+    :class:`numpy.random.Generator` is drawn from in place (a training run's own stream:
+    fresh pairs for its trees and actor terms).
     """
     if not isinstance(k, (int, np.integer)) or k < 1:
         raise InputError(f"number of pairs must be a positive integer, got {k!r}")

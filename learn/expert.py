@@ -29,6 +29,7 @@ from typing import Any, ClassVar
 
 import torch
 
+import finsler
 from learn.networks import predictor
 from learn.search import SearchSpec, search_paths
 from learn.term import ActorTerm, TermOutput, Trainer
@@ -83,8 +84,8 @@ class SearchImitation(ActorTerm):
         self.calls += 1
         if (self.calls - 1) % self.every:
             return 0
-        k, dim, depth = self.pairs, trainer.dim, trainer.depth_max
-        ends = trainer.metric.domain.sample(2 * k, trainer.np_rng).reshape(k, 2, dim)
+        k, depth = self.pairs, trainer.depth_max
+        ends = finsler.sample_pairs(trainer.metric, k, trainer.np_rng)
         e = torch.as_tensor(ends, dtype=torch.float64, device=trainer.device)
         actor = trainer.actor
         was_training = actor.training

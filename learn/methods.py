@@ -18,6 +18,7 @@ from typing import Any, ClassVar, Protocol
 
 import torch
 
+import finsler
 from finsler.errors import InputError
 from learn.expert import SearchImitation, search_spec
 from learn.term import ActorTerm, TermOutput, Trainer
@@ -141,8 +142,8 @@ class PathEnergy(ActorTerm):
         """Energies ``(pairs,)`` of the actor's paths between fresh pairs drawn from the
         run's generator (scaled per :attr:`scale`), differentiable in the actor's
         parameters."""
-        k, dim, depth = self.pairs, trainer.dim, trainer.depth_max
-        ends = trainer.metric.domain.sample(2 * k, trainer.np_rng).reshape(k, 2, dim)
+        k, depth = self.pairs, trainer.depth_max
+        ends = finsler.sample_pairs(trainer.metric, k, trainer.np_rng)
         e = torch.as_tensor(ends, dtype=torch.float32, device=trainer.device)
         pts = build_tree(e[:, 0], e[:, 1], depth,
                          lambda a, b: trainer.actor(a, b, deterministic=True)).double()

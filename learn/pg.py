@@ -545,7 +545,7 @@ class PGTrainer(RunLoop):
         cfg, d = self.cfg, self.level
         pi, opt = self.policies[d - 1], self.opts[d - 1]
         p, k = cfg.pairs_per_cycle, cfg.samples_per_pair
-        ends = self.metric.domain.sample(2 * p, self.np_rng).reshape(p, 2, self.dim)
+        ends = finsler.sample_pairs(self.metric, p, self.np_rng)
         ends_t = torch.as_tensor(ends, dtype=torch.float64, device=self.device)
         s, g = ends_t[:, 0], ends_t[:, 1]
         raw, paths = sample_training_paths(self.policies, self.metric, s, g, d, k, self.gen)

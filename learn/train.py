@@ -188,7 +188,7 @@ class Trainer(RunLoop):
         depth = self.depth_for(self.trees)
         per_tree = 2 ** (depth + 1) - 1 + (2**depth + 1 if self.cfg.zero_pairs else 0)
         n_trees = max(1, math.ceil(self.cfg.collection_size / per_tree))
-        ends = self.metric.domain.sample(2 * n_trees, self.np_rng).reshape(n_trees, 2, self.dim)
+        ends = finsler.sample_pairs(self.metric, n_trees, self.np_rng)
         ends_t = torch.as_tensor(ends, dtype=torch.float64, device=self.device)
         with torch.no_grad():
             pts = build_tree(ends_t[:, 0], ends_t[:, 1], depth, self._sample)
@@ -278,7 +278,7 @@ class Trainer(RunLoop):
         evaluation of C)."""
         if self.cfg.actor_pairs:
             k = self.cfg.actor_pairs
-            ends = self.metric.domain.sample(2 * k, self.np_rng).reshape(k, 2, self.dim)
+            ends = finsler.sample_pairs(self.metric, k, self.np_rng)
             e = torch.as_tensor(ends, dtype=s.dtype, device=s.device)
             s, g = torch.cat([s, e[:, 0]]), torch.cat([g, e[:, 1]])
         if self.actor.heads == 1:
@@ -367,7 +367,7 @@ class Trainer(RunLoop):
         evaluation of C. Returns the loss."""
         cfg = self.cfg
         k = cfg.polish_pairs
-        ends = self.metric.domain.sample(2 * k, self.np_rng).reshape(k, 2, self.dim)
+        ends = finsler.sample_pairs(self.metric, k, self.np_rng)
         e = torch.as_tensor(ends, dtype=torch.float64, device=self.device)
         self.actor.eval()
         pts = generate_paths(self.actor, self.metric, e[:, 0], e[:, 1], self.depth_max)

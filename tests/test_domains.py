@@ -49,6 +49,22 @@ def test_sampling_is_deterministic_for_a_seed() -> None:
     assert np.array_equal(a, b)
 
 
+def test_sample_pairs_draws_from_a_generator_in_place() -> None:
+    """A training run's fresh pairs: ``sample_pairs`` with a Generator draws the same
+    points, and advances the stream by as much, as the domain's own sampler on a twin
+    generator; with an integer seed it starts a fresh stream each time."""
+    m = finsler.get_metric("panda-pole")
+    a, b = np.random.default_rng(11), np.random.default_rng(11)
+    for k in (1, 5, 64):
+        got = finsler.sample_pairs(m, k, a)
+        want = m.domain.sample(2 * k, b).reshape(k, 2, m.dim)
+        np.testing.assert_array_equal(got, want)
+    assert a.random() == b.random()
+    np.testing.assert_array_equal(finsler.sample_pairs(m, 3, 7), finsler.sample_pairs(m, 3, 7))
+    with pytest.raises(InputError, match="positive integer"):
+        finsler.sample_pairs(m, 0, a)
+
+
 @pytest.mark.parametrize("name", ["matsumoto", "carlike", "panda-pole", "euclidean", "poincare"])
 def test_projection_idempotent_inside_and_nearest(name: str) -> None:
     m = finsler.get_metric(name)
