@@ -8,6 +8,7 @@ generates paths by ``D`` batched actor calls.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
@@ -21,7 +22,7 @@ from finsler.errors import InputError
 from learn.base import LoadedPolicy
 from learn.config import METHODS, TrainConfig
 from learn.loop import load_run, load_weights, read_config_section
-from learn.networks import Actor, predictor, resolve_device
+from learn.networks import Actor, Critic, predictor, resolve_device
 from learn.registry import method_of_run
 from learn.search import SearchResult, SearchSpec, search_paths
 from learn.storage import BEST_FILE, CONFIG_FILE, LATEST_FILE, POLICY_FILE, load_checkpoint
@@ -55,6 +56,19 @@ def build_actor(cfg: TrainConfig, metric: finsler.Metric | None = None) -> Actor
         init_log_std=cfg.init_log_std,
         explore_std=cfg.explore_std,
         heads=cfg.actor_heads,
+    )
+
+
+def build_critic(cfg: TrainConfig, metric: finsler.Metric | None = None) -> Critic:
+    """The critic network described by ``cfg`` (untrained): ``critic_hidden`` (else the
+    actor's ``hidden``), the transform and the symmetry of the run."""
+    return Critic(
+        metric if metric is not None else cfg.metric,
+        hidden=cfg.critic_hidden or cfg.hidden,
+        activation=cfg.activation,
+        normalize_inputs=cfg.normalize_inputs,
+        transform=cfg.critic_transform,
+        symmetric=cfg.symmetric_critic,
     )
 
 
@@ -274,6 +288,54 @@ def load_policy(run: str | Path, device: str = "cpu", checkpoint: str = "best",
                                   metric_params=metric_params)
     return load_midpoint_policy(run, device=device, checkpoint=checkpoint, env=env,
                                 metric_params=metric_params)
+
+
+def load_critic(run: str | Path, checkpoint: str = "best", device: str = "cpu") -> Critic:
+    """The critic ``V(s, g)`` of a midpoint run's checkpoint (``best`` or ``latest``), in
+    eval mode. Shipped policies and exported ones keep the actor only.
+
+    Raises :class:`InputError` for a missing directory or a checkpoint without a critic,
+    and :class:`CorruptFileError` for unreadable files.
+    """
+    path = Path(run)
+    if not path.is_dir():
+        raise InputError(f"run directory {str(run)!r} does not exist (a critic is kept in a "
+                         "run's checkpoints only; shipped policies keep the actor)")
+    path, cfg, ckpt, loaded = load_run(path, checkpoint, TrainConfig, METHODS, None, None)
+    if ckpt.get("critic") is None:
+        raise InputError(f"{path / loaded} holds no critic (an exported or shipped policy "
+                         "keeps the actor only)")
+    critic = build_critic(cfg)
+    load_weights(critic, ckpt["critic"], path)
+    return critic.to(resolve_device(device)).eval()
+
+
+def critic_level_errors(metric: finsler.Metric, paths: Any,
+                        value: Callable[[torch.Tensor, torch.Tensor], torch.Tensor]
+                        ) -> list[np.ndarray]:
+    """How far a critic is off the cost of a policy's own sub-paths, level by level: for
+    paths ``(K, 2**D + 1, dim)`` (a midpoint tree's points in order), level ``l`` holds
+    the ``2**l`` sub-pairs ``(p_i, p_{i + 2**(D-l)})`` of each path, and its entry is
+    ``value(p_i, p_j) / (sum of C over the segments between them) - 1``, shape
+    ``(K * 2**l,)``; levels ``0 .. D`` (level D: single segments, where the sub-path cost
+    is one evaluation of C). ``value`` takes float64 tensors ``(N, dim)`` x2."""
+    paths = np.asarray(paths, dtype=np.float64)
+    n = paths.shape[1] - 1 if paths.ndim == 3 else 0
+    if n < 1 or n & (n - 1):
+        raise InputError(f"paths must have shape (K, 2**D + 1, dim), got {paths.shape}")
+    costs = metric.path_costs(paths)
+    if np.any(costs <= 0):
+        raise InputError("a segment of zero cost has no relative error (repeated points)")
+    out = []
+    for lev in range(n.bit_length()):
+        step = n >> lev
+        a = paths[:, 0:n:step].reshape(-1, metric.dim)
+        b = paths[:, step:n + 1:step].reshape(-1, metric.dim)
+        true = costs.reshape(len(costs), -1, step).sum(-1).reshape(-1)
+        with torch.no_grad():
+            v = value(torch.as_tensor(a), torch.as_tensor(b))
+        out.append(np.asarray(v.detach().cpu(), dtype=np.float64) / true - 1.0)
+    return out
 
 
 def export_policy(run_dir: str | Path, dest: str | Path, checkpoint: str = "best") -> Path:

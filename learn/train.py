@@ -47,10 +47,11 @@ from learn.config import (
 )
 from learn.loop import RunLoop, best_record, eval_columns, read_config_section
 from learn.methods import actor_loss_of, actor_terms
-from learn.networks import Critic, resolve_device
+from learn.networks import resolve_device
 from learn.policy import (
     EvalResult,
     build_actor,
+    build_critic,
     evaluate_paths,
     generate_paths,
     load_midpoint_policy,
@@ -110,12 +111,7 @@ class Trainer(RunLoop):
         with torch.random.fork_rng(devices=[]):
             torch.manual_seed(cfg.seed)
             self.actor = build_actor(cfg, self.metric).to(self.device)
-            self.critic = Critic(
-                self.metric, hidden=cfg.critic_hidden or cfg.hidden,
-                activation=cfg.activation,
-                normalize_inputs=cfg.normalize_inputs, transform=cfg.critic_transform,
-                symmetric=cfg.symmetric_critic,
-            ).to(self.device)
+            self.critic = build_critic(cfg, self.metric).to(self.device)
         adam = dict(fused=True) if cfg.fused_adam else {}
         self.opt_actor = torch.optim.Adam(self.actor.parameters(), lr=cfg.lr, **adam)
         self.opt_critic = torch.optim.Adam(self.critic.parameters(), lr=cfg.lr, **adam)
