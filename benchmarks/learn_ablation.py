@@ -54,9 +54,10 @@ def run(env: str, name: str, timesteps: int, minutes: float | None, seed: int,
     make = learn.default_config if base == "ours" else learn.paper_config
     cfg = make(env, **{**over, "timesteps": timesteps, "minutes": minutes, "seed": seed,
                        "eval_every": 10_000})
-    out = tempfile.mkdtemp(prefix=f"abl_{name}_") + "/run"
-    res = learn.train(cfg, out, progress=False)
-    policy = learn.load_policy(out, checkpoint="latest")
+    with tempfile.TemporaryDirectory(prefix=f"abl_{name}_") as tmp:  # removed afterwards
+        out = tmp + "/run"
+        res = learn.train(cfg, out, progress=False)
+        policy = learn.load_policy(out, checkpoint="latest")
     pairs = finsler.default_pairs(policy.metric)
     paths = policy.generate(pairs[:, 0], pairs[:, 1])
     ratio = policy.metric.path_costs(paths).sum(1) / exact

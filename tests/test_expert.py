@@ -5,8 +5,6 @@ run equals an uninterrupted one: tests/test_learn.py), config checks."""
 
 from __future__ import annotations
 
-import tempfile
-
 import numpy as np
 import pytest
 import torch
@@ -46,10 +44,10 @@ def test_tree_targets_by_hand() -> None:
         tree_targets(p[:, :4], c[:, :3])
 
 
-def _bent_trainer() -> Trainer:
+def _bent_trainer(run_dir) -> Trainer:
     """A Euclidean trainer whose actor's midpoints are (s + g) / 2 pushed 0.2 along y."""
     cfg = _small(depth=3, eval_pairs=10)
-    tr = Trainer(cfg, tempfile.mkdtemp(prefix="expert_test_"), progress=False)
+    tr = Trainer(cfg, run_dir, progress=False)
     with torch.no_grad():
         tr.actor.net[-1].weight.zero_()
         tr.actor.net[-1].bias.zero_()
@@ -58,8 +56,9 @@ def _bent_trainer() -> Trainer:
 
 
 @pytest.mark.parametrize("kind", ["local", "full"])
-def test_term_counts_every_evaluation_and_targets_beat_the_policy(monkeypatch, kind) -> None:
-    tr = _bent_trainer()
+def test_term_counts_every_evaluation_and_targets_beat_the_policy(tmp_path, monkeypatch,
+                                                                  kind) -> None:
+    tr = _bent_trainer(tmp_path)
     seen = [0]
     real = finsler.Metric.path_costs
 
@@ -104,8 +103,8 @@ def test_term_counts_every_evaluation_and_targets_beat_the_policy(monkeypatch, k
     assert s.dtype == g.dtype == cc.dtype == torch.float64 and cc.shape == (12 * 7,)
 
 
-def test_term_rounds_follow_every_and_keep() -> None:
-    tr = _bent_trainer()
+def test_term_rounds_follow_every_and_keep(tmp_path) -> None:
+    tr = _bent_trainer(tmp_path)
     term = SearchImitation(weight=1.0, pairs=4, every=2, spec=search_spec("local"), keep=2)
     counts = [term.prepare(tr) for _ in range(6)]
     assert [c > 0 for c in counts] == [True, False, True, False, True, False]

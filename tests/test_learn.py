@@ -78,10 +78,10 @@ def test_td_lambda_targets_of_a_hand_built_depth2_tree() -> None:
         assert torch.equal(a, b)
 
 
-def test_trainer_collect_uses_td_targets_of_its_own_critic() -> None:
+def test_trainer_collect_uses_td_targets_of_its_own_critic(run_dirs) -> None:
     cfg = learn.default_config("euclidean", depth=2, targets="td", td_lambda=0.3,
                                collection_size=7, zero_pairs=False)
-    tr = Trainer(cfg, _tmp_run_dir(), progress=False)
+    tr = Trainer(cfg, run_dirs(), progress=False)
     s, g, c, ts = tr.collect()
     assert ts == 4 and s.shape == (7, 2)  # one tree: 1 + 2 + 4 pairs, 4 evaluations of C
     # the collected pairs are ordered level 0, level 1, level 2
@@ -101,12 +101,12 @@ def _exact_midpoint_actor(tr: Trainer) -> None:
         tr.actor.net[-1].bias.zero_()
 
 
-def test_path_energy_of_exact_midpoints_is_squared_distance() -> None:
+def test_path_energy_of_exact_midpoints_is_squared_distance(run_dirs) -> None:
     """On the Euclidean plane the recursive exact midpoints give n equal segments of
     length L / n, so n * sum C**2 = L**2; the pairs are fresh draws from the run's RNG."""
     cfg = learn.default_config("euclidean", depth=3, path_energy_weight=1.0,
                                path_energy_pairs=5)
-    tr = Trainer(cfg, _tmp_run_dir(), progress=False)
+    tr = Trainer(cfg, run_dirs(), progress=False)
     _exact_midpoint_actor(tr)
     term = PathEnergy(weight=1.0, pairs=5)
     state = tr.np_rng.bit_generator.state
@@ -126,14 +126,14 @@ def test_path_energy_of_exact_midpoints_is_squared_distance() -> None:
     assert tr.actor.net[-1].bias.grad[:2].abs().min() > 0
 
 
-def test_scale_free_path_energy_is_one_for_exact_midpoints() -> None:
+def test_scale_free_path_energy_is_one_for_exact_midpoints(run_dirs) -> None:
     """``path_energy_scale="straight"`` divides by the straight path's energy: on the
     Euclidean plane exact midpoints give exactly 1 per pair whatever the pair's size, a
     perturbed actor more than 1 with a gradient, and a step counts the straight paths'
     evaluations of C (values only) beside the tree's."""
     cfg = learn.default_config("euclidean", depth=3, path_energy_weight=1.0,
                                path_energy_pairs=6, path_energy_scale="straight")
-    tr = Trainer(cfg, _tmp_run_dir(), progress=False)
+    tr = Trainer(cfg, run_dirs(), progress=False)
     _exact_midpoint_actor(tr)
     term = PathEnergy(weight=1.0, pairs=6, scale="straight")
     np.testing.assert_allclose(term.energy(tr).detach().numpy(), np.ones(6), rtol=1e-5)
@@ -296,7 +296,7 @@ def _distance_critic(tr: Trainer) -> None:
     tr.critic = lambda a, b: (b - a).norm(dim=-1)  # type: ignore[assignment]
 
 
-def test_multi_head_actor_loss_scores_the_head_the_critic_rates_best() -> None:
+def test_multi_head_actor_loss_scores_the_head_the_critic_rates_best(run_dirs) -> None:
     """With the exact Euclidean distance as critic and two heads, one exactly at the
     midpoint and one offset: the scores' gradient raises the midpoint head's score and
     lowers the other's, the midpoint head (the winner) gets no mean gradient (its loss is
@@ -307,7 +307,7 @@ def test_multi_head_actor_loss_scores_the_head_the_critic_rates_best() -> None:
         cfg = learn.default_config("euclidean", depth=2, actor_heads=2,
                                    actor_head_share=share, actor_head_weight=1.0,
                                    log_std_min=-20.0)
-        tr = Trainer(cfg, _tmp_run_dir(), progress=False)
+        tr = Trainer(cfg, run_dirs(), progress=False)
         with torch.no_grad():
             last = tr.actor.net[-1]
             last.weight.zero_()
@@ -353,13 +353,13 @@ def test_multi_head_policy_saves_and_loads(tmp_path) -> None:
             learn.default_config("euclidean", **{field: bad})
 
 
-def test_actor_pairs_join_the_actor_minibatch_without_evaluating_c(monkeypatch) -> None:
+def test_actor_pairs_join_the_actor_minibatch_without_evaluating_c(run_dirs, monkeypatch) -> None:
     """``actor_pairs``: the actor loss is the method's loss over the minibatch followed by
     ``actor_pairs`` fresh uniform pairs drawn from the run's numpy generator (recomputed
     here with actor_pairs off on the concatenated batch, the same noise), and an update
     with them evaluates C nowhere (every evaluation would be counted in timesteps)."""
     cfg = learn.default_config("euclidean", depth=2, actor_pairs=7, actor_relative=True)
-    tr = Trainer(cfg, _tmp_run_dir(), progress=False)
+    tr = Trainer(cfg, run_dirs(), progress=False)
     _distance_critic(tr)
     s = torch.tensor([[-0.5, 0.2], [0.3, -0.4], [0.0, 0.0]])
     g = torch.tensor([[0.5, -0.1], [-0.2, 0.6], [0.0, 0.0]])
@@ -378,7 +378,7 @@ def test_actor_pairs_join_the_actor_minibatch_without_evaluating_c(monkeypatch) 
     tr.cfg = cfg
     # an update with the pairs: C is never evaluated, timesteps stay what they were
     s64, g64, c64, _ = tr.collect()
-    tr.critic = Trainer(cfg, _tmp_run_dir(), progress=False).critic
+    tr.critic = Trainer(cfg, run_dirs(), progress=False).critic
 
     def no_cost(*_: object) -> None:
         raise AssertionError("C evaluated by an actor_pairs update")
@@ -446,7 +446,7 @@ def test_relative_critic_is_length_times_exp_of_its_output() -> None:
                                rtol=1e-5, atol=1e-5)
 
 
-def test_relative_critic_skips_zero_pairs_and_learns_a_distance() -> None:
+def test_relative_critic_skips_zero_pairs_and_learns_a_distance(run_dirs) -> None:
     """The relative critic's loss is the mean squared error of log(c / r) over the
     pairs with a cost (zero pairs: log 0, no target; an update stays finite; a NaN cost is
     not dropped but skips the step), and on the
@@ -454,7 +454,7 @@ def test_relative_critic_skips_zero_pairs_and_learns_a_distance() -> None:
     trained on."""
     cfg = learn.default_config("euclidean", depth=2, critic_transform="relative", epochs=1,
                                minibatch_size=4096)
-    tr = Trainer(cfg, _tmp_run_dir(), progress=False)
+    tr = Trainer(cfg, run_dirs(), progress=False)
     rng = np.random.default_rng(0)
     pts = torch.as_tensor(tr.metric.domain.sample(2048, rng), dtype=torch.float64)
     s, g = pts[:1024], pts[1024:]
@@ -472,7 +472,7 @@ def test_relative_critic_skips_zero_pairs_and_learns_a_distance() -> None:
     tr.update(s, g, bad)
     assert tr.skipped_steps == 1
     cfg = cfg.replace(minibatch_size=256, epochs=40)
-    tr = Trainer(cfg, _tmp_run_dir(), progress=False)
+    tr = Trainer(cfg, run_dirs(), progress=False)
     tr.update(s, g, c)
     test = torch.as_tensor(tr.metric.domain.sample(400, rng), dtype=torch.float32)
     a, b = test[:200], test[200:]
@@ -481,9 +481,9 @@ def test_relative_critic_skips_zero_pairs_and_learns_a_distance() -> None:
     assert float(rel.max()) < 0.01
 
 
-def test_route_search_returns_only_real_improvements() -> None:
+def test_route_search_returns_only_real_improvements(run_dirs) -> None:
     cfg = learn.default_config("euclidean", depth=3, route_candidates=16, route_pairs=40)
-    tr = Trainer(cfg, _tmp_run_dir(), progress=False)
+    tr = Trainer(cfg, run_dirs(), progress=False)
     _exact_midpoint_actor(tr)
     term = RouteSearch(candidates=16, pairs=40, weight=1.0)
     # straight, evenly split paths are optimal: no candidate can be 1% cheaper
@@ -566,14 +566,11 @@ def test_actor_loss_power_rejects_impossible_values(bad: dict) -> None:
 # ----------------------------------------------------------------------------------------
 # determinism, learning, resume
 # ----------------------------------------------------------------------------------------
-_COUNTER = [0]
-
-
-def _tmp_run_dir() -> str:
-    import tempfile
-
-    _COUNTER[0] += 1
-    return tempfile.mkdtemp(prefix=f"learn_test_{_COUNTER[0]}_")
+@pytest.fixture
+def run_dirs(tmp_path_factory):
+    """Fresh run directories under pytest's temporary root (cleaned by pytest, never left
+    in the system's temp folder): ``run_dirs()`` makes one."""
+    return lambda: tmp_path_factory.mktemp("run")
 
 
 def _small(**over: object) -> learn.TrainConfig:
