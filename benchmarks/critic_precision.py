@@ -37,18 +37,29 @@ def main() -> None:
                          "task's)")
     ap.add_argument("--threads", type=int, default=1)
     args = ap.parse_args()
+    if args.pairs < 1:
+        ap.error(f"--pairs must be at least 1, got {args.pairs}")
+    try:
+        eps_list = [float(e) for e in args.eps.split(",") if e]
+    except ValueError:
+        ap.error(f"--eps must be comma-separated numbers, got {args.eps!r}")
+    if not all(np.isfinite(e) and e > 0 for e in eps_list):
+        ap.error(f"--eps values must be positive and finite, got {args.eps!r}")
     torch.set_num_threads(args.threads)
     for spec in args.runs:
         run, _, ck = spec.partition(":")
         ck = ck or "best"
         t = time.perf_counter()
-        policy = learn.load_policy(run, checkpoint=ck)
-        critic = learn.load_critic(run, checkpoint=ck).double()
+        try:
+            policy = learn.load_policy(run, checkpoint=ck)
+            critic = learn.load_critic(run, checkpoint=ck).double()
+        except (finsler.InputError, learn.CorruptFileError) as err:
+            raise SystemExit(f"critic_precision: {err}") from None
         m = policy.metric
         pairs = finsler.sample_pairs(m, args.pairs, args.seed)
         paths = policy.generate(pairs[:, 0], pairs[:, 1])
         costs = m.path_costs(paths)
-        eps = [float(e) for e in args.eps.split(",") if e] or [policy.eps]
+        eps = eps_list or [policy.eps]
         success = " / ".join(f"{100 * np.mean(costs.max(1) <= e):.1f}" for e in eps)
         errors = learn.critic_level_errors(m, paths, critic)
         print(f"{run} ({policy.checkpoint}, {m.name}, critic {critic.transform}"
