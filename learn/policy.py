@@ -26,7 +26,7 @@ from learn.networks import Actor, Critic, predictor, resolve_device
 from learn.registry import method_of_run
 from learn.search import SearchResult, SearchSpec, search_paths
 from learn.storage import BEST_FILE, CONFIG_FILE, LATEST_FILE, POLICY_FILE, load_checkpoint
-from learn.tree import build_tree
+from learn.tree import build_tree, level_pairs, mc_targets
 
 __all__ = [
     "EvalResult",
@@ -326,15 +326,14 @@ def critic_level_errors(metric: finsler.Metric, paths: Any,
     costs = metric.path_costs(paths)
     if np.any(costs <= 0):
         raise InputError("a segment of zero cost has no relative error (repeated points)")
+    pts = torch.as_tensor(paths)
     out = []
-    for lev in range(n.bit_length()):
-        step = n >> lev
-        a = paths[:, 0:n:step].reshape(-1, metric.dim)
-        b = paths[:, step:n + 1:step].reshape(-1, metric.dim)
-        true = costs.reshape(len(costs), -1, step).sum(-1).reshape(-1)
+    for lev, true in enumerate(mc_targets(torch.tensor(costs))):  # sub-path costs
+        a, b = level_pairs(pts, lev)
         with torch.no_grad():
-            v = value(torch.as_tensor(a), torch.as_tensor(b))
-        out.append(np.asarray(v.detach().cpu(), dtype=np.float64) / true - 1.0)
+            v = value(a.reshape(-1, metric.dim), b.reshape(-1, metric.dim))
+        out.append(np.asarray(v.detach().cpu(), dtype=np.float64) / true.reshape(-1).numpy()
+                   - 1.0)
     return out
 
 
