@@ -554,7 +554,7 @@ _OURS: dict[str, dict[str, Any]] = {
     # 0's best is a polished checkpoint, seed 1's one at 1.87e7. Fresh pairs: README.
     # The budget stays 2e7: 3e7 with these settings (seeds 0 / 1) gains nothing on the tuning
     # pairs (best 99.4 / 99.6, 96.8 / 95.8, 69.6 / 69.0%) nor on the fresh pairs (README,
-    # "When the policy alone is not enough").
+    # "Polishing the actor against the frozen critic").
     "panda-pole": dict(timesteps=20_000_000, hidden=(256, 256, 256), critic_hidden=(128, 128),
                        symmetric_critic=True, eval_every=25, actor_loss_power=8.0,
                        select_eps=10.0, polish_steps=3000),
