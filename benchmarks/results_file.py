@@ -1,0 +1,135 @@
+"""Write a benchmark's measurements to a file under ``benchmarks/results/``.
+
+Every figure the README or the docs cite lives in such a file, written by the script that
+measured it, never typed by hand. The header says how to get the same figures again: the
+command line, the commit (and whether the tree had uncommitted changes), the machine
+(cores, load averages at the start and at the end, CPU model, Python and key package
+versions) and the date. A rerun writes a new file (the date is in its name unless the
+script names it), so older measurements stay for comparison.
+
+Usage from a benchmark script (run as ``python benchmarks/NAME.py``, so this module is
+importable by its name)::
+
+    from results_file import ResultsFile
+    out = ResultsFile("ground_truth", title="Ground truth on fresh pairs")
+    out.add("## Matsumoto", table_markdown)
+    path = out.write()          # benchmarks/results/ground_truth-2026-11-28.md
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import os
+import platform
+import shlex
+import subprocess
+import sys
+from pathlib import Path
+
+RESULTS = Path(__file__).resolve().parent / "results"
+_ROOT = Path(__file__).resolve().parents[1]
+
+
+def _git(*args: str) -> str:
+    try:
+        out = subprocess.run(["git", *args], cwd=_ROOT, capture_output=True, text=True,
+                             timeout=20, check=False)
+    except (OSError, subprocess.SubprocessError):
+        return ""
+    return out.stdout.strip() if out.returncode == 0 else ""
+
+
+def _cpu_model() -> str:
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine()
+
+
+def _load() -> str:
+    try:
+        return " ".join(f"{x:.2f}" for x in os.getloadavg())
+    except OSError:
+        return "unknown"
+
+
+def _versions() -> str:
+    from importlib import metadata
+
+    parts = [f"python {platform.python_version()}"]
+    for name in ("numpy", "scipy", "casadi", "torch"):
+        try:
+            parts.append(f"{name} {metadata.version(name)}")
+        except metadata.PackageNotFoundError:
+            pass
+    return ", ".join(parts)
+
+
+def markdown_table(header: list[str], rows: list[list[object]]) -> str:
+    """A Markdown table; floats are written as given by ``str`` unless pre-formatted."""
+    lines = ["| " + " | ".join(header) + " |", "| " + " | ".join("---" for _ in header) + " |"]
+    lines += ["| " + " | ".join(str(c) for c in row) + " |" for row in rows]
+    return "\n".join(lines)
+
+
+class ResultsFile:
+    """Collects sections of Markdown and writes them under a reproducibility header.
+
+    ``name`` is the file's stem (the benchmark's name); ``stamp=True`` appends the date
+    (``NAME-YYYY-MM-DD.md``, then ``-2``, ``-3`` ... if that exists) so reruns keep history.
+    """
+
+    def __init__(self, name: str, title: str, *, stamp: bool = True,
+                 directory: str | os.PathLike[str] | None = None) -> None:
+        if not name or "/" in name or name.startswith("."):
+            raise ValueError(f"results name {name!r} is not a plain file stem")
+        self.name = name
+        self.title = title
+        self.stamp = stamp
+        self.directory = Path(directory) if directory is not None else RESULTS
+        self.started = _dt.datetime.now(_dt.timezone.utc)
+        self.load_start = _load()
+        self.sections: list[str] = []
+
+    def add(self, *chunks: str) -> None:
+        """Append Markdown (headings, tables, paragraphs) in order."""
+        self.sections.extend(c.rstrip() + "\n" for c in chunks)
+
+    def header(self) -> str:
+        commit = _git("rev-parse", "HEAD") or "unknown"
+        dirty = _git("status", "--porcelain", "--untracked-files=no")
+        cmd = " ".join(shlex.quote(a) for a in [Path(sys.executable).name, *sys.argv])
+        ended = _dt.datetime.now(_dt.timezone.utc)
+        return "\n".join([
+            f"# {self.title}",
+            "",
+            f"- command: `{cmd}`",
+            f"- commit: `{commit}`" + (" (with uncommitted changes)" if dirty else ""),
+            f"- machine: {os.cpu_count()} cores, {_cpu_model()}; load averages "
+            f"(1, 5, 15 min) {self.load_start} at the start, {_load()} at the end",
+            f"- software: {_versions()}",
+            f"- date: {self.started:%Y-%m-%d %H:%M} to {ended:%H:%M} UTC",
+            "",
+        ])
+
+    def path(self) -> Path:
+        if not self.stamp:
+            return self.directory / f"{self.name}.md"
+        base = f"{self.name}-{self.started:%Y-%m-%d}"
+        p, k = self.directory / f"{base}.md", 2
+        while p.exists():
+            p, k = self.directory / f"{base}-{k}.md", k + 1
+        return p
+
+    def write(self) -> Path:
+        """Write the file atomically and return its path (also printed)."""
+        from finsler.files import atomic_write_text
+
+        self.directory.mkdir(parents=True, exist_ok=True)
+        p = self.path()
+        atomic_write_text(p, self.header() + "\n" + "\n".join(self.sections))
+        print(f"results written to {p}")
+        return p
