@@ -54,9 +54,27 @@ def metric_class(name: str) -> type[Metric]:
     return _REGISTRY[check_name(name)]
 
 
-def list_metrics() -> list[str]:
-    """Names of the registered metrics, in registration order."""
-    return list(_REGISTRY)
+def list_metrics(*, provides: str | None = None, dim: int | None = None,
+                 convex_everywhere: bool | None = None) -> list[str]:
+    """Names of the registered metrics, in registration order; the keywords keep those whose
+    default-parameter instance answers as asked: ``provides`` a hook (e.g. ``"distance"``:
+    a closed form, :mod:`finsler.hooks`), has dimension ``dim``, is strongly convex on its
+    whole domain (``convex_everywhere``). Code that needs "the metrics with a closed form"
+    asks here instead of keeping a list of names."""
+    names = list(_REGISTRY)
+    if provides is None and dim is None and convex_everywhere is None:
+        return names
+    out = []
+    for name in names:
+        m = get_metric(name)
+        if provides is not None and not m.provides(provides):
+            continue
+        if dim is not None and m.dim != dim:
+            continue
+        if convex_everywhere is not None and bool(m.convex_everywhere) != convex_everywhere:
+            continue
+        out.append(name)
+    return out
 
 
 def check_name(name: str, what: str = "metric") -> str:

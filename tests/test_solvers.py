@@ -26,7 +26,8 @@ from solvers import DistanceStatus, SeedPlan, Status
 from solvers.baseline import adam_energy_baseline
 from solvers.transcription import energy_nlp
 
-CLOSED_FORM = ["euclidean", "minkowski", "randers", "poincare", "sphere"]
+#: the metrics that provide a closed-form distance (asked, not listed)
+CLOSED_FORM = finsler.list_metrics(provides="distance")
 
 
 # ----------------------------------------------------------------------------------------

@@ -39,12 +39,16 @@ __all__ = [
     "triples",
 ]
 
-#: Registered metrics with a closed-form distance.
-CLOSED_FORM: tuple[str, ...] = ("euclidean", "minkowski", "randers", "poincare", "sphere")
+# The metrics are asked what they can do (finsler.list_metrics filters on hooks and
+# properties); no list of names is kept here. Registered when this module is imported.
+#: Registered metrics with a closed-form distance (the ``distance`` hook).
+CLOSED_FORM: tuple[str, ...] = tuple(finsler.list_metrics(provides="distance"))
 #: The 2-D closed-form metrics (the defaults of the grid checks of Proposition 2).
-CLOSED_FORM_2D: tuple[str, ...] = CLOSED_FORM
+CLOSED_FORM_2D: tuple[str, ...] = tuple(finsler.list_metrics(provides="distance", dim=2))
 #: 2-D metrics that are Finsler (strongly convex, smooth) on their whole domain.
-FINSLER_2D: tuple[str, ...] = CLOSED_FORM
+FINSLER_2D: tuple[str, ...] = tuple(
+    n for n in finsler.list_metrics(dim=2, convex_everywhere=True)
+    if finsler.get_metric(n).smooth)
 
 
 def metrics(names: Sequence[str] | None = None) -> st.SearchStrategy[Metric]:
