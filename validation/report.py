@@ -74,21 +74,24 @@ def load_report_policy(
             f"shipped policy for {env} ({src}, {pol.checkpoint}; its checkpoint was selected "
             f"on {chosen_on}; see learn/policies/README.md for fresh pairs)")
     if quick:
-        if env != "matsumoto":
-            raise InputError(f"--quick trains a small policy only for matsumoto; {env!r} has "
-                             "no shipped policy: train one with `geodesics train` and pass --run")
         run_dir = out / "quick_run"
         if (run_dir / "config.json").is_file():  # a previous --quick run: reuse its policy
-            try:
-                pol = learn.load_policy(run_dir, checkpoint=checkpoint,
+            try:  # (env: a quick run of another environment is not reused)
+                pol = learn.load_policy(run_dir, checkpoint=checkpoint, env=env,
                                         metric_params=metric_params)
                 return pol, run_dir, (
                     f"small policy trained by an earlier --quick run, reused from {run_dir}"
                     f", {pol.checkpoint}")
             except InputError:
-                pass  # incomplete or corrupt: train again below
+                if _quick_run_env(run_dir) not in (None, env):
+                    raise InputError(
+                        f"{run_dir} holds a --quick run for {_quick_run_env(run_dir)!r}, not "
+                        f"{env!r}: choose another --out") from None
+                # incomplete or corrupt: train again below
         # a work budget only: a wall-clock limit would make the policy depend on the load
-        cfg = learn.default_config("matsumoto", timesteps=3_000_000, eval_every=5,
+        # (any environment: its default configuration at a small budget; a policy for a
+        # hard task trained this way is weak, and the report says how it was trained)
+        cfg = learn.default_config(env, timesteps=3_000_000, eval_every=5,
                                    metric_params=metric_params)
         learn.train(cfg, run_dir, progress=progress)
         pol = learn.load_policy(run_dir, checkpoint=checkpoint)
@@ -98,6 +101,15 @@ def load_report_policy(
     raise InputError(f"no shipped policy for {env!r} (shipped: "
                      f"{', '.join(learn.shipped_policies()) or 'none'}); pass --run DIR "
                      "or use --quick")
+
+
+def _quick_run_env(run_dir: Path) -> str | None:
+    """The environment of an earlier --quick run's config.json (None if unreadable)."""
+    try:
+        env = json.loads((run_dir / "config.json").read_text()).get("env")
+    except (OSError, ValueError, AttributeError):
+        return None
+    return env if isinstance(env, str) else None
 
 
 def time_to_success(rows: list[dict[str, Any]],
