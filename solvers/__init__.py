@@ -1,4 +1,4 @@
-"""solvers: exact geodesics by direct transcription with IPOPT, global seeding, min-max
+"""solvers: exact geodesics by batched Newton (IPOPT: reference, fallback), global seeding, min-max
 refinement of the task ceiling, continuum distances with error estimates, batches.
 
 Public API::
