@@ -171,3 +171,11 @@ def test_moved_results_say_where_they_come_from() -> None:
                       "- date"):
             assert field in head, (path.name, field)
         assert re.search(r"`[0-9a-f]{10}` 20\d\d-\d\d-\d\d", head), path.name
+
+
+@pytest.mark.parametrize("page", _pages(), ids=lambda p: str(p.relative_to(DOCS)))
+def test_docs_python_blocks_are_python(page: Path) -> None:
+    """Every ```python block of the guides compiles (they are fragments: the README's blocks
+    run in tests/test_readme.py)."""
+    for block in re.findall(r"```python\n(.*?)```", page.read_text(encoding="utf-8"), re.S):
+        compile(block, str(page), "exec")
