@@ -1,23 +1,41 @@
 """``geodesics check``: the property suite of :mod:`validation.testing` on a metric (and a
 policy), as a table of property, examples tried, passed, result and counterexample.
 
-Exit status 0 when every property holds (or is mapped: a non-convex region the metric
-documents, or skipped: does not apply), 1 when one fails, 2 for bad input. The same
-``--seed`` (with the same code loaded) gives the same examples and results. Nothing is
-written: hypothesis's caches go to a temporary folder, removed at the end.
+Each property ends ``passed``; ``failed`` (a counterexample, with both sides' values);
+``inconclusive`` (no counterexample, but some examples could not be judged: a solve that
+did not converge -- never a counterexample --, a certificate out of its work budget; the
+note says which and what was tried); ``mapped`` (failures only in a non-convex region the
+metric documents); ``skipped`` (does not apply: e.g. distance symmetry on a metric
+declared not reversible); or ``not-run`` (a property it needs failed: once F itself fails
+-- domain, finite-positive, homogeneity, subadditivity, strong convexity, lowered forms,
+smoothness -- the properties that need a valid F say "needs X" instead of failing as a
+consequence; :data:`validation.testing.suite.NEEDS`). The last line names the root cause
+(the first failed property) first.
+
+Exit status 0 when no property fails (inconclusive, mapped, skipped and not-run results
+included; with ``--strict`` an inconclusive one exits 1 too), 1 when one fails, 2 for bad
+input. The same ``--seed`` (with the same code loaded) gives the same examples and
+results. Nothing is written: hypothesis's caches go to a temporary folder, removed at the
+end. Warnings raised while checking (numpy's RuntimeWarnings on invalid values) are caught
+and summarised per property, not printed as they come.
 
 ``--json`` prints :meth:`validation.testing.CheckReport.to_dict`: ``metric``, ``params``,
-``policy``, ``seed``, ``examples``, ``ok``, ``failed`` (names), ``seconds`` and
-``properties``, one dict per property (``name``, ``claim``, ``status``, ``tried``,
-``passed``, ``mapped``, ``counterexample``, ``lhs`` / ``rhs`` (``label``, ``value``),
-``relation``, ``note``, ``shrink_evaluations``, ``seconds``).
+``policy``, ``seed``, ``examples``, ``ok`` (no property failed), ``failed``,
+``inconclusive`` and ``not_run`` (names, in the order checked: the first failed is the
+root cause), ``summary`` (the last line of the table), ``seconds`` and ``properties``, one
+dict per property (``name``, ``claim``, ``status``: one of ``passed``, ``failed``,
+``inconclusive``, ``mapped``, ``skipped``, ``not-run``; ``tried``, ``passed``, ``mapped``,
+``inconclusive`` (examples not judged), ``counterexample``, ``lhs`` / ``rhs`` (``label``,
+``value``), ``relation``, ``note``, ``needs`` (the properties it depends on),
+``warnings`` (caught, with counts), ``shrink_evaluations``, ``shrink_limited``,
+``seconds``). Non-finite values are written as text (``"nan"``), never as bare NaN.
 """
 
 from __future__ import annotations
 
 import json
 import tempfile
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 
@@ -31,7 +49,9 @@ from validation.cli_common import (
     one_line,
     parse_metric_params,
 )
-from validation.testing.engine import PropertyResult
+
+if TYPE_CHECKING:  # imported in check_command: hypothesis and the suite cost 0.2 s (issue 47)
+    from validation.testing.engine import PropertyResult
 
 __all__ = ["check_command", "register"]
 
@@ -59,13 +79,17 @@ def check_command(
              "metrics.")] = 0.25,
     as_json: Annotated[bool, typer.Option("--json", help="Print JSON instead of a table.")
                        ] = False,
+    strict: Annotated[bool, typer.Option(
+        "--strict", help="Exit 1 when a property is inconclusive (a solve that did not "
+                         "converge, a certificate out of budget), not only when one "
+                         "fails.")] = False,
     metric_param: MetricParamOption = None,
     metric_module: MetricModuleOption = None,
     method_module: MethodModuleOption = None,
 ) -> None:
     """Property-based checks of a metric (Finsler axioms, lowered forms, smoothness, solved
     distances) and of a policy (--run): a table with minimal counterexamples; exit 1 when a
-    property fails."""
+    property fails (with --strict, also when one is inconclusive)."""
     from validation.testing import check
 
     m = metric_from_options(metric, metric_param, metric_module)
@@ -128,13 +152,15 @@ def check_command(
                    + (f", policy {report.policy}" if report.policy else "")
                    + f": seed {seed}, {examples} examples per property of F")
         typer.echo(report.table())
-        verdict = ("all properties hold" if report.ok else
-                   f"FAILED: {', '.join(r.name for r in report.failed)}")
-        typer.echo(f"\n{verdict} ({report.seconds:.1f} s)")
-    if not report.ok:
-        typer.echo(one_line(f"note: {len(report.failed)} of {len(report.results)} properties "
-                            f"failed: {', '.join(r.name for r in report.failed)}"), err=True)
-        raise typer.Exit(code=1)
+        typer.echo(f"\n{report.summary()} ({report.seconds:.1f} s)")
+    code = report.exit_code(strict)
+    if code:
+        why = (f"{len(report.failed)} of {len(report.results)} properties failed, the root "
+               f"cause first: {', '.join(r.name for r in report.failed)}" if report.failed
+               else f"--strict and inconclusive: "
+                    f"{', '.join(r.name for r in report.inconclusive)}")
+        typer.echo(one_line(f"note: {why}"), err=True)
+        raise typer.Exit(code=code)
 
 
 def register(app: typer.Typer) -> None:

@@ -45,11 +45,23 @@ __all__ = [
     "check_segment_bound",
     "check_triangle_inequality",
     "closed_form_of",
+    "distance_checks",
     "distance_properties",
 ]
 
-#: The mesh of the certificate property: the ``coarse`` preset of :func:`solvers.certify`.
+#: The mesh of the certificate property: the ``coarse`` preset of :func:`solvers.certify`
+#: (its work budget: at most 3 LP rounds and 3000 triangles per pair, not a wall-clock
+#: limit, so the result depends on the seed only).
 CERTIFY_MESH = "coarse"
+#: What a failed distance property suspects: F passed the properties the distance needs
+#: (else the property is not run), so the solve or its error estimate.
+SOLVE_HINT = ("F passed the properties this one needs, so suspect the solve: a local "
+              "minimum, or an error estimate too small (`geodesics solve` on the pair with "
+              "more segments or seeds).")
+#: What a failed closed-form property suspects: the formula.
+CLOSED_FORM_HINT = ("The solver's value passed the other distance properties: check the "
+                    "closed form (the metric's `distance` method, or the one given as "
+                    "`check(closed_form=...)`).")
 
 
 @dataclass
@@ -202,10 +214,14 @@ class SolvedDistances:
 
 
 def _unusable(what: str, s: Solved) -> Verdict:
+    """An example whose solve gives no value to judge by: mapped (a documented non-convex
+    region) or inconclusive (the solve did not converge: never a counterexample)."""
     if s.mapped:
         return Verdict(True, note=f"{what}: the solved curve crosses a region where F(x, .) "
                                   "is not convex", mapped=True)
-    return Verdict(False, note=f"{what}: the solver did not converge (status {s.status})")
+    tried = ", ".join(f"{k} {v}" for k, v in s.extra.items() if k in ("segments", "degrees"))
+    return Verdict.unjudged(f"a solve did not converge (status {s.status}"
+                            + (f"; {tried}" if tried else "") + ")")
 
 
 def _vec(x: np.ndarray) -> list[float]:
@@ -248,8 +264,11 @@ class DistanceSuite:
         return float(np.max(np.where(np.isfinite(hi - lo), hi - lo, 1.0)))
 
     def run(self, name: str, claim: str, check: Callable[[Any], Verdict], examples: int,
-            keys: str = "xyz", strategy: st.SearchStrategy[Any] | None = None
-            ) -> PropertyResult:
+            keys: str = "xyz", strategy: st.SearchStrategy[Any] | None = None,
+            hint: str = SOLVE_HINT) -> PropertyResult:
+        """Search ``check`` on this suite's triples (or ``strategy``); a failure's note ends
+        with ``hint`` (what to suspect: by default the solve, since the properties of F
+        it needs passed)."""
         def describe(t: tuple[np.ndarray, ...]) -> dict[str, Any]:
             return {k: _vec(p) for k, p in zip("xyz", t) if k in keys}
 
@@ -260,9 +279,13 @@ class DistanceSuite:
             res.note = (f"{res.mapped} of {res.tried} examples crossed a region where "
                         f"F(x, .) is not convex ({self.metric.convexity_note}): mapped")
         elif res.status == "failed":
-            res.note = (f"{res.note}. Distances by {self.solved.oracle.name}: if F passes its "
-                        "own properties, suspect the solve (a local minimum, or an error "
-                        "estimate too small; retry with more segments)").lstrip(". ")
+            res.note = f"{res.note}. Distances by {self.solved.oracle.name}.".lstrip(". ")
+            if hint:
+                res.note = f"{res.note} {hint}"
+        elif res.status == "inconclusive":
+            res.note = (f"{res.note}. Distances by {self.solved.oracle.name}; `geodesics "
+                        "solve` on the pair shows the solver's statuses (more segments or "
+                        "seeds may converge).")
         if self.shrink < 1.0:
             res.note = (f"{res.note} Points drawn from the domain scaled by {self.shrink:.4g} "
                         "about its centre.").strip()
@@ -356,8 +379,9 @@ def check_closed_form(suite: DistanceSuite, examples: int = 3,
         distance, geodesic = closed_form_of(m)
     if distance is None:
         return PropertyResult(name, claim, SKIPPED, note=(
-            f"{m.name} supplies no closed-form distance (subclass finsler.ClosedFormMetric, "
-            "or pass distance=...)"))
+            f"{m.name} supplies no closed-form distance: give the metric a `distance(x, y)` "
+            "method (finsler.ClosedFormMetric), or pass one to "
+            "`validation.testing.check(metric, closed_form=...)`"))
     lo, hi = m.domain.bounds()
     size = float(np.max(np.where(np.isfinite(hi - lo), hi - lo, 1.0)))
 
@@ -385,7 +409,7 @@ def check_closed_form(suite: DistanceSuite, examples: int = 3,
                                ("closed-form geodesic", _vec(want)), dev <= tol,
                                f"largest deviation {dev:.3g} (tolerance {tol:.3g})")
 
-    return suite.run(name, claim, check, examples, keys="xy")
+    return suite.run(name, claim, check, examples, keys="xy", hint=CLOSED_FORM_HINT)
 
 
 def _along(path: np.ndarray, cum: np.ndarray, ts: np.ndarray) -> np.ndarray:
@@ -426,7 +450,14 @@ def check_certificate(suite: DistanceSuite, examples: int = 2, mesh: Any = CERTI
     bound, and the proven length of the solved curve as upper bound) contains the solved
     distance within its stated error: ``lower <= d + error`` and ``d - error <= upper``,
     on pairs at least 1e-3 of the domain's size apart (the certificate's mesh is far
-    coarser; certify fails on near-coincident points, see issue 22)."""
+    coarser; certify fails on near-coincident points, see issue 22). The interval is
+    proven whatever certify's status, so a pair outside it is a failure; a pair whose
+    certificate ends without a usable bound within the mesh's work budget
+    (``corrections_too_large``, ``lp_failed``) is inconclusive, and on a metric that
+    documents non-convexity a pair whose region is not Finsler is not attempted
+    (mapped). Skipped for metrics declared not smooth (certify's enclosures of second
+    derivatives prove nothing across a kink: measured on ``(1 + 0.3 |x0|) |v|``, its
+    "proven" upper bound 6.9e-7 below the quadrature length of the same path)."""
     m = suite.metric
     name = "certificate"
     claim = "certify's interval [lower, upper] contains the solved distance"
@@ -434,6 +465,11 @@ def check_certificate(suite: DistanceSuite, examples: int = 2, mesh: Any = CERTI
         return PropertyResult(name, claim, SKIPPED,
                               note=f"certified intervals are for 2-D metrics; {m.name} is "
                                    f"{m.dim}-D")
+    if not m.smooth:
+        return PropertyResult(name, claim, SKIPPED, note=(
+            f"{m.name} is declared not smooth: certify's bounds are proven where F is twice "
+            "differentiable (Metric.path_length_bounds and the dual bound's corrections "
+            "enclose second derivatives), so its interval would prove nothing here"))
 
     def check(t: tuple[np.ndarray, ...]) -> Verdict:
         import solvers
@@ -444,7 +480,18 @@ def check_certificate(suite: DistanceSuite, examples: int = 2, mesh: Any = CERTI
             return _unusable("d(x, y)", s)
         if np.array_equal(x, y):
             return Verdict(True)
+        if not m.convex_everywhere:
+            lam = m.convexity(_region_samples(m, s.path, x, y), n_directions=32)
+            if float(lam.min()) < 0:  # not Finsler there: no certified interval to expect
+                return Verdict(True, mapped=True, note=(
+                    "certificate not attempted: F(x, .) is not convex on the pair's region "
+                    f"(smallest eigenvalue {float(lam.min()):.3g} near the solved path)"))
         c = solvers.certify(m, x, y, mesh, path=s.path)
+        if c.status.label in ("corrections_too_large", "lp_failed"):
+            return Verdict.unjudged(
+                f"certify ran out of its work budget (status {c.status.label}: mesh "
+                f"{mesh if isinstance(mesh, str) else 'given'}, {c.triangles} triangles, "
+                f"{c.directions} directions; interval [{c.lower:.6g}, {c.upper:.6g}])")
         if c.lower > s.value + s.error:
             return Verdict.compare(("certified lower bound", c.lower), "<=",
                                    ("d(x, y) + error", s.value + s.error), False)
@@ -455,6 +502,19 @@ def check_certificate(suite: DistanceSuite, examples: int = 2, mesh: Any = CERTI
 
     apart = vs.pairs(m, suite.shrink, min_separation=1e-3 * suite.size())
     return suite.run(name, claim, check, examples, keys="xy", strategy=apart)
+
+
+def _region_samples(m: Metric, path: np.ndarray | None, x: np.ndarray, y: np.ndarray
+                    ) -> np.ndarray:
+    """Points of the region a certificate of ``(x, y)`` meshes finest: the solved path's
+    vertices and points around them (within 5% of the domain's size), in the domain."""
+    pts = np.asarray(path if path is not None else np.stack([x, y]), float)
+    lo, hi = m.domain.bounds()
+    size = float(np.max(np.where(np.isfinite(hi - lo), hi - lo, 1.0)))
+    rng = np.random.default_rng(0)
+    around = pts[rng.integers(0, len(pts), 256)] + 0.05 * size * rng.uniform(-1, 1, (256, m.dim))
+    both = np.concatenate([pts, np.asarray(m.domain.project(around), float)])
+    return both[m.domain.contains(both, tol=1e-9)]
 
 
 def check_midpoint_halves(suite: DistanceSuite, examples: int = 2) -> PropertyResult:
@@ -496,14 +556,26 @@ def distance_properties(metric: Metric, *, examples: int = 3, seed: int = 0,
     ``certify_examples``: pairs for the certificate (default ``examples - 1``, at least 2);
     ``shrink_limit``: new solves allowed while shrinking a counterexample."""
     suite = DistanceSuite.make(metric, oracle, seed, shrink, shrink_limit)
+    return [fn() for _, fn in distance_checks(suite, examples, closed_form, closed_form_geodesic,
+                                              certify_examples, zero_examples)]
+
+
+def distance_checks(suite: DistanceSuite, examples: int = 3,
+                    closed_form: Callable[..., Any] | None = None,
+                    closed_form_geodesic: Callable[..., Any] | None = None,
+                    certify_examples: int | None = None, zero_examples: int = 20
+                    ) -> list[tuple[str, Callable[[], PropertyResult]]]:
+    """``(name, run)`` of every distance property on ``suite``, in order, not yet run (so
+    a caller can leave out those whose prerequisites failed)."""
     cert = max(2, examples - 1) if certify_examples is None else certify_examples
     return [
-        check_distance_zero(suite, zero_examples),
-        check_distance_positive(suite, examples),
-        check_triangle_inequality(suite, examples),
-        check_segment_bound(suite, examples),
-        check_distance_symmetry(suite, examples),
-        check_closed_form(suite, examples, closed_form, closed_form_geodesic),
-        check_certificate(suite, cert),
-        check_midpoint_halves(suite, max(2, examples - 1)),
+        ("distance-zero", lambda: check_distance_zero(suite, zero_examples)),
+        ("distance-positive", lambda: check_distance_positive(suite, examples)),
+        ("triangle-inequality", lambda: check_triangle_inequality(suite, examples)),
+        ("segment-bound", lambda: check_segment_bound(suite, examples)),
+        ("distance-symmetry", lambda: check_distance_symmetry(suite, examples)),
+        ("closed-form-distance", lambda: check_closed_form(suite, examples, closed_form,
+                                                           closed_form_geodesic)),
+        ("certificate", lambda: check_certificate(suite, cert)),
+        ("midpoint-halves", lambda: check_midpoint_halves(suite, max(2, examples - 1))),
     ]

@@ -34,7 +34,9 @@ from validation.text import text_table
 
 __all__ = [
     "FAILED",
+    "INCONCLUSIVE",
     "MAPPED",
+    "NOT_RUN",
     "PASSED",
     "SKIPPED",
     "CheckReport",
@@ -46,6 +48,13 @@ __all__ = [
 ]
 
 PASSED, FAILED, MAPPED, SKIPPED = "passed", "failed", "mapped", "skipped"
+#: No counterexample, but some examples could not be judged (a solve that did not converge,
+#: a certificate out of its work budget): said so in the note, with what was tried.
+INCONCLUSIVE = "inconclusive"
+#: Not run: a property it needs failed (``needs`` names it); no example was judged.
+NOT_RUN = "not-run"
+#: Statuses from the most to the least informative (how :func:`combine` picks one).
+ORDER = {FAILED: 0, INCONCLUSIVE: 1, MAPPED: 2, PASSED: 3, SKIPPED: 4, NOT_RUN: 5}
 
 
 class PropertyFailure(AssertionError):
@@ -64,7 +73,9 @@ class Verdict:
     they must compare (``"<="``, ``"=="``, ...). ``ok``: the example holds. ``mapped``:
     the example lies where the metric documents that the property does not apply (a
     non-convex region): it neither passes nor fails, it is counted and reported.
-    ``note``: what else a reader needs (tolerances, statuses, an exception).
+    ``inconclusive``: the example could not be judged (a solve it needs did not converge);
+    never a counterexample (give ``ok=True``), counted and reported. ``note``: what else a
+    reader needs (tolerances, statuses, an exception).
     """
 
     ok: bool
@@ -73,6 +84,12 @@ class Verdict:
     relation: str = ""
     note: str = ""
     mapped: bool = False
+    inconclusive: bool = False
+
+    @classmethod
+    def unjudged(cls, note: str) -> Verdict:
+        """An example that could not be judged (``note`` says why and what was tried)."""
+        return cls(True, note=note, inconclusive=True)
 
     @classmethod
     def compare(cls, lhs: tuple[str, Any], relation: str, rhs: tuple[str, Any],
@@ -85,13 +102,18 @@ class PropertyResult:
     """What one property found.
 
     ``status``: ``passed`` (no counterexample among ``tried`` examples), ``failed`` (a
-    counterexample, shrunk), ``mapped`` (failures or examples only inside a region the
-    metric documents as excluded, e.g. where ``F(x, .)`` is not convex; ``note`` says
-    where) or ``skipped`` (does not apply to this metric; ``note`` says why).
-    ``tried`` examples were generated and judged (shrinking not counted), ``passed`` of
-    them held and ``mapped`` were in the documented region. ``counterexample`` maps names
-    to values (floats, lists); ``lhs`` / ``rhs`` are the two sides at it.
-    ``shrink_evaluations`` counts the examples judged while shrinking.
+    counterexample, shrunk), ``inconclusive`` (no counterexample, but ``inconclusive`` of
+    the examples could not be judged: a solve did not converge, a certificate ran out of
+    its budget; ``note`` says which and what was tried), ``mapped`` (failures or examples
+    only inside a region the metric documents as excluded, e.g. where ``F(x, .)`` is not
+    convex; ``note`` says where), ``skipped`` (does not apply to this metric; ``note``
+    says why) or ``not-run`` (a property it ``needs`` failed, so its verdict would mean
+    nothing). ``tried`` examples were generated and judged (shrinking not counted),
+    ``passed`` of them held and ``mapped`` were in the documented region.
+    ``counterexample`` maps names to values (floats, lists); ``lhs`` / ``rhs`` are the
+    two sides at it. ``shrink_evaluations`` counts the examples judged while shrinking.
+    ``warnings``: numpy/Python warnings raised while checking, summarised (message and
+    count), not printed.
     """
 
     name: str
@@ -108,10 +130,14 @@ class PropertyResult:
     shrink_evaluations: int = 0
     shrink_limited: bool = False
     seconds: float = 0.0
+    inconclusive: int = 0
+    needs: tuple[str, ...] = ()
+    warnings: list[str] = field(default_factory=list)
 
     @property
     def ok(self) -> bool:
-        """True unless the property failed."""
+        """True unless the property failed (inconclusive, mapped, skipped and not-run
+        results are not failures)."""
         return self.status != FAILED
 
     def assert_ok(self) -> None:
@@ -142,7 +168,9 @@ class PropertyResult:
         and the values on both sides."""
         head = f"{self.status.upper()} {self.name}: {self.claim}"
         lines = [head, f"  examples tried {self.tried}, passed {self.passed}"
-                 + (f", in the mapped region {self.mapped}" if self.mapped else "")]
+                 + (f", in the mapped region {self.mapped}" if self.mapped else "")
+                 + (f", not judged (inconclusive) {self.inconclusive}"
+                    if self.inconclusive else "")]
         if self.counterexample:
             how = (f"shrunk in {self.shrink_evaluations} evaluations"
                    + (", shrink budget reached" if self.shrink_limited else ""))
@@ -152,6 +180,8 @@ class PropertyResult:
             lines.append(f"  {self.sides()}")
         if self.note:
             lines.append(f"  {self.note}")
+        if self.warnings:
+            lines.append(f"  warnings while checking: {'; '.join(self.warnings)}")
         return "\n".join(lines)
 
     def to_dict(self) -> dict[str, Any]:
@@ -162,6 +192,8 @@ class PropertyResult:
                 "tried": self.tried, "passed": self.passed, "mapped": self.mapped,
                 "counterexample": jsonable(self.counterexample), "lhs": side(self.lhs),
                 "relation": self.relation, "rhs": side(self.rhs), "note": self.note,
+                "inconclusive": self.inconclusive, "needs": list(self.needs),
+                "warnings": list(self.warnings),
                 "shrink_evaluations": self.shrink_evaluations,
                 "shrink_limited": self.shrink_limited, "seconds": round(self.seconds, 3)}
 
@@ -169,7 +201,8 @@ class PropertyResult:
 @dataclass
 class CheckReport:
     """Every property checked on one metric (and policy): :meth:`table` for people,
-    :meth:`to_dict` for JSON; ``ok`` is False if any property failed."""
+    :meth:`to_dict` for JSON; ``ok`` is False if any property failed (inconclusive
+    results are not failures: :meth:`exit_code` with ``strict`` counts them)."""
 
     metric: str
     params: dict[str, Any]
@@ -185,31 +218,74 @@ class CheckReport:
 
     @property
     def failed(self) -> list[PropertyResult]:
+        """The failed properties, in the order checked: properties of F first, so the
+        first is the root cause (what depends on it is ``not-run``, not failed)."""
         return [r for r in self.results if not r.ok]
+
+    @property
+    def inconclusive(self) -> list[PropertyResult]:
+        return [r for r in self.results if r.status == INCONCLUSIVE]
+
+    @property
+    def not_run(self) -> list[PropertyResult]:
+        return [r for r in self.results if r.status == NOT_RUN]
+
+    def exit_code(self, strict: bool = False) -> int:
+        """1 if a property failed (or, with ``strict``, was inconclusive), else 0."""
+        return int(not self.ok or (strict and bool(self.inconclusive)))
+
+    def summary(self) -> str:
+        """One line: the root cause first (the first failed property), then what else
+        failed, what was not run because of it, and what was inconclusive."""
+        parts = []
+        if self.failed:
+            root, *rest = self.failed
+            parts.append(f"FAILED: {root.name}" + (f", {', '.join(r.name for r in rest)}"
+                                                    if rest else ""))
+        if self.not_run:
+            parts.append(f"{len(self.not_run)} not run (they need a property that failed)")
+        if self.inconclusive:
+            parts.append(f"inconclusive: {', '.join(r.name for r in self.inconclusive)}")
+        if not parts:
+            return "all properties hold"
+        if not self.failed:
+            parts.insert(0, "no property failed")
+        return "; ".join(parts)
 
     def table(self) -> str:
         """The property table (property, examples tried, passed, result, counterexample)
-        followed by the details of every failed or mapped property."""
+        followed by the details of every failed, inconclusive or mapped property, and why
+        properties were skipped or not run."""
         head = ("property", "tried", "passed", "result", "counterexample")
         rows = [head] + [(r.name, str(r.tried), str(r.passed), r.status, r.short_example())
                          for r in self.results]
         lines = [text_table(rows)]
-        details = [r.describe() for r in self.results if r.status in (FAILED, MAPPED)]
-        reasons: dict[str, list[str]] = {}
+        details = [r.describe() for r in self.results
+                   if r.status in (FAILED, INCONCLUSIVE, MAPPED)]
+        groups: dict[str, dict[str, list[str]]] = {SKIPPED: {}, NOT_RUN: {}}
         for r in self.results:
-            if r.status == SKIPPED:
-                reasons.setdefault(r.note, []).append(r.name)
-        skipped = [f"  {', '.join(names)}: {note}" for note, names in reasons.items()]
+            if r.status in groups:
+                groups[r.status].setdefault(r.note, []).append(r.name)
         if details:
             lines += ["", *details]
-        if skipped:
-            lines += ["", "skipped:", *skipped]
+        for status, title in ((NOT_RUN, "not run:"), (SKIPPED, "skipped:")):
+            if groups[status]:
+                lines += ["", title, *(f"  {', '.join(names)}: {note}"
+                                       for note, names in groups[status].items())]
+        warned = [f"  {r.name}: {'; '.join(r.warnings)}" for r in self.results if r.warnings
+                  and r.status not in (FAILED, INCONCLUSIVE, MAPPED)]
+        if warned:
+            lines += ["", "warnings caught while checking (not printed as they came):",
+                      *warned]
         return "\n".join(lines)
 
     def to_dict(self) -> dict[str, Any]:
         return {"metric": self.metric, "params": jsonable(self.params), "policy": self.policy,
                 "seed": self.seed, "examples": self.examples, "ok": self.ok,
-                "failed": [r.name for r in self.failed], "seconds": round(self.seconds, 3),
+                "failed": [r.name for r in self.failed],
+                "inconclusive": [r.name for r in self.inconclusive],
+                "not_run": [r.name for r in self.not_run],
+                "summary": self.summary(), "seconds": round(self.seconds, 3),
                 "properties": [r.to_dict() for r in self.results]}
 
 
@@ -277,8 +353,9 @@ def search(
     if isinstance(examples, bool) or not isinstance(examples, (int, np.integer)) or examples < 1:
         raise InputError(f"examples must be a positive integer, got {examples!r}")
     cache: dict[Any, Verdict] = {}
-    state = {"tried": 0, "passed": 0, "mapped": 0, "shrinks": 0, "failed": False,
-             "limited": False}
+    state = {"tried": 0, "passed": 0, "mapped": 0, "inconclusive": 0, "shrinks": 0,
+             "failed": False, "limited": False}
+    unjudged: dict[str, int] = {}
 
     def condition(example: Any) -> bool:
         k = _key(example)
@@ -293,7 +370,10 @@ def search(
             cache[k] = verdict
             if not state["failed"]:
                 state["tried"] += 1
-                if verdict.ok and verdict.mapped:
+                if verdict.ok and verdict.inconclusive:
+                    state["inconclusive"] += 1
+                    unjudged[verdict.note] = unjudged.get(verdict.note, 0) + 1
+                elif verdict.ok and verdict.mapped:
                     state["mapped"] += 1
                 elif verdict.ok:
                     state["passed"] += 1
@@ -314,6 +394,7 @@ def search(
         unsatisfiable = True
     res = PropertyResult(name=name, claim=claim, status=PASSED, tried=state["tried"],
                          passed=state["passed"], mapped=state["mapped"],
+                         inconclusive=state["inconclusive"],
                          shrink_evaluations=state["shrinks"], shrink_limited=state["limited"])
     if found is not None:
         v = cache[_key(found)]
@@ -323,6 +404,11 @@ def search(
     elif unsatisfiable or res.tried == 0:
         res.status = SKIPPED
         res.note = "no valid example could be generated"
+    elif res.inconclusive:
+        res.status = INCONCLUSIVE
+        why = "; ".join(f"{n} x {note}" if n > 1 else note for note, n in unjudged.items())
+        res.note = (f"{res.inconclusive} of {res.tried} examples could not be judged, no "
+                    f"counterexample among the others: {why}")
     elif res.mapped:
         res.status = MAPPED
     res.seconds = time.perf_counter() - t0
@@ -331,12 +417,13 @@ def search(
 
 def combine(name: str, claim: str, parts: Sequence[PropertyResult]) -> PropertyResult:
     """One result from searches of the same property on several regions: failed if any
-    failed (its counterexample), else mapped if any mapped, else passed; counts summed."""
-    order = {FAILED: 0, MAPPED: 1, PASSED: 2, SKIPPED: 3}
-    first = min(parts, key=lambda r: order[r.status])
+    failed (its counterexample), else inconclusive, else mapped if any mapped, else
+    passed; counts summed."""
+    first = min(parts, key=lambda r: ORDER[r.status])
     out = PropertyResult(name=name, claim=claim, status=first.status,
                          tried=sum(r.tried for r in parts), passed=sum(r.passed for r in parts),
                          mapped=sum(r.mapped for r in parts),
+                         inconclusive=sum(r.inconclusive for r in parts),
                          counterexample=first.counterexample, lhs=first.lhs, rhs=first.rhs,
                          relation=first.relation,
                          shrink_evaluations=sum(r.shrink_evaluations for r in parts),

@@ -28,6 +28,7 @@ from finsler.errors import InputError
 from validation import strategies as vs
 from validation.testing.engine import (
     FAILED,
+    INCONCLUSIVE,
     PASSED,
     SKIPPED,
     PropertyResult,
@@ -112,7 +113,8 @@ def check_policy_midpoint(policy: Any, metric: Metric, *, examples: int = 3, see
                                                                               (mid, y))]
         for r in (whole, *halves):
             if not r.converged:
-                return Verdict(False, note=f"an exact solve did not converge ({r.status.label})")
+                return Verdict.unjudged(f"an exact solve did not converge ({r.status.label}, "
+                                        f"{r.segments} segments)")
         d = whole.length
         if d <= 0:
             return Verdict(True)
@@ -223,8 +225,10 @@ def check_policy_success(policy: Any, metric: Metric, *, pairs: int = 10, seed: 
                f"{max_length_ratio:g} on {len(arr)} fresh pairs")
     used = np.isfinite(ratio)
     if not used.any():
-        length = PropertyResult("policy-length-ratio", claim_r, FAILED, tried=len(arr),
-                                note="no exact solve converged")
+        length = PropertyResult("policy-length-ratio", claim_r, INCONCLUSIVE, tried=len(arr),
+                                inconclusive=len(arr),
+                                note=f"no exact solve converged ({2**d} segments, statuses "
+                                     f"{sorted({r.status.label for r in exact})})")
     else:
         mean = float(np.nanmean(ratio))
         j = int(np.nanargmax(ratio))

@@ -3,14 +3,15 @@
 from __future__ import annotations
 
 import time
+import warnings
 from collections.abc import Callable
 from typing import Any
 
 from finsler import Metric
 from finsler.errors import InputError
 from finsler.spec import MetricSpec
-from validation.testing.distance import DistanceOracle, distance_properties
-from validation.testing.engine import SKIPPED, CheckReport, PropertyResult
+from validation.testing.distance import DistanceOracle, DistanceSuite, distance_checks
+from validation.testing.engine import FAILED, NOT_RUN, CheckReport, PropertyResult
 from validation.testing.metric import (
     check_domain,
     check_finite_positive,
@@ -27,14 +28,38 @@ from validation.testing.policy import (
     MIDPOINT_RTOL,
     MIN_SUCCESS,
     SYMMETRY_RTOL,
-    policy_properties,
+    check_policy_midpoint,
+    check_policy_success,
+    check_policy_symmetry,
 )
 
-__all__ = ["PREREQUISITES", "check", "solved_examples_for"]
+__all__ = ["NEEDS", "PREREQUISITES", "check", "solved_examples_for"]
 
-#: Properties of F without which solved distances mean nothing: when one fails, the
-#: distance and policy properties are skipped (and say why).
-PREREQUISITES = ("domain", "finite-positive", "homogeneity", "lowered-forms")
+#: Properties of F without which solved distances (and a policy's errors against them)
+#: mean nothing: every distance and policy property needs all of them.
+PREREQUISITES = ("domain", "finite-positive", "homogeneity", "subadditivity",
+                 "strong-convexity", "lowered-forms", "smoothness")
+
+#: What each property needs: when one of them fails (or was not run), the property is
+#: reported ``not-run`` naming it, instead of failing as a consequence (e.g. ``nan ==
+#: nan`` in lowered-forms once F is NaN somewhere, subadditivity once homogeneity fails).
+#: A ``mapped`` or ``skipped`` property does not block what needs it.
+NEEDS: dict[str, tuple[str, ...]] = {
+    "domain": (),
+    "finite-positive": ("domain",),
+    "homogeneity": ("domain",),
+    "subadditivity": ("finite-positive", "homogeneity"),
+    "strong-convexity": ("finite-positive", "homogeneity"),
+    "reversibility": ("finite-positive",),
+    "lowered-forms": ("domain",),
+    "smoothness": ("domain",),
+    **{n: PREREQUISITES for n in (
+        "distance-zero", "distance-positive", "triangle-inequality", "segment-bound",
+        "closed-form-distance", "certificate", "midpoint-halves", "policy-midpoint",
+        "policy-success", "policy-length-ratio")},
+    "distance-symmetry": (*PREREQUISITES, "reversibility"),
+    "policy-symmetry": (*PREREQUISITES, "reversibility"),
+}
 
 
 def solved_examples_for(examples: int) -> int:
@@ -102,35 +127,83 @@ def check(
         return r
 
     kw = {"examples": examples, "seed": seed}
-    for fn in (check_domain, check_finite_positive, check_homogeneity):
-        add(fn(metric, **kw))
-    add(check_subadditivity(metric, convex_shrink=convex_shrink, **kw))
-    add(check_strong_convexity(metric, convex_shrink=convex_shrink, **kw))
-    for fn in (check_reversibility, check_lowered_forms, check_smoothness):
-        add(fn(metric, **kw))
-    broken = [r.name for r in report.results if r.name in PREREQUISITES and not r.ok]
+    status: dict[str, str] = {}
+    roots: dict[str, tuple[str, ...]] = {}  # the failed properties behind a not-run one
+
+    def blocked(name: str) -> tuple[str, ...]:
+        out: list[str] = []
+        for need in NEEDS.get(name, ()):
+            if status.get(need) == FAILED:
+                out.append(need)
+            elif status.get(need) == NOT_RUN:
+                out += roots[need]
+        return tuple(dict.fromkeys(out))
+
+    def run(names: tuple[str, ...], fn: Callable[[], Any]) -> None:
+        why = tuple(dict.fromkeys(b for n in names for b in blocked(n)))
+        if why:
+            results = [_not_run(n, why, metric) for n in names]
+        else:
+            results = _quietly(fn)
+            results = results if isinstance(results, list) else [results]
+        for r in results:
+            r.needs = NEEDS.get(r.name, ())
+            status[r.name] = r.status
+            if r.status == NOT_RUN:
+                roots[r.name] = why
+            add(r)
+
+    run(("domain",), lambda: check_domain(metric, **kw))
+    run(("finite-positive",), lambda: check_finite_positive(metric, **kw))
+    run(("homogeneity",), lambda: check_homogeneity(metric, **kw))
+    run(("subadditivity",), lambda: check_subadditivity(metric, convex_shrink=convex_shrink,
+                                                        **kw))
+    run(("strong-convexity",), lambda: check_strong_convexity(
+        metric, convex_shrink=convex_shrink, **kw))
+    run(("reversibility",), lambda: check_reversibility(metric, **kw))
+    run(("lowered-forms",), lambda: check_lowered_forms(metric, **kw))
+    run(("smoothness",), lambda: check_smoothness(metric, **kw))
     # where F(x, .) is documented not convex, solved lengths are not distances with
     # reliable errors: distances (and policies' midpoints) are checked on the convex region
-    region = 1.0 if broken else solve_region(metric, convex_shrink, seed)
-    later: list[tuple[str, Callable[[], list[PropertyResult]]]] = [
-        ("distance", lambda: distance_properties(
-            metric, examples=solved, seed=seed, oracle=oracle, shrink=region,
-            closed_form=closed_form, closed_form_geodesic=closed_form_geodesic))]
+    if any(blocked(n) for n in _NAMES["distance"]):
+        region = 1.0
+    else:
+        region = solve_region(metric, convex_shrink, seed)
+    suite = DistanceSuite.make(metric, oracle, seed, region)
+    for name, fn in distance_checks(suite, solved, closed_form, closed_form_geodesic):
+        run((name,), fn)
     if policy is not None:
-        later.append(("policy", lambda: policy_properties(
-            policy, metric, examples=examples, solved_examples=solved, pairs=pairs,
-            seed=seed, shrink=region, midpoint_rtol=midpoint_rtol,
-            symmetry_rtol=symmetry_rtol, min_success=min_success,
-            max_length_ratio=max_length_ratio)))
-    for _what, run in later:
-        if broken:
-            for r in run_skipped(_what, broken, metric, policy):
-                add(r)
-            continue
-        for r in run():
-            add(r)
+        run(("policy-midpoint",), lambda: check_policy_midpoint(
+            policy, metric, examples=solved, seed=seed, rtol=midpoint_rtol, shrink=region))
+        run(("policy-symmetry",), lambda: check_policy_symmetry(
+            policy, metric, examples=examples, seed=seed, rtol=symmetry_rtol))
+        run(("policy-success", "policy-length-ratio"), lambda: check_policy_success(
+            policy, metric, pairs=pairs, seed=seed, min_success=min_success,
+            max_length_ratio=max_length_ratio))
     report.seconds = time.perf_counter() - t0
     return report
+
+
+def _quietly(fn: Callable[[], Any]) -> Any:
+    """Run one property with warnings caught (numpy's RuntimeWarnings on invalid values
+    are findings, not noise on stderr) and summarised on its results."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        out = fn()
+    counts: dict[str, int] = {}
+    for w in caught:
+        key = f"{w.category.__name__}: {' '.join(str(w.message).split())[:120]}"
+        counts[key] = counts.get(key, 0) + 1
+    text = [f"{k} ({n}x)" if n > 1 else k for k, n in counts.items()]
+    for r in out if isinstance(out, list) else [out]:
+        r.warnings = list(text)
+    return out
+
+
+def _not_run(name: str, why: tuple[str, ...], metric: Metric) -> PropertyResult:
+    return PropertyResult(name, "", NOT_RUN, note=(
+        f"needs {', '.join(why)}, which {'fails' if len(why) == 1 else 'fail'} on "
+        f"{metric.name}: its verdict would mean nothing until that is fixed"))
 
 
 _NAMES = {
@@ -139,12 +212,3 @@ _NAMES = {
                  "midpoint-halves"),
     "policy": ("policy-midpoint", "policy-symmetry", "policy-success", "policy-length-ratio"),
 }
-
-
-def run_skipped(what: str, broken: list[str], metric: Metric, policy: Any
-                ) -> list[PropertyResult]:
-    """The ``what`` properties, reported skipped because ``broken`` properties of F
-    failed."""
-    note = (f"skipped: {metric.name} fails {', '.join(broken)}, so solved distances (and a "
-            "policy's errors against them) mean nothing until that is fixed")
-    return [PropertyResult(n, "", SKIPPED, note=note) for n in _NAMES[what]]
