@@ -18,6 +18,10 @@ hook                   meaning                                               use
 ``seed_plan``          the global seeding plan (a ``solvers.SeedPlan``) for  ``solvers`` (seeding)
                        this metric. Default ``None``: chosen from ``dim``,
                        ``smooth`` and ``convex_everywhere``.
+``seed_curves``        initial curves of the metric's own geometry for the   ``solvers`` (seeding)
+                       global search: ``starts, goals (K, dim), t (T,) ->
+                       {family: (K, S, T, dim)}`` (e.g. car-like: cubic
+                       Hermite curves along the headings).
 ``convex_radius``      radius of the disk about the origin where ``F(x, .)``  figures (dash-dot
                        is strongly convex (property). Default ``None``.       circle)
 ``height_map``         ``(N, 2) -> (N,)`` height whose slope the metric       figures (contours)
@@ -45,8 +49,9 @@ from finsler.errors import InputError
 __all__ = ["HOOKS", "MetricHooks"]
 
 #: Every optional hook of a metric, in the order of the table above.
-HOOKS: tuple[str, ...] = ("smooth_square_sx", "seed_plan", "convex_radius", "height_map",
-                          "frame_positions", "landmarks", "distance", "geodesic")
+HOOKS: tuple[str, ...] = ("smooth_square_sx", "seed_plan", "seed_curves", "convex_radius",
+                          "height_map", "frame_positions", "landmarks", "distance",
+                          "geodesic")
 
 
 class MetricHooks:
@@ -90,6 +95,17 @@ class MetricHooks:
         ``solvers.SeedPlan``), or ``None`` (the default: the solver chooses one from
         ``dim``, ``smooth`` and ``convex_everywhere``)."""
         return None
+
+    def seed_curves(self, starts: Any, goals: Any, t: Any) -> dict[str, Any]:
+        """Initial curves that know this metric's geometry, for the global search of the
+        exact solvers (beside the generic seeds of ``solvers.SeedPlan``): for pairs
+        ``starts``, ``goals`` ``(K, dim)`` and curve parameters ``t`` ``(T,)`` (from 0 to
+        1), a dict ``{family: (K, S, T, dim)}``: ``S`` curves per pair of each named
+        family, from ``starts[k]`` at ``t = 0`` to ``goals[k]`` at ``t = 1``. The solver
+        projects them into the domain and pins their ends; results report how each
+        family fared (``GeodesicResult.seed_families``). Family names are short words
+        (letters, digits, ``-``). Not provided by default."""
+        raise self._missing("seed_curves")
 
     # -- drawing ----------------------------------------------------------------------------
     @property

@@ -26,7 +26,7 @@ from finsler.metric import Metric
 from solvers.backends import backend_for
 from solvers.inputs import domain_scale
 from solvers.newton import NewtonOptions, NewtonState, NewtonStatus, energy_residual
-from solvers.seeding import SeedPlan, graph_seeder, perturbed_batch, resample, seed_batch
+from solvers.seeding import SeedPlan, graph_seeds, perturbed_batch, resample, seed_batch
 
 __all__ = ["BatchOptions", "BatchSolution", "Rows", "covers", "solve_pairs_batched"]
 
@@ -209,7 +209,8 @@ class BatchSolution:
     restarts included); per pair ``(K,)``: ``best`` (index into ``final``, ``-1`` if none
     is finite), ``seeds_tried``, ``seeds_agreeing``, ``iterations``; ``levels``: one dict
     per level with per-pair arrays ``solved`` and ``iterations``; ``stats``: the batch's
-    evaluations and level times."""
+    evaluations and level times; ``first``: the rows solved from the seeds (the ladder's
+    first size, restarts included), for the evidence per seed family."""
 
     final: Rows
     best: np.ndarray
@@ -218,6 +219,7 @@ class BatchSolution:
     iterations: np.ndarray
     levels: list[dict[str, Any]]
     stats: dict[str, Any]
+    first: Rows | None = None
 
     def levels_of(self, k: int) -> list[dict[str, Any]]:
         """The ladder of pair ``k`` as the result objects report it."""
@@ -274,12 +276,13 @@ def solve_pairs_batched(m: Metric, pairs: np.ndarray, n: int, plan: SeedPlan,
         parts = [seeds]
         tried = np.full(K, S, dtype=np.int64)
         if plan.graph:
-            gp = graph_seeder(m).paths(pairs[:, 0], pairs[:, 1])
-            have = [k for k in range(K) if gp[k] is not None]
+            gs = graph_seeds(m, pairs[:, 0], pairs[:, 1], n0, plan)
+            have = [(k, name, c) for k in range(K) for name, c in gs[k]]
             if have:
-                parts.append(Rows(np.asarray(have, dtype=np.int64), ["graph"] * len(have),
-                                  np.stack([resample(gp[k][0], gp[k][1], n0) for k in have])))
-                tried[have] += 1
+                parts.append(Rows(np.asarray([k for k, _, _ in have], dtype=np.int64),
+                                  [name for _, name, _ in have],
+                                  np.stack([c for _, _, c in have])))
+                tried += np.asarray([len(g) for g in gs], dtype=np.int64)
         if len(sizes) == 1:
             parts.append(given_rows)
         rows = run.solve(Rows.cat(parts), plan.drop_after, plan.drop_factor)
@@ -295,6 +298,7 @@ def solve_pairs_batched(m: Metric, pairs: np.ndarray, n: int, plan: SeedPlan,
                              curves.reshape(-1, n0 + 1, m.dim))
                 rows = Rows.cat([rows, run.solve(extra, plan.drop_after, plan.drop_factor)])
         agree = _agreeing(rows, K)
+        first = rows
         levels.append(_level(rows, K, n0))
         stats["levels"].append({"segments": n0, "rows": len(rows),
                                 "wall_time": time.perf_counter() - t0})
@@ -317,6 +321,7 @@ def solve_pairs_batched(m: Metric, pairs: np.ndarray, n: int, plan: SeedPlan,
         rows = run.solve(given_rows)
         levels.append(_level(rows, K, n))
         agree = _agreeing(rows, K)
+        first = rows
     if global_seeds and plan.polish:
         t1 = time.perf_counter()
         best = _best(rows, K)
@@ -340,7 +345,8 @@ def solve_pairs_batched(m: Metric, pairs: np.ndarray, n: int, plan: SeedPlan,
         agree = _agreeing(rows, K)
     stats["evaluations"] = run.evaluations
     stats["value_evaluations"] = run.value_evaluations
-    return BatchSolution(rows, _best(rows, K), tried, agree, run.iterations, levels, stats)
+    return BatchSolution(rows, _best(rows, K), tried, agree, run.iterations, levels, stats,
+                         first)
 
 
 def residuals(m: Metric, points: np.ndarray) -> np.ndarray:

@@ -27,7 +27,15 @@ from finsler.metric import Metric
 from solvers.batched import BatchOptions, BatchSolution, covers, residuals, solve_pairs_batched
 from solvers.inputs import SHORT_PAIR, as_metric, check_point, domain_scale
 from solvers.result import GeodesicResult, MinMaxResult, Status
-from solvers.seeding import SeedPlan, graph_seeder, perturbed_curves, resample, seed_curves
+from solvers.seeding import (
+    SeedPlan,
+    alternative_gap,
+    family_stats,
+    graph_seeds,
+    perturbed_curves,
+    resample,
+    seed_curves,
+)
 from solvers.transcription import energy_nlp, minmax_nlp
 
 __all__ = [
@@ -198,7 +206,7 @@ def _distinct(m: Metric, ranked: list[_Solve], keep: int, drop_rtol: float) -> l
 
 def _ladder(m: Metric, s: np.ndarray, g: np.ndarray, n: int, plan: SeedPlan,
             given: list[tuple[str, np.ndarray]]
-            ) -> tuple[list[_Solve], list[dict[str, Any]], int, int, int]:
+            ) -> tuple[list[_Solve], list[dict[str, Any]], int, int, int, list[_Solve]]:
     """Multiresolution energy stage: every seed of ``plan`` solved at the plan's coarse
     size, ``plan.restarts`` perturbed copies of the best coarse optimum added, then only
     the ``plan.refine_top`` best distinct optima carried up the ladder ``plan.ladder(n)``
@@ -206,15 +214,13 @@ def _ladder(m: Metric, s: np.ndarray, g: np.ndarray, n: int, plan: SeedPlan,
     dropped at every level); caller-given paths join at the final size.
 
     Returns (solves at the final size, per-level summaries, seeds tried, starts (seeds and
-    restarts) agreeing with the best coarse energy, total IPOPT iterations)."""
+    restarts) agreeing with the best coarse energy, total IPOPT iterations, the solves
+    from the seeds at the first size)."""
     sizes = plan.ladder(n)
     n0 = sizes[0]
     t0 = time.perf_counter()
     seeds = seed_curves(m, s, g, n0, plan)
-    if plan.graph:
-        gp = graph_seeder(m).path(s, g)
-        if gp is not None:
-            seeds.append(("graph", resample(gp[0], gp[1], n0)))
+    seeds += graph_seeds(m, s[None], g[None], n0, plan)[0]
     n_seeds = len(seeds)  # the plan's seeds; caller-given paths are not counted here
     if len(sizes) == 1:
         seeds += given
@@ -227,6 +233,7 @@ def _ladder(m: Metric, s: np.ndarray, g: np.ndarray, n: int, plan: SeedPlan,
                                                        plan.restart_scale, plan.seed)):
                 solved.append(_solve_one(m, nlp, f"{best.name}~{k}", curve))
     total_iter = sum(max(r.iterations, 0) for r in solved)
+    first = list(solved)
     e0 = min((r.rank for r in solved), default=np.inf)
     agree = sum(1 for r in solved
                 if r.ok and abs(r.energy - e0) <= AGREE_RTOL * max(e0, 1e-300))
@@ -271,7 +278,7 @@ def _ladder(m: Metric, s: np.ndarray, g: np.ndarray, n: int, plan: SeedPlan,
         total_iter += its
         levels.append({"segments": n, "solved": len(tries), "iterations": its,
                        "wall_time": time.perf_counter() - t1, "polish": True})
-    return solved, levels, n_seeds, agree, total_iter
+    return solved, levels, n_seeds, agree, total_iter, first
 
 
 def resolve_method(m: Metric, method: Any) -> str:
@@ -395,6 +402,11 @@ def _from_batch(m: Metric, sol: BatchSolution, global_seeds: bool
         energies.update({r.name + ("~ipopt" if r.name in energies else ""):
                          (r.energy if r.status.converged else float("nan")) for r in extra[k]})
         agree = int(sol.seeds_agreeing[k])
+        fam: dict[str, dict[str, Any]] = {}
+        if sol.first is not None:
+            mine0 = np.flatnonzero(sol.first.pair == k)
+            fam = family_stats([sol.first.names[i] for i in mine0], sol.first.energy[mine0],
+                               sol.first.ok[mine0], energies, AGREE_RTOL)
         if not global_seeds:
             agree = sum(1 for e in energies.values() if np.isfinite(e) and abs(
                 e - best.energy) <= AGREE_RTOL * max(best.energy, 1e-300))
@@ -410,6 +422,8 @@ def _from_batch(m: Metric, sol: BatchSolution, global_seeds: bool
             best_seed=best.name,
             levels=sol.levels_of(k),
             method=best.method,
+            seed_families=fam,
+            alternative_gap=alternative_gap(energies, best.energy, AGREE_RTOL),
             **figures[k],
         ))
     return out
@@ -421,21 +435,32 @@ def _solve_ipopt(m: Metric, s: np.ndarray, g: np.ndarray, n: int, plan: SeedPlan
     """One pair by IPOPT alone: the seed plan's ladder (:func:`_ladder`), or only the given
     paths (``global_seeds=False``; ``warm``: nearly converged, IPOPT's warm options)."""
     if global_seeds:
-        solved, levels, n_seeds, agree, total_iter = _ladder(m, s, g, n, plan, given)
+        solved, levels, n_seeds, agree, total_iter, first = _ladder(m, s, g, n, plan, given)
     else:
-        solved, levels, total_iter = [], [], 0
+        solved, levels, total_iter, first = [], [], 0, []
         nlp = energy_nlp(m, n)
         for name, seed in given:
             solved.append(_solve_warm(m, name, seed) if warm
                           else _solve_one(m, nlp, name, seed))
             total_iter += max(solved[-1].iterations, 0)
         n_seeds, agree = len(given), 0
+        first = solved
     ok = [r for r in solved if r.ok]
     pool = ok or [r for r in solved if r.feasible and np.isfinite(r.energy)] or solved
     best = min(pool, key=lambda r: r.energy)
+    if global_seeds and best.ok:
+        # one warm re-solve of the chosen optimum (a few iterations): on car-like a
+        # solve from a seed with a heading jump stopped "converged" 2.8e-7 (relative
+        # energy) above the point a second solve reaches and keeps
+        again = _solve_warm(m, best.name, best.points, fallback=False)
+        total_iter += max(again.iterations, 0)
+        if again.ok and again.energy < best.energy:
+            solved = [again if r is best else r for r in solved]
+            best = again
     if not global_seeds:
         agree = sum(1 for r in ok if abs(r.energy - best.energy)
                     <= AGREE_RTOL * max(best.energy, 1e-300))
+    energies = {r.name: (r.energy if r.status.converged else float("nan")) for r in solved}
     return GeodesicResult(
         metric=m.name,
         points=best.points,
@@ -444,11 +469,14 @@ def _solve_ipopt(m: Metric, s: np.ndarray, g: np.ndarray, n: int, plan: SeedPlan
         wall_time=0.0,
         seeds_tried=n_seeds,
         seeds_agreeing=agree,
-        seed_energies={r.name: (r.energy if r.status.converged else float("nan"))
-                       for r in solved},
+        seed_energies=energies,
         best_seed=best.name,
         levels=levels,
         method="ipopt",
+        seed_families=family_stats([r.name for r in first], np.array([r.energy for r in first]),
+                                   np.array([r.ok for r in first], bool), energies,
+                                   AGREE_RTOL),
+        alternative_gap=alternative_gap(energies, best.energy, AGREE_RTOL),
         **_finish(m, best.points),
     )
 

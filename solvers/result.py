@@ -86,7 +86,23 @@ class GeodesicResult:
     ``residual`` is the path's first-order optimality residual: the largest entry of the
     projected gradient of ``sum C**2`` in the interior points, times the domain's size,
     over ``sum C**2`` (:func:`solvers.newton.energy_residual`; ``1e-10`` is this package's
-    convergence tolerance). For a batch, ``wall_time`` is the batch's time over its pairs.
+    convergence tolerance). This residual measures first-order optimality only where
+    ``F`` is smooth (``metric.smooth``); for a metric whose ``F`` has kinks (car-like's
+    ``max``) it is the norm of a gradient that need not vanish at a minimiser, so it is
+    not an optimality measure there (IPOPT's status on the smooth reformulation is).
+    For a batch, ``wall_time`` is the batch's time over its pairs.
+
+    Evidence of global optimality (agreement within one seed family is no evidence):
+    ``seed_families`` breaks the seeds down by family (:func:`solvers.seeding.seed_family`:
+    ``straight``, ``bulge``, ``random``, ``graph``, the metric's own ``seed_curves``
+    families, ``restart``, ``polish``, ``initial``): ``{family: {"tried", "agreeing",
+    "best_energy"}}``, ``tried`` / ``agreeing`` counted on the candidates solved from
+    the seeds (as ``seeds_tried`` / ``seeds_agreeing``, the ladder's first size),
+    ``best_energy`` the family's lowest energy at the final size (``None``: none of its
+    candidates was carried there converged). ``alternative_gap`` is the relative energy
+    gap ``e / energy - 1`` of the best other local optimum found at the final size
+    (``None``: every candidate there agrees with the best, within 1e-6); a small gap
+    says two basins nearly tie.
     """
 
     metric: str
@@ -116,6 +132,8 @@ class GeodesicResult:
     length_quadrature_error: float | None = None
     method: str = "ipopt"
     residual: float | None = None
+    seed_families: dict[str, dict[str, Any]] = field(default_factory=dict)
+    alternative_gap: float | None = None
 
     @property
     def segments(self) -> int:
@@ -161,6 +179,9 @@ class GeodesicResult:
             "nonconvex_points": self.nonconvex_points,
             "method": self.method,
             "residual": self.residual,
+            "best_seed": self.best_seed,
+            "seed_families": {k: dict(v) for k, v in self.seed_families.items()},
+            "alternative_gap": self.alternative_gap,
         }
         out["segments"] = self.segments
         if est is not None:

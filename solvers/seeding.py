@@ -13,7 +13,9 @@
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
@@ -25,12 +27,16 @@ from finsler.metric import Metric
 __all__ = [
     "GraphSeeder",
     "SeedPlan",
+    "alternative_gap",
+    "family_stats",
     "graph_seeder",
+    "graph_seeds",
     "perturbed_batch",
     "perturbed_curves",
     "resample",
     "seed_batch",
     "seed_curves",
+    "seed_family",
 ]
 
 
@@ -56,7 +62,10 @@ class SeedPlan:
     of non-convex metrics lie close together). ``drop_after`` / ``drop_factor`` (batched
     Newton solves only, :mod:`solvers.batched`): a seed still running after
     ``drop_after`` iterations whose energy is above ``drop_factor`` times the best
-    converged energy of its pair stops there (``0``: never).
+    converged energy of its pair stops there (``0``: never). ``own``: add the metric's
+    own seed curves where it provides them (the ``seed_curves`` hook, :mod:`finsler.hooks`;
+    e.g. car-like: Hermite curves along the headings). ``routes``: distinct graph routes
+    per pair (:meth:`GraphSeeder.routes`; with ``graph``).
     """
 
     bulges: tuple[float, ...] = (0.3,)
@@ -73,12 +82,17 @@ class SeedPlan:
     polish_scale: float = 0.03
     drop_after: int = 0
     drop_factor: float = 1.3
+    own: bool = True
+    routes: int = 1
 
     def __post_init__(self) -> None:
         from finsler.errors import InputError
 
         if any(not (np.isfinite(a) and a > 0) for a in self.bulges):
             raise InputError(f"bulge amplitudes must be positive, got {self.bulges!r}")
+        if isinstance(self.routes, bool) or not isinstance(self.routes, int) \
+                or self.routes < 1:
+            raise InputError(f"routes must be a positive integer, got {self.routes!r}")
         for name in ("random", "restarts", "polish", "drop_after"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 0:
@@ -117,14 +131,15 @@ class SeedPlan:
         A metric may return a :class:`SeedPlan` from its ``seed_plan()`` hook
         (:mod:`finsler.hooks`); else (the hook's default ``None``): a metric that declares
         ``unique_geodesics`` -> the straight line alone; high dimension (> 3) -> a few
-        random curves and the roadmap, coarse size 32; not
+        random curves (20) and the roadmap, coarse size 32; not
         smooth (e.g. car-like: kinks that the energy penalises in one long segment) ->
-        four bulge amplitudes and four random curves, coarse size 256 (IPOPT only); not
+        four bulge amplitudes and four random curves (with the metric's own seed curves
+        where it provides them), coarse size 256 (IPOPT only); not
         convex everywhere (e.g. Matsumoto: local minima round the hill, near-equal discrete
         minima in the non-convex regions) -> bulges at six amplitudes, 20 random curves
         and the graph: for the batched Newton method solved at 16 segments, every distinct
         optimum within 0.5 % of the best carried up a x2 ladder, 6 perturbed restarts of
-        the best at the final size, seeds clearly losing after 6 iterations dropped; for
+        the best at the final size (perturbations of 0.15 |g - s|), nothing dropped; for
         IPOPT at 64 segments, the best 4 refined; convex and smooth (Finsler, e.g.
         Riemannian or Randers: few local minima) -> the straight line and one bulge each
         side at 16 segments (and, for IPOPT, the graph). Measured in
@@ -144,8 +159,11 @@ class SeedPlan:
             return SeedPlan(bulges=(), random=0, graph=False)
         if metric.dim > 3:
             # measured on 10 Panda pairs (n = 32): coarse 8 missed the best energy by up to
-            # 6.6% on 2 pairs and saved no time; 32 keeps the task size exact
-            return SeedPlan(bulges=(0.3,), random=2, graph=True, coarse=32)
+            # 6.6% on 2 pairs and saved no time; 32 keeps the task size exact. 20 random
+            # curves instead of 2: on 10 other pairs the 2 misses of the plan (0.5 % and
+            # 1.2 % above 121 IPOPT starts) were found; 0.13 s per pair against 0.04 s
+            # (batched Newton, one process, 10 tuning pairs sample_pairs(panda, 10, 11))
+            return SeedPlan(bulges=(0.3,), random=20, graph=True, coarse=32)
         if not metric.smooth:
             # measured on 40 car-like pairs: (0.3,) alone missed a lower energy on 10 of
             # them, by up to 157%; these 14 starts were within 0.5% of 19 starts on all 40.
@@ -160,10 +178,14 @@ class SeedPlan:
                 # seeds 20261124 and 777001, against a wide multistart): 98-99 of 100 within
                 # 1e-4 of the best energy known (the IPOPT plan below: 100 and 99), none
                 # 1e-3 above. Seeds at 32 instead of 16: no better, 1.5x the time; without
-                # the restarts 97-98
+                # the restarts 97-98. No early drop, polishing at 0.15: on 100 other fresh
+                # pairs (issue 45) the drop (after 6 iterations, 1.3x) stopped the winning
+                # row on 4 of 6 misses and saved no measurable time (median CPU 8.9 ms per
+                # pair without it, 10.7 with it); without it 97/100, with polish_scale 0.15
+                # too 99/100 within 1e-4
                 return SeedPlan(bulges=bulges, random=20, graph=True, coarse=16, factor=2,
-                                refine_top=8, drop_rtol=0.005, polish=6, polish_scale=0.05,
-                                drop_after=6, drop_factor=1.3)
+                                refine_top=8, drop_rtol=0.005, polish=6, polish_scale=0.15,
+                                drop_after=0)
             # measured on 100 fresh Matsumoto pairs (n = 64, benchmarks/solver_speed.py,
             # seed 2611): 8 seeds at 16 segments reached the best-known energy (1e-4) on
             # 96, 50 seeds at 16 on 93 (the coarse ranking misleads: discrete minima of the
@@ -208,8 +230,10 @@ def seed_batch(metric: Metric, starts: np.ndarray, goals: np.ndarray, n: int,
     the domain: the straight line; sine bulges of each amplitude ``a * |g - s|`` to either
     side (perpendicular in the first two coordinates; in more than 3 dimensions along
     seeded random directions orthogonal to ``g - s``, amplitude ``a * max(|g - s|, 1)``);
-    ``plan.random`` seeded smooth random perturbations (sine modes 1-3). Every pair draws
-    the same seeded numbers (the curves of one pair do not depend on the others)."""
+    ``plan.random`` seeded smooth random perturbations (sine modes 1-3); with
+    ``plan.own``, the metric's own seed curves (its ``seed_curves`` hook, named
+    ``family[j]``). Every pair draws the same seeded numbers (the curves of one pair do
+    not depend on the others)."""
     s_all = np.asarray(starts, dtype=np.float64).reshape(-1, metric.dim)
     g_all = np.asarray(goals, dtype=np.float64).reshape(-1, metric.dim)
     K, dim = s_all.shape
@@ -246,12 +270,105 @@ def seed_batch(metric: Metric, starts: np.ndarray, goals: np.ndarray, n: int,
         coef = rng.normal(size=(len(modes), dim)) * 0.15 / modes[:, None]
         curves.append(line + scale[:, None, None] * (sines @ coef)[None])
         names.append(f"random{k}")
+    if plan.own and metric.provides("seed_curves"):
+        for family, own in _own_curves(metric, s_all, g_all, t[0, :, 0]).items():
+            curves.extend(np.moveaxis(own, 1, 0))
+            names.extend(f"{family}[{j}]" for j in range(own.shape[1]))
     out = np.stack(curves, 1)  # (K, S, n+1, dim)
     out = np.asarray(metric.domain.project(out.reshape(-1, dim)),
                      dtype=np.float64).reshape(out.shape)
     out[:, :, 0] = s_all[:, None]
     out[:, :, -1] = g_all[:, None]
     return names, out
+
+
+def _own_curves(metric: Metric, starts: np.ndarray, goals: np.ndarray, t: np.ndarray
+                ) -> dict[str, np.ndarray]:
+    """The metric's ``seed_curves`` hook, checked: ``{family: (K, S, T, dim)}``."""
+    from finsler.errors import InputError
+
+    got = metric.seed_curves(starts, goals, t)
+    if not isinstance(got, dict):
+        raise InputError(f"{type(metric).__name__}.seed_curves() must return a dict "
+                         f"{{family: (K, S, T, dim) array}}, got {type(got).__name__}")
+    want = (starts.shape[0], t.shape[0], metric.dim)
+    out = {}
+    for family, arr in got.items():
+        c = np.asarray(arr, dtype=np.float64)
+        if (not isinstance(family, str) or not _FAMILY.fullmatch(family) or c.ndim != 4
+                or (c.shape[0], c.shape[2], c.shape[3]) != want):
+            raise InputError(f"{type(metric).__name__}.seed_curves(): family {family!r} "
+                             f"must be a word (letters, digits, '-') naming an array of "
+                             f"shape ({want[0]}, S, {want[1]}, {want[2]}), got {c.shape}")
+        if not np.all(np.isfinite(c)):
+            raise InputError(f"{type(metric).__name__}.seed_curves(): family {family!r} "
+                             "has non-finite values")
+        out[family] = c
+    return out
+
+
+#: A seed family's name (the ``seed_curves`` hook's keys).
+_FAMILY = re.compile(r"[A-Za-z][A-Za-z0-9-]*")
+
+#: The families of the generic seeds and of the solver's own candidates: the prefix of a
+#: candidate's name (``bulge+0.3#0`` -> ``bulge``, ``random3`` -> ``random``).
+_PREFIX = re.compile(r"[A-Za-z]+")
+
+
+def seed_family(name: str) -> str:
+    """The seed family of a candidate's name: ``straight``, ``bulge``, ``random``,
+    ``graph``, ``initial`` (caller-given paths), a family of the metric's
+    ``seed_curves`` hook (``hermite-track[2]`` -> ``hermite-track``), ``restart``
+    (perturbed copies of the best coarse optimum, ``name~k``) or ``polish`` (basin
+    hopping at the final size, ``name~pk``); the ladder's suffix ``@size`` is ignored."""
+    base = re.sub(r"@\d+", "", name).removesuffix("~ipopt")
+    if "~" in base:
+        return "polish" if base.split("~", 1)[1].startswith("p") else "restart"
+    if "[" in base:
+        return base.split("[", 1)[0]
+    m = _PREFIX.match(base)
+    return m.group(0) if m else base
+
+
+def family_stats(names: list[str], energies: np.ndarray, converged: np.ndarray,
+                 final: dict[str, float], rtol: float) -> dict[str, dict[str, Any]]:
+    """Evidence per seed family for one pair: ``{family: {"tried", "agreeing",
+    "best_energy"}}``. ``names`` / ``energies`` / ``converged`` are the candidates solved
+    from the seeds (first size of the ladder): ``tried`` counts them, ``agreeing`` those
+    converged within ``rtol`` (relative) of the best among them; ``final`` maps the names
+    of the candidates solved at the final size to their energies (NaN: not converged):
+    ``best_energy`` is the family's lowest there (``None``: none of its candidates reached
+    the final size converged)."""
+    e = np.asarray(energies, dtype=np.float64)
+    ok = np.asarray(converged, bool) & np.isfinite(e)
+    e0 = float(np.min(e[ok])) if ok.any() else np.inf
+    out: dict[str, dict[str, Any]] = {}
+    for name, en, good in zip(names, e.tolist(), ok.tolist(), strict=True):
+        d = out.setdefault(seed_family(name), {"tried": 0, "agreeing": 0,
+                                               "best_energy": None})
+        d["tried"] += 1
+        d["agreeing"] += int(good and abs(en - e0) <= rtol * max(e0, 1e-300))
+    for name, en in final.items():
+        if not np.isfinite(en):
+            continue
+        d = out.setdefault(seed_family(name), {"tried": 0, "agreeing": 0,
+                                               "best_energy": None})
+        if d["best_energy"] is None or en < d["best_energy"]:
+            d["best_energy"] = float(en)
+    return out
+
+
+def alternative_gap(final: dict[str, float], best: float, rtol: float) -> float | None:
+    """The relative energy gap ``e / best - 1`` of the best other local optimum among the
+    candidates solved at the final size (energies ``final``; those within ``rtol`` of
+    ``best`` count as the same optimum), or ``None`` when every converged candidate
+    agrees with the best."""
+    e = np.asarray([v for v in final.values() if np.isfinite(v)], dtype=np.float64)
+    if not np.isfinite(best) or best <= 0:
+        return None
+    rel = e / best - 1.0
+    rel = rel[rel > rtol]
+    return float(np.min(rel)) if rel.size else None
 
 
 def perturbed_curves(metric: Metric, path: np.ndarray, k: int, scale: float, seed: int
@@ -380,6 +497,16 @@ class GraphSeeder:
         and a goal node per pair: a start node has only outgoing links, a goal node only
         incoming ones, so no path crosses another pair's; one Dijkstra call from all the
         start nodes)."""
+        return [r[0] if r else None for r in self.routes(starts, goals, 1)]
+
+    def routes(self, starts: np.ndarray, goals: np.ndarray, count: int
+               ) -> list[list[tuple[np.ndarray, np.ndarray]]]:
+        """Up to ``count`` distinct routes per pair (``(K, dim)`` each), shortest first:
+        after each route, the edges touching its inner nodes cost ``ROUTE_PENALTY`` times
+        more and Dijkstra runs again (another side of an obstacle or a hill); a route
+        through the same nodes as an earlier one is not repeated. Per pair a list of
+        (points ``(m+1, dim)``, edge costs ``(m,)``), empty if the graph does not connect
+        the pair."""
         s_all = np.asarray(starts, dtype=np.float64).reshape(-1, self.metric.dim)
         g_all = np.asarray(goals, dtype=np.float64).reshape(-1, self.metric.dim)
         K = s_all.shape[0]
@@ -401,30 +528,60 @@ class GraphSeeder:
         size = nn + 2 * K
         graph = sp.csr_matrix((w, (rows, cols)), shape=(size, size))
         allnodes = np.vstack([self.nodes, s_all, g_all])
-        out: list[tuple[np.ndarray, np.ndarray] | None] = []
+        found: list[list[np.ndarray]] = []
         for j in range(K):
-            # the direct link bounds the distance: nothing farther needs exploring
-            dist, pred = dijkstra(graph, directed=True, indices=int(S[j]),
-                                  return_predecessors=True, limit=float(w[-K + j]) * 1.000001)
-            if not np.isfinite(dist[G[j]]):
-                out.append(None)
-                continue
-            seq = [int(G[j])]
-            while seq[-1] != S[j]:
-                seq.append(int(pred[seq[-1]]))
-            seq.reverse()
-            pts = allnodes[seq]
-            out.append((pts, None))
-        # edge costs of every path in one evaluation
-        flat = [p for p in out if p is not None]
+            mine: list[np.ndarray] = []
+            g_j, used = graph, np.zeros(size, bool)
+            for _ in range(count):
+                # the direct link bounds the distance: nothing farther needs exploring
+                dist, pred = dijkstra(g_j, directed=True, indices=int(S[j]),
+                                      return_predecessors=True,
+                                      limit=float(w[-K + j]) * 1.000001)
+                if not np.isfinite(dist[G[j]]):
+                    break
+                seq = [int(G[j])]
+                while seq[-1] != S[j]:
+                    seq.append(int(pred[seq[-1]]))
+                seq.reverse()
+                inner = np.asarray(seq[1:-1], dtype=np.int64)
+                if not mine or not np.all(used[inner]):
+                    mine.append(np.asarray(seq))
+                if len(mine) >= count or len(seq) <= 2:
+                    break
+                used[inner] = True
+                coo = g_j.tocoo()
+                data = np.where(used[coo.row] | used[coo.col],
+                                coo.data * ROUTE_PENALTY, coo.data)
+                g_j = sp.csr_matrix((data, (coo.row, coo.col)), shape=(size, size))
+            found.append(mine)
+        # edge costs of every route in one evaluation
+        flat = [allnodes[seq] for mine in found for seq in mine]
+        out: list[list[tuple[np.ndarray, np.ndarray]]] = [[] for _ in range(K)]
         if flat:
-            a = np.concatenate([p[0][:-1] for p in flat])
-            b = np.concatenate([p[0][1:] for p in flat])
+            a = np.concatenate([p[:-1] for p in flat])
+            b = np.concatenate([p[1:] for p in flat])
             costs = np.atleast_1d(m.segment_length(a, b, 4))
-            split = np.cumsum([len(p[0]) - 1 for p in flat])[:-1]
-            it = iter(np.split(costs, split))
-            out = [None if p is None else (p[0], next(it)) for p in out]
+            it = iter(np.split(costs, np.cumsum([len(p) - 1 for p in flat])[:-1]))
+            pts = iter(flat)
+            for j, mine in enumerate(found):
+                out[j] = [(next(pts), next(it)) for _ in mine]
         return out
+
+
+#: How much more the edges at an earlier route's nodes cost when the next route is sought.
+ROUTE_PENALTY = 3.0
+
+
+def graph_seeds(metric: Metric, starts: np.ndarray, goals: np.ndarray, n: int,
+                plan: SeedPlan) -> list[list[tuple[str, np.ndarray]]]:
+    """The plan's graph seeds per pair (``plan.routes`` distinct routes of the metric's
+    graph, resampled to ``n + 1`` points at equal cost spacing): names ``graph`` (the
+    shortest route), ``graph-r1``, ``graph-r2``, ...; none without ``plan.graph``."""
+    if not plan.graph:
+        return [[] for _ in range(np.asarray(starts).reshape(-1, metric.dim).shape[0])]
+    found = graph_seeder(metric).routes(starts, goals, plan.routes)
+    return [[("graph" if r == 0 else f"graph-r{r}", resample(p, c, n))
+             for r, (p, c) in enumerate(mine)] for mine in found]
 
 
 def graph_seeder(metric: Metric) -> GraphSeeder:

@@ -119,6 +119,7 @@ def solve_to_tol(m: Metric, start: Any, goal: Any, n: int, tol: Any, max_segment
     # the seeding happened at the first size; later sizes are warm starts of its winner
     res.seeds_tried, res.seeds_agreeing = first.seeds_tried, first.seeds_agreeing
     res.seed_energies, res.best_seed = first.seed_energies, first.best_seed
+    res.seed_families, res.alternative_gap = first.seed_families, first.alternative_gap
     res.levels, res.iterations = first.levels, iterations
     if res.status in (Status.TRIVIAL, Status.SHORT):
         seg = m.segment_length_error(s, g)
