@@ -289,3 +289,122 @@ def test_batch_results_do_not_depend_on_the_other_pairs() -> None:
         alone = solvers.solve_geodesic(m, s, g, 32)
         np.testing.assert_allclose(alone.points, r.points, atol=1e-12)
         assert alone.best_seed == r.best_seed
+
+
+# ----------------------------------------------------------------------------------------
+# issue 48: tests that can fail on a line search, a seed plan or a residual gone wrong
+# ----------------------------------------------------------------------------------------
+def _bent_paths(m: finsler.Metric, pairs: np.ndarray, n: int, bump: float) -> np.ndarray:
+    """Paths between ``pairs`` bent sideways by a sine (far from the optimum), in the
+    domain."""
+    t = np.linspace(0.0, 1.0, n + 1)
+    d = pairs[:, 1] - pairs[:, 0]
+    perp = np.stack([-d[:, 1], d[:, 0]], 1)
+    p = (pairs[:, 0, None] + t[None, :, None] * d[:, None]
+         + bump * np.sin(3 * np.pi * t)[None, :, None] * perp[:, None])
+    p = np.asarray(m.domain.project(p.reshape(-1, 2)), float).reshape(p.shape)
+    p[:, 0], p[:, -1] = pairs[:, 0], pairs[:, 1]
+    return p
+
+
+def _worst_armijo_excess(m: finsler.Metric, armijo: float, c: float) -> float:
+    """Step a :class:`NewtonState` (line search on ``armijo``) from bent paths and return
+    the largest ``(E_new - E_old - c grad E_old . (p_new - p_old)) / E_old`` over every
+    iteration and problem, with ``E`` and its gradient from :func:`energy_terms` at the
+    paths before and after each step (the sufficient-decrease condition, along the
+    projection arc on box domains as Bertsekas's projected Newton states it)."""
+    from solvers.newton import NewtonState
+
+    pairs = finsler.sample_pairs(m, 8, seed=5)
+    opt = NewtonOptions(armijo=0.25)
+    object.__setattr__(opt, "armijo", armijo)  # frozen; the negative controls go below 0
+    lo, hi = m.domain.bounds()
+    state = NewtonState(m, _bent_paths(m, pairs, 16, 0.3), opt, _NUMPY_OPS,
+                        float(np.max(hi - lo)))
+    worst, steps = -np.inf, 0
+    while state.running and steps < 60:
+        ids = state.active.copy()
+        before = state.paths(ids)
+        state.step()
+        after = state.paths(ids)
+        steps += 1
+        tb = energy_terms(m, _NUMPY_OPS, _to_field(_NUMPY_OPS, before), hessian=False)
+        ta = energy_terms(m, _NUMPY_OPS, _to_field(_NUMPY_OPS, after), hessian=False)
+        slope = np.sum(np.stack(tb.grad, -1) * (after - before)[:, 1:-1], axis=(1, 2))
+        worst = max(worst, float(np.max((ta.energy - tb.energy - c * slope) / tb.energy)))
+    return worst
+
+
+@pytest.mark.parametrize("name", ["matsumoto", "sphere"])
+def test_every_newton_step_decreases_the_energy_sufficiently(name: str) -> None:
+    """Every accepted step meets the Armijo condition with the configured constant (0.25
+    here, stricter than the default 1e-4); the same check on a line search that accepts
+    any finite step (the constant forced to -1e300) finds a violation, on these metrics
+    where full Newton steps from bent paths overshoot: the test can fail."""
+    m = finsler.get_metric(name)
+    assert _worst_armijo_excess(m, 0.25, 0.25) <= 1e-14  # round-off ties are accepted
+    assert _worst_armijo_excess(m, -1e300, 0.25) > 1e-3
+
+
+@dataclass(frozen=True)
+class _Bump(finsler.Metric):
+    """``F = (1 + 5 exp(-|x|**2 / 0.09)) |v|`` on ``[-1, 1]**2``: a costly bump at the
+    centre, symmetric about the x-axis, so the straight path from ``(-0.8, 0)`` to ``(0.8,
+    0)`` is a critical point that Newton from the straight line never leaves."""
+
+    name: ClassVar[str] = "test-bump"
+    task: ClassVar[finsler.Task] = finsler.Task(depth=4, eps=0.5)
+    reversible: ClassVar[bool] = True
+    domain = property(lambda self: finsler.Box((-1.0, -1.0), (1.0, 1.0)))
+
+    def F_sx(self, x: ca.SX, v: ca.SX) -> ca.SX:
+        return (1 + 5.0 * ca.exp(-ca.dot(x, x) / 0.09)) * ca.sqrt(ca.dot(v, v))
+
+
+def test_the_global_optimum_comes_from_a_seed_other_than_the_first() -> None:
+    """Around the bump, not through it. An independent bound: the minimiser of ``E = sum
+    C**2`` over 16 segments has length ``L <= sqrt(16 E) <= sqrt(16 E(detour))`` for any
+    path (Cauchy-Schwarz), here a sine detour of amplitude 0.6 (its costs from
+    ``metric.cost``). The straight seed alone stays on the x-axis, above that bound; the
+    default seed plan (a seed plan that kept only its first seed would not) finds a path
+    within it, from a seed other than the straight line."""
+    m = _Bump()
+    s, g = np.array([-0.8, 0.0]), np.array([0.8, 0.0])
+    t = np.linspace(0.0, 1.0, 17)
+    detour = np.stack([-0.8 + 1.6 * t, 0.6 * np.sin(np.pi * t)], 1)
+    bound = float(np.sqrt(16 * np.sum(np.asarray(m.cost(detour[:-1], detour[1:])) ** 2)))
+    alone = solvers.solve_geodesic(m, s, g, 16, seeds=solvers.SeedPlan(
+        bulges=(), graph=False, coarse=None, own=False))
+    assert alone.converged and alone.seeds_tried == 1
+    assert np.max(np.abs(alone.points[:, 1])) == 0.0 and alone.length > 1.1 * bound
+    best = solvers.solve_geodesic(m, s, g, 16)
+    assert best.converged and best.seeds_tried > 1
+    assert best.length <= bound and best.best_seed not in ("straight", "")
+    assert np.max(np.abs(best.points[:, 1])) > 0.2  # it went around
+
+
+def test_residual_equals_finite_differences_of_the_energy() -> None:
+    """The gradient of ``E = sum_i F(p_i, p_{i+1} - p_i)**2`` behind ``energy_residual``
+    against central differences of E computed from ``metric.F`` alone (step 1e-6), and the
+    residual against ``max |grad| * scale / E`` from those differences (points well inside
+    the disk, so the projection changes nothing)."""
+    m = finsler.get_metric("sphere")
+    rng = np.random.default_rng(48)
+    pts = rng.uniform(-0.35, 0.35, size=(9, 2))
+
+    def energy(p: np.ndarray) -> float:
+        return float(np.sum(np.asarray(m.F(p[:-1], p[1:] - p[:-1])) ** 2))
+
+    h = 1e-6
+    fd = np.zeros((7, 2))
+    for i in range(1, 8):
+        for k in range(2):
+            up, down = pts.copy(), pts.copy()
+            up[i, k] += h
+            down[i, k] -= h
+            fd[i - 1, k] = (energy(up) - energy(down)) / (2 * h)
+    terms = energy_terms(m, _NUMPY_OPS, _to_field(_NUMPY_OPS, pts[None]), hessian=False)
+    grad = np.stack(terms.grad, -1)[0]
+    np.testing.assert_allclose(grad, fd, rtol=1e-6, atol=1e-8 * np.max(np.abs(fd)))
+    want = np.max(np.abs(fd)) * 1.6 / energy(pts)
+    assert energy_residual(m, pts[None], 1.6)[0] == pytest.approx(want, rel=1e-6)
