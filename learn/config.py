@@ -182,7 +182,8 @@ class TrainConfig(MetricConfig):
     """Beyond the paper: the critic's hidden layer sizes when they differ from ``hidden``
     (None: ``hidden``). Generation calls only the actor, so a larger critic costs training
     time, not generation time. Measured on Matsumoto (128-128, 1e8, 2 seeds): no gain on
-    fresh pairs for 1.5x the wall time (README)."""
+    fresh pairs for 1.5x the wall time
+    (benchmarks/results/relative-critic-moved.md)."""
     activation: str = "relu"
     """``relu`` (paper) or ``tanh``."""
     lr: float = 3e-5
@@ -536,10 +537,10 @@ _OURS: dict[str, dict[str, Any]] = {
     # (p = 2, 1e7) 96.6, 84.8, 51.2%. At the paper's budget, 2e7 (the default since issue
     # 25), p = 8 keeps its balance and the paths get shorter, as eq. (6)'s did: tuning
     # pairs 98.6 / 99.0, 91.6 / 92.0, 61.6 / 60.0%, mean length 118.3 / 118.4; validation
-    # best 99.4 / 99.4%, last 99.2 / 98.6%. Fresh pairs: README.
+    # best 99.4 / 99.4%, last 99.2 / 98.6%. Fresh pairs: benchmarks/results/balanced-halves-moved.md.
     # The actor 256-256-256 (the critic stays 128-128, critic_hidden; issue 25): the critic
-    # already knew balanced midpoints, the 128-128 actor did not reproduce them (README,
-    # "What limits the balance"). Same budget and schedule, seeds 0 / 1, tuning pairs, best
+    # already knew balanced midpoints, the 128-128 actor did not reproduce them
+    # (benchmarks/results/balanced-halves-moved.md, "What limits the balance"). Same budget and schedule, seeds 0 / 1, tuning pairs, best
     # checkpoints: 99.2 / 98.4, 95.2 / 94.8, 67.4 / 66.4%, mean length 116.5 / 116.2
     # (128-128 above: 98.6 / 99.0, 91.6 / 92.0, 61.6 / 60.0%, 118.3 / 118.4); validation
     # best 99.8 / 100%, last 98.4 / 99.2%. Training is about 1.7x slower (4400 against 7600
@@ -551,10 +552,11 @@ _OURS: dict[str, dict[str, Any]] = {
     # above, all digits: seed 0's 148, seed 1's first 42, the ones compared). Seeds 0 / 1,
     # tuning pairs, best checkpoints: 99.6 / 99.8, 95.4 / 96.8, 69.4 / 69.4%, mean length
     # 116.0 / 115.5 (above: 99.2 / 98.4, 95.2 / 94.8, 67.4 / 66.4%, 116.5 / 116.2); seed
-    # 0's best is a polished checkpoint, seed 1's one at 1.87e7. Fresh pairs: README.
+    # 0's best is a polished checkpoint, seed 1's one at 1.87e7. Fresh pairs:
+    # benchmarks/results/polishing-moved.md.
     # The budget stays 2e7: 3e7 with these settings (seeds 0 / 1) gains nothing on the tuning
-    # pairs (best 99.4 / 99.6, 96.8 / 95.8, 69.6 / 69.0%) nor on the fresh pairs (README,
-    # "Polishing the actor against the frozen critic").
+    # pairs (best 99.4 / 99.6, 96.8 / 95.8, 69.6 / 69.0%) nor on the fresh pairs
+    # (benchmarks/results/polishing-moved.md).
     "panda-pole": dict(timesteps=20_000_000, hidden=(256, 256, 256), critic_hidden=(128, 128),
                        symmetric_critic=True, eval_every=25, actor_loss_power=8.0,
                        select_eps=10.0, polish_steps=3000),
@@ -578,7 +580,8 @@ def default_config(env: str, **overrides: Any) -> TrainConfig:
 # collection suits the defaults only because the energy term supplies the local signal.
 # The model-free defaults keep the defaults' actor_relative: at 2e7 (Matsumoto, seeds 0 / 1,
 # 500 fresh pairs, last checkpoints) 98.7 +- 0.9% success and ratio mean 1.025 against
-# 95.4 +- 1.0% and 1.122 with the absolute residual actor (README).
+# 95.4 +- 1.0% and 1.122 with the absolute residual actor
+# (benchmarks/results/actor-relative-moved.md).
 _MODEL_FREE: dict[str, dict[str, Any]] = {
     "matsumoto": dict(epochs=3),
     "carlike": dict(epochs=2),
