@@ -537,10 +537,12 @@ _OURS: dict[str, dict[str, Any]] = {
     # (p = 2, 1e7) 96.6, 84.8, 51.2%. At the paper's budget, 2e7 (the default since issue
     # 25), p = 8 keeps its balance and the paths get shorter, as eq. (6)'s did: tuning
     # pairs 98.6 / 99.0, 91.6 / 92.0, 61.6 / 60.0%, mean length 118.3 / 118.4; validation
-    # best 99.4 / 99.4%, last 99.2 / 98.6%. Fresh pairs: benchmarks/results/balanced-halves-moved.md.
+    # best 99.4 / 99.4%, last 99.2 / 98.6%. Fresh pairs:
+    # benchmarks/results/balanced-halves-moved.md.
     # The actor 256-256-256 (the critic stays 128-128, critic_hidden; issue 25): the critic
     # already knew balanced midpoints, the 128-128 actor did not reproduce them
-    # (benchmarks/results/balanced-halves-moved.md, "What limits the balance"). Same budget and schedule, seeds 0 / 1, tuning pairs, best
+    # (benchmarks/results/balanced-halves-moved.md, "What limits the balance"). Same
+    # budget and schedule, seeds 0 / 1, tuning pairs, best
     # checkpoints: 99.2 / 98.4, 95.2 / 94.8, 67.4 / 66.4%, mean length 116.5 / 116.2
     # (128-128 above: 98.6 / 99.0, 91.6 / 92.0, 61.6 / 60.0%, 118.3 / 118.4); validation
     # best 99.8 / 100%, last 98.4 / 99.2%. Training is about 1.7x slower (4400 against 7600
