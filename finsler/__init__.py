@@ -4,33 +4,85 @@ evaluator (numpy, torch, IPOPT) derived from that single expression.
 A metric's optional capabilities are declared in :mod:`finsler.hooks`; its identity (name
 or class, parameters) as a :class:`MetricSpec` in :mod:`finsler.spec`."""
 
-from finsler.domains import Box, Disk, Domain, JointBox, Product
-from finsler.errors import DomainError, InputError, UnknownMetricError
-from finsler.files import OutputError, atomic_write_bytes, atomic_write_text, check_output_path
-from finsler.hooks import HOOKS, MetricHooks
-from finsler.metric import LengthBounds, LengthEstimate, Metric, Task
-from finsler.metrics import (
-    MATSUMOTO_CONVEX_RADIUS,
-    CarLike,
-    ClosedFormMetric,
-    Euclidean,
-    Matsumoto,
-    Minkowski,
-    PandaPole,
-    Poincare,
-    Randers,
-    Sphere,
-)
-from finsler.pairs import (
-    DEFAULT_EVAL_SEED,
-    VALIDATION_SEED,
-    default_pairs,
-    load_pairs,
-    sample_pairs,
-    validation_pairs,
-)
-from finsler.registry import get_metric, list_metrics, metric_class, register_metric
-from finsler.spec import MetricSpec, metric_spec
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from finsler.domains import Box, Disk, Domain, JointBox, Product
+    from finsler.errors import DomainError, InputError, UnknownMetricError
+    from finsler.files import OutputError, atomic_write_bytes, atomic_write_text, check_output_path
+    from finsler.hooks import HOOKS, MetricHooks
+    from finsler.metric import LengthBounds, LengthEstimate, Metric, Task
+    from finsler.metrics import (
+        MATSUMOTO_CONVEX_RADIUS,
+        CarLike,
+        ClosedFormMetric,
+        Euclidean,
+        Matsumoto,
+        Minkowski,
+        PandaPole,
+        Poincare,
+        Randers,
+        Sphere,
+    )
+    from finsler.pairs import (
+        DEFAULT_EVAL_SEED,
+        VALIDATION_SEED,
+        default_pairs,
+        load_pairs,
+        sample_pairs,
+        validation_pairs,
+    )
+    from finsler.registry import get_metric, list_metrics, metric_class, register_metric
+    from finsler.spec import MetricSpec, metric_spec
+
+# Public names -> defining module, imported on first use (PEP 562): `import finsler` and
+# `from finsler.errors import InputError` stay cheap (no CasADi, numpy) for the command line's
+# --help; `from finsler import Metric` works as before.
+_LAZY = {
+    "Box": "finsler.domains",
+    "CarLike": "finsler.metrics",
+    "ClosedFormMetric": "finsler.metrics",
+    "DEFAULT_EVAL_SEED": "finsler.pairs",
+    "Disk": "finsler.domains",
+    "Domain": "finsler.domains",
+    "DomainError": "finsler.errors",
+    "Euclidean": "finsler.metrics",
+    "HOOKS": "finsler.hooks",
+    "InputError": "finsler.errors",
+    "JointBox": "finsler.domains",
+    "LengthBounds": "finsler.metric",
+    "LengthEstimate": "finsler.metric",
+    "MATSUMOTO_CONVEX_RADIUS": "finsler.metrics",
+    "Matsumoto": "finsler.metrics",
+    "Metric": "finsler.metric",
+    "MetricHooks": "finsler.hooks",
+    "MetricSpec": "finsler.spec",
+    "Minkowski": "finsler.metrics",
+    "OutputError": "finsler.files",
+    "PandaPole": "finsler.metrics",
+    "Poincare": "finsler.metrics",
+    "Product": "finsler.domains",
+    "Randers": "finsler.metrics",
+    "Sphere": "finsler.metrics",
+    "Task": "finsler.metric",
+    "UnknownMetricError": "finsler.errors",
+    "VALIDATION_SEED": "finsler.pairs",
+    "atomic_write_bytes": "finsler.files",
+    "atomic_write_text": "finsler.files",
+    "check_output_path": "finsler.files",
+    "default_pairs": "finsler.pairs",
+    "get_metric": "finsler.registry",
+    "list_metrics": "finsler.registry",
+    "load_pairs": "finsler.pairs",
+    "metric_class": "finsler.registry",
+    "metric_spec": "finsler.spec",
+    "register_metric": "finsler.registry",
+    "sample_pairs": "finsler.pairs",
+    "validation_pairs": "finsler.pairs",
+}
 
 __all__ = [
     "DEFAULT_EVAL_SEED",
@@ -74,3 +126,21 @@ __all__ = [
     "sample_pairs",
     "validation_pairs",
 ]
+
+
+def __getattr__(name: str) -> Any:
+    module = _LAZY.get(name)
+    if module is None:  # a submodule reached as an attribute (``finsler.registry.X``)
+        try:
+            return importlib.import_module(f"finsler.{name}")
+        except ModuleNotFoundError as err:
+            if err.name != f"finsler.{name}":
+                raise
+        raise AttributeError(f"module 'finsler' has no attribute {name!r}")
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value  # cache: the next lookup is a plain attribute
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))

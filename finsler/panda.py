@@ -17,13 +17,16 @@ import functools
 import importlib.metadata
 from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import casadi
 import numpy as np
-import pinocchio
 
 from finsler.errors import InputError
 from finsler.lowering import LoweredFunction, lower
+
+if TYPE_CHECKING:  # imported in load_panda_model: the joint limits (the metric's domain,
+    import pinocchio  # `geodesics metrics`) need no Pinocchio (issue 47)
 
 __all__ = [
     "ARM_JOINT_NAMES",
@@ -108,6 +111,8 @@ def load_panda_model() -> pinocchio.Model:
         RuntimeError: if the package or its Panda URDF cannot be found, or if the model does not
             have the expected joints and frames.
     """
+    import pinocchio
+
     full = pinocchio.buildModelFromUrdf(str(_panda_urdf_path()))
     missing = [name for name in ARM_JOINT_NAMES if not full.existJointName(name)]
     if missing:

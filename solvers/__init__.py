@@ -18,33 +18,73 @@ Every result carries a status of one family (:mod:`solvers.status`): ``status.la
 what the API, JSON and the command line print.
 """
 
-from solvers.certify import CertifyResult, MeshSpec, certify
-from solvers.expmap import ExpResult, LogResult, exp_map, log_map
-from solvers.geodesic import (
-    check_pairs,
-    check_segments,
-    midpoint,
-    refine_minmax,
-    solve_batch,
-    solve_geodesic,
-)
-from solvers.result import (
-    DistanceResult,
-    GeodesicResult,
-    MidpointResult,
-    MinMaxResult,
-    SolverError,
-)
-from solvers.seeding import SeedPlan
-from solvers.spectral import distance
-from solvers.status import (
-    CertifyStatus,
-    DistanceStatus,
-    ExpStatus,
-    LogStatus,
-    Outcome,
-    Status,
-)
+from __future__ import annotations
+
+import importlib
+import sys
+import types
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from solvers.certify import CertifyResult, MeshSpec, certify
+    from solvers.expmap import ExpResult, LogResult, exp_map, log_map
+    from solvers.geodesic import (
+        check_pairs,
+        check_segments,
+        midpoint,
+        refine_minmax,
+        solve_batch,
+        solve_geodesic,
+    )
+    from solvers.result import (
+        DistanceResult,
+        GeodesicResult,
+        MidpointResult,
+        MinMaxResult,
+        SolverError,
+    )
+    from solvers.seeding import SeedPlan
+    from solvers.spectral import distance
+    from solvers.status import (
+        CertifyStatus,
+        DistanceStatus,
+        ExpStatus,
+        LogStatus,
+        Outcome,
+        Status,
+    )
+
+# Public names -> defining module, imported on first use (PEP 562), so that `import solvers`
+# (and the `geodesics` command line's --help) does not pay for scipy.integrate, the Newton
+# stack and IPOPT until a solver is called. `from solvers import solve_batch` works as before.
+_LAZY = {
+    "CertifyResult": "solvers.certify",
+    "CertifyStatus": "solvers.status",
+    "DistanceResult": "solvers.result",
+    "DistanceStatus": "solvers.status",
+    "ExpResult": "solvers.expmap",
+    "ExpStatus": "solvers.status",
+    "GeodesicResult": "solvers.result",
+    "LogResult": "solvers.expmap",
+    "LogStatus": "solvers.status",
+    "MeshSpec": "solvers.certify",
+    "MidpointResult": "solvers.result",
+    "MinMaxResult": "solvers.result",
+    "Outcome": "solvers.status",
+    "SeedPlan": "solvers.seeding",
+    "SolverError": "solvers.result",
+    "Status": "solvers.status",
+    "certify": "solvers.certify",
+    "check_pairs": "solvers.geodesic",
+    "check_segments": "solvers.geodesic",
+    "distance": "solvers.spectral",
+    "exp_map": "solvers.expmap",
+    "log_map": "solvers.expmap",
+    "midpoint": "solvers.geodesic",
+    "refine_minmax": "solvers.geodesic",
+    "solve_batch": "solvers.geodesic",
+    "solve_geodesic": "solvers.geodesic",
+}
 
 __all__ = [
     "CertifyResult",
@@ -74,3 +114,36 @@ __all__ = [
     "solve_batch",
     "solve_geodesic",
 ]
+
+
+def __getattr__(name: str) -> Any:
+    module = _LAZY.get(name)
+    if module is None:  # a submodule reached as an attribute (``solvers.seeding.X``)
+        try:
+            return importlib.import_module(f"solvers.{name}")
+        except ModuleNotFoundError as err:
+            if err.name != f"solvers.{name}":
+                raise
+        raise AttributeError(f"module 'solvers' has no attribute {name!r}")
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value  # cache: the next lookup is a plain attribute
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))
+
+
+class _Package(types.ModuleType):
+    """The package module, keeping ``solvers.certify`` the function as the eager package did:
+    importing a submodule binds it on its package, and ``solvers.certify`` (the module) would
+    then hide the function of the same name."""
+
+    def __setattr__(self, name: str, value: Any) -> None:
+        if (isinstance(value, types.ModuleType) and _LAZY.get(name) == value.__name__
+                and hasattr(value, name)):
+            value = getattr(value, name)
+        super().__setattr__(name, value)
+
+
+sys.modules[__name__].__class__ = _Package

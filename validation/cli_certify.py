@@ -27,8 +27,6 @@ import typer
 
 from finsler.errors import InputError
 from finsler.files import atomic_write_text, check_output_path
-from solvers.inputs import domain_scale
-from solvers.status import CertifyStatus
 from validation.cli_common import (
     MetricModuleOption,
     MetricParamOption,
@@ -72,6 +70,8 @@ def certify_command(
     import dataclasses
 
     from solvers.certify import MeshSpec, certify
+    from solvers.inputs import domain_scale
+    from solvers.status import CertifyStatus
 
     m = metric_from_options(metric, metric_param, metric_module)
     if m.dim != 2:

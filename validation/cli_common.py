@@ -5,15 +5,16 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import Annotated, Any
+from typing import TYPE_CHECKING, Annotated, Any
 
-import numpy as np
 import typer
 
 import finsler
 from finsler.errors import InputError, short
 from finsler.modules import import_user_module
-from validation.jsonout import jsonable
+
+if TYPE_CHECKING:  # numpy is imported where used: --help stays light (issue 47)
+    import numpy as np
 
 __all__ = [
     "METHOD_MODULE_HELP",
@@ -76,11 +77,15 @@ def fail(message: str, code: int = 2) -> None:
 def json_text(doc: Any, indent: int | None = 2) -> str:
     """Standard JSON of a command's result: numpy values as Python ones, and NaN or
     infinite numbers (which JSON cannot hold) as ``null``."""
+    from validation.jsonout import jsonable
+
     return json.dumps(jsonable(doc), indent=indent, allow_nan=False)
 
 
 def parse_point(text: str, dim: int, what: str) -> np.ndarray:
     """Parse ``"a,b,..."`` into a float64 vector of length ``dim``."""
+    import numpy as np
+
     try:
         values = [float(t) for t in text.replace(" ", "").split(",") if t != ""]
     except ValueError:

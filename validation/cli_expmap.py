@@ -13,7 +13,6 @@ from __future__ import annotations
 
 from typing import Annotated
 
-import numpy as np
 import typer
 
 import solvers
@@ -44,6 +43,8 @@ def exp_command(
     metric_module: MetricModuleOption = None,
 ) -> None:
     """exp(x, v): the end point at time t of the geodesic from x with initial velocity v."""
+    import numpy as np
+
     m = metric_from_options(metric, metric_param, metric_module)
     x = parse_point(start, m.dim, "--start")
     v = parse_point(velocity, m.dim, "--velocity")
@@ -86,6 +87,8 @@ def log_command(
     metric_module: MetricModuleOption = None,
 ) -> None:
     """log(x, y): the initial velocity v of the shortest geodesic with exp(x, v) = y."""
+    import numpy as np
+
     m = metric_from_options(metric, metric_param, metric_module)
     x = parse_point(start, m.dim, "--start")
     y = parse_point(goal, m.dim, "--goal")

@@ -11,7 +11,6 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Annotated
 
-import numpy as np
 import typer
 
 import finsler
@@ -242,6 +241,8 @@ def evaluate_command(
     shipped policies' runs; a run older than the validation set had its best checkpoint
     selected on it, so its figures there are optimistic (the output says so): give --pairs
     of a fresh seed for honest ones. The output names the checkpoint file used."""
+    import numpy as np
+
     import learn
     from learn.registry import import_method_modules
     from learn.runs import load_any_policy

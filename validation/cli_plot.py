@@ -75,4 +75,5 @@ def plot_curves_command(
 
 def register(app: typer.Typer) -> None:
     """Add ``plot-curves`` to the ``geodesics`` app."""
-    app.command("plot-curves")(plot_curves_command)
+    app.command("plot-curves", short_help="Learning curves of a sweep (Fig. 2), one panel per "
+                "environment, with a CSV of the plotted points.")(plot_curves_command)
