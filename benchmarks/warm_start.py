@@ -1,134 +1,132 @@
-"""Learned warm starts for exact solves (issue 11, part 3): time and agreement.
+"""Learned warm starts inside the batched solve (issue 47, item 5): time and optima of
+``geodesics solve --pairs P --warm-start ENV`` against the same command without it.
 
 For each task metric (``matsumoto`` n=64, ``carlike`` n=256, ``panda-pole`` n=32) on K
-fresh pairs (seed 777: neither the default evaluation set's seed nor the validation
-set's) this solves every pair twice, one pair at a time in this process:
+fresh pairs (``finsler.sample_pairs(m, K, seed)``, default seed 20261130: not a seed any
+plan or policy was tuned on) it runs the command line as whole processes, as a user
+would, one after the other:
 
-* globally seeded: ``solvers.solve_geodesic(m, s, g, n)`` (the default seed plan: several
-  initial curves, a lattice graph path in 2-D / 3-D, a roadmap for the arm);
-* learned warm start: the shipped policy's path (``policy.generate``, all pairs in one
-  batch) as the only initial path, ``solve_geodesic(..., initial=(path,),
-  global_seeds=False)`` -- what ``geodesics solve --warm-start ENV`` does;
-* with ``--recheck-above R`` (``geodesics solve --recheck-above R``): the pairs whose
-  learned path's energy is above R times the warm optimum solved again with the global
-  seeds plus the warm result (:func:`validation.cli_solve.recheck_flags`).
+* default: ``geodesics solve --metric M --pairs P --segments n --no-progress --out D.json``
+  (the global seed plan, batched Newton or IPOPT as ``--method auto`` picks);
+* warm: the same with ``--warm-start M`` (the shipped policy): the policy's path of each
+  pair is one more start in the same batch, beside the global seeds.
 
-It prints the time per exact geodesic of both (the warm start's includes its share of
-the batched path generation), the speed-up of the means, and on how many pairs the warm
-start's energy is within 1e-6 (relative) of the globally seeded one, lower than it (the
-learned route found a better local minimum) or higher (the warm start ended in a worse
-local minimum: those pairs are listed), and how many are within 1e-4, 1e-3, 1e-2.
-One-off setup (building the NLP and the seeding graph, loading the policy) is done on an
-extra pair before timing and printed apart.
+Per command: wall time (``time.perf_counter``) and CPU time (the child's user + system,
+``resource.getrusage(RUSAGE_CHILDREN)``: the interpreter's start, every import -- torch and
+the policy for the warm start --, the solve), the median over ``--repeats`` runs (default
+1); the first run of each pair of commands is preceded by an untimed ``geodesics
+--help`` so every run finds the file cache warm. Per pair, from the JSON of both: the
+warm start's energy against the default's, relative, counted worse above 1e-9 and 1e-6,
+better below -1e-6, and the largest gap. With ``--old`` it also solves the pairs the way
+``--warm-start`` did before issue 47 (the learned path alone, no global seeds:
+``solvers.solve_batch(..., initial_paths=paths, global_seeds=False)``, in this process) and
+counts the pairs where that ended worse than the default: the pairs where a warm start
+*could* be worse.
 
 Usage::
 
     python benchmarks/warm_start.py [--pairs 100] [--metrics matsumoto,carlike,panda-pole]
-        [--seed 777] [--recheck-above 1.05,1.3] [--search] [--json out.json]
+        [--seed 20261130] [--repeats 1] [--old] [--no-write]
 
-``--search``: the warm starts are the route search's paths (:meth:`learn.Policy.search`,
-``geodesics solve --warm-search``; its time is included). Pass ``--pairs`` per task as
-``--pairs carlike=30`` (repeatable) to shorten a slow task.
+Pass ``--pairs`` per task as ``--pairs carlike=20`` (repeatable) to shorten a slow task.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import resource
+import statistics
+import subprocess
+import sys
+import tempfile
 import time
+from pathlib import Path
 
 import numpy as np
-import torch
+from results_file import ResultsFile, markdown_table
 
 import finsler
-from learn.runs import warm_start_paths
-from solvers import solve_geodesic
-from validation.cli_solve import recheck_flags
 
 TASKS = {"matsumoto": 64, "carlike": 256, "panda-pole": 32}
-#: Relative energy difference below which the two solves count as the same geodesic.
-RTOL = 1e-6
-#: Relative gaps (warm minus global, over global) at which the pairs are also counted.
-GAPS = (1e-6, 1e-4, 1e-3, 1e-2)
+#: Relative energy gaps (warm minus default, over default) counted as worse.
+WORSE = (1e-9, 1e-6)
+SEED = 20261130
 
 
-def run_task(name: str, k: int, seed: int, recheck: tuple[float, ...] = (),
-             search: bool = False) -> dict:
+def geodesics() -> list[str]:
+    script = Path(sys.executable).with_name("geodesics")
+    return [str(script)] if script.exists() else [sys.executable, "-m", "validation.cli"]
+
+
+def timed(cmd: list[str]) -> tuple[float, float]:
+    """(CPU seconds, wall seconds) of one process running ``cmd`` (its output discarded;
+    a failure raises with its stderr)."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    t0 = time.perf_counter()
+    done = subprocess.run(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+                          check=False)
+    wall = time.perf_counter() - t0
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    if done.returncode != 0:
+        raise RuntimeError(f"{' '.join(cmd)} exited {done.returncode}: {done.stderr[-500:]}")
+    return (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime), wall
+
+
+def energies(path: Path) -> np.ndarray:
+    return np.array([r["energy"] for r in json.loads(path.read_text())["results"]])
+
+
+def old_energies(name: str, pairs: np.ndarray, n: int) -> np.ndarray:
+    """The energies of the retired ``--warm-start`` (learned path alone)."""
+    import torch
+
+    import solvers
+    from learn.runs import warm_start_paths
+
+    torch.set_num_threads(1)
+    m = finsler.get_metric(name)
+    paths, _ = warm_start_paths(name, m, pairs)
+    res = solvers.solve_batch(m, pairs, n, workers=1, progress=False, initial_paths=paths,
+                              global_seeds=False)
+    return np.array([r.energy for r in res])
+
+
+def run_task(name: str, k: int, seed: int, repeats: int, old: bool, folder: Path) -> dict:
     m = finsler.get_metric(name)
     n = TASKS[name]
-    pairs = finsler.sample_pairs(m, k + 1, seed)
-    setup_pair, pairs = pairs[:1], pairs[1:]
-
-    t0 = time.perf_counter()  # one-off: policy, NLP, seeding graph
-    p0, _ = warm_start_paths(name, m, setup_pair, search=search)
-    solve_geodesic(m, setup_pair[0, 0], setup_pair[0, 1], n, initial=(p0[0],),
-                   global_seeds=False)
-    solve_geodesic(m, setup_pair[0, 0], setup_pair[0, 1], n)
-    setup = time.perf_counter() - t0
-
-    t0 = time.perf_counter()
-    paths, pol = warm_start_paths(name, m, pairs, search=search)
-    gen = (time.perf_counter() - t0) / k
-    warm_t, glob_t, warm_e, glob_e, warm_ok, glob_ok = [], [], [], [], [], []
-    warm_res = []
-    for i in range(k):
-        s, g = pairs[i]
-        t0 = time.perf_counter()
-        w = solve_geodesic(m, s, g, n, initial=(paths[i],), global_seeds=False)
-        warm_t.append(time.perf_counter() - t0 + gen)
-        t0 = time.perf_counter()
-        r = solve_geodesic(m, s, g, n)
-        glob_t.append(time.perf_counter() - t0)
-        warm_res.append(w)
-        warm_e.append(w.energy)
-        glob_e.append(r.energy)
-        warm_ok.append(w.converged)
-        glob_ok.append(r.converged)
-    we, ge = np.array(warm_e), np.array(glob_e)
-    # --recheck-above R: global seeds (plus the warm result) where the learned path's energy
-    # is above R times the warm optimum; each pair's recheck is solved once and reused
-    rechecks: dict[int, tuple[float, float]] = {}
-    recheck_rows = []
-    for ratio in recheck:
-        flags = recheck_flags(m, paths, warm_res, ratio)
-        for i in np.flatnonzero(flags):
-            if int(i) not in rechecks:
-                t0 = time.perf_counter()
-                r = solve_geodesic(m, pairs[i, 0], pairs[i, 1], n,
-                                   initial=(warm_res[i].points,))
-                rechecks[int(i)] = (time.perf_counter() - t0, r.energy)
-        e = np.array([rechecks[i][1] if flags[i] else we[i] for i in range(k)])
-        t = np.array([warm_t[i] + (rechecks[i][0] if flags[i] else 0.0) for i in range(k)])
-        rr = (e - ge) / ge
-        recheck_rows.append({"ratio": ratio, "rechecked": int(flags.sum()),
-                             "seconds_mean": t.mean(),
-                             "speedup_mean": float(np.mean(glob_t) / t.mean()),
-                             "equal_or_lower": int(np.sum(rr <= RTOL)),
-                             "lower": int(np.sum(rr < -RTOL))})
-    rel = (we - ge) / ge
-    equal = np.abs(rel) <= RTOL
-    better = rel < -RTOL
-    worse = rel > RTOL
-    wt, gt = np.array(warm_t), np.array(glob_t)
-    return {
+    pairs = finsler.sample_pairs(m, k, seed)
+    pfile = folder / f"{name}-pairs.npy"
+    np.save(pfile, pairs)
+    base = [*geodesics(), "solve", "--metric", name, "--pairs", str(pfile), "--segments",
+            str(n), "--no-progress"]
+    cmds = {"default": [*base, "--out", str(folder / f"{name}-default.json")],
+            "warm": [*base, "--out", str(folder / f"{name}-warm.json"), "--warm-start", name]}
+    times: dict[str, list[tuple[float, float]]] = {key: [] for key in cmds}
+    for _ in range(repeats):
+        timed([*geodesics(), "--help"])
+        for key, cmd in cmds.items():
+            times[key].append(timed(cmd))
+            print(f"  {name} {key}: CPU {times[key][-1][0]:.2f} s, wall "
+                  f"{times[key][-1][1]:.2f} s", flush=True)
+    e_def = energies(folder / f"{name}-default.json")
+    e_warm = energies(folder / f"{name}-warm.json")
+    rel = (e_warm - e_def) / e_def
+    out = {
         "metric": name, "segments": n, "pairs": k, "seed": seed,
-        "policy": f"{pol.source} ({pol.checkpoint})",
-        "setup_seconds": setup,
-        "generation_seconds_per_pair": gen,
-        "warm_seconds": {"mean": wt.mean(), "median": float(np.median(wt)), "max": wt.max()},
-        "global_seconds": {"mean": gt.mean(), "median": float(np.median(gt)),
-                           "max": gt.max()},
-        "speedup_mean": gt.mean() / wt.mean(),
-        "speedup_median": float(np.median(gt) / np.median(wt)),
-        "equal": int(equal.sum()), "better": int(better.sum()), "worse": int(worse.sum()),
-        "warm_converged": int(np.sum(warm_ok)), "global_converged": int(np.sum(glob_ok)),
-        "within": {f"{t:g}": int(np.sum(rel <= t)) for t in GAPS},
-        "recheck": recheck_rows,
-        "worse_pairs": [{"pair": int(i), "relative_energy_gap": float(rel[i]),
-                         "pair_distance_coordinates": float(np.linalg.norm(
-                             pairs[i, 1] - pairs[i, 0]))}
-                        for i in np.flatnonzero(worse)],
+        "cpu": {key: statistics.median(c for c, _ in v) for key, v in times.items()},
+        "wall": {key: statistics.median(w for _, w in v) for key, v in times.items()},
+        "worse": {f"{t:g}": int(np.sum(rel > t)) for t in WORSE},
+        "better": int(np.sum(rel < -1e-6)),
+        "largest_gap": float(rel.max()),
+        "worse_pairs": [int(i) for i in np.flatnonzero(rel > WORSE[0])],
     }
+    if old:
+        rel_old = (old_energies(name, pairs, n) - e_def) / e_def
+        out["old_worse"] = {f"{t:g}": int(np.sum(rel_old > t)) for t in WORSE}
+        out["old_largest_gap"] = float(rel_old.max())
+        out["old_worse_pairs"] = [int(i) for i in np.flatnonzero(rel_old > 1e-6)]
+    return out
 
 
 def _parse_pairs(items: list[str]) -> tuple[int, dict[str, int]]:
@@ -147,48 +145,44 @@ def main() -> None:
     ap.add_argument("--pairs", action="append", default=[],
                     help="pairs per task (N, or TASK=N; repeatable), default 100")
     ap.add_argument("--metrics", default=",".join(TASKS))
-    ap.add_argument("--seed", type=int, default=777)
-    ap.add_argument("--json", default=None, help="also write the rows to this file")
-    ap.add_argument("--search", action="store_true",
-                    help="warm starts from the route search's paths")
-    ap.add_argument("--recheck-above", default="1.05,1.3",
-                    help="comma-separated ratios R of `geodesics solve --recheck-above R`")
+    ap.add_argument("--seed", type=int, default=SEED)
+    ap.add_argument("--repeats", type=int, default=1)
+    ap.add_argument("--old", action="store_true",
+                    help="also count where the retired warm start (learned path alone) was "
+                         "worse than the default")
+    ap.add_argument("--no-write", action="store_true", help="Print only; write no file.")
     args = ap.parse_args()
-    torch.set_num_threads(1)
     default, per = _parse_pairs(args.pairs)
     rows = []
-    for name in [t.strip() for t in args.metrics.split(",") if t.strip()]:
-        ratios = tuple(float(x) for x in args.recheck_above.split(",") if x.strip())
-        r = run_task(name, per.get(name, default), args.seed, ratios, args.search)
-        rows.append(r)
-        print(f"{name} (n={r['segments']}, {r['pairs']} fresh pairs, seed {r['seed']}; "
-              f"policy {r['policy']})")
-        print(f"  one-off setup {r['setup_seconds']:.2f} s; learned paths "
-              f"{1e3 * r['generation_seconds_per_pair']:.2f} ms per pair (batched)")
-        for key, lab in (("global_seconds", "global seeding"),
-                         ("warm_seconds", "learned warm start")):
-            t = r[key]
-            print(f"  {lab:<19} mean {t['mean']:.3f} s  median {t['median']:.3f} s  "
-                  f"max {t['max']:.3f} s per exact geodesic")
-        print(f"  speed-up {r['speedup_mean']:.1f}x (means), {r['speedup_median']:.1f}x "
-              f"(medians)")
-        print(f"  energy within {RTOL:g} of the globally seeded: {r['equal']}/{r['pairs']}; "
-              f"lower (better minimum): {r['better']}; higher: {r['worse']}; converged: "
-              f"warm {r['warm_converged']}, global {r['global_converged']}")
-        print("  warm-start energy at most (1 + gap) x the globally seeded one: " + ", ".join(
-            f"gap {t}: {c}/{r['pairs']}" for t, c in r["within"].items()))
-        for c in r["recheck"]:
-            print(f"  --recheck-above {c['ratio']:g}: {c['rechecked']} pairs re-solved with the "
-                  f"global seeds; mean {c['seconds_mean']:.3f} s per geodesic, speed-up "
-                  f"{c['speedup_mean']:.1f}x; equal or lower energy than global seeding: "
-                  f"{c['equal_or_lower']}/{r['pairs']} (lower: {c['lower']})")
-        for w in r["worse_pairs"]:
-            print(f"    pair {w['pair']} (|g - s| = {w['pair_distance_coordinates']:.2f}): "
-                  f"warm-start energy higher by {100 * w['relative_energy_gap']:.3g}%")
-    if args.json:
-        from learn.storage import atomic_write_text
-
-        atomic_write_text(args.json, json.dumps(rows, indent=2, default=float))
+    with tempfile.TemporaryDirectory() as tmp:
+        for name in [t.strip() for t in args.metrics.split(",") if t.strip()]:
+            rows.append(run_task(name, per.get(name, default), args.seed, args.repeats,
+                                 args.old, Path(tmp)))
+            print(json.dumps(rows[-1]), flush=True)
+    head = ["metric (n)", "pairs (seed)", "CPU default (s)", "CPU --warm-start (s)",
+            "wall default (s)", "wall --warm-start (s)", "CPU ratio", "worse > 1e-9",
+            "worse > 1e-6", "better < -1e-6", "largest relative gap"]
+    table = [[f"{r['metric']} ({r['segments']})", f"{r['pairs']} ({r['seed']})",
+              f"{r['cpu']['default']:.2f}", f"{r['cpu']['warm']:.2f}",
+              f"{r['wall']['default']:.2f}", f"{r['wall']['warm']:.2f}",
+              f"{r['cpu']['warm'] / r['cpu']['default']:.2f}", r["worse"]["1e-09"],
+              r["worse"]["1e-06"], r["better"], f"{r['largest_gap']:.2e}"] for r in rows]
+    res = ResultsFile("warm_start", title="--warm-start as one more start of the batched solve")
+    res.add(f"Whole `geodesics solve --pairs P --segments n --no-progress --out F` processes "
+            f"with and without `--warm-start METRIC` (the shipped policy), median of "
+            f"{args.repeats} run(s) each; CPU = user + system of the process (torch and the "
+            "policy's load included). Energies compared pair by pair from the two JSON "
+            "files (relative gap = (warm - default) / default).", "",
+            markdown_table(head, table))
+    if args.old:
+        res.add("", "The retired `--warm-start` (before issue 47: the learned path alone, "
+                "`solve_batch(..., initial_paths=paths, global_seeds=False)`) on the same "
+                "pairs, against the default:", "",
+                markdown_table(["metric", "worse > 1e-9", "worse > 1e-6", "largest gap"],
+                               [[r["metric"], r["old_worse"]["1e-09"], r["old_worse"]["1e-06"],
+                                 f"{r['old_largest_gap']:.2e}"] for r in rows]))
+    if not args.no_write:
+        res.write()
 
 
 if __name__ == "__main__":

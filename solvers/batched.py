@@ -111,6 +111,18 @@ def _best(rows: Rows, k: int) -> np.ndarray:
     return out
 
 
+def _best_of(rows: Rows, k: int, among: np.ndarray) -> np.ndarray:
+    """:func:`_best` among the rows where ``among`` ``(R,)`` is True (indices into
+    ``rows``; ``-1`` for a pair with none)."""
+    idx = np.flatnonzero(among)
+    if idx.size == len(rows):
+        return _best(rows, k)
+    if idx.size == 0:
+        return np.full(k, -1, dtype=np.int64)
+    b = _best(rows.take(idx), k)
+    return np.where(b >= 0, idx[np.maximum(b, 0)], -1)
+
+
 def _agreeing(rows: Rows, k: int) -> np.ndarray:
     """Per pair: converged rows within ``AGREE_RTOL`` of the pair's best converged energy."""
     ok = rows.ok
@@ -324,7 +336,12 @@ def solve_pairs_batched(m: Metric, pairs: np.ndarray, n: int, plan: SeedPlan,
         first = rows
     if global_seeds and plan.polish:
         t1 = time.perf_counter()
-        best = _best(rows, K)
+        # the row polished is the best of the plan's own rows: a caller-given row (a learned
+        # warm start) is one more candidate beside them and changes nothing they do, so the
+        # result is never worse than without it, for one more row (issue 47)
+        given_names = set(given_rows.names)
+        best = _best_of(rows, K, np.array([nm not in given_names for nm in rows.names],
+                                          dtype=bool))
         okp = np.flatnonzero((best >= 0) & rows.ok[np.maximum(best, 0)])
         extra = Rows(np.zeros(0, dtype=np.int64), [], np.zeros((0, n + 1, m.dim)))
         if okp.size:

@@ -1,6 +1,8 @@
-"""Learned warm starts for exact solves (issue 11, part 3): ``geodesics solve
---warm-start RUN_OR_ENV`` seeds IPOPT with the policy's paths; the result equals the
-globally seeded one on easy pairs; bad sources are refused with clear messages."""
+"""Learned warm starts for exact solves (issue 11, part 3; issue 47): ``geodesics solve
+--warm-start RUN_OR_ENV`` adds the policy's path of each pair as one more start of the
+batched solve, beside the global seeds, so it never ends worse than the default (checked on
+pairs where the learned path alone does end worse); the Python API still solves a learned
+path alone (``global_seeds=False``); bad sources are refused with clear messages."""
 
 from __future__ import annotations
 
@@ -49,36 +51,61 @@ def test_warm_started_solve_equals_globally_seeded(easy_pairs: np.ndarray) -> No
         assert learned_energy > g.energy * (1 + 1e-4)
 
 
-def test_cli_warm_start_matches_the_python_api(tmp_path: Path, easy_pairs: np.ndarray) -> None:
+def test_cli_warm_start_adds_one_start_beside_the_global_seeds(
+        tmp_path: Path, easy_pairs: np.ndarray) -> None:
     m = finsler.get_metric("matsumoto")
     pfile = tmp_path / "pairs.npy"
     np.save(pfile, easy_pairs)
     r = CliRunner()
-    res = r.invoke(app, ["solve", "--metric", "matsumoto", "--pairs", str(pfile),
-                         "--warm-start", "matsumoto", "--workers", "1", "--no-progress",
-                         "--json"])
+    base = ["solve", "--metric", "matsumoto", "--pairs", str(pfile), "--warm-start",
+            "matsumoto", "--workers", "1", "--no-progress", "--json"]
+    res = r.invoke(app, base)
     assert res.exit_code == 0, res.output
-    doc = json.loads(res.output)
-    assert doc["warm_start"]["global_seeds"] is False
+    doc = json.loads(res.stdout)
+    assert doc["warm_start"]["global_seeds"] is True
     assert doc["warm_start"]["policy"].endswith("matsumoto")
     glob = solvers.solve_batch(m, easy_pairs, workers=1, progress=False)
     for row, g in zip(doc["results"], glob):
-        assert row["seeds_tried"] == 1
-        assert row["energy"] == pytest.approx(g.energy, rel=1e-6)
-    # --keep-global-seeds: the learned path is one more start beside the global seeds
-    res = r.invoke(app, ["solve", "--metric", "matsumoto", "--pairs", str(pfile),
-                         "--warm-start", "matsumoto", "--keep-global-seeds", "--workers", "1",
-                         "--no-progress", "--json"])
-    assert res.exit_code == 0, res.output
-    doc = json.loads(res.output)
-    assert doc["warm_start"]["global_seeds"] is True
-    for row, g in zip(doc["results"], glob):
         assert row["seeds_tried"] == g.seeds_tried  # the global seeds were solved too
         assert row["energy"] <= g.energy * (1 + 1e-9)
+    # the learned path is a row of the same batch (the Python API the command calls)
     paths, _ = warm_start_paths("matsumoto", m, easy_pairs[:1])
     both = solvers.solve_batch(m, easy_pairs[:1], workers=1, progress=False,
                                initial_paths=paths, global_seeds=True)[0]
     assert "initial0" in both.seed_energies and len(both.seed_energies) > 1
+    # the retired options are accepted with a deprecation warning and change nothing
+    old = r.invoke(app, [*base, "--keep-global-seeds", "--recheck-above", "1.1"])
+    assert old.exit_code == 0, old.output
+    assert "--keep-global-seeds is deprecated" in old.stderr
+    assert "--recheck-above is deprecated" in old.stderr
+    assert [row["energy"] for row in json.loads(old.stdout)["results"]] == [
+        row["energy"] for row in doc["results"]]
+
+
+def test_warm_start_is_never_worse_where_the_learned_path_alone_is(tmp_path: Path) -> None:
+    """Issue 47: on pairs where a solve from the learned path alone (the warm start before
+    issue 47) ends in a worse optimum than the default solve, ``--warm-start`` ends at the
+    default's optimum or below. The pairs are found, not listed: of 30 fresh Matsumoto pairs
+    (seed 777) those where the path alone ends above the default by more than 1e-6 (4 pairs
+    with today's policy, by 0.08 % to 9.7 %; the test needs one)."""
+    m = finsler.get_metric("matsumoto")
+    pairs = finsler.sample_pairs(m, 30, 777)
+    paths, _ = warm_start_paths("matsumoto", m, pairs)
+    alone = solvers.solve_batch(m, pairs, 64, workers=1, progress=False, initial_paths=paths,
+                                global_seeds=False)
+    glob = solvers.solve_batch(m, pairs, 64, workers=1, progress=False)
+    worse = [k for k in range(len(pairs)) if alone[k].energy > glob[k].energy * (1 + 1e-6)]
+    assert worse, "the learned path alone ends at the default optimum on every pair"
+    pfile = tmp_path / "pairs.npy"
+    np.save(pfile, pairs[worse])
+    res = CliRunner().invoke(app, ["solve", "--metric", "matsumoto", "--pairs", str(pfile),
+                                   "--segments", "64", "--warm-start", "matsumoto",
+                                   "--workers", "1", "--no-progress", "--json"])
+    assert res.exit_code == 0, res.output
+    rows = json.loads(res.stdout)["results"]
+    for k, row in zip(worse, rows):
+        assert row["energy"] <= glob[k].energy * (1 + 1e-9), (k, row["energy"], glob[k].energy)
+        assert row["energy"] < alone[k].energy
 
 
 def test_warm_search_seeds_with_the_route_search(tmp_path: Path,
@@ -98,8 +125,8 @@ def test_warm_search_seeds_with_the_route_search(tmp_path: Path,
     assert doc["warm_start"]["route_search"] is True
     glob = solvers.solve_batch(m, easy_pairs, workers=1, progress=False)
     for row, g in zip(doc["results"], glob):
-        assert row["seeds_tried"] == 1
-        assert row["energy"] == pytest.approx(g.energy, rel=1e-6)
+        assert row["seeds_tried"] == g.seeds_tried
+        assert row["energy"] <= g.energy * (1 + 1e-9)
 
 
 def test_bad_warm_start_is_refused_clearly(tmp_path: Path) -> None:
@@ -109,11 +136,7 @@ def test_bad_warm_start_is_refused_clearly(tmp_path: Path) -> None:
         (["--warm-start", str(tmp_path / "missing_run")], "no such run directory"),
         (["--warm-start", "euclidean"], "no shipped policy for 'euclidean'"),
         (["--warm-start", "carlike"], "policy for 'carlike', not for 'matsumoto'"),
-        (["--keep-global-seeds"], "apply to --warm-start"),
-        (["--recheck-above", "1.1"], "apply to --warm-start"),
-        (["--warm-search"], "apply to --warm-start"),
-        (["--warm-start", "matsumoto", "--keep-global-seeds", "--recheck-above", "1.1"],
-         "without --keep-global-seeds"),
+        (["--warm-search"], "applies to --warm-start"),
     ]
     for extra, message in cases:
         res = r.invoke(app, [*base, *extra])
@@ -139,48 +162,6 @@ def test_bad_warm_start_is_refused_clearly(tmp_path: Path) -> None:
                                  global_seeds=False)
     ref = solvers.solve_geodesic(m15, pairs[0, 0], pairs[0, 1])
     assert res.converged and res.energy == pytest.approx(ref.energy, rel=1e-6)
-
-
-def test_recheck_above_resolves_the_untrusted_pairs_globally(tmp_path: Path) -> None:
-    """Panda, 20 fresh pairs: --recheck-above R re-solves exactly the pairs whose learned
-    energy is above R times the warm optimum, and those end at or below the globally seeded
-    energy. R is set in the first gap of more than 1% between consecutive ratios of these
-    pairs, from the largest down, so the test re-solves some pairs and keeps others
-    whatever policy is shipped (it used fixed values, then the gap after the 3rd largest,
-    and retrains outgrew both; the Panda policy shipped before the polish had 1.96, 1.56,
-    1.18, then 1.14x; today's has 1.13 then 1.12 as its 3rd and 4th)."""
-    m = finsler.get_metric("panda-pole")
-    pairs = finsler.sample_pairs(m, 21, 777)[1:]
-    pfile = tmp_path / "pairs.npy"
-    np.save(pfile, pairs)
-    r = CliRunner()
-    base = ["solve", "--metric", "panda-pole", "--pairs", str(pfile), "--warm-start",
-            "panda-pole", "--workers", "1", "--no-progress", "--json"]
-    warm = json.loads(r.invoke(app, base).output)
-    # the flags, computed by hand: learned energy (same n) over the warm optimum
-    paths, _ = warm_start_paths("panda-pole", m, pairs)
-    ratio = np.sum(m.path_costs(paths) ** 2, axis=1) / np.array(
-        [row["energy"] for row in warm["results"]])
-    top = np.sort(ratio)[::-1]
-    gaps = [k for k in range(1, len(top)) if top[k - 1] > top[k] * 1.01]
-    assert gaps, "no clear gap to place the threshold in"
-    R = float(top[gaps[0] - 1] + top[gaps[0]]) / 2
-    assert R > 1.0
-    want = [k for k in range(len(pairs)) if ratio[k] > R]
-    res = r.invoke(app, [*base, "--recheck-above", repr(R)])
-    assert res.exit_code == 0, res.output
-    doc = json.loads(res.output)
-    redo = doc["warm_start"]["rechecked"]
-    assert redo == want and 0 < len(redo) < len(pairs)
-    glob = solvers.solve_batch(m, pairs[redo], workers=1, progress=False)
-    for k, g in zip(redo, glob):
-        assert doc["results"][k]["energy"] <= g.energy * (1 + 1e-6)
-        assert doc["results"][k]["energy"] <= warm["results"][k]["energy"] * (1 + 1e-9)
-    others = [k for k in range(len(pairs)) if k not in redo]
-    assert [doc["results"][k]["energy"] for k in others] == [
-        warm["results"][k]["energy"] for k in others]
-    bad = r.invoke(app, [*base, "--recheck-above", "0.5"])
-    assert bad.exit_code == 2 and "ratio >= 1" in bad.output
 
 
 def test_cli_warm_start_from_a_folder_that_is_no_run_names_the_option(tmp_path: Path) -> None:
