@@ -478,6 +478,51 @@ class GraphSeeder:
         self._set_edges(key // n_nodes, key % n_nodes)
         return self
 
+    @classmethod
+    def aligned(cls, metric: Metric, nodes: np.ndarray, steps: tuple[float, ...],
+                directions: int = 200, keep: int = 16, base: GraphSeeder | None = None
+                ) -> GraphSeeder:
+        """A graph for anisotropic metrics (3-D): from every node, edges along the
+        ``keep`` directions of least ``F(node, u)`` among ``directions`` unit vectors
+        ``u`` (a Fibonacci sphere), each ``steps`` long, to the node nearest to their end
+        (car-like: forward along the node's heading, turning either way; no edge
+        sideways or backwards, which cost ``sqrt(1 + c_p)`` times more). Only values of
+        ``F`` choose the directions. ``base``: a graph whose nodes and edges are kept too
+        (its lattice links for the moves the chosen directions miss)."""
+        if metric.dim != 3:
+            from finsler.errors import InputError
+
+            raise InputError(f"aligned graphs are 3-D; the metric has dim {metric.dim}")
+        i = np.arange(directions) + 0.5
+        phi, th = np.arccos(1.0 - 2.0 * i / directions), np.pi * (1.0 + 5.0**0.5) * i
+        u = np.stack([np.cos(th) * np.sin(phi), np.sin(th) * np.sin(phi), np.cos(phi)], 1)
+        if base is not None:
+            nodes = np.vstack([base.nodes, nodes])
+        tree = cKDTree(nodes)
+        keep = min(keep, directions)
+        rows, cols = [], []
+        chunk = max(1, 400_000 // directions)
+        for a in range(0, nodes.shape[0], chunk):
+            x = nodes[a:a + chunk]
+            f = metric.F(np.repeat(x, directions, 0), np.tile(u, (len(x), 1)))
+            best = np.argsort(np.asarray(f).reshape(len(x), directions), 1)[:, :keep]
+            src = np.repeat(np.arange(a, a + len(x)), keep)
+            for step in steps:
+                end = (x[:, None] + step * u[best]).reshape(-1, 3)
+                _, dst = tree.query(end)
+                good = metric.domain.contains(end) & (dst != src)
+                rows.append(src[good])
+                cols.append(dst[good])
+        if base is not None:
+            rows.append(base.rows)
+            cols.append(base.cols)
+        n = nodes.shape[0]
+        key = np.unique(np.concatenate(rows) * n + np.concatenate(cols))
+        self = cls(metric, nodes, k_link=base.k_link if base is not None else 16,
+                   radius=np.inf)
+        self._set_edges(key // n, key % n)
+        return self
+
     def _set_edges(self, rows: np.ndarray, cols: np.ndarray) -> None:
         w = np.empty(rows.size)
         chunk = 200_000
@@ -599,5 +644,16 @@ def _build_graph_seeder(metric: Metric) -> GraphSeeder:
         lo, hi = metric.domain.bounds()
         hx = float(np.max(hi[:2] - lo[:2])) / 20.0
         ht = float(hi[2] - lo[2]) / 32.0
-        return GraphSeeder.lattice(metric, (hx, hx, ht), (2, 2, 1))
+        base = GraphSeeder.lattice(metric, (hx, hx, ht), (2, 2, 1))
+        # aligned edges from a finer lattice, and the lattice's own: on 12 car-like
+        # tuning pairs (sample_pairs(carlike, 12, 11), 256 segments) the graph route
+        # solved by IPOPT ended below the lattice's alone on 3 pairs (energy 0.154
+        # against 0.743 not converged, 0.211 against 0.624, 0.933 against 1.481), 3e-4
+        # above on one, equal (1e-4) on the rest; the aligned edges alone lost 2.1x on
+        # one pair. 100 directions, 12 kept: 2 of the 3 gains lost. Built once per metric:
+        # 52k nodes, 1.6M edges, 14 s on a loaded machine (the lattice alone 0.4 s)
+        fine = GraphSeeder.lattice(metric, (hx / 2, hx / 2, ht), (1, 1, 1)).nodes
+        return GraphSeeder.aligned(metric, fine, (0.075 * float(np.max(hi[:2] - lo[:2])),
+                                                  0.15 * float(np.max(hi[:2] - lo[:2]))),
+                                   base=base)
     return GraphSeeder.roadmap(metric, n_nodes=1500, k=10, seed=0)

@@ -186,3 +186,25 @@ def test_a_user_metric_declares_its_own_seed_curves() -> None:
     assert r.seed_families["detour"]["tried"] == 1
     with pytest.raises(InputError, match="family 'my detour!'"):
         solvers.solve_geodesic(_Detour(bad=True), [-0.5, -0.5], [0.5, 0.5], 16)
+
+
+def test_aligned_graph_moves_along_the_cheap_directions() -> None:
+    """Car-like: the aligned edges go forward along the heading, about as cheap per
+    Euclidean length as forward motion (1), where a k-nearest-neighbour roadmap on the
+    same nodes mostly links sideways or backwards (sqrt(1 + c_p) ~ 10); chosen by F
+    alone."""
+    m = finsler.get_metric("carlike")
+    nodes = m.domain.sample(3000, np.random.default_rng(0))
+    g = solvers.seeding.GraphSeeder.aligned(m, nodes, (0.3,), directions=100, keep=8)
+    d = g.nodes[g.cols] - g.nodes[g.rows]
+    ratio = g.weights / np.linalg.norm(d, axis=1)
+    assert g.rows.size > 3 * len(nodes)
+    knn = solvers.seeding.GraphSeeder.roadmap(m, 3000, 8, seed=0)
+    knn_ratio = knn.weights / np.linalg.norm(knn.nodes[knn.cols] - knn.nodes[knn.rows], axis=1)
+    assert np.median(ratio) < 0.4 * np.median(knn_ratio)
+    heading = np.stack([np.cos(g.nodes[g.rows, 2]), np.sin(g.nodes[g.rows, 2])], 1)
+    forward = np.sum(d[:, :2] * heading, 1)
+    assert np.quantile(forward, 0.05) > 0  # forward motion, not backward
+    with pytest.raises(InputError, match="3-D"):
+        solvers.seeding.GraphSeeder.aligned(finsler.get_metric("matsumoto"), nodes[:, :2],
+                                            (0.2,))
