@@ -93,9 +93,14 @@ def test_declared_hooks_are_found_by_asking_the_metric() -> None:
         plain.height_map(np.zeros((1, 2)))
     with pytest.raises(InputError):
         plain.provides("no_such_hook")
+    assert not plain.provides("seed_curves")
+    with pytest.raises(InputError, match="does not provide the hook 'seed_curves'"):
+        plain.seed_curves(np.zeros((1, 2)), np.ones((1, 2)), np.linspace(0, 1, 5))
     # the toolkit's own metrics declare theirs the same way
     assert {"height_map", "convex_radius"} <= set(finsler.get_metric("matsumoto").hooks())
     assert finsler.get_metric("carlike").provides("smooth_square_sx")
+    assert finsler.get_metric("carlike").provides("seed_curves")
+    assert finsler.HOOKS.index("seed_curves") == finsler.HOOKS.index("seed_plan") + 1
 
 
 def _metric_probes(path: Path) -> list[str]:
