@@ -298,8 +298,10 @@ def solve_pairs_batched(m: Metric, pairs: np.ndarray, n: int, plan: SeedPlan,
         if len(sizes) == 1:
             parts.append(given_rows)
         rows = run.solve(Rows.cat(parts), plan.drop_after, plan.drop_factor)
-        if plan.restarts:
-            best = _best(rows, K)
+        given_names = set(given_rows.names)
+        if plan.restarts:  # of the best of the plan's own rows (see the polish below)
+            best = _best_of(rows, K, np.array([nm not in given_names for nm in rows.names],
+                                              dtype=bool))
             okp = np.flatnonzero((best >= 0) & rows.ok[np.maximum(best, 0)])
             if okp.size:
                 b = best[okp]

@@ -226,9 +226,17 @@ def _ladder(m: Metric, s: np.ndarray, g: np.ndarray, n: int, plan: SeedPlan,
         seeds += given
     nlp = energy_nlp(m, n0)
     solved = [_solve_one(m, nlp, name, seed) for name, seed in seeds]
+    # restarts and polish perturb the best of the plan's own solves: a caller-given path (a
+    # learned warm start) is one more candidate and changes nothing they do (issue 47)
+    given_names = {name for name, _ in given}
+
+    def plan_best(rows: list[_Solve]) -> _Solve | None:
+        return min((r for r in rows if r.name not in given_names), key=lambda r: r.rank,
+                   default=None)
+
     if plan.restarts:
-        best = min(solved, key=lambda r: r.rank)
-        if best.ok:
+        best = plan_best(solved)
+        if best is not None and best.ok:
             for k, curve in enumerate(perturbed_curves(m, best.points, plan.restarts,
                                                        plan.restart_scale, plan.seed)):
                 solved.append(_solve_one(m, nlp, f"{best.name}~{k}", curve))
@@ -263,9 +271,9 @@ def _ladder(m: Metric, s: np.ndarray, g: np.ndarray, n: int, plan: SeedPlan,
     if plan.polish:
         t1 = time.perf_counter()
         nlp = energy_nlp(m, n)
-        best = min(solved, key=lambda r: r.rank)
+        best = plan_best(solved)
         tries = []
-        if best.ok:
+        if best is not None and best.ok:
             for k in range(plan.polish):
                 curve = perturbed_curves(m, best.points, 1, plan.polish_scale,
                                          plan.seed + 1000 + k)[0]
