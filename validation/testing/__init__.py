@@ -40,6 +40,15 @@ Properties (names as in the table of ``geodesics check``):
 Every failure names the property, gives the smallest counterexample hypothesis's
 shrinking reached (within a budget of evaluations) and the values on both sides. Searches
 are seeded: the same seed gives the same examples and results.
+
+Outcomes: ``passed``, ``failed`` (a counterexample), ``inconclusive`` (some examples could
+not be judged -- a solve that did not converge is never a counterexample --, no
+counterexample among the others), ``mapped``, ``skipped`` (does not apply) and, in
+:func:`check`, ``not-run``: properties depend on others (:data:`suite.NEEDS`), and once
+one of F's own properties fails, what needs it is not run (the root cause is the first
+failed property). ``domain``, ``finite-positive``, ``strong-convexity`` and
+``smoothness`` add seeded sweeps of many points (:mod:`validation.testing.regions`) to
+hypothesis's draws, so a small bad region is found and its size reported.
 """
 
 from validation.testing.cases import DistanceTests, MetricTests, PolicyTests
