@@ -173,7 +173,8 @@ class PropertyResult:
                  + (f", not judged (inconclusive) {self.inconclusive}"
                     if self.inconclusive else "")]
         if self.counterexample:
-            how = (f"shrunk in {self.shrink_evaluations} evaluations"
+            how = ("not shrunk" if not self.shrink_evaluations else
+                   f"shrunk in {self.shrink_evaluations} evaluations"
                    + (", shrink budget reached" if self.shrink_limited else ""))
             lines.append(f"  counterexample ({how}):")
             lines += [f"    {k} = {fmt(v, 12)}" for k, v in self.counterexample.items()]
