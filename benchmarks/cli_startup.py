@@ -15,15 +15,20 @@ With ``--imports`` it also lists, per command, the heavy modules the run importe
 that invokes the typer app in a fresh interpreter (``tests/test_cli_imports.py`` asserts
 the first four stay out).
 
+``--before DIR`` also times the same commands from another checkout of the project
+(``python -m validation.cli`` with ``PYTHONPATH=DIR``; e.g. ``git worktree add DIR REV`` or
+``git archive REV | tar -x -C DIR``), labelled with DIR, for a before/after table.
+
 Usage::
 
-    python benchmarks/cli_startup.py [--repeats 5] [--imports] [--no-write]
+    python benchmarks/cli_startup.py [--repeats 5] [--imports] [--before DIR] [--no-write]
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import resource
 import shutil
 import statistics
@@ -59,20 +64,23 @@ def entry_point() -> list[str]:
     return [found] if found else [sys.executable, "-m", "validation.cli"]
 
 
-def one_run(cmd: list[str]) -> tuple[float, float]:
-    """(CPU seconds, wall seconds) of one whole process running ``cmd``."""
+def one_run(cmd: list[str], env: dict[str, str] | None = None) -> tuple[float, float]:
+    """(CPU seconds, wall seconds) of one whole process running ``cmd`` (with ``env``: in
+    the folder its PYTHONPATH names, so that checkout's packages are the ones imported)."""
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
-    subprocess.run(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, check=True)
+    subprocess.run(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, check=True,
+                   env=env, cwd=None if env is None else env["PYTHONPATH"])
     wall = time.perf_counter() - t0
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
     return cpu, wall
 
 
-def imported(args: list[str]) -> list[str]:
+def imported(args: list[str], env: dict[str, str] | None = None) -> list[str]:
     done = subprocess.run([sys.executable, "-c", _PROBE, json.dumps(args), json.dumps(HEAVY)],
-                          capture_output=True, text=True, check=True)
+                          capture_output=True, text=True, check=True, env=env,
+                          cwd=None if env is None else env["PYTHONPATH"])
     return json.loads(done.stdout.strip().splitlines()[-1])
 
 
@@ -81,34 +89,42 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--imports", action="store_true",
                     help="Also list the heavy modules each command imports.")
+    ap.add_argument("--before", metavar="DIR", default=None,
+                    help="Also time a checkout of another revision at DIR.")
     ap.add_argument("--no-write", action="store_true", help="Print only; write no file.")
     a = ap.parse_args()
     if a.repeats < 1:
         ap.error("--repeats must be >= 1")
     out = ResultsFile("cli_startup", title="Command-line start-up: CPU and wall time")
-    base = entry_point()
-    one_run([*base, "--help"])  # warm the file cache: the first run reads every .pyc from disk
-    header = ["command", "CPU median (s)", "CPU min-max (s)", "wall median (s)",
+    trees: list[tuple[str, list[str], dict[str, str] | None]] = [("this tree", entry_point(),
+                                                                  None)]
+    if a.before:
+        env = dict(os.environ, PYTHONPATH=str(Path(a.before).resolve()))
+        trees.insert(0, (a.before, [sys.executable, "-m", "validation.cli"], env))
+    header = ["tree", "command", "CPU median (s)", "CPU min-max (s)", "wall median (s)",
               "wall min-max (s)", f"<= {BAR} s CPU"]
     if a.imports:
         header.append("heavy modules imported")
     rows = []
-    for args in COMMANDS:
-        runs = [one_run(base + args) for _ in range(a.repeats)]
-        cpu = [c for c, _ in runs]
-        wall = [w for _, w in runs]
-        row = [f"`geodesics {' '.join(args)}`", f"{statistics.median(cpu):.3f}",
-               f"{min(cpu):.3f}-{max(cpu):.3f}", f"{statistics.median(wall):.3f}",
-               f"{min(wall):.3f}-{max(wall):.3f}",
-               "yes" if statistics.median(cpu) <= BAR else "NO"]
-        if a.imports:
-            row.append(", ".join(imported(args)) or "-")
-        rows.append(row)
-        print("  ".join(row), flush=True)
-    out.add(f"Median of {a.repeats} whole-process runs each (`{' '.join(base)} ...`, output "
-            "discarded; one untimed run first). CPU = the child's user + system time "
-            "(getrusage RUSAGE_CHILDREN), all threads included.", "",
-            markdown_table(header, rows))
+    for label, base, env in trees:
+        one_run([*base, "--help"], env)  # warm the file cache: the first run reads the .pyc
+        for args in COMMANDS:
+            runs = [one_run(base + args, env) for _ in range(a.repeats)]
+            cpu = [c for c, _ in runs]
+            wall = [w for _, w in runs]
+            row = [label, f"`geodesics {' '.join(args)}`", f"{statistics.median(cpu):.3f}",
+                   f"{min(cpu):.3f}-{max(cpu):.3f}", f"{statistics.median(wall):.3f}",
+                   f"{min(wall):.3f}-{max(wall):.3f}",
+                   "yes" if statistics.median(cpu) <= BAR else "NO"]
+            if a.imports:
+                row.append(", ".join(imported(args, env)) or "-")
+            rows.append(row)
+            print("  ".join(row), flush=True)
+    out.add(f"Median of {a.repeats} whole-process runs each (`{' '.join(trees[-1][1])} ...`"
+            + (f"; `{a.before}`: `python -m validation.cli ...` with PYTHONPATH={a.before}"
+               if a.before else "") + ", output discarded; one untimed run first per tree). "
+            "CPU = the child's user + system time (getrusage RUSAGE_CHILDREN), all threads "
+            "included.", "", markdown_table(header, rows))
     if not a.no_write:
         out.write()
 
