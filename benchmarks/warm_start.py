@@ -21,12 +21,15 @@ better below -1e-6, and the largest gap. With ``--old`` it also solves the pairs
 ``--warm-start`` did before issue 47 (the learned path alone, no global seeds:
 ``solvers.solve_batch(..., initial_paths=paths, global_seeds=False)``, in this process) and
 counts the pairs where that ended worse than the default: the pairs where a warm start
-*could* be worse.
+*could* be worse. With ``--split`` it times, in this process (``time.process_time``, one
+thread), the parts of the warm start's cost: importing learn and torch, loading the policy
+and generating the K paths, and the batched solve with the learned rows against without
+(after an untimed solve of one pair that builds and caches the metric's functions).
 
 Usage::
 
     python benchmarks/warm_start.py [--pairs 100] [--metrics matsumoto,carlike,panda-pole]
-        [--seed 20261130] [--repeats 1] [--old] [--no-write]
+        [--seed 20261130] [--repeats 1] [--old] [--split] [--no-write]
 
 Pass ``--pairs`` per task as ``--pairs carlike=20`` (repeatable) to shorten a slow task.
 """
@@ -92,7 +95,35 @@ def old_energies(name: str, pairs: np.ndarray, n: int) -> np.ndarray:
     return np.array([r.energy for r in res])
 
 
-def run_task(name: str, k: int, seed: int, repeats: int, old: bool, folder: Path) -> dict:
+def split_costs(name: str, pairs: np.ndarray, n: int) -> dict[str, float]:
+    """CPU seconds of the warm start's parts, in this process: import of learn (torch),
+    policy load + generation, and the solve with and without the learned rows (after an
+    untimed solve of one pair that builds and caches the metric's functions)."""
+    t0 = time.process_time()
+    import torch
+
+    import solvers
+    from learn.runs import warm_start_paths
+
+    torch.set_num_threads(1)
+    t1 = time.process_time()
+    m = finsler.get_metric(name)
+    paths, _ = warm_start_paths(name, m, pairs)
+    t2 = time.process_time()
+    solvers.solve_batch(m, pairs[:1], n, minmax=True, workers=1, progress=False,
+                        initial_paths=paths[:1])
+    t3 = time.process_time()
+    solvers.solve_batch(m, pairs, n, minmax=True, workers=1, progress=False)
+    t4 = time.process_time()
+    solvers.solve_batch(m, pairs, n, minmax=True, workers=1, progress=False,
+                        initial_paths=paths)
+    t5 = time.process_time()
+    return {"import": t1 - t0, "policy": t2 - t1, "solve_default": t4 - t3,
+            "solve_warm": t5 - t4}
+
+
+def run_task(name: str, k: int, seed: int, repeats: int, old: bool, folder: Path,
+             split: bool = False) -> dict:
     m = finsler.get_metric(name)
     n = TASKS[name]
     pairs = finsler.sample_pairs(m, k, seed)
@@ -121,6 +152,8 @@ def run_task(name: str, k: int, seed: int, repeats: int, old: bool, folder: Path
         "largest_gap": float(rel.max()),
         "worse_pairs": [int(i) for i in np.flatnonzero(rel > WORSE[0])],
     }
+    if split:
+        out["split"] = split_costs(name, pairs, n)
     if old:
         rel_old = (old_energies(name, pairs, n) - e_def) / e_def
         out["old_worse"] = {f"{t:g}": int(np.sum(rel_old > t)) for t in WORSE}
@@ -150,6 +183,8 @@ def main() -> None:
     ap.add_argument("--old", action="store_true",
                     help="also count where the retired warm start (learned path alone) was "
                          "worse than the default")
+    ap.add_argument("--split", action="store_true",
+                    help="also time the parts of the warm start in this process")
     ap.add_argument("--no-write", action="store_true", help="Print only; write no file.")
     args = ap.parse_args()
     default, per = _parse_pairs(args.pairs)
@@ -157,7 +192,7 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         for name in [t.strip() for t in args.metrics.split(",") if t.strip()]:
             rows.append(run_task(name, per.get(name, default), args.seed, args.repeats,
-                                 args.old, Path(tmp)))
+                                 args.old, Path(tmp), args.split))
             print(json.dumps(rows[-1]), flush=True)
     head = ["metric (n)", "pairs (seed)", "CPU default (s)", "CPU --warm-start (s)",
             "wall default (s)", "wall --warm-start (s)", "CPU ratio", "worse > 1e-9",
@@ -181,6 +216,15 @@ def main() -> None:
                 markdown_table(["metric", "worse > 1e-9", "worse > 1e-6", "largest gap"],
                                [[r["metric"], r["old_worse"]["1e-09"], r["old_worse"]["1e-06"],
                                  f"{r['old_largest_gap']:.2e}"] for r in rows]))
+    if args.split:
+        res.add("", "Where the warm start's time goes, in one process (CPU s, "
+                "`time.process_time`, one torch thread; the first task's import includes "
+                "torch):", "",
+                markdown_table(["metric", "import learn + torch", "policy load + paths",
+                                "solve_batch default", "solve_batch + learned rows"],
+                               [[r["metric"], *(f"{r['split'][key]:.2f}" for key in
+                                                ("import", "policy", "solve_default",
+                                                 "solve_warm"))] for r in rows]))
     if not args.no_write:
         res.write()
 
