@@ -2,9 +2,14 @@
 
 from __future__ import annotations
 
+import os
+import re
+import sys
+import tempfile
 import time
 import warnings
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from typing import Any
 
 from finsler import Metric
@@ -186,18 +191,51 @@ def check(
 
 def _quietly(fn: Callable[[], Any]) -> Any:
     """Run one property with warnings caught (numpy's RuntimeWarnings on invalid values
-    are findings, not noise on stderr) and summarised on its results."""
-    with warnings.catch_warnings(record=True) as caught:
+    are findings, not noise on stderr) and summarised on its results, and what native
+    code writes to stderr meanwhile (CasADi's "NaN detected" of a solve) with them."""
+    with _native_stderr() as lines, warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         out = fn()
     counts: dict[str, int] = {}
     for w in caught:
         key = f"{w.category.__name__}: {' '.join(str(w.message).split())[:120]}"
         counts[key] = counts.get(key, 0) + 1
+    for line in lines:
+        # CasADi - 2026-11-28 02:19:37 WARNING("...: NaN detected ..., at (row 66, col 0).")
+        text = re.sub(r"^CasADi - \S+ \S+ ", "CasADi ", " ".join(line.split()))
+        text = re.sub(r"\(row \d+, col \d+\)", "(row ., col .)", text)
+        if text:
+            key = f"stderr: {text[:120]}"
+            counts[key] = counts.get(key, 0) + 1
     text = [f"{k} ({n}x)" if n > 1 else k for k, n in counts.items()]
     for r in out if isinstance(out, list) else [out]:
         r.warnings = list(text)
     return out
+
+
+@contextmanager
+def _native_stderr() -> Iterator[list[str]]:
+    """Collect what is written to the process's stderr file descriptor (native code:
+    CasADi and IPOPT print there, not through Python) into a list of lines; nothing is
+    collected where stderr has no descriptor (a test runner's captured stream)."""
+    lines: list[str] = []
+    try:
+        fd = sys.stderr.fileno()
+    except (AttributeError, OSError, ValueError):
+        yield lines
+        return
+    sys.stderr.flush()
+    saved = os.dup(fd)
+    with tempfile.TemporaryFile() as tmp:
+        os.dup2(tmp.fileno(), fd)
+        try:
+            yield lines
+        finally:
+            sys.stderr.flush()
+            os.dup2(saved, fd)
+            os.close(saved)
+            tmp.seek(0)
+            lines.extend(tmp.read().decode(errors="replace").splitlines())
 
 
 def _not_run(name: str, why: tuple[str, ...], metric: Metric) -> PropertyResult:
