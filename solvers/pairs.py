@@ -24,8 +24,9 @@ import numpy as np
 
 from finsler.errors import InputError
 from finsler.metric import Metric
-from solvers.batched import BatchOptions, BatchSolution, covers, residuals, solve_pairs_batched
+from solvers.batched import BatchOptions, BatchSolution, covers, solve_pairs_batched
 from solvers.inputs import SHORT_PAIR, as_metric, check_point, domain_scale
+from solvers.nonsmooth import optimality_residual
 from solvers.result import GeodesicResult, MinMaxResult, Status
 from solvers.seeding import (
     SeedPlan,
@@ -82,7 +83,8 @@ def _finish_many(metric: Metric, paths: np.ndarray, residual: np.ndarray | None 
     """The reported figures of paths ``(K, n+1, dim)``, all evaluated at once: segment
     costs, energy, length, the polyline's length by adaptive quadrature with its error,
     largest segment cost, points where ``F`` is not convex (metrics not convex
-    everywhere), first-order residual (``residual``: known ones, NaN where unknown)."""
+    everywhere), optimality residual (:func:`solvers.nonsmooth.optimality_residual`: the
+    KKT residual where ``F`` is not smooth; ``residual``: known ones, NaN where unknown)."""
     k, n1, dim = paths.shape
     costs = metric.path_costs(paths, check=False)
     # adaptive quadrature with its error (in parts that fit the memory limit)
@@ -94,7 +96,7 @@ def _finish_many(metric: Metric, paths: np.ndarray, residual: np.ndarray | None 
     res = np.full(k, np.nan) if residual is None else np.asarray(residual, dtype=float)
     unknown = np.flatnonzero(~np.isfinite(res))
     if unknown.size:
-        res[unknown] = residuals(metric, paths[unknown])
+        res[unknown] = optimality_residual(metric, paths[unknown], domain_scale(metric))
     columns = zip(np.sum(costs**2, 1).tolist(), np.sum(costs, 1).tolist(),
                   quad_value.tolist(), quad_error.tolist(), np.max(costs, 1).tolist(),
                   np.asarray(nonconvex).tolist(), res.tolist(), strict=True)
