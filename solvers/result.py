@@ -94,8 +94,9 @@ class GeodesicResult:
     stationarity, complementarity and domain feasibility, scaled the same way
     (:func:`solvers.nonsmooth.kkt_residual`); 0 exactly at a KKT point. Measured on
     IPOPT's car-like optima: 2e-8 to 1e-5 at 32 segments (the energy's gradient there:
-    up to 4), up to 5e-3 at 256 where IPOPT's slack sits off its exact value within
-    IPOPT's complementarity tolerance; above 1 on paths moved by 1e-3.
+    up to 4); on 4 fresh pairs at 256 (``benchmarks/nonsmooth_residual.py``) 1e-7 to
+    2e-6 and one 1.5e-3 (IPOPT's slack can sit off its exact value within IPOPT's
+    complementarity tolerance); above 1 on paths moved by 1e-3.
     For a batch, ``wall_time`` is the batch's time over its pairs.
 
     Evidence of global optimality (agreement within one seed family is no evidence):
