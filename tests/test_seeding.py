@@ -87,7 +87,7 @@ def test_carlike_pair_0_finds_the_shorter_basin_fast() -> None:
     assert old.energy > 1.5 * ref  # the generic seeds alone miss it
     r = solvers.solve_geodesic(m, s, g, n)
     assert r.converged and r.energy <= ref * (1 + 1e-6)
-    assert seed_family(r.best_seed).startswith("hermite")
+    assert r.best_seed.startswith("hermite")  # a Hermite curve's basin (maybe polished)
     fam = r.seed_families
     assert sum(d["tried"] for d in fam.values()) == r.seeds_tried
     assert sum(d["agreeing"] for d in fam.values()) == r.seeds_agreeing
