@@ -173,9 +173,13 @@ def solve_batch(
 
     ``initial_paths`` ``(K, m+1, dim)``: one caller-given initial path per pair (e.g. a
     learned policy's paths, or exact paths of another size ``m``: resampled to ``n + 1``
-    points), solved as ``solve_geodesic(initial=[path])``. With ``global_seeds=False`` only
-    that path is solved (the fast warm-start mode: a good path converges in a few IPOPT
-    iterations); with ``True`` the global seeds are solved too and the lowest energy kept.
+    points), solved as ``solve_geodesic(initial=[path])``. With ``global_seeds=True`` (what
+    ``geodesics solve --warm-start`` does) the path is one more start of the pair's batched
+    solve, beside the global seeds, and restarts refine the best of the plan's own starts:
+    never a worse optimum than without it. With ``False`` only that path is solved (a local
+    polish of a path already near its optimum; from a learned path it was measured no faster
+    than the global seeds and worse on 8 of 100 Matsumoto pairs:
+    ``benchmarks/results/warm_start-2026-11-28.md``).
     ``tol``: every pair solved to that relative accuracy of its length
     (:func:`~solvers.geodesic.solve_geodesic`).
 
