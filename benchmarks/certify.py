@@ -5,8 +5,12 @@ else (``--seed`` 31337, :func:`finsler.sample_pairs`), this runs :func:`solvers.
 the default mesh (target gap 1e-2) and at the fine one (target 1e-3), and prints per pair
 the lower and upper bounds, the relative gap ``(upper - lower) / upper``, the gap of the
 solver's own path (``path_gap``: the upper bound may instead come from the path with
-switchbacks where F is not convex), the triangles, LP rows and the wall time, then how many
-pairs meet each bar. A certified gap <= 1e-3 on
+switchbacks where F is not convex), the triangles, LP rows, the CPU time of the process
+(``time.process_time``: the figure the bars of issue 46 are stated in, which the load of
+other programs on the machine barely changes) and the wall time, then how many pairs meet
+each bar and the median and largest CPU time. The figures also go to a results file
+``benchmarks/results/certify-DATE.md`` (:mod:`results_file`: command, commit, machine and
+its load). A certified gap <= 1e-3 on
 the solver's own path (the upper bound is its length) proves that path within 0.1 % of
 the global optimum: the count of such pairs is printed.
 
@@ -14,14 +18,15 @@ Usage::
 
     python benchmarks/certify.py [--pairs 20] [--seed 31337] [--fine-time-limit SECONDS]
                                  [--skip-fine | --skip-default] [--only 4,8,10]
-                                 [--json out.json]
+                                 [--json out.json] [--no-results-file]
 
 The presets' work budgets (refinement rounds, triangles) end each refinement, so the
 figures do not depend on the machine or its load. ``--fine-time-limit`` (seconds per
 pair, default none) may stop the fine refinement earlier: the row then says
 ``stopped_by time_limit`` and its gap depends on the machine. ``--only`` certifies a
 subset of the pairs (their numbers in the set of ``--pairs``), e.g. to share the pairs
-between two processes. One thread.
+between two processes. One thread. The first pair's CPU time includes building the
+metric's derivative programs (once per process).
 """
 
 from __future__ import annotations
@@ -34,6 +39,7 @@ import time
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 import numpy as np
+from results_file import ResultsFile, markdown_table
 
 import finsler
 from finsler.files import atomic_write_text
@@ -46,29 +52,47 @@ def run(pairs: np.ndarray, spec: MeshSpec, time_limit: float | None, label: str,
     rows = []
     for i in only:
         s, g = pairs[i]
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         r = certify(m, s, g, spec, time_limit=time_limit)
-        wall = time.perf_counter() - t0
-        rows.append({"pair": i, "lower": r.lower, "upper": r.upper, "gap": r.gap,
+        wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+        rows.append({"cpu": cpu, "pair": i, "lower": r.lower, "upper": r.upper, "gap": r.gap,
                      "upper_source": r.upper_source, "path_gap": r.path_gap,
                      "triangles": r.triangles, "rows": r.lp_rows, "rounds": len(r.rounds),
                      "seconds": wall, "convexity": r.convexity, "stopped_by": r.stopped_by})
         print(f"{label:7s} {i:3d}  {r.lower:.7f}  {r.upper:.7f}  {r.gap:9.2e}  "
               f"{r.path_gap:9.2e}  {r.triangles:6d}  {r.lp_rows:7d}  {len(r.rounds):3d}  "
-              f"{wall:7.1f}  {r.stopped_by}", flush=True)
+              f"{cpu:7.1f}  {wall:7.1f}  {r.stopped_by}", flush=True)
     return rows
 
 
 def summary(rows: list[dict], bar: float, label: str) -> dict:
     gaps = np.array([r["gap"] for r in rows])
     secs = np.array([r["seconds"] for r in rows])
+    cpu = np.array([r["cpu"] for r in rows])
     met = int(np.sum(gaps <= bar))
     print(f"{label}: gap <= {bar:g} on {met}/{len(rows)} pairs; gap median {np.median(gaps):.2e}"
-          f", max {gaps.max():.2e}; time median {np.median(secs):.1f} s, max {secs.max():.1f} s,"
-          f" total {secs.sum():.0f} s")
+          f", max {gaps.max():.2e}; CPU median {np.median(cpu):.1f} s, max {cpu.max():.1f} s; "
+          f"wall median {np.median(secs):.1f} s, max {secs.max():.1f} s, total {secs.sum():.0f} s")
     return {"bar": bar, "met": met, "pairs": len(rows), "gap_median": float(np.median(gaps)),
-            "gap_max": float(gaps.max()), "seconds_median": float(np.median(secs)),
+            "gap_max": float(gaps.max()), "cpu_median": float(np.median(cpu)),
+            "cpu_max": float(cpu.max()), "seconds_median": float(np.median(secs)),
             "seconds_max": float(secs.max()), "seconds_total": float(secs.sum())}
+
+
+def section(label: str, block: dict) -> str:
+    """Markdown of one mesh preset's rows and summary."""
+    sm = block["summary"]
+    table = markdown_table(
+        ["pair", "lower", "upper", "gap", "path_gap", "triangles", "LP rows", "rounds",
+         "CPU s", "wall s", "stopped_by"],
+        [[r["pair"], f"{r['lower']:.7f}", f"{r['upper']:.7f}", f"{r['gap']:.2e}",
+          f"{r['path_gap']:.2e}", r["triangles"], r["rows"], r["rounds"], f"{r['cpu']:.1f}",
+          f"{r['seconds']:.1f}", r["stopped_by"]] for r in block["rows"]])
+    return (f"## {label} mesh (target gap {sm['bar']:g})\n\n{table}\n\n"
+            f"Gap <= {sm['bar']:g} on {sm['met']}/{sm['pairs']} pairs; gap median "
+            f"{sm['gap_median']:.2e}, max {sm['gap_max']:.2e}. CPU time per pair "
+            f"(time.process_time): median {sm['cpu_median']:.1f} s, max {sm['cpu_max']:.1f} s; "
+            f"wall median {sm['seconds_median']:.1f} s, max {sm['seconds_max']:.1f} s.\n")
 
 
 def main() -> None:
@@ -82,6 +106,8 @@ def main() -> None:
     ap.add_argument("--skip-default", action="store_true")
     ap.add_argument("--only", default=None, help="comma-separated pair numbers")
     ap.add_argument("--json", default=None, help="write the figures to this JSON file")
+    ap.add_argument("--no-results-file", action="store_true",
+                    help="do not write benchmarks/results/certify-DATE.md")
     args = ap.parse_args()
     m = finsler.get_metric("matsumoto")
     pairs = finsler.sample_pairs(m, args.pairs, args.seed)
@@ -90,7 +116,7 @@ def main() -> None:
     if any(not 0 <= i < args.pairs for i in only):
         ap.error(f"--only takes pair numbers below --pairs ({args.pairs})")
     head = ("mesh    pair  lower      upper      gap        path_gap   triangles rows   "
-            "rounds seconds stopped_by")
+            "rounds cpu_s   wall_s  stopped_by")
     print(head)
     doc: dict = {"seed": args.seed, "pairs": args.pairs, "only": only}
     if not args.skip_default:
@@ -106,6 +132,17 @@ def main() -> None:
               f"optimum (path_gap <= 1e-3) on {own}/{len(only)} pairs")
     if args.json:
         atomic_write_text(args.json, json.dumps(doc, indent=2), "benchmark figures")
+    if not args.no_results_file:
+        out = ResultsFile("certify", title="Certified intervals on fresh Matsumoto pairs")
+        out.add(f"Pairs: finsler.sample_pairs(matsumoto, {args.pairs}, {args.seed}), pairs "
+                f"{','.join(map(str, only))}; one thread (OMP_NUM_THREADS="
+                f"{os.environ.get('OMP_NUM_THREADS')}). CPU time is time.process_time of this "
+                "process around each certify call (the first pair's includes building the "
+                "metric's derivative programs).")
+        for key in ("default", "fine"):
+            if key in doc:
+                out.add(section(key, doc[key]))
+        out.write()
 
 
 if __name__ == "__main__":
