@@ -93,7 +93,7 @@ class _Rays:
 def _clarabel_lp(a: Any, rhs: np.ndarray, s_idx: int, g_idx: int, n: int, clarabel: Any,
                  sp: Any) -> tuple[np.ndarray, np.ndarray, str]:
     """``max x[g]`` subject to ``a x <= rhs`` and ``x[s] = 0``, by Clarabel called directly
-    (the same solver and settings cvxpy used here, without its canonicalisation and its
+    (the solver cvxpy reached here before, without its canonicalisation and its
     import, seconds per certificate). Returns ``x``, the duals of the rows (``>= 0``) and
     the status (``optimal``, ``optimal_inaccurate`` in cvxpy's words, else Clarabel's
     label: any finite ``x`` is usable, the caller checks it against every row and scales
