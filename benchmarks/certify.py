@@ -118,6 +118,9 @@ def main() -> None:
     head = ("mesh    pair  lower      upper      gap        path_gap   triangles rows   "
             "rounds cpu_s   wall_s  stopped_by")
     print(head)
+    # built now: its header gives the load at the start and the start time of the runs
+    out = None if args.no_results_file else ResultsFile(
+        "certify", title="Certified intervals on fresh Matsumoto pairs")
     doc: dict = {"seed": args.seed, "pairs": args.pairs, "only": only}
     if not args.skip_default:
         doc["default"] = {"rows": run(pairs, MeshSpec.preset("default"), None, "default",
@@ -132,8 +135,7 @@ def main() -> None:
               f"optimum (path_gap <= 1e-3) on {own}/{len(only)} pairs")
     if args.json:
         atomic_write_text(args.json, json.dumps(doc, indent=2), "benchmark figures")
-    if not args.no_results_file:
-        out = ResultsFile("certify", title="Certified intervals on fresh Matsumoto pairs")
+    if out is not None:
         out.add(f"Pairs: finsler.sample_pairs(matsumoto, {args.pairs}, {args.seed}), pairs "
                 f"{','.join(map(str, only))}; one thread (OMP_NUM_THREADS="
                 f"{os.environ.get('OMP_NUM_THREADS')}). CPU time is time.process_time of this "
