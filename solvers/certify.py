@@ -6,7 +6,7 @@ every curve ``gamma`` from ``x`` to ``y``, ``phi(y) - phi(x) = int dphi(gamma') 
 int F(gamma, gamma')``, hence ``d(x, y) >= phi(y) - phi(x)``. :func:`certify` maximises
 ``phi(goal) - phi(start)`` over continuous piecewise-quadratic (P2) potentials on a Delaunay
 triangulation that covers the whole domain (a convex polygon containing it), a linear
-program solved with Clarabel.
+program solved with cvxpy (Clarabel).
 
 The condition must hold at EVERY ``z`` of a triangle and EVERY direction, not only at
 samples. With ``K`` unit directions ``v_k`` and the chords ``w(t) = (1 - t) v_j + t v_{j+1}``
@@ -186,10 +186,9 @@ class CertifyResult:
     the dual condition equals that of the convexification, see the module docstring);
     ``convexity_note`` says it in words. ``rounds`` lists, per LP solve, the triangles,
     rows used, lower bound and gap. ``times`` in seconds: ``solve`` (upper bound), ``mesh``,
-    ``bounds`` (F and its Hessians), ``lp`` and ``total``. ``lp_status`` is the LP
-    solver's status (``optimal``, ``optimal_inaccurate``, ...) of the last LP;
-    ``max_row_ratio`` the largest ``grad phi . v / bound`` over every row of the last
-    potential before the final check (``<= 1`` up to the LP solver's
+    ``bounds`` (F and its Hessians), ``lp`` and ``total``. ``lp_status`` is cvxpy's status
+    of the last LP; ``max_row_ratio`` the largest ``grad phi . v / bound`` over every row
+    of the last potential before the final check (``<= 1`` up to the LP solver's
     feasibility tolerance; the potential is divided by it when above 1). ``lp_rows`` counts
     the rows of the last LP (edges of the inner polygons), ``lp_rows_total`` the sampled
     rows they imply (3 x triangles x directions). ``stopped_by`` says what ended the

@@ -3,13 +3,12 @@
 Split out of :mod:`solvers.certify` (issue 23: below 800 lines, one home per idea). Given
 the rows ``grad phi_T(z_m) . v_k <= b[T, m, k]`` that module proves (values of F minus the
 second-order corrections), :func:`_solve_lp` maximises ``phi(goal) - phi(start)`` with
-Clarabel (called directly, no longer through cvxpy) in rounds: vertices away from the path
-are kept inside inner polygons of their rows' sets (:class:`_Rays`, never violated),
-vertices near it get the sampled rows themselves, grown by the violated directions; every
-round's potential is checked against ALL rows and scaled down by its largest row ratio, so
-the bound it gives is valid whatever the LP solver's tolerance. :func:`_initial_modes`
-chooses the first exact vertices and directions of a mesh (near the path, or inherited
-from the previous mesh's LP).
+cvxpy (Clarabel) in rounds: vertices away from the path are kept inside inner polygons of
+their rows' sets (:class:`_Rays`, never violated), vertices near it get the sampled rows
+themselves, grown by the violated directions; every round's potential is checked against
+ALL rows and scaled down by its largest row ratio, so the bound it gives is valid whatever
+the LP solver's tolerance. :func:`_initial_modes` chooses the first exact vertices and
+directions of a mesh (near the path, or inherited from the previous mesh's LP).
 
 A failed LP raises :class:`LPFailure`, which :func:`solvers.certify.certify` turns into
 :attr:`solvers.CertifyStatus.LP_FAILED`. Nothing here imports :mod:`solvers.certify`
@@ -30,11 +29,8 @@ from solvers.certify_mesh import _distance_to_path, _Mesh
 
 _LOG = logging.getLogger(__name__)
 
-#: Solver of the LPs (Clarabel: an interior-point method, far faster here than HiGHS, also
-#: than HiGHS's dual simplex warm-started after rows are added: 3-10 s per round there).
+#: cvxpy solver of the LPs (Clarabel: an interior-point method, far faster here than HiGHS).
 LP_SOLVER = "CLARABEL"
-#: Clarabel's gap and feasibility tolerances (its default: 1e-8).
-LP_TOLERANCE = 1e-6
 #: Rows whose dual exceeds this fraction of the largest dual count as tight (refined).
 TIGHT_DUAL = 1e-7
 #: Evenly spaced rays of the inner polygons that keep the vertices away from the path safe.
@@ -90,41 +86,6 @@ class _Rays:
         return normal, np.einsum("ri,ri->r", normal, pts)
 
 
-def _clarabel_lp(a: Any, rhs: np.ndarray, s_idx: int, g_idx: int, n: int, clarabel: Any,
-                 sp: Any) -> tuple[np.ndarray, np.ndarray, str]:
-    """``max x[g]`` subject to ``a x <= rhs`` and ``x[s] = 0``, by Clarabel called directly
-    (the solver cvxpy reached here before, without its canonicalisation and its
-    import, seconds per certificate). Returns ``x``, the duals of the rows (``>= 0``) and
-    the status (``optimal``, ``optimal_inaccurate`` in cvxpy's words, else Clarabel's
-    label: any finite ``x`` is usable, the caller checks it against every row and scales
-    it); raises :class:`LPFailure` when there is none."""
-    m = rhs.size
-    fix = sp.csr_matrix(([1.0], ([0], [s_idx])), shape=(1, n))
-    mat = sp.vstack([fix, a]).tocsc()
-    q = np.zeros(n)
-    q[g_idx] = -1.0
-    settings = clarabel.DefaultSettings()
-    settings.verbose = False
-    settings.max_threads = 1
-    # the potential is checked against every row and scaled afterwards: LP_TOLERANCE (well
-    # below the gaps sought, 1e-3 and up) costs nothing in soundness, and iterations less
-    settings.tol_gap_abs = settings.tol_gap_rel = settings.tol_feas = LP_TOLERANCE
-    try:
-        solver = clarabel.DefaultSolver(sp.csc_matrix((n, n)), q, mat,
-                                        np.concatenate([[0.0], rhs]),
-                                        [clarabel.ZeroConeT(1), clarabel.NonnegativeConeT(m)],
-                                        settings)
-        sol = solver.solve()
-    except Exception as err:  # (Clarabel raises plain exceptions on bad data)
-        raise LPFailure(f"the LP solver failed: {short(str(err))}") from err
-    label = str(sol.status).rsplit(".", 1)[-1]
-    status = {"Solved": "optimal", "AlmostSolved": "optimal_inaccurate"}.get(label, label)
-    x = np.asarray(sol.x, float)
-    if x.size != n or not np.all(np.isfinite(x)):
-        raise LPFailure(f"the LP ended with status {label}")
-    return x, np.asarray(sol.z, float)[1:], status
-
-
 def _solve_lp(mesh: _Mesh, b: np.ndarray, dirs: np.ndarray, s_idx: int, g_idx: int,
               upper: float, target: float, start: dict[str, np.ndarray],
               max_iter: int = 30) -> dict[str, Any]:
@@ -142,7 +103,9 @@ def _solve_lp(mesh: _Mesh, b: np.ndarray, dirs: np.ndarray, s_idx: int, g_idx: i
     ``start``: ``exact`` ``(T*3,)`` bool and ``active`` ``(T*3, K)`` bool, the first
     exact vertices and their directions.
     """
-    import clarabel
+    import warnings
+
+    import cvxpy as cp
     import scipy.sparse as sp
 
     k = b.shape[2]
@@ -172,11 +135,22 @@ def _solve_lp(mesh: _Mesh, b: np.ndarray, dirs: np.ndarray, s_idx: int, g_idx: i
         coef = np.einsum("ri,rij->rj", normal, gradc[vid])
         a = sp.csr_matrix((coef.ravel(), (np.repeat(np.arange(rhs.size), 6),
                                           dofs[vid].ravel())), shape=(rhs.size, mesh.n_dofs))
+        x = cp.Variable(mesh.n_dofs)
+        cons = [a @ x <= rhs, x[s_idx] == 0]
+        prob = cp.Problem(cp.Maximize(x[g_idx]), cons)
         t0 = time.perf_counter()
-        x_value, duals_raw, status = _clarabel_lp(a, rhs, s_idx, g_idx, mesh.n_dofs, clarabel, sp)
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")  # "inaccurate" is in the status, checked below
+                prob.solve(solver=LP_SOLVER)
+        except cp.error.SolverError as err:
+            raise LPFailure(f"the LP solver failed: {short(str(err))}") from err
         lp_seconds += time.perf_counter() - t0
-        phi = x_value
-        duals = np.maximum(duals_raw, 0.0)
+        status = str(prob.status)
+        if x.value is None:
+            raise LPFailure(f"the LP ended with status {status}")
+        phi = np.asarray(x.value, float)
+        duals = np.maximum(np.asarray(cons[0].dual_value, float), 0.0)
         ratio = np.einsum("vi,ki->vk", np.einsum("vid,vd->vi", gradc, phi[dofs]), dirs) / b_flat
         ratio_max = float(np.max(ratio))
         scale = max(ratio_max, 1.0) * (1.0 + 1e-12)

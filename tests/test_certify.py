@@ -410,23 +410,3 @@ def test_cli_certify_failure_prints_the_result_then_exits_1(
     assert doc["status"] == "lp_failed" and doc["lower"] == 0.0
     assert "certify lp_failed" in res.stderr and len(res.stderr.strip().splitlines()) == 1
 
-
-def test_clarabel_lp_solves_a_small_lp_with_known_optimum_and_duals() -> None:
-    """The LP called directly: max x2 s.t. x1 - x0 <= 3, x2 - x1 <= 2, x2 - x0 <= 4,
-    x0 = 0 has the optimum x2 = 4 (the third row binds; the path through x1 allows 5), the
-    third row's dual 1 and the others' 0 (scipy's HiGHS as the independent reference)."""
-    import clarabel
-    import scipy.sparse as sp
-    from scipy.optimize import linprog
-
-    lp_mod = importlib.import_module("solvers.certify_lp")
-    a = np.array([[-1.0, 1.0, 0.0], [0.0, -1.0, 1.0], [-1.0, 0.0, 1.0]])
-    rhs = np.array([3.0, 2.0, 4.0])
-    x, duals, status = lp_mod._clarabel_lp(sp.csr_matrix(a), rhs, 0, 2, 3, clarabel, sp)
-    ref = linprog([0, 0, -1], A_ub=a, b_ub=rhs, A_eq=[[1, 0, 0]], b_eq=[0],
-                  bounds=[(None, None)] * 3, method="highs")
-    assert status == "optimal" and ref.status == 0
-    assert x[2] == pytest.approx(-ref.fun, abs=1e-6) and x[2] == pytest.approx(4.0, abs=1e-6)
-    assert np.all(a @ x <= rhs + 1e-6) and abs(x[0]) < 1e-9
-    assert np.allclose(duals, -ref.ineqlin.marginals, atol=1e-6)
-    assert np.allclose(duals, [0.0, 0.0, 1.0], atol=1e-6)
