@@ -6,8 +6,9 @@ or class, parameters) as a :class:`MetricSpec` in :mod:`finsler.spec`."""
 
 from __future__ import annotations
 
-import importlib
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
+
+from finsler.lazy import lazy_exports
 
 if TYPE_CHECKING:
     from finsler.domains import Box, Disk, Domain, JointBox, Product
@@ -128,19 +129,4 @@ __all__ = [
 ]
 
 
-def __getattr__(name: str) -> Any:
-    module = _LAZY.get(name)
-    if module is None:  # a submodule reached as an attribute (``finsler.registry.X``)
-        try:
-            return importlib.import_module(f"finsler.{name}")
-        except ModuleNotFoundError as err:
-            if err.name != f"finsler.{name}":
-                raise
-        raise AttributeError(f"module 'finsler' has no attribute {name!r}")
-    value = getattr(importlib.import_module(module), name)
-    globals()[name] = value  # cache: the next lookup is a plain attribute
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(__all__))
+__getattr__, __dir__ = lazy_exports(__name__, _LAZY, globals(), __all__)

@@ -20,10 +20,11 @@ what the API, JSON and the command line print.
 
 from __future__ import annotations
 
-import importlib
 import sys
 import types
 from typing import TYPE_CHECKING, Any
+
+from finsler.lazy import lazy_exports
 
 if TYPE_CHECKING:
     from solvers.certify import CertifyResult, MeshSpec, certify
@@ -116,22 +117,7 @@ __all__ = [
 ]
 
 
-def __getattr__(name: str) -> Any:
-    module = _LAZY.get(name)
-    if module is None:  # a submodule reached as an attribute (``solvers.seeding.X``)
-        try:
-            return importlib.import_module(f"solvers.{name}")
-        except ModuleNotFoundError as err:
-            if err.name != f"solvers.{name}":
-                raise
-        raise AttributeError(f"module 'solvers' has no attribute {name!r}")
-    value = getattr(importlib.import_module(module), name)
-    globals()[name] = value  # cache: the next lookup is a plain attribute
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(__all__))
+__getattr__, __dir__ = lazy_exports(__name__, _LAZY, globals(), __all__)
 
 
 class _Package(types.ModuleType):
