@@ -63,6 +63,8 @@ def test_cli_warm_start_adds_one_start_beside_the_global_seeds(
     assert res.exit_code == 0, res.output
     doc = json.loads(res.stdout)
     assert doc["warm_start"]["global_seeds"] is True
+    # deprecated (issue 47): the default is as good and faster; the message says so
+    assert "--warm-start is deprecated" in res.stderr and "never worse" in res.stderr
     assert doc["warm_start"]["policy"].endswith("matsumoto")
     glob = solvers.solve_batch(m, easy_pairs, workers=1, progress=False)
     for row, g in zip(doc["results"], glob):
@@ -121,7 +123,7 @@ def test_warm_search_seeds_with_the_route_search(tmp_path: Path,
                                    "--warm-start", "matsumoto", "--warm-search", "--workers",
                                    "1", "--no-progress", "--json"])
     assert res.exit_code == 0, res.output
-    doc = json.loads(res.output)
+    doc = json.loads(res.stdout)  # (stderr holds the deprecation warning)
     assert doc["warm_start"]["route_search"] is True
     glob = solvers.solve_batch(m, easy_pairs, workers=1, progress=False)
     for row, g in zip(doc["results"], glob):

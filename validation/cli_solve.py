@@ -51,6 +51,14 @@ from validation.cli_common import (
     parse_point,
 )
 
+#: Printed (stderr) when --warm-start is used; the figures are those of
+#: benchmarks/results/warm_start-2026-11-28*.md.
+WARM_START_DEPRECATED = (
+    "warning: --warm-start is deprecated: the default solve (without it) reaches the same "
+    "optimum (125 of 126 fresh pairs measured) without loading torch and the policy (1.6-1.9 s "
+    "of CPU); --warm-start still adds the learned path as one more start beside the global "
+    "seeds, so its result is never worse")
+
 if TYPE_CHECKING:  # numpy, solvers and learn are imported where used: --help stays light
     import numpy as np
 
@@ -207,6 +215,8 @@ def solve_command(
 
             import_method_modules(method_module)
         inits, warm = _warm_start(warm_start, m, arr, warm_search)
+        if inits is not None:
+            typer.echo(WARM_START_DEPRECATED, err=True)
         if out is not None:
             # checked (its folder created) after every other input and before any solve:
             # a bad --out must not cost a batch of solves, bad input must not leave folders
