@@ -120,9 +120,17 @@ def main() -> None:
                 row.append(", ".join(imported(args, env)) or "-")
             rows.append(row)
             print("  ".join(row), flush=True)
-    out.add(f"Median of {a.repeats} whole-process runs each (`{' '.join(trees[-1][1])} ...`"
-            + (f"; `{a.before}`: `python -m validation.cli ...` with PYTHONPATH={a.before}"
-               if a.before else "") + ", output discarded; one untimed run first per tree). "
+    here = Path(__file__).resolve().parents[1]
+
+    def shown(path: object) -> str:  # paths of this machine as relative or bare names
+        text = str(path)
+        return text.replace(f"{here}/", "") if text.startswith(f"{here}/") else Path(text).name
+
+    out.add(f"Median of {a.repeats} whole-process runs each "
+            f"(`{' '.join(shown(x) for x in trees[-1][1])} ...`"
+            + (f"; `{shown(a.before)}` (the --before checkout): `python -m validation.cli ...` "
+               "with PYTHONPATH set to it" if a.before else "")
+            + ", output discarded; one untimed run first per tree). "
             "CPU = the child's user + system time (getrusage RUSAGE_CHILDREN), all threads "
             "included.", "", markdown_table(header, rows))
     if not a.no_write:
