@@ -22,7 +22,7 @@ from finsler.errors import InputError
 from validation import curves as cv
 from validation import figures as fg
 from validation.cli import app
-from validation.cli_plot import plot_curves
+from validation.cli.plot import plot_curves
 
 HEADER = ("iteration,timesteps,timesteps_paper,timesteps_derivative,wall_seconds,"
           "success_rate,mean_length,mean_max_segment_cost")

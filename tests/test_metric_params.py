@@ -26,7 +26,7 @@ from learn.config import TrainConfig, resolve_metric
 from learn.storage import CONFIG_FILE, LATEST_FILE, RESULT_FILE, read_json
 from learn.train import Trainer
 from validation.cli import app
-from validation.cli_common import parse_metric_params
+from validation.cli.common import parse_metric_params
 
 torch.set_num_threads(1)
 ROOT = Path(__file__).resolve().parents[1]
@@ -332,7 +332,7 @@ def test_report_picks_figures_by_what_the_metric_is(tmp_path: Path) -> None:
 
 
 def test_sweep_passes_the_metric_to_its_workers() -> None:
-    from validation.cli_sweep import metric_overrides
+    from validation.cli.sweep import metric_overrides
 
     assert metric_overrides(["matsumoto"], None) == {}
     assert metric_overrides(["matsumoto", "carlike"], {"radius": 0.9}) == {

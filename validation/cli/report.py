@@ -10,7 +10,7 @@ import typer
 
 from finsler.errors import InputError
 from finsler.files import check_input_dir, check_output_dir
-from validation.cli_common import (
+from validation.cli.common import (
     METRIC_MODULE_HELP,
     MethodModuleOption,
     fail,

@@ -9,7 +9,7 @@ from typing import Annotated, Any
 import typer
 
 from finsler.errors import InputError
-from validation.cli_common import fail, output_path
+from validation.cli.common import fail, output_path
 
 __all__ = ["FORMATS", "plot_curves", "plot_curves_command", "register"]
 

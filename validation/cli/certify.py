@@ -27,7 +27,7 @@ import typer
 
 from finsler.errors import InputError
 from finsler.files import atomic_write_text, check_output_path
-from validation.cli_common import (
+from validation.cli.common import (
     MetricModuleOption,
     MetricParamOption,
     fail,

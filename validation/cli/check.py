@@ -40,7 +40,7 @@ from typing import TYPE_CHECKING, Annotated
 import typer
 
 from finsler.errors import InputError
-from validation.cli_common import (
+from validation.cli.common import (
     MethodModuleOption,
     MetricModuleOption,
     MetricParamOption,

@@ -18,7 +18,7 @@ import typer
 import solvers
 from finsler.errors import InputError
 from finsler.limits import check_memory
-from validation.cli_common import (
+from validation.cli.common import (
     MetricModuleOption,
     MetricParamOption,
     fail,

@@ -14,7 +14,7 @@ from typing import Annotated
 import typer
 
 from finsler.errors import InputError
-from validation.cli_common import (
+from validation.cli.common import (
     MetricModuleOption,
     MetricParamOption,
     fail,
@@ -144,13 +144,8 @@ def cost_command(
 
 def _register_optional_commands() -> None:
     """Commands of the other layers, registered here so the CLI stays one entry point."""
-    from validation import cli_learn, cli_plot, cli_report, cli_solve, cli_sweep
-
-    for module in (cli_solve, cli_learn, cli_report, cli_plot, cli_sweep):
-        module.register(app)
-    importlib.import_module("validation.cli_expmap").register(app)
-    importlib.import_module("validation.cli_certify").register(app)
-    importlib.import_module("validation.cli_check").register(app)
+    for name in ("solve", "learn", "report", "plot", "sweep", "expmap", "certify", "check"):
+        importlib.import_module(f"validation.cli.{name}").register(app)
 
 
 _register_optional_commands()

@@ -11,7 +11,7 @@ import typer
 from finsler.errors import InputError
 from finsler.files import check_output_dir
 from finsler.pool import PoolInterrupted
-from validation.cli_common import (
+from validation.cli.common import (
     METHOD_MODULE_HELP,
     METRIC_MODULE_HELP,
     METRIC_PARAM_HELP,

@@ -41,7 +41,7 @@ import finsler
 import solvers
 from finsler.errors import InputError
 from finsler.pool import PoolInterrupted
-from validation.cli_common import (
+from validation.cli.common import (
     MethodModuleOption,
     MetricModuleOption,
     MetricParamOption,

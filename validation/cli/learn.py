@@ -16,7 +16,7 @@ import typer
 import finsler
 from finsler.errors import InputError
 from finsler.files import check_input_dir, check_output_dir
-from validation.cli_common import (
+from validation.cli.common import (
     METHOD_MODULE_HELP,
     METRIC_MODULE_HELP,
     METRIC_PARAM_HELP,
