@@ -1,0 +1,180 @@
+"""Mutation testing of the solver core and the property suite, one group at a time, and
+a results file with the score and every surviving mutant (issue 48, item 6).
+
+    python benchmarks/mutation.py                       # every group below
+    python benchmarks/mutation.py block_tridiagonal newton --max-children 2
+
+For each group: the COMMITTED tree (``git archive HEAD``, so the score is for the commit
+the results file names) is unpacked into ``build/mutation/GROUP/``, its ``[tool.mutmut]``
+(``pyproject.toml``) gets the group's source files and its own FAST focused tests, and
+``mutmut run`` (``nice``) mutates and tests them there. The results file
+(``benchmarks/results/mutation-DATE.md``) gives per group the mutants, killed, timeouts,
+survivors, score = (killed + timeout) / (mutants - skipped), the CPU time, the commit of
+each source file, and the diff of every survivor; ``mutation_report.md`` gives the
+verdicts. A score from a group's focused tests is a lower bound of the whole suite's.
+Needs ``pip install -e ".[mutation]"`` (mutmut >= 3.8).
+"""
+
+from __future__ import annotations
+
+import argparse
+import re
+import resource
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from results_file import ResultsFile, markdown_table
+
+ROOT = Path(__file__).resolve().parents[1]
+
+#: group -> (files mutated, fast focused tests run against them). mutmut runs, per
+#: mutant, only the selected tests that called the mutated function.
+GROUPS: dict[str, tuple[list[str], list[str]]] = {
+    "block_tridiagonal": (["solvers/block_tridiagonal.py"], ["tests/test_block_tridiagonal.py"]),
+    "certify_mesh": (["solvers/certify_mesh.py"], ["tests/test_mutation_kills_certify_mesh.py"]),
+    "certify_lp": (["solvers/certify_lp.py"], ["tests/test_mutation_kills_certify_lp.py"]),
+    "newton": (["solvers/newton.py"], ["tests/test_newton.py",
+                                       "tests/test_mutation_kills_newton.py"]),
+    "batched": (["solvers/batched.py"], ["tests/test_newton.py",
+                                         "tests/test_mutation_kills_newton.py"]),
+    "testing": (["validation/testing/"], ["tests/test_mutation_kills_testing.py"]),
+}
+
+_MUTMUT_SECTION = re.compile(r"^\[tool\.mutmut\]\n(?:(?!^\[).*\n?)*", re.M)
+
+
+def _mutmut() -> str:
+    exe = Path(sys.executable).with_name("mutmut")
+    if not exe.exists():
+        sys.exit("mutmut not found beside this Python: pip install -e '.[mutation]'")
+    return str(exe)
+
+
+def _toml_list(items: list[str]) -> str:
+    return "[" + ", ".join(f'"{x}"' for x in items) + "]"
+
+
+def prepare(group: str, work: Path) -> Path:
+    """The committed tree in ``work/group`` with the group's ``[tool.mutmut]``."""
+    files, tests = GROUPS[group]
+    missing = [t for t in tests if not (ROOT / t).exists()]
+    if missing:
+        raise SystemExit(f"group {group}: tests {missing} do not exist")
+    where = work / group
+    if where.exists():
+        shutil.rmtree(where)
+    where.mkdir(parents=True)
+    archive = subprocess.run(["git", "archive", "HEAD"], cwd=ROOT, capture_output=True,
+                             check=True).stdout
+    subprocess.run(["tar", "-x", "-C", str(where)], input=archive, check=True)
+    py = (where / "pyproject.toml").read_text()
+    section = "\n".join([
+        "[tool.mutmut]",
+        f"source_paths = {_toml_list(files)}",
+        'also_copy = ["finsler", "solvers", "learn", "validation", "tests", "benchmarks"]',
+        f"pytest_add_cli_args_test_selection = {_toml_list(tests)}",
+        'pytest_add_cli_args = ["-p", "no:cacheprovider", "-q", "-n", "0", "-x"]', ""])
+    (where / "pyproject.toml").write_text(_MUTMUT_SECTION.sub(section, py))
+    return where
+
+
+def run(group: str, work: Path, children: int) -> dict:
+    where = prepare(group, work)
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    t0 = time.perf_counter()
+    proc = subprocess.run(["nice", "-n", "10", _mutmut(), "run", "--max-children",
+                           str(children)], cwd=where, capture_output=True, text=True,
+                          check=False)
+    wall = time.perf_counter() - t0
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    if proc.returncode != 0:
+        tail = (proc.stdout + proc.stderr)[-3000:]
+        return {"group": group, "error": f"mutmut run exited {proc.returncode}:\n{tail}",
+                "wall": wall, "cpu": cpu}
+    res = subprocess.run([_mutmut(), "results", "--all", "true"], cwd=where,
+                         capture_output=True, text=True, check=True).stdout
+    status: dict[str, str] = {}
+    for line in res.splitlines():
+        name, sep, st = line.strip().rpartition(": ")
+        if sep:
+            status[name] = st
+    survivors = sorted(n for n, s in status.items() if s in ("survived", "no tests"))
+    diffs = {n: subprocess.run([_mutmut(), "show", n], cwd=where, capture_output=True,
+                               text=True, check=False).stdout for n in survivors}
+    count = {s: sum(1 for v in status.values() if v == s) for s in set(status.values())}
+    return {"group": group, "status": status, "count": count, "survivors": survivors,
+            "diffs": diffs, "wall": wall, "cpu": cpu}
+
+
+def file_commits(files: list[str]) -> str:
+    out = []
+    for f in files:
+        c = subprocess.run(["git", "log", "-1", "--format=%h", "--", f], cwd=ROOT,
+                           capture_output=True, text=True, check=False).stdout.strip()
+        out.append(f"`{f}` @ {c or '?'}")
+    return ", ".join(out)
+
+
+def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("groups", nargs="*", metavar="GROUP",
+                    help=f"groups to run (default all: {', '.join(GROUPS)})")
+    ap.add_argument("--max-children", type=int, default=1,
+                    help="mutmut's worker processes (default 1: the machine is shared)")
+    ap.add_argument("--work", type=Path, default=ROOT / "build" / "mutation",
+                    help="where the trees are unpacked and mutated")
+    args = ap.parse_args(argv)
+    unknown = [g for g in args.groups if g not in GROUPS]
+    if unknown:
+        ap.error(f"unknown group(s) {unknown}; the groups are {', '.join(GROUPS)}")
+    args.groups = args.groups or list(GROUPS)
+    out = ResultsFile("mutation", title="Mutation testing of the solver core and the "
+                      "property suite (mutmut)")
+    rows, sections = [], []
+    for g in args.groups:
+        print(f"mutating {g} ...", flush=True)
+        r = run(g, args.work, args.max_children)
+        files, tests = GROUPS[g]
+        if "error" in r:
+            rows.append([f"`{g}`", "-", "-", "-", "-", "error", f"{r['cpu']:.0f}",
+                         f"{r['wall']:.0f}"])
+            sections.append(f"## {g}\n\n```\n{r['error']}\n```\n")
+            print(r["error"], file=sys.stderr)
+            continue
+        c = r["count"]
+        total, skipped = len(r["status"]), c.get("skipped", 0)
+        caught = c.get("killed", 0) + c.get("timeout", 0)
+        score = 100.0 * caught / max(total - skipped, 1)
+        rows.append([f"`{g}`", total, c.get("killed", 0), c.get("timeout", 0),
+                     len(r["survivors"]), f"{score:.1f} %", f"{r['cpu']:.0f}",
+                     f"{r['wall']:.0f}"])
+        other = {k: v for k, v in c.items() if k not in ("killed", "timeout", "survived",
+                                                          "no tests")}
+        text = [f"## {g}", "", f"Source: {file_commits(files)}. Tests: "
+                + ", ".join(f"`{t}`" for t in tests) + ".",
+                f"Other statuses: {other or 'none'}.", ""]
+        if r["survivors"]:
+            text.append(f"Survivors ({len(r['survivors'])}; `no tests` = no selected test "
+                        "calls the function):\n")
+            for n in r["survivors"]:
+                text += [f"### `{n}` ({r['status'][n]})", "", "```diff",
+                         r["diffs"][n].strip(), "```", ""]
+        sections.append("\n".join(text))
+        print(f"{g}: {caught}/{total - skipped} = {score:.1f} %", flush=True)
+    out.add("Score = (killed + timeout) / (mutants - skipped), against each group's fast "
+            "focused tests only (a lower bound of the whole suite's score). CPU = user + "
+            "system seconds of mutmut and its workers (niced; the machine is shared by "
+            "other work, so wall time varies). Verdicts on the survivors: "
+            "`mutation_report.md`.",
+            markdown_table(["group", "mutants", "killed", "timeout", "survived",
+                            "score", "CPU s", "wall s"], rows),
+            *sections)
+    out.write()
+
+
+if __name__ == "__main__":
+    main()
