@@ -12,8 +12,8 @@ from typing import Any
 import numpy as np
 
 from finsler.errors import InputError
+from finsler.status import DistanceStatus, SolverError, Status
 from solvers.chebyshev import interpolation_matrix
-from solvers.status import DistanceStatus, Status
 
 __all__ = [
     "DistanceResult",
@@ -24,14 +24,6 @@ __all__ = [
     "SolverError",
     "Status",
 ]
-
-
-class SolverError(RuntimeError):
-    """Raised by ``strict=True`` solves that did not converge (the result is attached)."""
-
-    def __init__(self, message: str, result: Any = None) -> None:
-        super().__init__(message)
-        self.result = result
 
 
 @dataclass

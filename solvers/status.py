@@ -1,203 +1,31 @@
-"""One family of statuses: the outcome of every computation of the toolkit.
-
-Every solve, distance, exp, log, certificate and batched Newton problem ends with a member
-of an enum of this module, all subclasses of :class:`Outcome`. They share one vocabulary:
-
-- ``status.label`` is the toolkit's name of the outcome (``Status.SUCCESS`` ->
-  ``"success"``), what JSON results, reports and the command line print; ``str(status)`` is
-  the label too. A name means the same in every family (``success``, ``trivial``,
-  ``not_convex``, ``max_iterations`` ...).
-- ``status.converged`` says whether the number it comes with can be trusted as the answer
-  asked for; a result's own ``converged`` is its status's.
-- A computation that fails (IPOPT stops, an integrator underflows, an LP solver fails, a
-  bound cannot be refined within its budget) returns its status; exceptions are for bad
-  input (:class:`finsler.InputError`) and, with ``strict=True``, for asking that a
-  non-converged status be raised (:class:`solvers.SolverError`).
-
-:func:`families` lists them (the property suite and the CLI read it).
-"""
+"""The solvers' statuses: re-exported from :mod:`finsler.status`, the toolkit's one family
+of statuses in the ground layer (the same objects; ``learn`` and ``validation`` import them
+from there). Read :mod:`finsler.status` for what ``label`` and ``converged`` mean."""
 
 from __future__ import annotations
 
-import enum
+from finsler.status import (
+    CertifyStatus,
+    CertifyStop,
+    DistanceStatus,
+    ExpStatus,
+    LogStatus,
+    NewtonStatus,
+    Outcome,
+    PropertyOutcome,
+    Status,
+    families,
+)
 
 __all__ = [
     "CertifyStatus",
+    "CertifyStop",
     "DistanceStatus",
     "ExpStatus",
     "LogStatus",
     "NewtonStatus",
     "Outcome",
+    "PropertyOutcome",
     "Status",
     "families",
 ]
-
-
-class Outcome(enum.Enum):
-    """Base of every status enum of the toolkit (no members of its own)."""
-
-    @property
-    def label(self) -> str:
-        """The toolkit's name of the status: the member's name in lower case."""
-        return self.name.lower()
-
-    @property
-    def converged(self) -> bool:  # pragma: no cover - every family overrides it
-        raise NotImplementedError
-
-    def __str__(self) -> str:
-        return self.label
-
-
-class Status(Outcome):
-    """IPOPT's return status (``return_status`` of CasADi's ``nlpsol`` stats), plus the
-    toolkit's own ``TRIVIAL`` (start == goal: nothing to solve) and ``SHORT`` (start and goal
-    closer than :data:`solvers.inputs.SHORT_PAIR` times the domain's size: the straight
-    segment, equally divided, is the geodesic to within ``O(|g - s|**2)`` ~ 1e-14 in
-    coordinates, below what IPOPT resolves, and ``F**2`` is not differentiable at zero
-    velocity, so no NLP is solved)."""
-
-    SUCCESS = "Solve_Succeeded"
-    ACCEPTABLE = "Solved_To_Acceptable_Level"
-    INFEASIBLE = "Infeasible_Problem_Detected"
-    SEARCH_DIRECTION_TOO_SMALL = "Search_Direction_Becomes_Too_Small"
-    DIVERGING_ITERATES = "Diverging_Iterates"
-    USER_STOP = "User_Requested_Stop"
-    FEASIBLE_POINT_FOUND = "Feasible_Point_Found"
-    MAX_ITERATIONS = "Maximum_Iterations_Exceeded"
-    RESTORATION_FAILED = "Restoration_Failed"
-    STEP_COMPUTATION_ERROR = "Error_In_Step_Computation"
-    MAX_CPU_TIME = "Maximum_CpuTime_Exceeded"
-    MAX_WALL_TIME = "Maximum_WallTime_Exceeded"
-    NOT_ENOUGH_DEGREES_OF_FREEDOM = "Not_Enough_Degrees_Of_Freedom"
-    INVALID_PROBLEM = "Invalid_Problem_Definition"
-    INVALID_OPTION = "Invalid_Option"
-    INVALID_NUMBER = "Invalid_Number_Detected"
-    UNRECOVERABLE = "Unrecoverable_Exception"
-    NONIPOPT_EXCEPTION = "NonIpopt_Exception_Thrown"
-    INSUFFICIENT_MEMORY = "Insufficient_Memory"
-    INTERNAL_ERROR = "Internal_Error"
-    TRIVIAL = "Trivial_Start_Equals_Goal"
-    SHORT = "Short_Pair_Straight_Segment"
-    UNKNOWN = "Unknown"
-
-    @classmethod
-    def from_ipopt(cls, text: str) -> Status:
-        """Map IPOPT's ``return_status`` string to the enum (``UNKNOWN`` if unrecognised)."""
-        for s in cls:
-            if s.value == text:
-                return s
-        return cls.UNKNOWN
-
-    @property
-    def converged(self) -> bool:
-        """Only a full IPOPT success, or a trivial / short pair, counts as converged."""
-        return self in (Status.SUCCESS, Status.TRIVIAL, Status.SHORT)
-
-
-
-class DistanceStatus(Outcome):
-    """Outcome of :func:`solvers.distance`."""
-
-    CONVERGED = "converged"
-    """The error estimate is below ``rtol * distance``."""
-    TOLERANCE_NOT_REACHED = "tolerance_not_reached"
-    """The finest discretisation was solved but the estimate is above the tolerance."""
-    NOT_CONVEX = "not_convex"
-    """The path crosses a region where ``F(x, .)`` is not convex: the continuum infimum is
-    the length for the convexified metric, discretised paths chatter, and the number is
-    only the length of a smooth local minimiser (an upper bound of the infimum)."""
-    SOLVER_FAILED = "solver_failed"
-    """IPOPT did not converge at some level."""
-    TRIVIAL = "trivial"
-    """Start equals goal."""
-
-    @property
-    def converged(self) -> bool:
-        return self in (DistanceStatus.CONVERGED, DistanceStatus.TRIVIAL)
-
-
-class ExpStatus(Outcome):
-    """Outcome of :func:`exp_map`."""
-
-    SUCCESS = "success"
-    """Integrated to ``t``."""
-    LEFT_DOMAIN = "left_domain"
-    """The curve reached the boundary of the domain at ``t_end < t``."""
-    NOT_CONVEX = "not_convex"
-    """The curve reached a region where ``F(x, .)`` is not strongly convex at ``t_end``:
-    beyond it the geodesic equation does not describe locally shortest curves."""
-    INTEGRATION_FAILED = "integration_failed"
-    """The integrator failed (step size underflow or non-finite values)."""
-
-    @property
-    def converged(self) -> bool:
-        return self is ExpStatus.SUCCESS
-
-
-class LogStatus(Outcome):
-    """Outcome of :func:`log_map`."""
-
-    SUCCESS = "success"
-    """``|exp(x, v) - y| <= tol`` and ``F(x, v)`` agrees with the solver's distance."""
-    TRIVIAL = "trivial"
-    """``x == y``: ``v = 0``."""
-    NOT_CONVERGED = "not_converged"
-    """Shooting stopped above the tolerance (``residual`` says by how much)."""
-    OTHER_GEODESIC = "other_geodesic"
-    """Shooting converged to a geodesic longer than the shortest path found by the solver
-    (relative gap above :data:`OTHER_GEODESIC_RTOL`): ``v`` is not the log."""
-
-    @property
-    def converged(self) -> bool:
-        return self in (LogStatus.SUCCESS, LogStatus.TRIVIAL)
-
-
-class NewtonStatus(int, Outcome):
-    """Outcome of one problem of :func:`newton_energy`."""
-
-    RUNNING = 0
-    CONVERGED = 1
-    """``residual <= gtol``: a first-order point of the energy (relative gradient)."""
-    MAX_ITERATIONS = 2
-    STALLED = 3
-    """No acceptable step even with the largest shift (round-off, or a kink of ``F``)."""
-    BOUNDARY = 4
-    """Steps kept leaving the domain: the optimum has an active domain constraint."""
-    NOT_FINITE = 5
-    """The energy or its derivatives are not finite at the start."""
-    DROPPED = 6
-    """Stopped by the caller (e.g. a seed clearly losing against another of its pair)."""
-
-    @property
-    def converged(self) -> bool:
-        return self is NewtonStatus.CONVERGED
-
-
-class CertifyStatus(Outcome):
-    """Outcome of :func:`solvers.certify` (``CertifyResult.status``). The interval
-    ``[lower, upper]`` it comes with is proven in every case; the status says whether the
-    refinement reached its target gap."""
-
-    CERTIFIED = "certified"
-    """The gap reached ``MeshSpec.target_gap``."""
-    BUDGET_REACHED = "budget_reached"
-    """A work budget of :class:`solvers.MeshSpec` ended the refinement above the target gap
-    (``max_rounds``, ``max_triangles``, or no triangle left to refine: ``stopped_by``)."""
-    TIME_LIMIT = "time_limit"
-    """The caller's wall-clock limit ended the refinement (only then can the interval
-    depend on the machine's speed)."""
-    CORRECTIONS_TOO_LARGE = "corrections_too_large"
-    """The second-order corrections of the bound stayed above ``F`` on some triangles
-    within the budget: the lower bound is the best earlier round's, or the trivial 0."""
-    LP_FAILED = "lp_failed"
-    """The LP solver failed: the lower bound is the best earlier round's, or the trivial 0."""
-
-    @property
-    def converged(self) -> bool:
-        return self is CertifyStatus.CERTIFIED
-
-
-def families() -> tuple[type[Outcome], ...]:
-    """Every status enum of the toolkit."""
-    return (Status, DistanceStatus, ExpStatus, LogStatus, CertifyStatus, NewtonStatus)

@@ -2,4 +2,5 @@
 
 from validation.cli.entry import main
 
-main()
+if __name__ == "__main__":  # importing the module (a package scan) must not run the CLI
+    main()
