@@ -234,6 +234,8 @@ class CertifyStop(str, Outcome):
     LP_FAILED = "lp_failed"
     """As :attr:`CertifyStatus.LP_FAILED`."""
 
+    __hash__ = str.__hash__  # a dict keyed by the old string finds the member
+
     @property
     def converged(self) -> bool:
         return self is CertifyStop.TARGET_GAP
@@ -263,6 +265,8 @@ class PropertyOutcome(str, Outcome):
     def label(self) -> str:
         """The suite's word (``"not-run"`` with its hyphen, as in its JSON since it began)."""
         return str(self.value)
+
+    __hash__ = str.__hash__  # a dict keyed by the old string finds the member
 
     @property
     def converged(self) -> bool:

@@ -72,6 +72,7 @@ from finsler.intervals import Interval, enclose, isqrt
 from finsler.limits import check_memory
 from finsler.lowering import LoweredFunction, lower
 from finsler.metric import Metric
+from finsler.status import Result
 from solvers.certify_lp import INITIAL_DIRECTIONS as INITIAL_DIRECTIONS
 from solvers.certify_lp import LP_SOLVER, LPFailure, _initial_modes, _solve_lp
 from solvers.certify_lp import TIGHT_DUAL as TIGHT_DUAL
@@ -84,7 +85,7 @@ from solvers.certify_mesh import _initial_points, _Mesh, _outline, _zigzag
 from solvers.certify_mesh import _inside_polygon as _inside_polygon
 from solvers.certify_mesh import _spacing as _spacing
 from solvers.inputs import SHORT_PAIR, as_metric, domain_scale, is_short_pair
-from solvers.status import CertifyStatus
+from solvers.status import CertifyStatus, CertifyStop
 
 __all__ = ["CertifyResult", "MeshSpec", "certify"]
 
@@ -169,7 +170,7 @@ class MeshSpec:
 
 
 @dataclass
-class CertifyResult:
+class CertifyResult(Result):
     """A certified interval ``lower <= d(start, goal) <= upper``.
 
     ``gap = (upper - lower) / upper``. ``upper`` is a proven upper bound of the length of
@@ -229,9 +230,17 @@ class CertifyResult:
     times: dict[str, float]
     rounds: list[dict[str, Any]] = field(default_factory=list)
     path: np.ndarray | None = None
-    stopped_by: str = "target_gap"
+    stopped_by: CertifyStop = CertifyStop.TARGET_GAP
     status: CertifyStatus = CertifyStatus.CERTIFIED
     message: str = ""
+
+    def __post_init__(self) -> None:
+        self.stopped_by = CertifyStop(self.stopped_by)  # a member of the status family
+
+    @property
+    def wall_time(self) -> float:
+        """Seconds of the whole certificate (``times["total"]``)."""
+        return float(self.times.get("total", 0.0))
 
     @property
     def converged(self) -> bool:
@@ -254,7 +263,7 @@ class CertifyResult:
                 continue
             if isinstance(val, np.ndarray):
                 val = val.tolist()
-            out[f.name] = val.label if isinstance(val, CertifyStatus) else val
+            out[f.name] = val.label if isinstance(val, (CertifyStatus, CertifyStop)) else val
         return out
 
 
@@ -538,6 +547,7 @@ def certify(
     *,
     path: Any = None,
     time_limit: float | None = None,
+    strict: bool = False,
 ) -> CertifyResult:
     """Certified interval ``lower <= d(start, goal) <= upper`` on a 2-D metric.
 
@@ -549,7 +559,8 @@ def certify(
     length plus its quadrature error estimate; the lower bound is the dual bound
     described in the module docstring. Raises :class:`InputError` for a metric that is
     not 2-D (or whose domain is not a box or a disk), points outside the domain, or bad
-    options.
+    options. ``strict=True`` raises :class:`SolverError` unless the status is
+    ``CERTIFIED`` (the interval is proven either way).
     """
     t_start = time.perf_counter()
     m = as_metric(metric)
@@ -704,7 +715,7 @@ def certify(
     lower = best["lower"]
     kind, note = _convexity(m, final.points)
     total = time.perf_counter() - t_start
-    return CertifyResult(
+    res = CertifyResult(
         metric=m.name, start=s, goal=g, lower=lower, upper=upper, length=float(est.value),
         length_error=float(est.error), gap=(upper - lower) / upper,
         upper_source=upper_source, path_upper=solver_upper,
@@ -720,3 +731,4 @@ def certify(
         rounds=rounds, path=upper_path, stopped_by=stopped_by, status=status,
         message=message,
     )
+    return res.strict() if strict else res

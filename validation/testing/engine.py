@@ -30,6 +30,7 @@ from hypothesis.errors import NoSuchExample, Unsatisfiable
 from hypothesis.strategies import SearchStrategy
 
 from finsler.errors import InputError
+from finsler.status import PropertyOutcome
 from validation.jsonout import jsonable as _jsonable
 from validation.text import text_table
 
@@ -42,18 +43,23 @@ __all__ = [
     "SKIPPED",
     "CheckReport",
     "PropertyFailure",
+    "PropertyOutcome",
     "PropertyResult",
     "Verdict",
     "search",
     "seeded",
 ]
 
-PASSED, FAILED, MAPPED, SKIPPED = "passed", "failed", "mapped", "skipped"
+# The outcomes of a property are members of the toolkit's status family
+# (:class:`finsler.status.PropertyOutcome`, str enums: ``PASSED == "passed"``, and the JSON
+# words are unchanged).
+PASSED, FAILED, MAPPED, SKIPPED = (PropertyOutcome.PASSED, PropertyOutcome.FAILED,
+                                   PropertyOutcome.MAPPED, PropertyOutcome.SKIPPED)
 #: No counterexample, but some examples could not be judged (a solve that did not converge,
 #: a certificate out of its work budget): said so in the note, with what was tried.
-INCONCLUSIVE = "inconclusive"
+INCONCLUSIVE = PropertyOutcome.INCONCLUSIVE
 #: Not run: a property it needs failed (``needs`` names it); no example was judged.
-NOT_RUN = "not-run"
+NOT_RUN = PropertyOutcome.NOT_RUN
 #: Statuses from the most to the least informative (how :func:`combine` picks one).
 ORDER = {FAILED: 0, INCONCLUSIVE: 1, MAPPED: 2, PASSED: 3, SKIPPED: 4, NOT_RUN: 5}
 
@@ -119,7 +125,7 @@ class PropertyResult:
 
     name: str
     claim: str
-    status: str
+    status: PropertyOutcome
     tried: int = 0
     passed: int = 0
     mapped: int = 0
@@ -134,6 +140,14 @@ class PropertyResult:
     inconclusive: int = 0
     needs: tuple[str, ...] = ()
     warnings: list[str] = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        # a status given by its word ("passed") becomes the member (InputError otherwise)
+        try:
+            self.status = PropertyOutcome(self.status)
+        except ValueError:
+            raise InputError(f"unknown property status {self.status!r}; choose one of "
+                             f"{', '.join(o.value for o in PropertyOutcome)}") from None
 
     @property
     def ok(self) -> bool:
@@ -190,7 +204,7 @@ class PropertyResult:
         def side(s: tuple[str, Any] | None) -> dict[str, Any] | None:
             return None if s is None else {"label": s[0], "value": jsonable(s[1])}
 
-        return {"name": self.name, "claim": self.claim, "status": self.status,
+        return {"name": self.name, "claim": self.claim, "status": self.status.label,
                 "tried": self.tried, "passed": self.passed, "mapped": self.mapped,
                 "counterexample": jsonable(self.counterexample), "lhs": side(self.lhs),
                 "relation": self.relation, "rhs": side(self.rhs), "note": self.note,
@@ -259,7 +273,8 @@ class CheckReport:
         followed by the details of every failed, inconclusive or mapped property, and why
         properties were skipped or not run."""
         head = ("property", "tried", "passed", "result", "counterexample")
-        rows = [head] + [(r.name, str(r.tried), str(r.passed), r.status, r.short_example())
+        rows = [head] + [(r.name, str(r.tried), str(r.passed), r.status.label,
+                          r.short_example())
                          for r in self.results]
         lines = [text_table(rows)]
         details = [r.describe() for r in self.results
