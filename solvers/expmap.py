@@ -32,6 +32,7 @@ from finsler.errors import InputError, short
 from finsler.geometry import Spray, spray
 from finsler.limits import check_memory
 from finsler.metric import Metric
+from finsler.status import Result, json_ready
 from solvers.chebyshev import differentiation_matrix
 from solvers.inputs import as_metric, check_point, is_short_pair
 from solvers.result import DistanceStatus, SolverError
@@ -58,7 +59,7 @@ OTHER_GEODESIC_RTOL = 1e-6
 
 
 @dataclass
-class ExpResult:
+class ExpResult(Result):
     """The geodesic ``gamma`` with ``gamma(0) = start``, ``gamma'(0) = velocity``, at ``t``.
 
     ``point`` ``(dim,)`` is ``gamma(t_end)`` and ``point_velocity`` ``(dim,)`` its tangent;
@@ -88,12 +89,8 @@ class ExpResult:
     curve: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
     jacobian: np.ndarray | None = None
 
-    @property
-    def converged(self) -> bool:
-        return self.status.converged
-
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready summary (``geodesics exp --json``)."""
+        """JSON-ready summary (``geodesics exp --json``; non-finite numbers as ``None``)."""
         out: dict[str, Any] = {
             "metric": self.metric,
             "start": self.start.tolist(),
@@ -114,11 +111,11 @@ class ExpResult:
         if self.curve.size:
             out["times"] = self.times.tolist()
             out["curve"] = self.curve.tolist()
-        return out
+        return json_ready(out)
 
 
 @dataclass
-class LogResult:
+class LogResult(Result):
     """Initial velocity ``velocity`` ``(dim,)`` of the shortest geodesic from ``start`` to
     ``goal`` parametrised on ``[0, 1]``: ``exp(start, velocity) = goal`` and
     ``F(start, velocity) = d(start, goal)``.
@@ -145,13 +142,9 @@ class LogResult:
     initial_velocity: np.ndarray
     exp: ExpResult | None = None
 
-    @property
-    def converged(self) -> bool:
-        return self.status.converged
-
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready summary (``geodesics log --json``)."""
-        return {
+        """JSON-ready summary (``geodesics log --json``; non-finite numbers as ``None``)."""
+        return json_ready({
             "metric": self.metric,
             "start": self.start.tolist(),
             "goal": self.goal.tolist(),
@@ -164,7 +157,7 @@ class LogResult:
             "iterations": self.iterations,
             "integrations": self.integrations,
             "wall_time": self.wall_time,
-        }
+        })
 
 
 # ----------------------------------------------------------------------------------------

@@ -1,7 +1,9 @@
 """Result objects of the solvers: every solve returns one, with its status.
 
 Non-convergence is a :class:`Status`, never a silent number; ``strict=True`` in the API
-turns a non-converged status into a :class:`SolverError`.
+(or ``result.strict()``) turns a non-converged status into a :class:`SolverError`. Every
+result derives from :class:`finsler.status.Result` (``status``, ``converged``, ``wall_time``,
+``to_dict``, ``strict``).
 """
 
 from __future__ import annotations
@@ -12,7 +14,7 @@ from typing import Any
 import numpy as np
 
 from finsler.errors import InputError
-from finsler.status import DistanceStatus, SolverError, Status
+from finsler.status import DistanceStatus, Result, SolverError, Status, json_ready
 from solvers.chebyshev import interpolation_matrix
 
 __all__ = [
@@ -21,13 +23,14 @@ __all__ = [
     "GeodesicResult",
     "MidpointResult",
     "MinMaxResult",
+    "Result",
     "SolverError",
     "Status",
 ]
 
 
 @dataclass
-class MinMaxResult:
+class MinMaxResult(Result):
     """Min-max refinement of a discrete geodesic: minimise the largest segment cost.
 
     ``points`` ``(n+1, dim)``; ``segment_costs`` ``(n,)`` recomputed in float64 from the
@@ -43,13 +46,9 @@ class MinMaxResult:
     wall_time: float
     cap_relaxed: bool
 
-    @property
-    def converged(self) -> bool:
-        return self.status.converged
-
 
 @dataclass
-class GeodesicResult:
+class GeodesicResult(Result):
     """Discrete geodesic of the task (energy minimiser of ``sum_i C(p_i, p_{i+1})**2``).
 
     Shapes: ``points`` ``(n+1, dim)`` with ``points[0] = start``, ``points[n] = goal``;
@@ -139,10 +138,6 @@ class GeodesicResult:
         return int(self.points.shape[0] - 1)
 
     @property
-    def converged(self) -> bool:
-        return self.status.converged
-
-    @property
     def cost_ratio(self) -> float:
         """Largest over mean segment cost (1 for exactly equal segment costs)."""
         mean = float(np.mean(self.segment_costs))
@@ -160,7 +155,8 @@ class GeodesicResult:
         """JSON-ready summary (the schema of ``geodesics solve``): ``length`` is always the
         sum of the costs C; a solve with ``tol`` adds ``length_estimate`` (the continuum
         length) and ``error_estimate`` (None where no estimate exists, e.g. a single
-        size). ``status`` is :attr:`Status.label`, ``ipopt_status`` IPOPT's own word."""
+        size). ``status`` is :attr:`Status.label`, ``ipopt_status`` IPOPT's own word;
+        non-finite numbers (a failed solve's energy) are ``None``."""
         est = self.error_estimate
         out: dict[str, Any] = {
             "points": self.points.tolist(),
@@ -195,19 +191,35 @@ class GeodesicResult:
         if self.minmax is not None:
             out["minmax_max_segment_cost"] = self.minmax.max_segment_cost
             out["minmax_status"] = self.minmax.status.label
-        return out
+        return json_ready(out)
 
 
 @dataclass
-class MidpointResult:
-    """Midpoint ``p_{n/2}`` ``(dim,)`` of the discrete geodesic, with the full result."""
+class MidpointResult(Result):
+    """Midpoint ``p_{n/2}`` ``(dim,)`` of the discrete geodesic, with the full result
+    (``status`` and ``wall_time`` are the geodesic's)."""
 
     point: np.ndarray
     geodesic: GeodesicResult
 
+    @property
+    def status(self) -> Status:  # type: ignore[override]
+        return self.geodesic.status
+
+    @property
+    def wall_time(self) -> float:  # type: ignore[override]
+        return self.geodesic.wall_time
+
+    def to_dict(self) -> dict[str, Any]:
+        """``point``, ``status``, ``converged``, ``wall_time`` and the geodesic's
+        ``to_dict()`` under ``geodesic``."""
+        return {"point": json_ready(self.point), "status": self.status.label,
+                "converged": self.converged, "wall_time": self.wall_time,
+                "geodesic": self.geodesic.to_dict()}
+
 
 @dataclass
-class DistanceResult:
+class DistanceResult(Result):
     """Continuum distance ``d(start, goal)`` from the pseudospectral transcription.
 
     ``distance`` is the length of the finest polynomial curve; ``error_estimate`` the
@@ -235,9 +247,16 @@ class DistanceResult:
     upper_bound: float = float("inf")
     discrete: GeodesicResult | None = None
 
-    @property
-    def converged(self) -> bool:
-        return self.status.converged
+    def to_dict(self, with_discrete: bool = False) -> dict[str, Any]:
+        """JSON-ready summary: every field but ``nodes`` (``(N+1, dim)`` lists) and
+        ``discrete`` (the discrete solve's own ``to_dict()``, only if ``with_discrete``);
+        ``ipopt_status`` is IPOPT's own word, ``upper_bound`` ``None`` when there is none
+        (infinite)."""
+        out = super().to_dict()
+        out["ipopt_status"] = self.ipopt_status.value
+        if not with_discrete:
+            out.pop("discrete")
+        return out
 
     def curve(self, t: Any) -> np.ndarray:
         """Points of the curve at parameters ``t`` ``(T,)`` in ``[0, 1]`` -> ``(T, dim)``."""
