@@ -101,8 +101,22 @@ class MetricTests(_Case):
         _outcome(_m.check_smoothness(self.get_metric(), **self._kw()))
 
 
-#: Distance suites (with their caches of solves) shared by the test methods of a class.
-_SUITES: dict[Any, _d.DistanceSuite] = {}
+def _shared(metric: Metric, key: str, entry: tuple[Any, ...], build: Callable[[], Any]) -> Any:
+    """``build()`` once per metric and ``entry``, shared by the test methods of a class
+    (pytest makes one instance per method). Kept on the metric (:meth:`Metric.derived`, the
+    toolkit's one cache of things derived from a metric), not in a module dict keyed by
+    the metric; ``entry`` is compared by identity for objects (an oracle, a policy) and by
+    value for numbers and names, so nothing is keyed by ``id()`` or needs to be hashable."""
+    table: list[tuple[tuple[Any, ...], Any]] = metric.derived(key, list)
+    for known, value in table:
+        if len(known) == len(entry) and all(
+                a is b or (isinstance(a, (int, float, str, type(None)))
+                           and type(a) is type(b) and a == b)
+                for a, b in zip(known, entry, strict=True)):
+            return value
+    value = build()
+    table.append((entry, value))
+    return value
 
 
 class DistanceTests(_Case):
@@ -133,13 +147,9 @@ class DistanceTests(_Case):
         shrink = self.distance_shrink
         if shrink is None:
             shrink = _m.solve_region(m, self.convex_shrink, self.seed)
-        key = (type(self).__qualname__, m, oracle, self.seed, shrink)
-        try:
-            if key not in _SUITES:
-                _SUITES[key] = _d.DistanceSuite.make(m, oracle, self.seed, shrink)
-            return _SUITES[key]
-        except TypeError:  # unhashable metric or oracle: no sharing
-            return _d.DistanceSuite.make(m, oracle, self.seed, shrink)
+        return _shared(m, "validation.testing.distance_suites",
+                       (type(self).__qualname__, oracle, self.seed, shrink),
+                       lambda: _d.DistanceSuite.make(m, oracle, self.seed, shrink))
 
     def test_distance_zero(self) -> None:
         _outcome(_d.check_distance_zero(self.suite(), max(self.solved_examples, 20)))
@@ -166,10 +176,6 @@ class DistanceTests(_Case):
 
     def test_midpoint_halves(self) -> None:
         _outcome(_d.check_midpoint_halves(self.suite(), max(2, self.solved_examples - 1)))
-
-
-#: Fresh-pair results per policy configuration, shared by the success and ratio tests.
-_POLICY_RUNS: dict[Any, list[PropertyResult]] = {}
 
 
 class PolicyTests(_Case):
@@ -224,12 +230,13 @@ class PolicyTests(_Case):
 
     def _fresh(self) -> list[PropertyResult]:
         pol, m = self.get_policy(), self.get_metric()
-        key = (id(pol), m, self.pairs, self.seed, self.min_success, self.max_length_ratio)
-        if key not in _POLICY_RUNS:
-            _POLICY_RUNS[key] = _p.check_policy_success(
-                pol, m, pairs=self.pairs, seed=self.seed, min_success=self.min_success,
-                max_length_ratio=self.max_length_ratio)
-        return _POLICY_RUNS[key]
+        # fresh-pair results per policy configuration, shared by the success and ratio tests
+        return _shared(m, "validation.testing.policy_runs",
+                       (pol, self.pairs, self.seed, self.min_success, self.max_length_ratio),
+                       lambda: _p.check_policy_success(
+                           pol, m, pairs=self.pairs, seed=self.seed,
+                           min_success=self.min_success,
+                           max_length_ratio=self.max_length_ratio))
 
     def test_policy_success(self) -> None:
         _outcome(self._fresh()[0])
