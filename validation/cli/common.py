@@ -20,13 +20,19 @@ __all__ = [
     "METHOD_MODULE_HELP",
     "METRIC_MODULE_HELP",
     "METRIC_PARAM_HELP",
+    "SWEEP_METRIC_PARAM_HELP",
+    "TRAINED_METRIC_PARAM_HELP",
+    "MethodModuleOption",
     "MetricModuleOption",
     "MetricParamOption",
+    "SweepMetricParamOption",
+    "TrainedMetricParamOption",
     "fail",
     "import_metric_modules",
     "json_text",
     "metric_from_options",
     "metric_or_fail",
+    "metric_param_option",
     "one_line",
     "parse_metric_params",
     "parse_overrides",
@@ -45,9 +51,26 @@ METHOD_MODULE_HELP = ("Module (dotted name) or FILE.py to import first, so that 
                       "learning methods it registers (learn.registry.register_method) can "
                       "be used (repeatable; a file's folder is put on sys.path, so sweep "
                       "workers import it too).")
-#: The two options as parameter types of a command.
-MetricParamOption = Annotated[list[str] | None, typer.Option(
-    "--metric-param", metavar="NAME=VALUE", help=METRIC_PARAM_HELP)]
+#: Help of ``--metric-param`` where a run's policy is read (evaluate, report).
+TRAINED_METRIC_PARAM_HELP = ("Metric parameter the policy must have been trained with "
+                             "(repeatable; the run's own parameters are always used).")
+#: Help of ``--metric-param`` for a sweep.
+SWEEP_METRIC_PARAM_HELP = METRIC_PARAM_HELP + " Applies to every environment of the sweep."
+
+
+def metric_param_option(help: str = METRIC_PARAM_HELP) -> Any:
+    """The ``--metric-param NAME=VALUE`` option (repeatable) as a parameter type; the one
+    definition of its flag and metavar, ``help`` fitting the command."""
+    return Annotated[list[str] | None, typer.Option(
+        "--metric-param", metavar="NAME=VALUE", help=help)]
+
+
+#: The shared options as parameter types of a command: every command declares
+#: ``metric_param: MetricParamOption = None`` (or the evaluate/report/sweep variant) and
+#: ``metric_module: MetricModuleOption = None``, ``method_module: MethodModuleOption = None``.
+MetricParamOption = metric_param_option()
+TrainedMetricParamOption = metric_param_option(TRAINED_METRIC_PARAM_HELP)
+SweepMetricParamOption = metric_param_option(SWEEP_METRIC_PARAM_HELP)
 MetricModuleOption = Annotated[list[str] | None, typer.Option(
     "--metric-module", metavar="MODULE", help=METRIC_MODULE_HELP)]
 MethodModuleOption = Annotated[list[str] | None, typer.Option(

@@ -17,9 +17,10 @@ import finsler
 from finsler.errors import InputError
 from finsler.files import check_input_dir, check_output_dir
 from validation.cli.common import (
-    METHOD_MODULE_HELP,
-    METRIC_MODULE_HELP,
-    METRIC_PARAM_HELP,
+    MethodModuleOption,
+    MetricModuleOption,
+    MetricParamOption,
+    TrainedMetricParamOption,
     fail,
     import_metric_modules,
     json_text,
@@ -35,16 +36,13 @@ def train_command(
     env: Annotated[str, typer.Option(help="Environment (metric) name, e.g. matsumoto.")],
     out: Annotated[Path, typer.Option(parser=output_path,
                                       help="Run directory to create (or resume).")],
-    metric_param: Annotated[list[str] | None, typer.Option(
-        "--metric-param", metavar="NAME=VALUE", help=METRIC_PARAM_HELP)] = None,
-    metric_module: Annotated[list[str] | None, typer.Option(
-        "--metric-module", metavar="MODULE", help=METRIC_MODULE_HELP)] = None,
+    metric_param: MetricParamOption = None,
+    metric_module: MetricModuleOption = None,
     method: Annotated[str | None, typer.Option(
         help="A registered learning method: midpoint (eq. 6, default), inter (eq. 17), "
              "two-to-one (eq. 18), the paper's baselines seq (PPO, eqs. 14/57) and pg "
              "(policy gradient, eqs. 15/16), or one of --method-module.")] = None,
-    method_module: Annotated[list[str] | None, typer.Option(
-        "--method-module", metavar="MODULE", help=METHOD_MODULE_HELP)] = None,
+    method_module: MethodModuleOption = None,
     timesteps: Annotated[int | None, typer.Option(
         help="Budget of evaluations of C, all-inclusive: every evaluation the learner makes "
              "to learn (the validation evaluations that select checkpoints are not "
@@ -221,14 +219,9 @@ def evaluate_command(
              "than that set, on the default evaluation set) or latest (the last one, no "
              "selection).")] = "best",
     as_json: Annotated[bool, typer.Option("--json", help="Print JSON.")] = False,
-    metric_param: Annotated[list[str] | None, typer.Option(
-        "--metric-param", metavar="NAME=VALUE",
-        help="Metric parameter the policy must have been trained with (repeatable; the "
-             "run's own parameters are always used).")] = None,
-    metric_module: Annotated[list[str] | None, typer.Option(
-        "--metric-module", metavar="MODULE", help=METRIC_MODULE_HELP)] = None,
-    method_module: Annotated[list[str] | None, typer.Option(
-        "--method-module", metavar="MODULE", help=METHOD_MODULE_HELP)] = None,
+    metric_param: TrainedMetricParamOption = None,
+    metric_module: MetricModuleOption = None,
+    method_module: MethodModuleOption = None,
     search: Annotated[bool, typer.Option(
         "--search", help="Evaluate the paths of the route search (learn.search: candidate "
         "midpoints at the top levels chosen by the cost of the policy's completed paths, "

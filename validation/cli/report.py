@@ -11,8 +11,9 @@ import typer
 from finsler.errors import InputError
 from finsler.files import check_input_dir, check_output_dir
 from validation.cli.common import (
-    METRIC_MODULE_HELP,
     MethodModuleOption,
+    MetricModuleOption,
+    TrainedMetricParamOption,
     fail,
     import_metric_modules,
     output_path,
@@ -48,12 +49,8 @@ def report_command(
         help="Processes for the exact solves (default: CPU count).")] = None,
     progress: Annotated[bool, typer.Option("--progress/--no-progress",
                                            help="Show progress bars.")] = True,
-    metric_param: Annotated[list[str] | None, typer.Option(
-        "--metric-param", metavar="NAME=VALUE",
-        help="Metric parameter the policy must have been trained with (repeatable; the "
-             "run's own parameters are always used).")] = None,
-    metric_module: Annotated[list[str] | None, typer.Option(
-        "--metric-module", metavar="MODULE", help=METRIC_MODULE_HELP)] = None,
+    metric_param: TrainedMetricParamOption = None,
+    metric_module: MetricModuleOption = None,
     method_module: MethodModuleOption = None,
     search: Annotated[bool, typer.Option(
         "--search/--no-search",

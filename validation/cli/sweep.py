@@ -12,9 +12,9 @@ from finsler.errors import InputError
 from finsler.files import check_output_dir
 from finsler.pool import PoolInterrupted
 from validation.cli.common import (
-    METHOD_MODULE_HELP,
-    METRIC_MODULE_HELP,
-    METRIC_PARAM_HELP,
+    MethodModuleOption,
+    MetricModuleOption,
+    SweepMetricParamOption,
     fail,
     import_metric_modules,
     json_text,
@@ -106,13 +106,9 @@ def sweep_command(
              "VALUE is JSON or a bare string), e.g. --set eval_every=10.")] = None,
     quiet: Annotated[bool, typer.Option("--quiet", help="No progress bar.")] = False,
     as_json: Annotated[bool, typer.Option("--json", help="Print the rows as JSON.")] = False,
-    metric_param: Annotated[list[str] | None, typer.Option(
-        "--metric-param", metavar="NAME=VALUE",
-        help=METRIC_PARAM_HELP + " Applies to every environment of the sweep.")] = None,
-    metric_module: Annotated[list[str] | None, typer.Option(
-        "--metric-module", metavar="MODULE", help=METRIC_MODULE_HELP)] = None,
-    method_module: Annotated[list[str] | None, typer.Option(
-        "--method-module", metavar="MODULE", help=METHOD_MODULE_HELP)] = None,
+    metric_param: SweepMetricParamOption = None,
+    metric_module: MetricModuleOption = None,
+    method_module: MethodModuleOption = None,
 ) -> None:
     """Train every (environment, variant, seed) into its own run directory: finished runs
     are skipped, unfinished ones resumed, absent ones started, so an interrupted sweep is
