@@ -122,16 +122,16 @@ def test_indefinite_systems_are_reported_and_the_others_still_solved(m: int, d: 
 @pytest.mark.parametrize("d", [1, 2, 3])
 @pytest.mark.parametrize("method", ["thomas", "cyclic"])
 @pytest.mark.parametrize("scale", [None, 1.0, 7.0])
+@pytest.mark.parametrize(("m", "j"), [(5, 0), (5, 1), (5, 2), (1, 0), (3, 1)])
 def test_local_shifts_exactly_the_indefinite_pivot_by_gershgorin(d: int, method: str,
-                                                                  scale) -> None:
-    """``local``: the one indefinite block, placed where it is a pivot as given (block 0
-    for Thomas, an even block for cyclic reduction, all couplings zero around it), is
+                                                                  scale, m: int, j: int) -> None:
+    """``local``: the one indefinite block ``j``, with all couplings around it zero (so
+    it is a pivot as given in either elimination order: at the first level of cyclic
+    reduction for an even ``j``, deeper for an odd one, the last level for ``M = 1``), is
     shifted by TAU_FACTOR * |Gershgorin bound| + 1e-6 * scale times I, nothing else: the
     solution is the dense solve of H + tau I on that block, and the system is reported
     definite."""
-    m = 5
     a, o, r = system(2, m, d, seed=d + 3, coupling=0.3)
-    j = 0 if method == "thomas" else 2
     o[:, j] = 0.0
     if j:
         o[:, j - 1] = 0.0
@@ -155,12 +155,18 @@ def test_local_shifts_exactly_the_indefinite_pivot_by_gershgorin(d: int, method:
 
 @pytest.mark.parametrize("d", [1, 2, 3])
 @pytest.mark.parametrize("method", ["thomas", "cyclic"])
-def test_local_leaves_definite_systems_alone(d: int, method: str) -> None:
+@pytest.mark.parametrize("size", [1.0, 1e-3])
+def test_local_leaves_definite_systems_alone(d: int, method: str, size: float) -> None:
+    """Definite systems (also of small entries, ``size`` 1e-3: definiteness is not
+    "entries above 1") are solved as without ``local`` and reported definite."""
     a, o, r = system(2, 6, d, seed=30 + d, coupling=0.3)
+    a, o = a * size, o * size
     x, ok = solve(a, o, r, method, local=True)
     x0, ok0 = solve(a, o, r, method, local=False)
     assert ok.all() and ok0.all()
     np.testing.assert_array_equal(x, x0)
+    ref = np.linalg.solve(dense(a[0], o[0]), r[0].reshape(-1))
+    np.testing.assert_allclose(x[0].reshape(-1), ref, rtol=0, atol=1e-11 * np.abs(ref).max())
 
 
 @pytest.mark.parametrize("d", [1, 2, 3])

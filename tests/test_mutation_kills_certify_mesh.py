@@ -304,15 +304,20 @@ def test_a_mesh_of_too_few_points_is_refused() -> None:
 
 
 class _Lobes:
-    """F(x, v) = |v| (1 + 0.5 cos 4 theta): cheap along the diagonals (0.5 |v|), dear
-    along the axes (1.5 |v|); its unit ball is not convex. Domain: a large box."""
+    """F(x, v) = |v| (1 + c(x) cos 4 theta), c = 0.5 for x_0 < 0.5 (cheap along the
+    diagonals, 0.5 |v|, dear along the axes, 1.5 |v|: a unit ball that is not convex),
+    c = 0 beyond (Euclidean). Domain: a large box. The zigzag must evaluate F at the
+    segments' midpoints, without input checks (the points are the solver's own)."""
 
     domain = Box((-10.0, -10.0), (10.0, 10.0))
+    cut = 0.5
 
-    @staticmethod
-    def F(x, v, check=True):
-        v = np.asarray(v, float)
-        return np.hypot(v[:, 0], v[:, 1]) * (1 + 0.5 * np.cos(4 * np.arctan2(v[:, 1], v[:, 0])))
+    def F(self, x, v, check=True):
+        assert check is False
+        x, v = np.asarray(x, float), np.asarray(v, float)
+        assert x.shape == v.shape
+        c = np.where(x[:, 0] < self.cut, 0.5, 0.0)
+        return np.hypot(v[:, 0], v[:, 1]) * (1 + c * np.cos(4 * np.arctan2(v[:, 1], v[:, 0])))
 
 
 class _Euclid:
@@ -320,31 +325,50 @@ class _Euclid:
 
     @staticmethod
     def F(x, v, check=True):
+        assert check is False
         return np.hypot(np.asarray(v)[:, 0], np.asarray(v)[:, 1])
 
 
 def test_zigzag_replaces_a_dear_segment_by_diagonal_teeth() -> None:
-    """(0,0) -> (1,0) along an axis costs 1.5; along the two diagonals (8 directions)
-    sqrt(2) * 0.5 = 0.71: the zigzag (0,0) (.25,.25) (.5,0) (.75,.25) (1,0) with 2 teeth;
-    a zero-length segment and a cheap diagonal segment are kept as they are."""
-    pts = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 0.0], [2.0, 1.0]])
+    """(0,0) -> (0.4,0) along an axis costs 1.5 |v| (midpoint where c = 0.5); along the two
+    diagonals (8 directions) sqrt(2) * 0.5 |v| = 0.71 |v|: the zigzag (0,0) (.1,.1)
+    (.2,0) (.3,.1) (.4,0) with 2 teeth. A zero-length segment, a segment whose midpoint
+    is Euclidean (x_0 >= 0.5: no cheaper combination) and a cheap diagonal segment are
+    kept as they are."""
+    pts = np.array([[0.0, 0.0], [0.4, 0.0], [0.4, 0.0], [1.4, 0.0], [2.0, 0.6],
+                    [1.0, 0.6], [0.0, 0.6], [-0.5, 0.1]])
     zig = _zigzag(_Lobes(), pts, 8)
-    want = [[0, 0], [0.25, 0.25], [0.5, 0], [0.75, 0.25], [1, 0], [1, 0], [2, 1]]
+    # (1.0, 0.6) -> (0.0, 0.6): midpoint x_0 = 0.5, Euclidean: kept; (0.0, 0.6) ->
+    # (-0.5, 0.1) is a diagonal: kept; (1.4, 0) -> (2, .6) and (2, .6) -> (1, .6): kept
+    want = [[0, 0], [0.1, 0.1], [0.2, 0], [0.3, 0.1], [0.4, 0], [0.4, 0], [1.4, 0], [2, 0.6],
+            [1.0, 0.6], [0.0, 0.6], [-0.5, 0.1]]
     np.testing.assert_allclose(zig, want, atol=1e-12)
     zig3 = _zigzag(_Lobes(), pts[:2], 8, teeth=3)
     assert zig3.shape == (7, 2)
-    np.testing.assert_allclose(zig3[1], [1 / 6, 1 / 6], atol=1e-12)
-    np.testing.assert_allclose(zig3[-1], [1, 0], atol=0)
-    length = float(np.sum(_Lobes.F(None, np.diff(zig3, axis=0))))
-    assert length == pytest.approx(math.sqrt(2) * 0.5, rel=1e-12)
+    np.testing.assert_allclose(zig3, [[0, 0], [0.4 / 6, 0.4 / 6], [0.4 / 3, 0],
+                                      [0.2, 0.4 / 6], [0.8 / 3, 0], [2 / 3 * 0.5, 0.4 / 6],
+                                      [0.4, 0]], atol=1e-12)
+    length = float(np.sum(_Lobes().F(zig3[:-1], np.diff(zig3, axis=0), check=False)))
+    assert length == pytest.approx(math.sqrt(2) * 0.5 * 0.4, rel=1e-12)
     assert _zigzag(_Euclid(), pts, 8) is None  # a norm: no cheaper combination
-    assert _zigzag(_Lobes(), np.array([[0.0, 0.0], [1.0, 1.0]]), 8) is None
+    assert _zigzag(_Lobes(), np.array([[0.0, 0.0], [0.3, 0.3]]), 8) is None
+    # downwards: teeth along the diagonals of the lower half, 225 degrees first (of two
+    # equally cheap pairs, the first sampled direction leads)
+    up = _zigzag(_Lobes(), np.array([[0.0, 0.0], [0.0, -0.4]]), 8)
+    np.testing.assert_allclose(up, [[0, 0], [-0.1, -0.1], [0, -0.2], [-0.1, -0.3], [0, -0.4]],
+                               atol=1e-12)
+    # with 4 directions no pair is cheaper than the axis itself (the axes are sampled)
+    assert _zigzag(_Lobes(), pts[:2], 4) is None
 
 
 def test_zigzag_is_projected_into_the_domain_and_keeps_the_ends() -> None:
     class Small(_Lobes):
         domain = Box((-1.0, -0.1), (1.0, 0.1))
+        cut = 1.0
 
     zig = _zigzag(Small(), np.array([[-0.5, 0.0], [0.5, 0.0]]), 8)
-    np.testing.assert_allclose(zig[1], [-0.25, 0.1], atol=1e-12)  # projected from 0.25
-    np.testing.assert_array_equal(zig[[0, -1]], [[-0.5, 0.0], [0.5, 0.0]])
+    np.testing.assert_allclose(zig, [[-0.5, 0], [-0.25, 0.1], [0, 0], [0.25, 0.1], [0.5, 0]],
+                               atol=1e-12)  # (-.25, .25) projected to (-.25, .1)
+    zig = _zigzag(Small(), np.array([[-1.5, 0.0], [0.5, 0.0]]), 8)
+    np.testing.assert_array_equal(zig[[0, -1]], [[-1.5, 0.0], [0.5, 0.0]])  # ends kept
+    np.testing.assert_allclose(zig[1], [-1.0, 0.1], atol=1e-12)
