@@ -15,6 +15,7 @@ from __future__ import annotations
 import os
 import time
 from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -27,11 +28,12 @@ from finsler.spec import MetricSpec
 from solvers.backends import backend_for
 from solvers.inputs import as_metric, check_pairs, check_segments
 from solvers.pairs import check_initial_paths, resolve_method, solve_pairs
-from solvers.result import GeodesicResult
+from solvers.result import GeodesicResult, SolverError
 from solvers.seeding import SeedPlan
-from solvers.tolerance import TOL_MAX_SEGMENTS, solve_to_tol
+from solvers.tolerance import TOL_MAX_SEGMENTS, check_tol, solve_to_tol
 
-__all__ = ["NEWTON_POOL_MIN", "NEWTON_ROWS", "solve_batch"]
+__all__ = ["NEWTON_POOL_MIN", "NEWTON_ROWS", "BatchJob", "check_batch", "run_batch",
+           "solve_batch"]
 
 
 def _metric_spec(m: Metric) -> MetricSpec:
@@ -53,8 +55,8 @@ def _solve_chunk(m: Metric, ks: Sequence[int], pairs: np.ndarray, n: int, plan: 
                  minmax: bool, inits: np.ndarray | None, global_seeds: bool,
                  tol: float | None, method: str, device: Any
                  ) -> list[tuple[int, GeodesicResult]]:
-    """The pairs of a chunk: one batched solve (each pair refined on its own with
-    ``tol``)."""
+    """The pairs of a chunk (checked by :func:`solve_batch`): one batched solve (each pair
+    refined on its own with ``tol``)."""
     if tol is not None:
         return [(k, solve_to_tol(m, p[0], p[1], n, tol, TOL_MAX_SEGMENTS,
                                  time.perf_counter(), seeds=plan,
@@ -153,6 +155,8 @@ def solve_batch(
     tol: float | None = None,
     method: str = "auto",
     device: Any = None,
+    strict: bool = False,
+    names: tuple[str, str] = ("pairs[:, 0] (starts)", "pairs[:, 1] (goals)"),
 ) -> list[GeodesicResult]:
     """Solve every pair of ``pairs`` ``(K, 2, dim)``; results in the order of the pairs.
 
@@ -188,11 +192,87 @@ def solve_batch(
     chunks of about :data:`NEWTON_ROWS` (pair, seed) problems, every problem of a chunk in
     one batch; the default ``workers`` is then 1 below :data:`NEWTON_POOL_MIN` pairs (the
     batch is vectorised; processes pay off only for many chunks), else the CPU count.
-    """
-    from tqdm.auto import tqdm
 
+    ``strict=True`` raises :class:`SolverError` (the list of results attached) if a pair
+    did not converge (min-max included), after every pair was solved and saved; the default
+    (``False``, as before) returns every result with its status. ``names``: how error
+    messages name the starts and goals (the command line names ``--start`` / ``--goal``).
+
+    The input is checked here, once (:func:`_check_batch`); the chunks trust it.
+    """
+    job = check_batch(metric, pairs, segments, seeds=seeds, minmax=minmax, workers=workers,
+                      ray_address=ray_address, chunk_size=chunk_size,
+                      initial_paths=initial_paths, global_seeds=global_seeds, tol=tol,
+                      method=method, device=device, names=names)
+    return run_batch(job, progress=progress, checkpoint_dir=checkpoint_dir, strict=strict)
+
+
+def run_batch(job: BatchJob, *, progress: bool = True,
+              checkpoint_dir: str | os.PathLike[str] | None = None,
+              strict: bool = False) -> list[GeodesicResult]:
+    """:func:`solve_batch` of a checked :class:`BatchJob` (:func:`check_batch`): nothing
+    is checked again. A caller that must do something between the checks and the first
+    solve (the command line checks its ``--out`` path there) calls the two steps."""
+    if not isinstance(job, BatchJob):
+        raise InputError(f"run_batch needs a BatchJob (check_batch), got {type(job).__name__}")
+    store = (_BatchStore(checkpoint_dir, job.m, job.n, job.plan, job.minmax,
+                         job.global_seeds, job.tol) if checkpoint_dir else None)
+    results = _solve_checked(job, store, progress)
+    if strict:
+        bad = [k for k, r in enumerate(results)
+               if not (r.converged and (r.minmax is None or r.minmax.converged))]
+        if bad:
+            raise SolverError(f"{job.m.name}: {len(bad)} of {len(results)} pairs did not "
+                              f"converge (first: pair {bad[0]}, status "
+                              f"{results[bad[0]].status.label})", results)
+    return results
+
+
+@dataclass(frozen=True)
+class BatchJob:
+    """A batch's checked input (:func:`check_batch`): what :func:`run_batch` and the
+    chunks take without checking again. ``pairs`` is read-only."""
+
+    m: Metric
+    pairs: np.ndarray
+    n: int
+    method: str
+    plan: SeedPlan
+    workers: int
+    inits: np.ndarray | None
+    global_seeds: bool
+    tol: float | None
+    minmax: bool
+    device: Any
+    ray_address: str | None = None
+    chunk_size: int | None = None
+
+    def inits_of(self, ks: Sequence[int] | int) -> np.ndarray | None:
+        return None if self.inits is None else self.inits[ks]
+
+    def args(self, spec: MetricSpec, ks: list[int]) -> tuple:
+        """The arguments of :func:`_chunk_worker` for the pairs ``ks``."""
+        return (spec, ks, self.pairs[ks], self.n, self.plan, self.minmax, self.inits_of(ks),
+                self.global_seeds, self.tol, self.method, self.device)
+
+
+def _positive_int(value: Any, name: str) -> None:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
+        raise InputError(f"{name} must be a positive integer, got {value!r}")
+
+
+def check_batch(metric: Metric | str, pairs: Any, segments: int | None = None, *,
+                seeds: SeedPlan | None = None, minmax: bool = False,
+                workers: int | None = None, ray_address: str | None = None,
+                chunk_size: int | None = None, initial_paths: Any = None,
+                global_seeds: Any = True, tol: float | None = None, method: str = "auto",
+                device: Any = None,
+                names: tuple[str, str] = ("pairs[:, 0] (starts)", "pairs[:, 1] (goals)")
+                ) -> BatchJob:
+    """Step 1 of :func:`solve_batch` (same arguments): every input checked once, before any
+    work (and, with Ray, before any file is made); :func:`run_batch` solves the job."""
     m = as_metric(metric)
-    arr = check_pairs(m, pairs)
+    arr = check_pairs(m, pairs, names)
     n = check_segments(m, segments)
     how = resolve_method(m, method)
     if device is not None:
@@ -204,12 +284,9 @@ def solve_batch(
         workers = os.cpu_count() or 1
         if how == "newton" and arr.shape[0] < NEWTON_POOL_MIN:
             workers = 1
-    if isinstance(workers, bool) or not isinstance(workers, (int, np.integer)) or workers < 1:
-        raise InputError(f"workers must be a positive integer, got {workers!r}")
-    if chunk_size is not None and (isinstance(chunk_size, bool)
-                                   or not isinstance(chunk_size, (int, np.integer))
-                                   or chunk_size < 1):
-        raise InputError(f"chunk_size must be a positive integer, got {chunk_size!r}")
+    _positive_int(workers, "workers")
+    if chunk_size is not None:
+        _positive_int(chunk_size, "chunk_size")
     if ray_address is not None:
         from finsler.cluster import probe_address, require_ray
 
@@ -220,59 +297,69 @@ def solve_batch(
     inits = check_initial_paths(m, arr, n, initial_paths)
     if not global_seeds and inits is None:
         raise InputError("global_seeds=False needs initial_paths (one path per pair)")
-    if tol is not None and (isinstance(tol, bool) or not isinstance(tol, (int, float))
-                            or not (np.isfinite(tol) and 0 < tol < 1)):
-        raise InputError(f"tol must be a relative tolerance in (0, 1), got {tol!r}")
-    store = (_BatchStore(checkpoint_dir, m, n, plan, minmax, bool(global_seeds), tol)
-             if checkpoint_dir else None)
-    results: list[GeodesicResult | None] = [None] * arr.shape[0]
+    tol_ = None if tol is None else check_tol(m, n, tol, TOL_MAX_SEGMENTS)[0]
+    arr = arr.copy()  # the caller's array stays the caller's
+    arr.flags.writeable = False  # checked: nobody changes it before the solve
+    return BatchJob(m, arr, n, how, plan, int(workers), inits, bool(global_seeds), tol_,
+                    bool(minmax), device, ray_address,
+                    None if chunk_size is None else int(chunk_size))
 
-    def init_of(k: int) -> np.ndarray | None:
-        return None if inits is None else inits[k]
 
-    if store is not None:
-        for k in range(arr.shape[0]):
-            results[k] = store.load(k, arr[k], init_of(k))
-    todo = [k for k in range(arr.shape[0]) if results[k] is None]
+def _chunks(job: BatchJob, todo: list[int]) -> list[list[int]]:
+    """Step 2: the pairs still to solve cut into chunks (one batched Newton solve each, of
+    about :data:`NEWTON_ROWS` problems; several per worker so finished work is kept)."""
     size = 1
-    if how == "newton":
-        size = _chunk_pairs(plan, bool(global_seeds))
-        if workers > 1:  # several chunks per worker: balanced, and finished work is kept
-            size = max(1, min(size, -(-len(todo) // (4 * workers))))
-    chunks = [todo[i:i + size] for i in range(0, len(todo), size)]
-    workers = int(min(workers, max(len(chunks), 1)))
+    if job.method == "newton":
+        size = _chunk_pairs(job.plan, job.global_seeds)
+        if job.workers > 1:
+            size = max(1, min(size, -(-len(todo) // (4 * job.workers))))
+    return [todo[i:i + size] for i in range(0, len(todo), size)]
+
+
+def _solve_checked(job: BatchJob, store: _BatchStore | None, progress: bool
+                   ) -> list[GeodesicResult]:
+    """Step 3: the pairs saved by an earlier run loaded, the others solved in this process,
+    in worker processes or as Ray tasks, every finished chunk saved at once."""
+    from tqdm.auto import tqdm
+
+    m, arr = job.m, job.pairs
+    K = arr.shape[0]
+    results: list[GeodesicResult | None] = [None] * K
+    if store is not None:
+        for k in range(K):
+            results[k] = store.load(k, arr[k], job.inits_of(k))
+    todo = [k for k in range(K) if results[k] is None]
+    chunks = _chunks(job, todo)
+    workers = int(min(job.workers, max(len(chunks), 1)))
     spec = _metric_spec(m)
-
-    def job(ks: list[int]) -> tuple:
-        return (spec, ks, arr[ks], n, plan, minmax, None if inits is None else inits[ks],
-                bool(global_seeds), tol, how, device)
-
-    bar = tqdm(total=arr.shape[0], desc=f"solve {m.name}", disable=not progress, unit="pair",
-               initial=arr.shape[0] - len(todo))
+    bar = tqdm(total=K, desc=f"solve {m.name}", disable=not progress, unit="pair",
+               initial=K - len(todo))
 
     def take(done: list[tuple[int, GeodesicResult]]) -> None:
         for k, res in done:
             results[k] = res
             if store is not None:
-                store.save(k, arr[k], res, init_of(k))
+                store.save(k, arr[k], res, job.inits_of(k))
         bar.update(len(done))
 
     try:
-        if ray_address is not None and todo:
+        if job.ray_address is not None and todo:
             from solvers.distributed import solve_chunks_ray
 
             local_cpus = int(min(workers, len(todo)))
-            for done in solve_chunks_ray(ray_address, _chunk_worker, job, todo,
-                                         chunk_size, num_cpus=local_cpus):
+            for done in solve_chunks_ray(job.ray_address, _chunk_worker,
+                                         lambda ks: job.args(spec, ks), todo,
+                                         job.chunk_size, num_cpus=local_cpus):
                 take(done)
         elif workers == 1 or len(chunks) <= 1:
             for ks in chunks:
-                take(_solve_chunk(m, ks, arr[ks], n, plan, minmax,
-                                  None if inits is None else inits[ks], bool(global_seeds),
-                                  tol, how, device))
+                take(_solve_chunk(m, ks, arr[ks], job.n, job.plan, job.minmax,
+                                  job.inits_of(ks), job.global_seeds, job.tol, job.method,
+                                  job.device))
         else:
             with ProcessPool(workers) as pool:
-                for done in pool.map_unordered(_chunk_worker, [job(ks) for ks in chunks]):
+                for done in pool.map_unordered(_chunk_worker,
+                                               [job.args(spec, ks) for ks in chunks]):
                     take(done)
     finally:
         bar.close()

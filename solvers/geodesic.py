@@ -24,12 +24,12 @@ import numpy as np
 from finsler.errors import InputError
 from finsler.metric import Metric
 from solvers.batch_jobs import solve_batch
-from solvers.inputs import as_metric, check_pairs, check_segments
+from solvers.inputs import as_metric, check_pairs, check_point, check_segments
 from solvers.pairs import check_initial_paths, refine_minmax, solve_pair
 from solvers.pairs import resolve_method as resolve_method
 from solvers.result import GeodesicResult, MidpointResult, SolverError
 from solvers.seeding import SeedPlan
-from solvers.tolerance import TOL_MAX_SEGMENTS, solve_to_tol
+from solvers.tolerance import TOL_MAX_SEGMENTS, check_tol, solve_to_tol
 from solvers.tolerance import richardson as richardson
 
 __all__ = [
@@ -88,14 +88,18 @@ def solve_geodesic(
     torch device for the Newton method (``"cuda"``; default numpy on the CPU).
     """
     t0 = time.perf_counter()
+    # the input is checked here, once; what solves below trusts it
     m = as_metric(metric)
     n = check_segments(m, segments)
     how = resolve_method(m, method)
+    s = check_point(m, start, "start")
+    g = check_point(m, goal, "goal")
     if tol is not None:
-        return solve_to_tol(m, start, goal, n, tol, max_segments, t0, seeds=seeds,
+        tol_, max_n = check_tol(m, n, tol, max_segments)
+        return solve_to_tol(m, s, g, n, tol_, max_n, t0, seeds=seeds,
                             initial=initial, global_seeds=global_seeds, minmax=minmax,
                             strict=strict, method=how, device=device)
-    res = solve_pair(m, start, goal, n, seeds=seeds, initial=initial,
+    res = solve_pair(m, s, g, n, seeds=seeds, initial=initial,
                      global_seeds=global_seeds, minmax=minmax, method=how, device=device)
     res.wall_time = time.perf_counter() - t0
     if strict and not (res.converged and (res.minmax is None or res.minmax.converged)):
@@ -118,8 +122,9 @@ def midpoint(
     """Midpoint ``p_{n/2}`` of the discrete geodesic (``n`` even; default ``2**D``); keyword
     arguments go to :func:`solve_geodesic`."""
     m = as_metric(metric)
-    n = check_segments(m, segments)
-    if n % 2:
+    n = m.task.segments if segments is None else segments  # checked by solve_geodesic
+    if isinstance(n, (int, np.integer)) and not isinstance(n, bool) and n % 2:
         raise InputError(f"midpoint needs an even number of segments, got {n}")
-    res = solve_geodesic(m, start, goal, n, **kwargs)
-    return MidpointResult(point=res.points[n // 2].copy(), geodesic=res)
+    res = solve_geodesic(m, start, goal, segments, **kwargs)
+    # the middle node of the returned path (with ``tol`` its size may be a doubling of n)
+    return MidpointResult(point=res.points[res.segments // 2].copy(), geodesic=res)

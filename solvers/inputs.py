@@ -1,4 +1,8 @@
-"""Input checks shared by the solvers (the lowest solver module: imports only finsler)."""
+"""Input checks shared by the solvers (the lowest solver module: imports only finsler).
+
+The public functions (``solve_geodesic``, ``solve_batch``, ``distance``, ``exp_map``,
+``log_map``, ``certify``, ``refine_minmax``) check their input here once; what they call
+below takes the checked objects and does not check again."""
 
 from __future__ import annotations
 
@@ -68,14 +72,18 @@ def check_point(metric: Metric, x: Any, name: str) -> np.ndarray:
     return metric.domain.check(arr, name)[0].astype(np.float64)
 
 
-def check_pairs(metric: Metric, pairs: Any) -> np.ndarray:
-    """Validate start/goal pairs ``(K, 2, dim)``: shape, finiteness, domain membership."""
+def check_pairs(metric: Metric, pairs: Any,
+                names: tuple[str, str] = ("pairs[:, 0] (starts)", "pairs[:, 1] (goals)")
+                ) -> np.ndarray:
+    """Validate start/goal pairs ``(K, 2, dim)``: shape, finiteness, domain membership;
+    ``names``: how error messages name the starts and the goals (a command line names its
+    options)."""
     arr = np.asarray(pairs, dtype=np.float64)
     if arr.ndim != 3 or arr.shape[1] != 2 or arr.shape[2] != metric.dim or arr.shape[0] < 1:
         raise InputError(
             f"pairs must have shape (K, 2, {metric.dim}) with K >= 1 for metric "
             f"{metric.name!r}, got {arr.shape}"
         )
-    metric.domain.check(arr[:, 0], "pairs[:, 0] (starts)")
-    metric.domain.check(arr[:, 1], "pairs[:, 1] (goals)")
+    metric.domain.check(arr[:, 0], names[0])
+    metric.domain.check(arr[:, 1], names[1])
     return arr

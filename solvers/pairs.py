@@ -11,6 +11,11 @@ one long segment, which the energy penalises). Every result's figures (length by
 quadrature with its error, largest segment cost, residual) are computed here, and
 :func:`refine_minmax` minimises the largest segment cost: the exact ceiling of the
 paper's task. :func:`solve_pair` is one pair's solve without ``tol`` or ``strict``.
+
+Input is checked once, at the public boundary (:func:`~solvers.geodesic.solve_geodesic`,
+:func:`~solvers.geodesic.solve_batch`, :func:`refine_minmax`); the functions here take the
+checked objects (a :class:`~finsler.Metric`, float64 points in the domain, a checked size)
+and do not check them again.
 """
 
 from __future__ import annotations
@@ -25,7 +30,7 @@ import numpy as np
 from finsler.errors import InputError
 from finsler.metric import Metric
 from solvers.batched import BatchOptions, BatchSolution, covers, solve_pairs_batched
-from solvers.inputs import SHORT_PAIR, as_metric, check_point, domain_scale
+from solvers.inputs import SHORT_PAIR, as_metric, domain_scale
 from solvers.nonsmooth import optimality_residual
 from solvers.result import GeodesicResult, MinMaxResult, Status
 from solvers.seeding import (
@@ -350,7 +355,7 @@ def solve_pairs(m: Metric, pairs: np.ndarray, n: int, plan: SeedPlan,
     if minmax:
         for r in res:
             if r.minmax is None:
-                r.minmax = refine_minmax(m, r)
+                r.minmax = _refine_minmax(m, r)
     return res
 
 
@@ -491,16 +496,15 @@ def _solve_ipopt(m: Metric, s: np.ndarray, g: np.ndarray, n: int, plan: SeedPlan
     )
 
 
-def solve_pair(m: Metric, start: Any, goal: Any, n: int, *, seeds: SeedPlan | None = None,
-               initial: Sequence[np.ndarray] = (), global_seeds: bool = True,
-               minmax: bool = False, method: str = "newton", device: Any = None
-               ) -> GeodesicResult:
+def solve_pair(m: Metric, s: np.ndarray, g: np.ndarray, n: int, *,
+               seeds: SeedPlan | None = None, initial: Sequence[np.ndarray] = (),
+               global_seeds: bool = True, minmax: bool = False, method: str = "newton",
+               device: Any = None) -> GeodesicResult:
     """One pair as :func:`~solvers.geodesic.solve_geodesic` solves it without ``tol`` and
-    ``strict`` (``m`` a metric, ``n`` checked, ``method`` resolved by
-    :func:`resolve_method`): the points checked, the seed plan (default
-    :meth:`SeedPlan.default`) and the ``initial`` paths solved."""
-    s = check_point(m, start, "start")
-    g = check_point(m, goal, "goal")
+    ``strict``, from checked input (``m`` a metric, ``s`` / ``g`` float64 points in its
+    domain, :func:`solvers.inputs.check_point`; ``n`` checked, ``method`` resolved by
+    :func:`resolve_method`): the seed plan (default :meth:`SeedPlan.default`) and the
+    ``initial`` paths solved."""
     plan = seeds if seeds is not None else SeedPlan.default(m, method)
     if not isinstance(plan, SeedPlan):
         raise InputError(f"seeds must be a SeedPlan, got {type(plan).__name__}")
@@ -519,8 +523,12 @@ def refine_minmax(metric: Metric | str, result: GeodesicResult) -> MinMaxResult:
     The returned points are the refined ones if they lie in the domain and lower the max,
     else the starting points (the status then tells why); costs are recomputed in float64.
     """
+    return _refine_minmax(as_metric(metric), result)
+
+
+def _refine_minmax(m: Metric, result: GeodesicResult) -> MinMaxResult:
+    """:func:`refine_minmax` with ``m`` a metric (what the solvers call)."""
     t0 = time.perf_counter()
-    m = as_metric(metric)
     if result.status in (Status.TRIVIAL, Status.SHORT):
         return MinMaxResult(result.points, result.segment_costs, result.max_segment_cost,
                             result.status, 0, 0.0, False)

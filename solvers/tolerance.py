@@ -17,12 +17,12 @@ import numpy as np
 
 from finsler.errors import InputError
 from finsler.metric import Metric
-from solvers.inputs import check_point, check_segments
-from solvers.pairs import refine_minmax, solve_pair, solve_pairs
+from solvers.inputs import check_segments
+from solvers.pairs import _refine_minmax, solve_pair, solve_pairs
 from solvers.result import GeodesicResult, SolverError, Status
 from solvers.seeding import SeedPlan, resample
 
-__all__ = ["EXPECTED_ORDER", "TOL_MAX_SEGMENTS", "richardson", "solve_to_tol"]
+__all__ = ["EXPECTED_ORDER", "TOL_MAX_SEGMENTS", "check_tol", "richardson", "solve_to_tol"]
 
 #: Largest size :func:`~solvers.geodesic.solve_geodesic` doubles to for ``tol``.
 TOL_MAX_SEGMENTS = 16384
@@ -80,24 +80,28 @@ def _tol_estimate(levels: list[dict[str, Any]], nonconvex: bool) -> dict[str, An
     return est
 
 
-def solve_to_tol(m: Metric, start: Any, goal: Any, n: int, tol: Any, max_segments: Any,
-                 t0: float, *, minmax: bool, strict: bool, method: str, device: Any,
-                 **kw: Any) -> GeodesicResult:
-    """``solve_geodesic(..., tol=tol)`` with ``m`` a metric, ``n`` checked and ``method``
-    resolved: the pair solved at ``n`` (``kw``: ``seeds``, ``initial``, ``global_seeds``),
-    then at doubled sizes, each warm started from the last, until :func:`_tol_estimate`
-    is within ``tol`` or ``max_segments`` is reached; ``t0``: the caller's start time
-    (for ``wall_time``)."""
-    if isinstance(tol, bool) or not isinstance(tol, (int, float)) or not (
+def check_tol(m: Metric, n: int, tol: Any, max_segments: Any) -> tuple[float, int]:
+    """``tol`` (a relative tolerance in ``(0, 1)``) and ``max_segments`` (a size ``>= n``)
+    checked, as ``(float, int)``: what :func:`solve_to_tol` takes."""
+    if isinstance(tol, bool) or not isinstance(tol, (int, float, np.floating)) or not (
             np.isfinite(tol) and 0 < tol < 1):
         raise InputError(f"tol must be a relative tolerance in (0, 1), got {tol!r}")
     if isinstance(max_segments, bool) or not isinstance(max_segments, (int, np.integer)) \
             or max_segments < n:
         raise InputError(f"max_segments must be an integer >= segments ({n}), got "
                          f"{max_segments!r}")
-    check_segments(m, int(max_segments))
-    s = check_point(m, start, "start")
-    g = check_point(m, goal, "goal")
+    return float(tol), check_segments(m, int(max_segments))
+
+
+def solve_to_tol(m: Metric, s: np.ndarray, g: np.ndarray, n: int, tol: float,
+                 max_segments: int, t0: float, *, minmax: bool, strict: bool, method: str,
+                 device: Any, **kw: Any) -> GeodesicResult:
+    """``solve_geodesic(..., tol=tol)`` from checked input (``m`` a metric, ``s`` / ``g``
+    points in its domain, ``n`` checked, ``tol`` / ``max_segments`` by :func:`check_tol`,
+    ``method`` resolved): the pair solved at ``n`` (``kw``: ``seeds``, ``initial``,
+    ``global_seeds``), then at doubled sizes, each warm started from the last, until
+    :func:`_tol_estimate` is within ``tol`` or ``max_segments`` is reached; ``t0``: the
+    caller's start time (for ``wall_time``)."""
     res = first = solve_pair(m, s, g, n, method=method, device=device, **kw)
     iterations = first.iterations
     levels: list[dict[str, Any]] = []
@@ -134,7 +138,7 @@ def solve_to_tol(m: Metric, start: Any, goal: Any, n: int, tol: Any, max_segment
     res.tol_reached = bool(done)
     res.tol_levels = levels
     if minmax:
-        res.minmax = refine_minmax(m, res)
+        res.minmax = _refine_minmax(m, res)
     res.wall_time = time.perf_counter() - t0
     if strict and not (res.converged and res.tol_reached
                        and (res.minmax is None or res.minmax.converged)):

@@ -31,6 +31,7 @@ which patched that, are accepted with a deprecation warning and do nothing.)
 
 from __future__ import annotations
 
+import dataclasses
 import shutil
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any
@@ -177,6 +178,9 @@ def solve_command(
     across --workers and --ray)."""
     import numpy as np
 
+    from solvers.batch_jobs import check_batch, run_batch
+    from solvers.pairs import check_initial_paths
+
     m = metric_from_options(metric, metric_param, metric_module)
     if pairs is not None and (start is not None or goal is not None):
         fail("give either --start/--goal or --pairs, not both")
@@ -206,17 +210,21 @@ def solve_command(
         g = parse_point(goal, m.dim, "--goal")  # type: ignore[arg-type]
         arr = np.stack([s, g])[None]
     try:
-        if pairs is None:
-            m.domain.check(arr[0, 0], "--start")
-            m.domain.check(arr[0, 1], "--goal")
-        n = solvers.check_segments(m, segments)
         if method_module:
             from learn.registry import import_method_modules
 
             import_method_modules(method_module)
+        # the solver's own check of the input, once (naming the options), before --out
+        # and before the policy is loaded; run_batch below trusts it
+        job = check_batch(m, arr, segments, minmax=True, workers=workers, ray_address=ray,
+                          chunk_size=chunk_size, tol=tol, method=method, device=device,
+                          names=("--start", "--goal") if pairs is None else
+                          ("--pairs starts", "--pairs goals"))
+        n = job.n
         inits, warm = _warm_start(warm_start, m, arr, warm_search)
         if inits is not None:
             typer.echo(WARM_START_DEPRECATED, err=True)
+            job = dataclasses.replace(job, inits=check_initial_paths(m, job.pairs, n, inits))
         if out is not None:
             # checked (its folder created) after every other input and before any solve:
             # a bad --out must not cost a batch of solves, bad input must not leave folders
@@ -228,11 +236,8 @@ def solve_command(
                                               "exists and is not a folder")
         # With --out, finished pairs are kept beside it (parts) until the JSON is written,
         # so an interrupted run resumes where it stopped when the same command is run again.
-        results = solvers.solve_batch(
-            m, arr, n, minmax=True, workers=workers, progress=progress and pairs is not None,
-            checkpoint_dir=parts, ray_address=ray, chunk_size=chunk_size,
-            initial_paths=inits, global_seeds=True, tol=tol, method=method, device=device,
-        )
+        results = run_batch(job, progress=progress and pairs is not None,
+                            checkpoint_dir=parts)
     except InputError as err:
         fail(str(err))
     except PoolInterrupted as stop:
