@@ -220,9 +220,10 @@ def _params_text(metric: Metric) -> str:
 _LABELS = {"searched": "learned + route search"}
 
 
-def _markdown(doc: dict[str, Any], figures: list[str], metric: Metric) -> str:
+def _md_summary(doc: dict[str, Any], metric: Metric) -> list[str]:
+    """The title, the run's facts, the success rates and the length ratios."""
     sr = doc["success_rate"]
-    lines = [
+    lines: list[str] = [
         f"# Learned vs exact geodesics: `{doc['metric']}`",
         "",
         f"- policy: {doc['policy_note']}",
@@ -267,6 +268,12 @@ def _markdown(doc: dict[str, Any], figures: list[str], metric: Metric) -> str:
         "realises (Proposition 1 fails there).",
         "",
     ]
+    return lines
+
+
+def _md_search(doc: dict[str, Any]) -> list[str]:
+    """What the route search did (if it ran)."""
+    lines: list[str] = []
     if "search" in doc:
         sc = doc["search"]
         lines += [
@@ -287,6 +294,12 @@ def _markdown(doc: dict[str, Any], figures: list[str], metric: Metric) -> str:
             "policy succeeds.",
             "",
         ]
+    return lines
+
+
+def _md_midpoint(doc: dict[str, Any], metric: Metric) -> list[str]:
+    """The first-level midpoint errors (if measured), with continuum distances if computed."""
+    lines: list[str] = []
     me = doc.get("midpoint_error")
     if me is not None:
         fl = doc.get("midpoint_error_exact_floor")
@@ -324,6 +337,12 @@ def _markdown(doc: dict[str, Any], figures: list[str], metric: Metric) -> str:
                               "continuum distance is that of the convexified metric and "
                               "discrete lengths depend on the resolution.")
         lines.append("")
+    return lines
+
+
+def _md_certified(doc: dict[str, Any]) -> list[str]:
+    """The certified intervals (if computed)."""
+    lines: list[str] = []
     cert = doc.get("certified")
     if cert:
         done = [r for r in cert["pairs"] if "error" not in r]
@@ -356,6 +375,12 @@ def _markdown(doc: dict[str, Any], figures: list[str], metric: Metric) -> str:
             lines += ["", f"Convexity: {done[0]['convexity']} (where F(x, .) is not convex "
                       "the bound holds for the distance, that of the convexified metric).",
                       ""]
+    return lines
+
+
+def _md_finsler_and_timing(doc: dict[str, Any]) -> list[str]:
+    """The share of non-convex path points, the time per path and the exact solver's statuses."""
+    lines: list[str] = []
     nc = doc["nonconvex_point_fraction"]
     lines += [
         "## Where the metric is Finsler",
@@ -392,6 +417,12 @@ def _markdown(doc: dict[str, Any], figures: list[str], metric: Metric) -> str:
         "## Figures",
         "",
     ]
+    return lines
+
+
+def _md_figures(doc: dict[str, Any], figures: list[str]) -> list[str]:
+    """The figures with their captions (and the time to a success rate)."""
+    lines: list[str] = []
     captions = {
         "learning_curve.png": "Learning curve (success rate on "
         + CURVE_SETS[doc.get("learning_curve_pairs", "validation")] + ", from "
@@ -426,7 +457,14 @@ def _markdown(doc: dict[str, Any], figures: list[str], metric: Metric) -> str:
                   + "; ".join(reached) + ".", ""]
     for f in figures:
         lines += [f"![{f}]({f})", "", captions.get(f, ""), ""]
-    lines += ["All numbers are also in `report.json`.", ""]
+    return lines
+
+
+def _markdown(doc: dict[str, Any], figures: list[str], metric: Metric) -> str:
+    """``report.md``: one section per step, in the order a reader meets them."""
+    lines = [*_md_summary(doc, metric), *_md_search(doc), *_md_midpoint(doc, metric),
+             *_md_certified(doc), *_md_finsler_and_timing(doc), *_md_figures(doc, figures),
+             "All numbers are also in `report.json`.", ""]
     return "\n".join(lines)
 
 
