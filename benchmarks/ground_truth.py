@@ -20,29 +20,43 @@ The multistart is the expensive part: its energies are cached in
 parameters, the seed, K, N and the multistart's settings), written after every chunk of
 pairs, so an interrupted run resumes and a rerun only redoes the default.
 
+Against finslerax (``--finslerax-python``, issue 45's Matsumoto bar): for the metrics
+finslerax's worker knows (``matsumoto``, ``randers``; ``benchmarks/peer_workers.py``, its
+venv as ``benchmarks/peers.py``'s docstring says), finslerax 1.1's Gauss-Newton batched
+with ``jax.vmap`` over the same pairs at the same size in the same run, one thread,
+compiled first (compile time reported apart), its energies (the project's ``F``) against
+the same best known; the default's time is then the median of ``--repeats`` runs, as is
+finslerax's.
+
 Usage::
 
     python benchmarks/ground_truth.py [--metrics carlike,panda-pole] [--pairs 100]
         [--seed 20261201] [--best-starts 20] [--chunk 5]
+        [--finslerax-python PEERS/finslerax/bin/python] [--repeats 3]
 
 Writes ``benchmarks/results/ground_truth-DATE.md`` (``results_file.py``).
 """
 
 from __future__ import annotations
 
-import argparse
-import hashlib
-import json
-import time
-from pathlib import Path
+import os
 
-import numpy as np
-from results_file import RESULTS, ResultsFile, markdown_table
+for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_v, "1")  # one thread, before numpy loads its BLAS
 
-import finsler
-from finsler.spec import MetricSpec
-from solvers import SeedPlan, solve_batch
-from solvers.seeding import seed_family
+import argparse  # noqa: E402
+import hashlib  # noqa: E402
+import json  # noqa: E402
+import time  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import numpy as np  # noqa: E402
+from results_file import RESULTS, ResultsFile, markdown_table  # noqa: E402
+
+import finsler  # noqa: E402
+from finsler.spec import MetricSpec  # noqa: E402
+from solvers import SeedPlan, solve_batch  # noqa: E402
+from solvers.seeding import seed_family  # noqa: E402
 
 CACHE = RESULTS / "ground_truth_cache"
 TIGHT, LOOSE = 1e-4, 1e-2
@@ -106,20 +120,67 @@ def best_known(metric: finsler.Metric, pairs: np.ndarray, n: int, starts: int, s
     return {k: np.asarray(v) for k, v in done.items()}
 
 
-def run_metric(name: str, k: int, seed: int, starts: int, chunk: int) -> dict[str, object]:
+#: The metrics finslerax's worker (``peer_workers.py``) knows, and their parameters there.
+FINSLERAX = {"matsumoto": lambda m: {"height": m.height},
+             "randers": lambda m: {"wind": [m.wind_x, m.wind_y]}}
+
+
+def finslerax_energies(m: finsler.Metric, pairs: np.ndarray, n: int, python: str | None,
+                       repeats: int) -> dict[str, object]:
+    """finslerax's Gauss-Newton under ``jax.vmap`` over ``pairs`` (one thread, compiled
+    first): ``{"energy", "wall", "cpu", "setup", "note"}`` (times per pair; energies with
+    the project's ``F``, infinite where a path is not finite or leaves the domain), or
+    ``{"skipped": reason}``."""
+    from peers import run_peer
+
+    check = np.stack([pairs[:8, 0], np.random.default_rng(1).normal(size=(min(8, len(pairs)),
+                                                                         m.dim))], 1)
+    job = {"metric": m.name, "task": "throughput", "pairs": pairs.tolist(), "segments": n,
+           "check": check.tolist(), "repeats": repeats, "params": FINSLERAX[m.name](m)}
+    fx = run_peer("finslerax", python, job)
+    if "skipped" in fx:
+        return fx
+    e = np.full(len(pairs), np.inf)
+    if fx.get("paths") is not None:
+        for k, p in enumerate(np.asarray(fx["paths"], dtype=np.float64)):
+            if (np.all(np.isfinite(p)) and np.allclose(p[[0, -1]], pairs[k], atol=1e-9)
+                    and np.all(m.domain.contains(p, tol=1e-9))):
+                e[k] = float(np.sum(m.cost(p[:-1], p[1:], check=False) ** 2))
+    truth = m.F(check[:, 0], check[:, 1])
+    gap = float(np.max(np.abs(np.asarray(fx["check"]) - truth) / truth))
+    k = len(pairs)
+    return {"energy": e, "wall": fx["seconds"] / k, "cpu": fx["cpu"] / k,
+            "setup": fx["setup"], "note": f"finslerax {fx['version']} (its F equals the "
+            f"project's to {gap:.1e})" + (f"; error: {fx['error']}" if fx.get("error") else "")}
+
+
+def run_metric(name: str, k: int, seed: int, starts: int, chunk: int, repeats: int = 1,
+               finslerax: str | None = None) -> dict[str, object]:
     m = finsler.get_metric(name)
     n = 2 ** m.task.depth
     pairs = finsler.sample_pairs(m, k, seed)
     print(f"{name}: {k} pairs, {n} segments", flush=True)
     best = best_known(m, pairs, n, starts, seed, chunk)
     solve_batch(m, pairs[:1], segments=n, workers=1, progress=False)  # builds, not timed
-    t0, c0 = time.perf_counter(), time.process_time()
-    rs = solve_batch(m, pairs, segments=n, workers=1, progress=False)
-    wall, cpu = (time.perf_counter() - t0) / k, (time.process_time() - c0) / k
+    times = []
+    for _ in range(repeats):
+        t0, c0 = time.perf_counter(), time.process_time()
+        rs = solve_batch(m, pairs, segments=n, workers=1, progress=False)
+        times.append(((time.perf_counter() - t0) / k, (time.process_time() - c0) / k))
+    wall, cpu = (float(np.median([t[i] for t in times])) for i in (0, 1))
     # energies as returned (a status that is not converged is counted, not hidden)
     e_def = np.array([r.energy if np.isfinite(r.energy) else np.inf for r in rs])
     e_ms = np.where(np.isfinite(best["energy"]), best["energy"], np.inf)
     e_best = np.minimum(e_def, e_ms)
+    peer = None
+    if finslerax is not None and name in FINSLERAX:
+        peer = finslerax_energies(m, pairs, n, finslerax, repeats)
+        if "energy" in peer:
+            e_best = np.minimum(e_best, peer["energy"])
+            g = peer["energy"] / e_best - 1.0
+            peer.update(within_tight=int(np.sum(g <= TIGHT)),
+                        within_loose=int(np.sum(g <= LOOSE)), above_1e3=int(np.sum(g > 1e-3)),
+                        worst_gap=float(np.max(g)), failed=int(np.sum(~np.isfinite(g))))
     gap = e_def / e_best - 1.0
     beat = int(np.sum(e_def < e_ms * (1.0 - TIGHT)))
     win_ms: dict[str, int] = {}
@@ -142,7 +203,7 @@ def run_metric(name: str, k: int, seed: int, starts: int, chunk: int) -> dict[st
         "ms_not_converged": int(np.sum(~best["converged"])),
         "families_multistart": win_ms, "families_default": win_def,
         "seeds_default": float(np.mean([r.seeds_tried for r in rs])),
-        "disagree": disagree, "gaps": gap,
+        "disagree": disagree, "gaps": gap, "peer": peer, "above_1e3": int(np.sum(gap > 1e-3)),
     }
 
 
@@ -162,7 +223,15 @@ def main() -> None:
     ap.add_argument("--pairs-for", action="append", default=[], metavar="NAME=K",
                     help="K pairs for one metric (repeatable), e.g. carlike=20")
     ap.add_argument("--chunk", type=int, default=5, help="pairs per cached chunk")
+    ap.add_argument("--repeats", type=int, default=1,
+                    help="timed runs of the default (and of finslerax); the median is kept")
+    ap.add_argument("--finslerax-python", default=os.environ.get("FINSLERAX_PYTHON"),
+                    help="python of a venv with finslerax 1.1 and jax[cpu] (see "
+                         "benchmarks/peers.py): compare on matsumoto and randers; default "
+                         "$FINSLERAX_PYTHON, none: no comparison")
     args = ap.parse_args()
+    if args.repeats < 1:
+        raise SystemExit("--repeats must be at least 1")
     names = finsler.list_metrics() if args.metrics == "all" else args.metrics.split(",")
     for nm in names:
         finsler.get_metric(nm)  # an unknown name fails before any work
@@ -186,9 +255,25 @@ def main() -> None:
             "Times: the "
             "default's per pair, one process (the machine is shared with other jobs: CPU "
             "time is the steadier figure).")
-    rows, notes = [], []
+    rows, notes, peer_rows, peer_notes = [], [], [], []
     for nm in names:
-        r = run_metric(nm, count[nm], args.seed, args.best_starts, args.chunk)
+        r = run_metric(nm, count[nm], args.seed, args.best_starts, args.chunk, args.repeats,
+                       args.finslerax_python)
+        if r["peer"] is not None:
+            pr = r["peer"]
+            if "skipped" in pr:
+                peer_notes.append(f"- {nm}: finslerax skipped: {pr['skipped']}")
+            else:
+                peer_rows.append([nm, r["K"], r["N"], "project solve_batch (default)",
+                                  f"{1e3 * r['wall']:.1f}", f"{1e3 * r['cpu']:.1f}", "-",
+                                  f"{r['within_tight']}/{r['K']}", r["above_1e3"],
+                                  r["not_converged"], f"{r['worst_gap']:.2e}"])
+                peer_rows.append([nm, r["K"], r["N"], "finslerax GaussNewton, jax.vmap",
+                                  f"{1e3 * pr['wall']:.1f}", f"{1e3 * pr['cpu']:.1f}",
+                                  f"{pr['setup']:.1f}", f"{pr['within_tight']}/{r['K']}",
+                                  pr["above_1e3"], pr["failed"], f"{pr['worst_gap']:.2e}"])
+                peer_notes.append(f"- {nm}: {pr['note']}")
+                print(markdown_table(PEER_HEAD, peer_rows[-2:]), flush=True)
         rows.append([r["metric"], r["K"], r["N"], f"{r['within_tight']}/{r['K']}",
                      f"{r['within_loose']}/{r['K']}", f"{r['worst_gap']:.2e}",
                      f"{1e3 * r['wall']:.1f}", f"{1e3 * r['cpu']:.1f}", r["beat"],
@@ -209,7 +294,18 @@ def main() -> None:
                             "not converged (default / multistart)", "seeds", "seeds disagree",
                             "multistart CPU s/pair"], rows))
     out.add("Which seed families found the winning basins:", "\n".join(notes))
+    if peer_rows or peer_notes:
+        out.add(f"Against finslerax in the same run (the same pairs and size, one thread; "
+                f"times the median of {args.repeats} run(s); finslerax compiled first, "
+                "'setup'; the best known here includes finslerax's paths; a failure: a "
+                "path not finite, off its pair or outside the domain):",
+                markdown_table(PEER_HEAD, peer_rows) if peer_rows else "",
+                "\n".join(peer_notes))
     out.write()
+
+
+PEER_HEAD = ["metric", "K", "N", "method", "wall ms/pair", "CPU ms/pair", "setup s",
+             "within 1e-4", "above 1e-3", "not converged / failed", "worst gap"]
 
 
 if __name__ == "__main__":
