@@ -45,6 +45,8 @@ def test_outline_of_a_box_is_its_corners_counter_clockwise() -> None:
     assert poly.dtype == np.float64
     np.testing.assert_array_equal(poly, [[-1, -2], [3, -2], [3, 0.5], [-1, 0.5]])
     assert signed_area(poly) == pytest.approx(4 * 2.5)
+    ints = _outline(SimpleNamespace(domain=Box((-1, -2), (3, 1)), name="b"))
+    assert ints.dtype == np.float64  # integer corners still give float coordinates
 
 
 def test_outline_of_a_disk_is_a_circumscribed_64_gon() -> None:
