@@ -45,6 +45,10 @@ GROUPS: dict[str, tuple[list[str], list[str]]] = {
     "testing": (["validation/testing/"], ["tests/test_metric_properties.py",
                                           "tests/test_check.py"]),
 }
+#: extra pytest arguments of a group's selection: test_newton.py's dense block solves
+#: (two minutes, and tests/test_block_tridiagonal.py's job) call nothing of these modules
+SELECT = {"newton": ["-k", "not block_tridiagonal_solve_matches_dense"],
+          "batched": ["-k", "not block_tridiagonal_solve_matches_dense"]}
 #: the groups run when none is named
 DEFAULT = ["block_tridiagonal", "certify_mesh", "newton", "batched"]
 
@@ -90,7 +94,7 @@ def prepare(group: str, work: Path) -> Path:
         "[tool.mutmut]",
         f"source_paths = {_toml_list(files)}",
         'also_copy = ["finsler", "solvers", "learn", "validation", "tests", "benchmarks"]',
-        f"pytest_add_cli_args_test_selection = {_toml_list(tests)}",
+        f"pytest_add_cli_args_test_selection = {_toml_list([*tests, *SELECT.get(group, [])])}",
         'pytest_add_cli_args = ["-p", "no:cacheprovider", "-q", "-n", "0", "-x"]', ""])
     (where / "pyproject.toml").write_text(_MUTMUT_SECTION.sub(section, py))
     return where
