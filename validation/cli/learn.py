@@ -9,7 +9,7 @@ policies; e.g. the shipped Matsumoto policy is reproduced by
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Any
 
 import typer
 
@@ -97,34 +97,15 @@ def train_command(
     config.json, used to evaluate, report and resume); --metric-module imports a user's
     module (or FILE.py) whose @finsler.register_metric classes are then trainable.
     """
-    import learn
     from learn import runs
     from learn.base import TrainingInterrupted
-    from learn.registry import import_method_modules
 
     try:
-        import_metric_modules(metric_module)
-        import_method_modules(method_module)
-        params = parse_metric_params(metric_param)
-        check_output_dir(out, "--out")
-        if not resume:  # a resumed run's config names (and re-imports) its metric
-            finsler.registry.check_name(env, "environment")
-        if timesteps is not None and timesteps < 1:
-            raise InputError(f"--timesteps must be a positive integer, got {timesteps}")
-        if minutes is not None and not minutes > 0:
-            raise InputError(f"--minutes must be positive, got {minutes}")
-        learn.resolve_device(device)
+        params = _check_train_options(env, out, metric_param, metric_module, method_module,
+                                      timesteps, minutes, device, resume)
         if resume:
-            # the run's saved settings; explicitly given options must agree with them
-            cfg = runs.load_run_config(out)
-            if cfg.env != env:
-                raise InputError(f"cannot resume: run {out} trains {cfg.env!r}, not {env!r}")
-            given = {"method": method, "seed": seed, "timesteps": timesteps}
-            over = {k: v for k, v in given.items() if v is not None}
-            over.update(parse_settings(settings or [], type(cfg)))
-            if params is not None:  # checked against the run's on resume
-                over["metric_params"] = params
-            cfg = cfg.replace(minutes=minutes, device=device, **over)
+            cfg = _resumed_config(out, env, method, seed, timesteps, minutes, device,
+                                  settings or [], params)
         else:
             cfg = _new_config(env, method, paper, model_free, seed, timesteps, minutes,
                               device, settings or [], params)
@@ -139,6 +120,52 @@ def train_command(
                    + "".join(f" --metric-module {m}" for m in metric_module or [])
                    + "".join(f" --method-module {m}" for m in method_module or []), err=True)
         raise typer.Exit(code=130) from None
+    _print_trained(env, result)
+
+
+def _check_train_options(env: str, out: Path, metric_param: list[str] | None,
+                         metric_module: list[str] | None, method_module: list[str] | None,
+                         timesteps: int | None, minutes: float | None, device: str,
+                         resume: bool) -> dict[str, object] | None:
+    """Step 1 of ``train``: the user's modules imported, the options checked; returns the
+    parsed --metric-param values."""
+    import learn
+    from learn.registry import import_method_modules
+
+    import_metric_modules(metric_module)
+    import_method_modules(method_module)
+    params = parse_metric_params(metric_param)
+    check_output_dir(out, "--out")
+    if not resume:  # a resumed run's config names (and re-imports) its metric
+        finsler.registry.check_name(env, "environment")
+    if timesteps is not None and timesteps < 1:
+        raise InputError(f"--timesteps must be a positive integer, got {timesteps}")
+    if minutes is not None and not minutes > 0:
+        raise InputError(f"--minutes must be positive, got {minutes}")
+    learn.resolve_device(device)
+    return params
+
+
+def _resumed_config(out: Path, env: str, method: str | None, seed: int | None,
+                    timesteps: int | None, minutes: float | None, device: str,
+                    settings: list[str], params: dict[str, object] | None) -> object:
+    """Step 2 of ``train --resume``: the run's saved settings; explicitly given options must
+    agree with them (the config's ``replace`` checks)."""
+    from learn import runs
+
+    cfg = runs.load_run_config(out)
+    if cfg.env != env:
+        raise InputError(f"cannot resume: run {out} trains {cfg.env!r}, not {env!r}")
+    given = {"method": method, "seed": seed, "timesteps": timesteps}
+    over = {k: v for k, v in given.items() if v is not None}
+    over.update(parse_settings(settings, type(cfg)))
+    if params is not None:  # checked against the run's on resume
+        over["metric_params"] = params
+    return cfg.replace(minutes=minutes, device=device, **over)
+
+
+def _print_trained(env: str, result: Any) -> None:
+    """The one line ``train`` prints when the run finished."""
     f = result.final
     typer.echo(
         f"{env}: {result.timesteps} evaluations of C (all-inclusive) in "

@@ -176,12 +176,43 @@ def solve_command(
     With --pairs and --out, finished pairs are kept in OUT.parts/ until the JSON is
     written, so running the same command again after an interruption resumes it (also
     across --workers and --ray)."""
+    m = metric_from_options(metric, metric_param, metric_module)
+    _check_options(pairs, start, goal, workers, ray, chunk_size, tol, warm_start,
+                   warm_search, keep_global_seeds, recheck_above)
+    arr = _read_pairs(m, pairs, start, goal)
+    parts = None
+    try:
+        job, warm = _checked_job(m, arr, pairs, segments, workers, ray, chunk_size, tol,
+                                 method, device, warm_start, warm_search, method_module)
+        if out is not None:
+            out, parts = _checked_out(out, pairs is not None)
+        results = _solve(job, progress and pairs is not None, parts)
+    except InputError as err:
+        fail(str(err))
+    payload = solve_payload(m, results, job.n)
+    if warm is not None:
+        payload["warm_start"] = warm
+    text = json_text(payload, indent=None if pairs is not None else 2)
+    if out is not None:
+        _write(out, parts, text)
+    if as_json:
+        typer.echo(text)
+    elif pairs is None:
+        _print_pair(results[0], payload, tol)
+    else:
+        typer.echo(
+            f"{len(results)} pairs, success rate (exact ceiling) {payload['success_rate']:.2%}"
+            + (f", written to {out}" if out is not None else "")
+        )
+
+
+def _check_options(pairs: Path | None, start: str | None, goal: str | None,
+                   workers: int | None, ray: str | None, chunk_size: int | None,
+                   tol: float | None, warm_start: str | None, warm_search: bool,
+                   keep_global_seeds: bool, recheck_above: float | None) -> None:
+    """Step 1: the options that go together, and the deprecated ones warned about."""
     import numpy as np
 
-    from solvers.batch_jobs import check_batch, run_batch
-    from solvers.pairs import check_initial_paths
-
-    m = metric_from_options(metric, metric_param, metric_module)
     if pairs is not None and (start is not None or goal is not None):
         fail("give either --start/--goal or --pairs, not both")
     if pairs is None and (start is None or goal is None):
@@ -202,98 +233,119 @@ def solve_command(
             typer.echo(f"warning: {name} is deprecated and does nothing: --warm-start adds the "
                        "learned path as one more start beside the global seeds, which are "
                        "always solved", err=True)
-    parts = None
-    if pairs is not None:
-        arr = _pairs_or_fail(pairs, m)
-    else:
-        s = parse_point(start, m.dim, "--start")  # type: ignore[arg-type]
-        g = parse_point(goal, m.dim, "--goal")  # type: ignore[arg-type]
-        arr = np.stack([s, g])[None]
-    try:
-        if method_module:
-            from learn.registry import import_method_modules
 
-            import_method_modules(method_module)
-        # the solver's own check of the input, once (naming the options), before --out
-        # and before the policy is loaded; run_batch below trusts it
-        job = check_batch(m, arr, segments, minmax=True, workers=workers, ray_address=ray,
-                          chunk_size=chunk_size, tol=tol, method=method, device=device,
-                          names=("--start", "--goal") if pairs is None else
-                          ("--pairs starts", "--pairs goals"))
-        n = job.n
-        inits, warm = _warm_start(warm_start, m, arr, warm_search)
-        if inits is not None:
-            typer.echo(WARM_START_DEPRECATED, err=True)
-            job = dataclasses.replace(job, inits=check_initial_paths(m, job.pairs, n, inits))
-        if out is not None:
-            # checked (its folder created) after every other input and before any solve:
-            # a bad --out must not cost a batch of solves, bad input must not leave folders
-            out = finsler.check_output_path(out, "--out")
-            if pairs is not None:
-                parts = out.with_name(out.name + ".parts")
-                if parts.exists() and not parts.is_dir():
-                    raise finsler.OutputError(f"{parts} (the resumable parts of --out) "
-                                              "exists and is not a folder")
-        # With --out, finished pairs are kept beside it (parts) until the JSON is written,
-        # so an interrupted run resumes where it stopped when the same command is run again.
-        results = run_batch(job, progress=progress and pairs is not None,
-                            checkpoint_dir=parts)
-    except InputError as err:
-        fail(str(err))
+
+def _read_pairs(m: finsler.Metric, pairs: Path | None, start: str | None,
+                goal: str | None) -> np.ndarray:
+    """Step 2: the pairs ``(K, 2, dim)``, from --pairs or parsed from --start / --goal."""
+    import numpy as np
+
+    if pairs is not None:
+        return _pairs_or_fail(pairs, m)
+    s = parse_point(start, m.dim, "--start")  # type: ignore[arg-type]
+    g = parse_point(goal, m.dim, "--goal")  # type: ignore[arg-type]
+    return np.stack([s, g])[None]
+
+
+def _checked_job(m: finsler.Metric, arr: np.ndarray, pairs: Path | None,
+                 segments: int | None, workers: int | None, ray: str | None,
+                 chunk_size: int | None, tol: float | None, method: str, device: str | None,
+                 warm_start: str | None, warm_search: bool, method_module: list[str] | None
+                 ) -> tuple[Any, dict[str, Any] | None]:
+    """Step 3: the solver's own check of the input, once (naming the options), before
+    --out and before a policy is loaded; the job it returns is solved without checking
+    again. With --warm-start the learned paths join the job (and the payload's entry)."""
+    from solvers.batch_jobs import check_batch
+    from solvers.pairs import check_initial_paths
+
+    if method_module:
+        from learn.registry import import_method_modules
+
+        import_method_modules(method_module)
+    job = check_batch(m, arr, segments, minmax=True, workers=workers, ray_address=ray,
+                      chunk_size=chunk_size, tol=tol, method=method, device=device,
+                      names=("--start", "--goal") if pairs is None else
+                      ("--pairs starts", "--pairs goals"))
+    inits, warm = _warm_start(warm_start, m, arr, warm_search)
+    if inits is not None:
+        typer.echo(WARM_START_DEPRECATED, err=True)
+        job = dataclasses.replace(job, inits=check_initial_paths(m, job.pairs, job.n, inits))
+    return job, warm
+
+
+def _checked_out(out: Path, many: bool) -> tuple[Path, Path | None]:
+    """Step 4: --out checked (its folder created) after every other input and before any
+    solve: a bad --out must not cost a batch of solves, bad input must not leave folders.
+    With --pairs, finished pairs are kept beside it (``OUT.parts``) until the JSON is
+    written, so an interrupted run resumes where it stopped when run again."""
+    out = finsler.check_output_path(out, "--out")
+    parts = None
+    if many:
+        parts = out.with_name(out.name + ".parts")
+        if parts.exists() and not parts.is_dir():
+            raise finsler.OutputError(f"{parts} (the resumable parts of --out) "
+                                      "exists and is not a folder")
+    return out, parts
+
+
+def _solve(job: Any, progress: bool, parts: Path | None) -> list[solvers.GeodesicResult]:
+    """Step 5: the checked job solved; an interruption stops every worker and says what
+    was kept (exit code 130)."""
+    from solvers.batch_jobs import run_batch
+
+    try:
+        return run_batch(job, progress=progress, checkpoint_dir=parts)
     except PoolInterrupted as stop:
         kept = (f"the pairs solved so far are kept in {parts}; run the same command to "
                 "resume" if parts is not None else "nothing was kept (give --out to keep "
                 "finished pairs)")
         typer.echo(f"interrupted ({stop.signal_name}), all workers stopped: {kept}", err=True)
         raise typer.Exit(code=130) from None
-    payload = solve_payload(m, results, n)
-    if warm is not None:
-        payload["warm_start"] = warm
-    text = json_text(payload, indent=None if pairs is not None else 2)
-    if out is not None:
-        try:
-            finsler.atomic_write_text(out, text, "--out")
-        except InputError as err:
-            kept = f"; the finished pairs are kept in {parts}" if parts is not None else ""
-            fail(f"{err}{kept}")
-        if parts is not None:
-            shutil.rmtree(parts, ignore_errors=True)
-    if as_json:
-        typer.echo(text)
-    elif pairs is None:
-        r = results[0]
-        row = payload["results"][0]
-        typer.echo(f"status                    {r.status.label}")
-        typer.echo(f"segments                  {r.segments}")
-        typer.echo(f"length (sum C)            {r.length:.12g}")
-        err = ("" if r.length_quadrature_error is None
-               else f" +- {r.length_quadrature_error:.2g}")
-        typer.echo(f"length (eq. 58 quadr.)    {r.length_quadrature:.12g}{err}")
-        typer.echo(f"energy (sum C^2)          {r.energy:.12g}")
-        typer.echo(f"max segment cost          {r.max_segment_cost:.6g}")
-        typer.echo(f"min-max max segment cost  {row['minmax_max_segment_cost']:.6g}"
-                   f"  (eps {payload['eps']:g}: {'success' if row['success'] else 'fail'})")
-        typer.echo(f"seeds agreeing / tried    {r.seeds_agreeing} / {r.seeds_tried}")
-        typer.echo(f"method, residual          {r.method}, {r.residual:.2e}")
-        if r.error_estimate is not None:
-            order = ("not seen" if not r.order_seen else f"{r.order:.2f}") + (
-                f" (observed {r.order:.2f})" if r.order is not None and not r.order_seen
-                else "")
-            pm = (f"+- {r.error_estimate:.2e}" if np.isfinite(r.error_estimate)
-                  else "(no error estimate: the solve could not refine)")
-            typer.echo(f"length (continuum est.)   {r.length_estimate:.15g} {pm} at "
-                       f"{r.segments} segments, order {order}"
-                       + ("" if r.tol_reached else f"  (tol {tol:g} NOT reached)"))
-        nr = r.segments  # --tol may refine beyond --segments
-        mid = (f"midpoint p_{nr // 2}          " if nr % 2 == 0 else
-               f"p_{nr // 2} (n = {nr} is odd: no midpoint node) ")
-        typer.echo(f"{mid:<26}{np.array2string(r.points[nr // 2], precision=8)}")
-        typer.echo(f"wall time                 {r.wall_time:.3f} s")
-    else:
-        typer.echo(
-            f"{len(results)} pairs, success rate (exact ceiling) {payload['success_rate']:.2%}"
-            + (f", written to {out}" if out is not None else "")
-        )
+
+
+def _write(out: Path, parts: Path | None, text: str) -> None:
+    """Step 6: the JSON written to --out; the resumable parts removed once it is."""
+    try:
+        finsler.atomic_write_text(out, text, "--out")
+    except InputError as err:
+        kept = f"; the finished pairs are kept in {parts}" if parts is not None else ""
+        fail(f"{err}{kept}")
+    if parts is not None:
+        shutil.rmtree(parts, ignore_errors=True)
+
+
+def _print_pair(r: solvers.GeodesicResult, payload: dict[str, Any], tol: float | None
+                ) -> None:
+    """The text output of one pair."""
+    import numpy as np
+
+    row = payload["results"][0]
+    typer.echo(f"status                    {r.status.label}")
+    typer.echo(f"segments                  {r.segments}")
+    typer.echo(f"length (sum C)            {r.length:.12g}")
+    err = ("" if r.length_quadrature_error is None
+           else f" +- {r.length_quadrature_error:.2g}")
+    typer.echo(f"length (eq. 58 quadr.)    {r.length_quadrature:.12g}{err}")
+    typer.echo(f"energy (sum C^2)          {r.energy:.12g}")
+    typer.echo(f"max segment cost          {r.max_segment_cost:.6g}")
+    typer.echo(f"min-max max segment cost  {row['minmax_max_segment_cost']:.6g}"
+               f"  (eps {payload['eps']:g}: {'success' if row['success'] else 'fail'})")
+    typer.echo(f"seeds agreeing / tried    {r.seeds_agreeing} / {r.seeds_tried}")
+    typer.echo(f"method, residual          {r.method}, {r.residual:.2e}")
+    if r.error_estimate is not None:
+        order = ("not seen" if not r.order_seen else f"{r.order:.2f}") + (
+            f" (observed {r.order:.2f})" if r.order is not None and not r.order_seen
+            else "")
+        pm = (f"+- {r.error_estimate:.2e}" if np.isfinite(r.error_estimate)
+              else "(no error estimate: the solve could not refine)")
+        typer.echo(f"length (continuum est.)   {r.length_estimate:.15g} {pm} at "
+                   f"{r.segments} segments, order {order}"
+                   + ("" if r.tol_reached else f"  (tol {tol:g} NOT reached)"))
+    nr = r.segments  # --tol may refine beyond --segments
+    mid = (f"midpoint p_{nr // 2}          " if nr % 2 == 0 else
+           f"p_{nr // 2} (n = {nr} is odd: no midpoint node) ")
+    typer.echo(f"{mid:<26}{np.array2string(r.points[nr // 2], precision=8)}")
+    typer.echo(f"wall time                 {r.wall_time:.3f} s")
 
 
 def register(app: typer.Typer) -> None:
