@@ -140,3 +140,19 @@ def test_string_outcomes_are_members_with_their_old_words() -> None:
     with pytest.raises(finsler.InputError, match="unknown property status"):
         PropertyResult("p", "claim", "passd")
     assert CertifyStop("max_rounds") is CertifyStop.MAX_ROUNDS
+
+
+def test_strict_in_solve_batch(results: dict[str, Any], monkeypatch: pytest.MonkeyPatch
+                               ) -> None:
+    import solvers.batch_jobs as bj
+
+    m = finsler.get_metric("poincare")
+    pairs = np.stack(PAIR)[None]
+    ok = solvers.solve_batch(m, pairs, 8, progress=False, strict=True)  # converges: no raise
+    assert ok[0].converged
+    bad = _not_converged(results["batch"], "batch")
+    monkeypatch.setattr(bj, "_solve_checked", lambda job, store, progress: [bad])
+    assert solvers.solve_batch(m, pairs, 8, progress=False) == [bad]  # default: returned
+    with pytest.raises(SolverError, match="1 of 1 pairs did not converge") as err:
+        solvers.solve_batch(m, pairs, 8, progress=False, strict=True)
+    assert err.value.result == [bad]
