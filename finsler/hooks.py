@@ -8,33 +8,35 @@ advice hook, whose default ``None`` means "no advice"), never ``getattr`` on a m
 ``isinstance`` on a metric class, so a user's metric gets every behaviour the toolkit's
 own metrics get by defining the same method.
 
-=====================  ====================================================  =====================
-hook                   meaning                                               used by
-=====================  ====================================================  =====================
-``smooth_square_sx``   ``F**2`` as a C^2 expression with slack variables,    ``solvers`` (IPOPT
-                       exact at a minimiser (for an ``F`` with ``max``,      transcriptions)
-                       ``abs``: the car-like metric). Default ``None``:
-                       ``F_sx**2`` is used as it is.
-``seed_plan``          the global seeding plan (a ``solvers.SeedPlan``) for  ``solvers`` (seeding)
-                       this metric. Default ``None``: chosen from ``dim``,
-                       ``smooth`` and ``convex_everywhere``.
-``seed_curves``        initial curves of the metric's own geometry for the   ``solvers`` (seeding)
-                       global search: ``starts, goals (K, dim), t (T,) ->
-                       {family: (K, S, T, dim)}`` (e.g. car-like: cubic
-                       Hermite curves along the headings).
-``convex_radius``      radius of the disk about the origin where ``F(x, .)``  figures (dash-dot
-                       is strongly convex (property). Default ``None``.       circle)
-``height_map``         ``(N, 2) -> (N,)`` height whose slope the metric       figures (contours)
-                       models, drawn as contours under 2-D paths.
-``frame_positions``    forward kinematics ``(N, dim) -> (N, frames, 3)``:     figures (arm motion)
-                       world positions of a robot's frames.
-``landmarks``          named world points ``{name: (x, y[, z])}`` drawn with  figures (arm motion)
-                       the frames (an obstacle). Default ``{}``.
-``distance``           the exact distance ``(N, dim) x2 -> (N,)`` in closed   ``validation``
-                       form (a reference for tests and the propositions).     (propositions, tests)
-``geodesic``           the exact minimising geodesic at arc-length fractions
-                       ``t``: ``(N, dim) x2, (T,) -> (N, T, dim)``.
-=====================  ====================================================  =====================
+=======================  ====================================================  =====================
+hook                     meaning                                               used by
+=======================  ====================================================  =====================
+``smooth_square_sx``     ``F**2`` as a C^2 expression with slack variables,    ``solvers`` (IPOPT
+                         exact at a minimiser (for an ``F`` with ``max``,      transcriptions)
+                         ``abs``: the car-like metric). Default ``None``:
+                         ``F_sx**2`` is used as it is.
+``seed_plan``            the global seeding plan (a ``solvers.SeedPlan``) for  ``solvers`` (seeding)
+                         this metric. Default ``None``: chosen from ``dim``,
+                         ``smooth`` and ``convex_everywhere``.
+``seed_curves``          initial curves of the metric's own geometry for the   ``solvers`` (seeding)
+                         global search: ``starts, goals (K, dim), t (T,) ->
+                         {family: (K, S, T, dim)}`` (e.g. car-like: cubic
+                         Hermite curves along the headings).
+``convex_radius``        radius of the disk about the origin where ``F(x, .)``  figures (dash-dot
+                         is strongly convex (property). Default ``None``.       circle)
+``height_map``           ``(N, 2) -> (N,)`` height whose slope the metric       figures (contours)
+                         models, drawn as contours under 2-D paths.
+``frame_positions``      forward kinematics ``(N, dim) -> (N, frames, 3)``:     figures (arm motion)
+                         world positions of a robot's frames.
+``landmarks``            named world points ``{name: (x, y[, z])}`` drawn with  figures (arm motion)
+                         the frames (an obstacle). Default ``{}``.
+``distance``             the exact distance ``(N, dim) x2 -> (N,)`` in closed   ``validation``
+                         form (a reference for tests and the propositions).     (propositions)
+``geodesic``             the exact minimising geodesic at arc-length fractions
+                         ``t``: ``(N, dim) x2, (T,) -> (N, T, dim)``.
+``conformal_factor_sx``  the factor ``f(x)`` of a conformal metric             ``solvers`` (certify
+                         ``F(x, v) = f(x) |v|``, an SX expression of ``x``.    in n-D)
+=======================  ====================================================  =====================
 
 ``Metric.hooks()`` lists the hooks a metric provides (also in ``Metric.info()`` and
 ``geodesics metrics``).
@@ -51,7 +53,7 @@ __all__ = ["HOOKS", "MetricHooks"]
 #: Every optional hook of a metric, in the order of the table above.
 HOOKS: tuple[str, ...] = ("smooth_square_sx", "seed_plan", "seed_curves", "convex_radius",
                           "height_map", "frame_positions", "landmarks", "distance",
-                          "geodesic")
+                          "geodesic", "conformal_factor_sx")
 
 
 class MetricHooks:
@@ -142,3 +144,12 @@ class MetricHooks:
         fractions ``t`` ``(T,)``: ``(N, dim)`` x2 -> ``(N, T, dim)``. Not provided by
         default."""
         raise self._missing("geodesic")
+
+    # -- structure ----------------------------------------------------------------------
+    def conformal_factor_sx(self, x: Any) -> Any:
+        """The factor ``f(x) > 0`` of a conformal metric, ``F(x, v) = f(x) |v|`` with
+        ``|v|`` the Euclidean norm, as a CasADi SX expression of ``x`` (``(dim, 1)`` SX ->
+        ``(1, 1)`` SX). A metric provides it only if ``F`` has exactly this form: the n-D
+        certificate (``solvers.certify_conformal``) proves its lower bound from enclosures
+        of this factor alone. Not provided by default."""
+        raise self._missing("conformal_factor_sx")

@@ -38,6 +38,13 @@ def _norm_sx(v: ca.SX) -> ca.SX:
     return ca.sqrt(ca.dot(v, v))
 
 
+def _factor_from_F(metric: Metric, x: ca.SX) -> ca.SX:
+    """``F_sx(x, e_1)`` for a conformal metric ``F(x, v) = f(x) |v|``: ``f(x)``."""
+    unit = np.zeros(metric.dim)
+    unit[0] = 1.0
+    return metric.F_sx(x, ca.SX(unit))
+
+
 def _positive(name: str, value: float) -> None:
     if not (math.isfinite(value) and value > 0):
         raise InputError(f"parameter {name} must be positive and finite, got {value!r}")
@@ -253,6 +260,18 @@ class PandaPole(Metric):
 
         return panda.pole_metric_sx(x, v, pole=(self.pole_x, self.pole_y))
 
+    def conformal_factor_sx(self, x: ca.SX) -> ca.SX:
+        """Hook: ``F(q, v) = f(q) |v|`` with ``f`` eq. (60)'s weight ``1 + sum_i
+        rho_i**(-1/2)``, ``rho_i`` the squared horizontal distances of the frames to the
+        pole. Written with the power ``-1/2`` rather than ``1 / sqrt``: its interval
+        enclosure on boxes where a frame may reach the pole's axis is the half-line
+        ``[rho_max**(-1/2), inf]``, not the whole line (tests check it equals ``F_sx``)."""
+        from finsler import panda
+
+        p = panda.frame_positions_sx(x)
+        squared = (p[:, 0] - self.pole_x) ** 2 + (p[:, 1] - self.pole_y) ** 2
+        return 1 + ca.sum1(squared ** -0.5)
+
     def landmarks(self) -> dict[str, tuple[float, ...]]:
         """Hook: the pole's position in the world frame (x, y)."""
         return {"pole": (float(self.pole_x), float(self.pole_y))}
@@ -319,6 +338,10 @@ class Euclidean(ClosedFormMetric):
 
     def F_sx(self, x: ca.SX, v: ca.SX) -> ca.SX:
         return _norm_sx(v)
+
+    def conformal_factor_sx(self, x: ca.SX) -> ca.SX:
+        """Hook: ``F(x, v) = 1 |v|``."""
+        return _factor_from_F(self, x)
 
     def _distance(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
         return np.linalg.norm(y - x, axis=1)
@@ -432,6 +455,10 @@ class Poincare(ClosedFormMetric):
     def F_sx(self, x: ca.SX, v: ca.SX) -> ca.SX:
         return 2.0 * _norm_sx(v) / (1.0 - ca.dot(x, x))
 
+    def conformal_factor_sx(self, x: ca.SX) -> ca.SX:
+        """Hook: ``F(x, v) = 2 |v| / (1 - |x|**2)``."""
+        return _factor_from_F(self, x)
+
     def _distance(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
         num = 2.0 * np.sum((x - y) ** 2, axis=1)
         den = (1 - np.sum(x * x, axis=1)) * (1 - np.sum(y * y, axis=1))
@@ -474,6 +501,10 @@ class Sphere(ClosedFormMetric):
 
     def F_sx(self, x: ca.SX, v: ca.SX) -> ca.SX:
         return 2.0 * _norm_sx(v) / (1.0 + ca.dot(x, x))
+
+    def conformal_factor_sx(self, x: ca.SX) -> ca.SX:
+        """Hook: ``F(u, v) = 2 |v| / (1 + |u|**2)``."""
+        return _factor_from_F(self, x)
 
     @staticmethod
     def to_sphere(u: np.ndarray) -> np.ndarray:

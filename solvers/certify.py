@@ -549,7 +549,9 @@ def certify(
     time_limit: float | None = None,
     strict: bool = False,
 ) -> CertifyResult:
-    """Certified interval ``lower <= d(start, goal) <= upper`` on a 2-D metric.
+    """Certified interval ``lower <= d(start, goal) <= upper`` on a 2-D metric (a
+    conformal metric of dimension > 3, hook ``conformal_factor_sx``, goes to
+    :func:`solvers.certify_conformal.certify_conformal`: a ``ConformalCertifyResult``).
 
     ``start``, ``goal``: points ``(2,)`` in the domain. ``mesh``: a :class:`MeshSpec` or a
     preset name (``"coarse"``, ``"default"``, ``"fine"``). ``path`` ``(n+1, 2)``: a curve
@@ -564,6 +566,12 @@ def certify(
     """
     t_start = time.perf_counter()
     m = as_metric(metric)
+    if m.dim > 3 and m.provides("conformal_factor_sx"):  # n-D conformal (issue 46, item 3)
+        from solvers.certify_conformal import ConformalSpec, certify_conformal
+
+        res = certify_conformal(m, start, goal,
+                                mesh if isinstance(mesh, ConformalSpec) else None, path=path)
+        return res.strict() if strict else res  # type: ignore[return-value]
     if m.dim != 2:
         raise InputError(f"certify works on 2-D metrics; {m.name} has dimension {m.dim}")
     spec = MeshSpec.preset(mesh) if isinstance(mesh, str) else (mesh or MeshSpec())

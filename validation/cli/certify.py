@@ -43,7 +43,9 @@ __all__ = ["certify_command", "register"]
 
 
 def certify_command(
-    metric: Annotated[str, typer.Option(help="Registered 2-D metric (see `geodesics metrics`).")],
+    metric: Annotated[str, typer.Option(
+        help="Registered 2-D metric, or a conformal one of any dimension (see `geodesics "
+             "metrics`).")],
     start: Annotated[str, typer.Option(help='Start point, e.g. "0.1,-0.2".')],
     goal: Annotated[str, typer.Option(help='Goal point, e.g. "0.5,0.3".')],
     mesh: Annotated[str, typer.Option(
@@ -59,6 +61,9 @@ def certify_command(
         help="Seconds after which no new refinement round starts (the result then depends "
              "on the machine's speed and says stopped_by: time_limit; without it the "
              "preset's work budgets, rounds and triangles, decide).")] = None,
+    max_boxes: Annotated[int | None, typer.Option(
+        help="n-D conformal metrics: work budget, boxes enclosed in all (default 2e6).")
+    ] = None,
     out: Annotated[Path | None, typer.Option(help="Also write the JSON result here.")] = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print JSON.")] = False,
     metric_param: MetricParamOption = None,
@@ -74,6 +79,9 @@ def certify_command(
     from solvers.status import CertifyStatus
 
     m = metric_from_options(metric, metric_param, metric_module)
+    if m.dim > 3 and m.provides("conformal_factor_sx"):  # n-D conformal (issue 46, item 3)
+        _certify_conformal(m, start, goal, target_gap, max_boxes, out, as_json)
+        return
     if m.dim != 2:
         fail(f"certify works on 2-D metrics; {m.name} has dimension {m.dim}")
     s = parse_point(start, m.dim, "--start")
@@ -118,6 +126,50 @@ def certify_command(
     else:
         _print_result(m.name, s, g, res)
     if res.status in (CertifyStatus.LP_FAILED, CertifyStatus.CORRECTIONS_TOO_LARGE):
+        fail(f"certify {res.status.label}: {res.message}", code=1)
+
+
+def _certify_conformal(m: Any, start: str, goal: str, target_gap: float | None,
+                       max_boxes: int | None, out: Path | None, as_json: bool) -> None:
+    """``geodesics certify`` on a conformal metric of dimension > 3: a proven lower bound
+    (:func:`solvers.certify_conformal.certify_conformal`)."""
+    import dataclasses
+
+    from solvers.certify_conformal import ConformalSpec, certify_conformal
+    from solvers.status import CertifyStatus
+
+    s = parse_point(start, m.dim, "--start")
+    g = parse_point(goal, m.dim, "--goal")
+    try:
+        m.domain.check(s, "--start")
+        m.domain.check(g, "--goal")
+        changes: dict[str, Any] = {}
+        if target_gap is not None:
+            changes["target_gap"] = target_gap
+        if max_boxes is not None:
+            changes["max_boxes"] = max_boxes
+        spec = dataclasses.replace(ConformalSpec(), **changes)
+        if out is not None:
+            check_output_path(out, "--out")
+        res = certify_conformal(m, s, g, spec)
+        doc = res.to_dict()
+        if out is not None:
+            atomic_write_text(out, json_text(doc), "certify result")
+    except InputError as err:
+        fail(str(err))
+        return
+    if as_json:
+        typer.echo(json_text(doc))
+    else:
+        typer.echo(f"metric {m.name}: start {tuple(s.tolist())} goal {tuple(g.tolist())}")
+        typer.echo(f"status = {res.status.label}   (stopped by {res.stopped_by})")
+        typer.echo(f"lower  = {res.lower:.10g}   ({res.method})")
+        typer.echo(f"upper  = {res.upper:.10g}   (path length, proven by interval arithmetic)")
+        typer.echo(f"ratio  = {res.ratio:.4f}   lower / upper; trivial bound "
+                   f"{res.trivial:.6g} (min f {res.min_factor:.6g} x |goal - start|)")
+        typer.echo(f"work   : {res.enclosures} box enclosures, {res.boxes} boxes kept, "
+                   f"{res.cells} cells; {res.times['total']:.2f} s")
+    if res.status is CertifyStatus.LP_FAILED:
         fail(f"certify {res.status.label}: {res.message}", code=1)
 
 

@@ -1,0 +1,570 @@
+"""Sound lower bounds of distances for conformal metrics in any dimension (issue 46, item 3).
+
+For a conformal metric ``F(q, v) = f(q) |v|`` (the hook ``conformal_factor_sx``; the Panda
+pole metric, eq. 60, is one in 7-D) :func:`certify_conformal` proves ``lower <= d(x, y) <=
+upper``. The upper bound is the solver's path length, proven by interval arithmetic
+(:meth:`finsler.Metric.path_length_bounds`). The lower bound needs only enclosures of ``f``
+over boxes (:func:`finsler.intervals.enclose`, outward rounding) and three facts:
+
+1. **The region.** A path of length at most ``U`` (the upper bound) on which ``f >= m`` has
+   Euclidean length at most ``U / m``, so it lies in the ellipsoid ``E = {q : |q - x| +
+   |q - y| <= U / m}``. Boxes covering the domain are split (branch and bound); a box that
+   misses ``E`` (``dist(x, box) + dist(y, box) > U / m``) or the domain (an enclosure of a
+   domain constraint outside its bounds) is dropped. ``m`` is the smallest enclosure of
+   ``f`` over the kept boxes, so the kept boxes cover every point of every path shorter
+   than ``U`` (induction over the rounds: each round's boxes cover the previous ``E``).
+   ``m |y - x|`` is the trivial bound the result reports beside the real one.
+2. **A 2-D reduction.** With ``u = (y - x) / |y - x|``, the map ``q -> (s, r)``, ``s = u .
+   (q - x)`` (along the chord) and ``r = |q - x - s u|`` (distance from the chord's line),
+   is 1-Lipschitz, and ``E`` maps onto an ellipse. On a grid of ``(s, r)`` cells, ``g(c)``
+   is the smallest enclosure of ``f`` over the boxes whose ``(s, r)`` range meets cell
+   ``c`` (``f >= g`` wherever a path can project into ``c``). A path's length is then at
+   least the length of its projection in the 2-D conformal metric ``g |w|``.
+3. **A verified potential on the plane.** A continuous piecewise-linear ``Phi(s, r)`` on
+   the grid's triangles with ``|grad Phi| <= g`` on every triangle of a cell that any box
+   meets gives ``d(x, y) >= Phi(|y - x|, 0) - Phi(0, 0)`` (``Phi o (s, r)`` is a
+   subsolution of the eikonal equation on the region). ``Phi`` maximises that difference,
+   a second-order cone program through cvxpy; its gradients are then checked exactly in
+   float64 and ``Phi`` divided by the largest ratio ``|grad Phi| / g`` (times ``1 +
+   1e-9``), so the bound holds whatever the solver's tolerance. The 1-D chord potential
+   (``Phi(s)`` alone) is the special case ``r_cells = 1``: the plane adds that a path must
+   pay to leave the chord for the cheap regions away from it.
+
+Refinement: a box is split (along its widest side) while its enclosure of ``f`` is below
+``1 - refine_tol`` times the smallest value of ``f`` seen at box centres in any cell it
+meets (it then holds that cell's bound down), the worst first, within the work budget
+``max_boxes`` (boxes enclosed in all); budgets, never wall clock, decide the result.
+
+Limits: the bound is only as good as the enclosures of ``f`` over boxes (natural interval
+extension through the lowered CasADi program: wrapping through a kinematic chain costs a
+few per cent at box widths of 0.1 rad) and as the ``(s, r)`` reduction, which keeps only
+the distance to the chord's line: two regions at the same ``(s, r)`` share one bound. It
+proves a lower bound, not a tight interval: the gap stays at several per cent in 7-D.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import casadi as ca
+import numpy as np
+
+from finsler.affine import enclose_affine
+from finsler.errors import InputError
+from finsler.intervals import Interval, enclose
+from finsler.lowering import LoweredFunction, lower
+from finsler.metric import Metric
+from finsler.status import Result
+from solvers.inputs import as_metric
+from solvers.status import CertifyStatus
+
+__all__ = ["ConformalCertifyResult", "ConformalSpec", "certify_conformal"]
+
+#: Relative widening of float64 geometry (s, r, distances) against rounding.
+_SLACK = 1e-9
+#: Boxes enclosed per call of the lowered program (memory).
+_CHUNK = 100_000
+#: Check every new box's enclosure against the factor's value at its centre (a wrong
+#: enclosure raises instead of giving a bound; tests switch it off to see the bound fail).
+CHECK_VALUES = True
+#: cvxpy solvers of the potential's cone program, tried in turn.
+CONE_SOLVERS = ("CLARABEL", "SCS")
+#: Fewest boxes split per round (the enclosures are vectorised: small rounds are slow).
+MIN_SPLIT = 2000
+
+
+@dataclass(frozen=True)
+class ConformalSpec:
+    """Work budgets and resolution of :func:`certify_conformal`."""
+
+    max_boxes: int = 2_000_000
+    """Budget: boxes enclosed in all (each split encloses two)."""
+    max_live: int = 600_000
+    """Budget: boxes kept at once (memory)."""
+    max_rounds: int = 200
+    """Budget: refinement rounds."""
+    s_cells: int = 32
+    """Cells along the chord between start and goal (more beyond them, same size)."""
+    r_cells: int = 12
+    """Cells across, from the chord's line to the edge of the ellipse (1: the chord-only
+    1-D potential)."""
+    mark_fraction: float = 0.7
+    """Split, per round, the boxes carrying this fraction of the priorities (at least
+    ``MIN_SPLIT``)."""
+    refine_tol: float = 0.01
+    """Split a box while its enclosure is below ``1 - refine_tol`` times the best value
+    seen in its cells."""
+    target_gap: float = 0.2
+    """Status ``certified`` when ``(upper - lower) / upper`` is at most this."""
+    segments: int | None = None
+    """Segments of the solver's path (the upper bound); default: the task's."""
+
+    def __post_init__(self) -> None:
+        for name, low in (("max_boxes", 2), ("max_live", 2), ("max_rounds", 1),
+                          ("s_cells", 1), ("r_cells", 1)):
+            val = getattr(self, name)
+            if isinstance(val, bool) or not isinstance(val, (int, np.integer)) or val < low:
+                raise InputError(f"ConformalSpec.{name} must be an integer >= {low}, got "
+                                 f"{val!r}")
+        for name in ("refine_tol", "target_gap", "mark_fraction"):
+            val = getattr(self, name)
+            if isinstance(val, bool) or not isinstance(val, (int, float)) or not (
+                    math.isfinite(val) and 0 < val < 1):
+                raise InputError(f"ConformalSpec.{name} must be in (0, 1), got {val!r}")
+        if self.segments is not None and (isinstance(self.segments, bool) or not isinstance(
+                self.segments, (int, np.integer)) or self.segments < 2):
+            raise InputError(f"ConformalSpec.segments must be an integer >= 2, got "
+                             f"{self.segments!r}")
+
+
+@dataclass
+class ConformalCertifyResult(Result):
+    """A proven interval ``lower <= d(start, goal) <= upper`` for a conformal metric.
+
+    ``lower`` is the larger of ``potential_lower`` (the verified planar potential) and
+    ``trivial`` (``min_factor * |goal - start|``, ``min_factor`` the proven smallest value
+    of ``f`` over the reachable region); ``ratio = lower / upper``, ``gap = 1 - ratio``.
+    ``boxes`` are the boxes kept at the end, ``enclosures`` the boxes enclosed in all (the
+    work), ``cells`` the ``(s, r)`` cells with a bound, ``scale`` the factor the potential
+    was divided by after the exact check of its gradients (1 + the solver's tolerance).
+    ``stopped_by``: ``no_refinement`` (no box holds a cell down), ``max_boxes``,
+    ``max_live`` or ``max_rounds`` (the budgets), or a failure's label. ``times`` in
+    seconds (solve, boxes, lp, total); ``wall_time`` their total."""
+
+    metric: str
+    start: np.ndarray
+    goal: np.ndarray
+    lower: float
+    upper: float
+    ratio: float
+    gap: float
+    trivial: float
+    potential_lower: float
+    min_factor: float
+    euclidean: float
+    ellipse: float
+    boxes: int
+    enclosures: int
+    cells: int
+    rounds: int
+    scale: float
+    lp_status: str
+    solver_status: str
+    stopped_by: str
+    status: CertifyStatus
+    message: str
+    method: str
+    spec: dict[str, Any]
+    times: dict[str, float]
+    wall_time: float
+    path: np.ndarray = field(repr=False)
+
+    def to_dict(self, with_path: bool = False) -> dict[str, Any]:
+        out = super().to_dict()
+        if not with_path:
+            out.pop("path", None)
+        return out
+
+
+def _factor_function(metric: Metric) -> LoweredFunction:
+    """The lowered conformal factor ``q -> f(q)`` (cached on the metric)."""
+    def build() -> LoweredFunction:
+        q = ca.SX.sym("q", metric.dim)
+        f = ca.SX(metric.conformal_factor_sx(q))
+        if f.numel() != 1:
+            raise InputError(f"{metric.name}: conformal_factor_sx must return a scalar, got "
+                             f"shape {f.shape}")
+        return lower(ca.Function(f"conformal_factor_{metric._ident}", [q], [f]))
+    return metric.derived("certify.conformal_factor", build)
+
+
+def _constraint_function(metric: Metric) -> tuple[LoweredFunction, np.ndarray,
+                                                  np.ndarray] | None:
+    """The domain's constraints ``q -> g(q)`` with bounds ``lb <= g <= ub``, or None."""
+    def build() -> Any:
+        q = ca.SX.sym("q", metric.dim)
+        cons = metric.domain.constraints_sx(q)
+        if not cons:
+            return None
+        g = ca.vertcat(*[ca.SX(c[0]) for c in cons])
+        return (lower(ca.Function(f"domain_{metric._ident}", [q], [ca.densify(g)])),
+                np.array([c[1] for c in cons], float), np.array([c[2] for c in cons], float))
+    return metric.derived("certify.domain_constraints", build)
+
+
+def _enclose_factor(fn: LoweredFunction, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """Proven lower bounds ``(N,)`` of ``f`` over the boxes ``[lo, hi]``: affine
+    arithmetic intersected with the natural interval extension (the natural one alone for
+    a program with an operation affine arithmetic lacks), clamped at 0 (``f > 0`` on the
+    domain)."""
+    out = np.empty(lo.shape[0])
+    for a in range(0, lo.shape[0], _CHUNK):
+        sl = slice(a, a + _CHUNK)
+        with np.errstate(all="ignore"):
+            try:
+                (val,) = enclose_affine(fn, lo[sl], hi[sl])
+            except NotImplementedError:
+                (val,) = enclose(fn, Interval(lo[sl], hi[sl]))[0]
+        out[sl] = np.broadcast_to(val.lo, (lo[sl].shape[0],))
+    return np.maximum(np.nan_to_num(out, nan=0.0, neginf=0.0), 0.0)
+
+
+def _outside_domain(cons: Any, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """True where a box certainly misses the domain (a constraint's enclosure lies
+    outside its bounds)."""
+    out = np.zeros(lo.shape[0], bool)
+    if cons is None:
+        return out
+    fn, lb, ub = cons
+    for a in range(0, lo.shape[0], _CHUNK):
+        sl = slice(a, a + _CHUNK)
+        with np.errstate(all="ignore"):
+            (vals,) = enclose(fn, Interval(lo[sl], hi[sl]))
+        for k, v in enumerate(vals):
+            out[sl] |= np.broadcast_to((v.lo > ub[k]) | (v.hi < lb[k]), out[sl].shape)
+    return out
+
+
+def _box_point_distance(lo: np.ndarray, hi: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """Lower bounds of the Euclidean distances from ``p`` to the boxes."""
+    gap = np.maximum(np.maximum(lo - p, p - hi), 0.0)
+    return np.sqrt(np.einsum("ij,ij->i", gap, gap)) * (1.0 - _SLACK)
+
+
+def _box_sr(lo: np.ndarray, hi: np.ndarray, x: np.ndarray, u: np.ndarray
+            ) -> tuple[np.ndarray, ...]:
+    """Ranges ``[s_lo, s_hi]``, ``[r_lo, r_hi]`` of ``(s, r)`` over the boxes."""
+    c = 0.5 * (lo + hi) - x
+    h = 0.5 * (hi - lo)
+    sc = c @ u
+    srad = h @ np.abs(u)
+    perp = c - sc[:, None] * u
+    rc = np.sqrt(np.einsum("ij,ij->i", perp, perp))
+    rrad = np.sqrt(np.einsum("ij,ij->i", h, h))
+    pad = _SLACK * (1.0 + np.abs(sc) + srad + rc + rrad)
+    return (sc - srad - pad, sc + srad + pad, np.maximum(rc - rrad - pad, 0.0),
+            rc + rrad + pad)
+
+
+@dataclass
+class _Grid:
+    """``(s, r)`` cells: s nodes ``s0 + i hs`` (0 and ``dist`` are nodes), r nodes
+    ``j hr``."""
+
+    s0: float
+    hs: float
+    ns: int
+    hr: float
+    nr: int
+    i_start: int
+    i_goal: int
+
+    @classmethod
+    def make(cls, dist: float, radius: float, spec: ConformalSpec) -> _Grid:
+        hs = dist / spec.s_cells
+        half_minor = 0.5 * math.sqrt(max(radius * radius - dist * dist, 0.0))
+        extra = max(0.5 * (radius - dist), 0.0) * (1.0 + _SLACK)
+        k = math.ceil(extra / hs) + 1
+        # (a thin ellipse keeps cells no flatter than 1 : 4, for the cone program's scaling)
+        hr = max(half_minor * (1.0 + _SLACK) / spec.r_cells, 0.25 * hs)
+        return cls(s0=-k * hs, hs=hs, ns=spec.s_cells + 2 * k, hr=hr, nr=spec.r_cells,
+                   i_start=k, i_goal=k + spec.s_cells)
+
+    def ranges(self, s_lo: np.ndarray, s_hi: np.ndarray, r_lo: np.ndarray,
+               r_hi: np.ndarray) -> tuple[np.ndarray, ...]:
+        """Index ranges (inclusive, clipped to the grid) of the cells the rectangles
+        meet."""
+        def idx(v: np.ndarray, origin: float, h: float, n: int) -> np.ndarray:
+            with np.errstate(invalid="ignore", over="ignore"):
+                k = np.floor((v - origin) / h)
+            return np.clip(np.nan_to_num(k, nan=0.0), 0, n - 1).astype(np.int64)
+        return (idx(s_lo, self.s0, self.hs, self.ns), idx(s_hi, self.s0, self.hs, self.ns),
+                idx(r_lo, 0.0, self.hr, self.nr), idx(r_hi, 0.0, self.hr, self.nr))
+
+
+def _expand(i0: np.ndarray, i1: np.ndarray, j0: np.ndarray, j1: np.ndarray, nr: int
+            ) -> tuple[np.ndarray, np.ndarray]:
+    """(box, flat cell) pairs of every cell of every box's index range."""
+    ni, nj = i1 - i0 + 1, j1 - j0 + 1
+    count = ni * nj
+    box = np.repeat(np.arange(i0.size), count)
+    start = np.repeat(np.cumsum(count) - count, count)
+    k = np.arange(box.size) - start
+    nj_b = nj[box]
+    cell = (i0[box] + k // nj_b) * nr + (j0[box] + k % nj_b)
+    return box, cell
+
+
+def _cell_bounds(grid: _Grid, f_lo: np.ndarray, rng: tuple[np.ndarray, ...]) -> np.ndarray:
+    """``g`` per cell ``(ns * nr,)``: the smallest box enclosure meeting it (inf: none)."""
+    box, cell = _expand(*rng, grid.nr)
+    g = np.full(grid.ns * grid.nr, np.inf)
+    np.minimum.at(g, cell, f_lo[box])
+    return g
+
+
+def _triangles(grid: _Grid, g: np.ndarray) -> tuple[np.ndarray, ...]:
+    """For every triangle of a bounded cell: node indices ``(a, b, c)`` with gradient
+    ``((phi_b - phi_a) / hs, (phi_c - phi_a) / hr)`` (up to sign), and its bound ``g``."""
+    cells = np.flatnonzero(np.isfinite(g))
+    i, j = cells // grid.nr, cells % grid.nr
+    nrn = grid.nr + 1
+    n00, n10, n01, n11 = i * nrn + j, (i + 1) * nrn + j, i * nrn + j + 1, (i + 1) * nrn + j + 1
+    # lower-left (n00, n10, n01): d/ds = n10 - n00, d/dr = n01 - n00
+    # upper-right (n11, n01, n10): d/ds = n11 - n01, d/dr = n11 - n10
+    sa = np.concatenate([n00, n01])
+    sb = np.concatenate([n10, n11])
+    ra = np.concatenate([n00, n10])
+    rb = np.concatenate([n01, n11])
+    return sa, sb, ra, rb, np.concatenate([g[cells], g[cells]])
+
+
+def _potential(grid: _Grid, g: np.ndarray) -> tuple[float, float, str, np.ndarray]:
+    """Maximise ``Phi(goal) - Phi(start)`` s.t. ``|grad Phi| <= g`` per triangle (cvxpy
+    SOCP), check every gradient exactly and rescale -> (bound, scale, solver status, the
+    dual weight of every cell: the bound's sensitivity to its ``g``)."""
+    import cvxpy as cp
+    import scipy.sparse as sp
+
+    sa, sb, ra, rb, gt = _triangles(grid, g)
+    n_nodes = (grid.ns + 1) * (grid.nr + 1)
+    t = gt.size
+    rows = np.arange(t)
+    ds = sp.csr_matrix((np.concatenate([np.full(t, 1.0 / grid.hs), np.full(t, -1.0 / grid.hs)]),
+                        (np.concatenate([rows, rows]), np.concatenate([sb, sa]))),
+                       shape=(t, n_nodes))
+    dr = sp.csr_matrix((np.concatenate([np.full(t, 1.0 / grid.hr), np.full(t, -1.0 / grid.hr)]),
+                        (np.concatenate([rows, rows]), np.concatenate([rb, ra]))),
+                       shape=(t, n_nodes))
+    start = grid.i_start * (grid.nr + 1)
+    goal = grid.i_goal * (grid.nr + 1)
+    phi = cp.Variable(n_nodes)
+    gn = float(np.max(gt)) if gt.size else 0.0
+    weight = np.zeros(g.size)
+    if not gn > 0.0:
+        return 0.0, 1.0, "no_bound", weight  # f is not bounded away from 0: Phi = 0
+    cone = cp.SOC(gt / gn, cp.vstack([ds @ phi, dr @ phi]) / gn, axis=0)
+    prob = cp.Problem(cp.Maximize((phi[goal] - phi[start]) / gn), [cone, phi[start] == 0.0])
+    for solver in CONE_SOLVERS:  # the next one where a solver fails
+        try:
+            prob.solve(solver=solver)
+            break
+        except (cp.error.SolverError, ValueError) as err:
+            failure = f"solver_error ({solver}): {err}"
+    else:
+        return 0.0, float("nan"), failure, weight
+    if phi.value is None or not np.all(np.isfinite(phi.value)):
+        return 0.0, float("nan"), str(prob.status), weight
+    dual = cone.dual_value[0] if isinstance(cone.dual_value, list) else None
+    if dual is not None:
+        cells = np.flatnonzero(np.isfinite(g))
+        np.add.at(weight, np.concatenate([cells, cells]), np.maximum(np.asarray(dual), 0.0))
+    val = np.asarray(phi.value, float)
+    zero = gt <= 0.0
+    if np.any(zero):  # f not bounded away from 0 there: Phi exactly constant on such cells
+        from scipy.sparse.csgraph import connected_components
+
+        ends = np.concatenate([np.stack([sa[zero], sb[zero]], 1),
+                               np.stack([ra[zero], rb[zero]], 1)])
+        graph = sp.coo_matrix((np.ones(len(ends)), (ends[:, 0], ends[:, 1])),
+                              shape=(n_nodes, n_nodes))
+        _, label = connected_components(graph, directed=False)
+        touched = np.unique(ends)
+        low = np.full(n_nodes, np.inf)
+        np.minimum.at(low, label[touched], val[touched])
+        val[touched] = low[label[touched]]
+    # the exact check: gradients of the float64 potential against the cell bounds
+    gs = (val[sb] - val[sa]) / grid.hs
+    gr = (val[rb] - val[ra]) / grid.hr
+    norm = np.hypot(gs, gr)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = float(np.max(np.where(zero, np.where(norm > 0.0, np.inf, 0.0), norm / gt)))
+    scale = max(1.0, ratio) * (1.0 + _SLACK)
+    bound = (val[goal] - val[start]) / scale
+    return max(bound * (1.0 - _SLACK), 0.0), scale, str(prob.status), weight
+
+
+def certify_conformal(metric: Metric | str, start: Any, goal: Any,
+                      spec: ConformalSpec | None = None, *, path: Any = None
+                      ) -> ConformalCertifyResult:
+    """Proven interval ``lower <= d(start, goal) <= upper`` on a conformal metric of any
+    dimension (one providing the hook ``conformal_factor_sx``); see the module docstring
+    for the method. ``path`` ``(n+1, dim)``: a curve from start to goal for the upper
+    bound (default: :func:`solvers.solve_geodesic` at ``spec.segments`` segments).
+    Raises :class:`InputError` for a metric without the hook, points outside the domain,
+    start == goal, or a domain that is unbounded."""
+    t_start = time.perf_counter()
+    m = as_metric(metric)
+    spec = spec or ConformalSpec()
+    if not isinstance(spec, ConformalSpec):
+        raise InputError(f"spec must be a ConformalSpec, got {type(spec).__name__}")
+    if not m.provides("conformal_factor_sx"):
+        raise InputError(f"metric {m.name!r} is not conformal (it does not provide the hook "
+                         "'conformal_factor_sx'): certify_conformal needs F(x, v) = f(x) |v|")
+    x = m.domain.check(np.asarray(start, float), "start")[0]
+    y = m.domain.check(np.asarray(goal, float), "goal")[0]
+    dist = float(np.linalg.norm(y - x))
+    if dist == 0.0:
+        raise InputError("start equals goal: the distance is 0, nothing to certify")
+    dom_lo, dom_hi = (np.asarray(b, float) for b in m.domain.bounds())
+    if not (np.all(np.isfinite(dom_lo)) and np.all(np.isfinite(dom_hi))):
+        raise InputError(f"certify_conformal needs a bounded domain; {m.name}'s is "
+                         f"{m.domain.describe()}")
+
+    # upper bound
+    t0 = time.perf_counter()
+    if path is None:
+        from solvers.geodesic import solve_geodesic
+
+        n = spec.segments if spec.segments is not None else m.task.segments
+        sol = solve_geodesic(m, x, y, n)
+        pts = np.asarray(sol.points, float)
+        solver_status = sol.status.label
+    else:
+        pts = np.array(path, dtype=np.float64)
+        if pts.ndim != 2 or pts.shape[1] != m.dim or pts.shape[0] < 2:
+            raise InputError(f"path must have shape (n+1, {m.dim}), got {pts.shape}")
+        if not (np.allclose(pts[0], x, rtol=0, atol=1e-12)
+                and np.allclose(pts[-1], y, rtol=0, atol=1e-12)):
+            raise InputError("path must run from start to goal")
+        m.domain.check(pts, "path")
+        solver_status = "given"
+    upper = float(m.path_length_bounds(pts).upper)
+    t_solve = time.perf_counter() - t0
+
+    # boxes: branch and bound on the reachable region
+    t0 = time.perf_counter()
+    fn = _factor_function(m)
+    cons = _constraint_function(m)
+    u = (y - x) / dist
+    lo, hi = dom_lo[None, :].copy(), dom_hi[None, :].copy()
+    f_lo = _enclose_factor(fn, lo, hi)
+    f_c = np.full(1, np.inf)
+    work, rounds = 1, 0
+    stopped_by = "max_rounds"
+    grid: _Grid | None = None
+    g = np.zeros(0)
+    m_low = 0.0
+    radius = math.inf
+    weight: np.ndarray | None = None
+    lp_boxes, lp_solves = 0, 0
+    while True:
+        # the region: drop boxes outside the domain or the ellipse of the current m
+        m_low = float(np.min(f_lo)) if f_lo.size else 0.0
+        radius = upper / m_low * (1.0 + _SLACK) if m_low > 0 else math.inf
+        keep = ~_outside_domain(cons, lo, hi)
+        if math.isfinite(radius):
+            keep &= (_box_point_distance(lo, hi, x) + _box_point_distance(lo, hi, y)
+                     <= radius)
+        lo, hi, f_lo, f_c = lo[keep], hi[keep], f_lo[keep], f_c[keep]
+        if lo.shape[0] == 0:  # the path itself lies in the region: a sound run never empties it
+            raise RuntimeError(f"{m.name}: no box of the region is left, which contradicts "
+                               "the path's own length: the enclosures are wrong (a bug)")
+        m_new = float(np.min(f_lo))
+        if m_new > m_low:  # fewer boxes: a larger m, a smaller ellipse (next round)
+            m_low = m_new
+            radius = upper / m_low * (1.0 + _SLACK)
+        if not math.isfinite(radius):
+            radius = 2.0 * float(np.linalg.norm(dom_hi - dom_lo)) + dist
+        grid = _Grid.make(dist, radius, spec)
+        rng = grid.ranges(*_box_sr(lo, hi, x, u))
+        g = _cell_bounds(grid, f_lo, rng)
+        if rounds >= spec.max_rounds:
+            break
+        # the best value seen per cell (f at box centres), and the boxes holding cells down
+        cs = _box_sr(0.5 * (lo + hi), 0.5 * (lo + hi), x, u)
+        ci = grid.ranges(*cs)
+        seen = np.full(g.size, np.inf)
+        np.minimum.at(seen, ci[0] * grid.nr + ci[2], f_c)
+        if weight is None or weight.size != g.size or lo.shape[0] > 1.3 * lp_boxes:
+            # the bound's sensitivity to each cell's g (the cone program's duals)
+            weight = _potential(grid, g)[3]
+            lp_boxes = lo.shape[0]
+            lp_solves += 1
+        box, cell = _expand(*rng, grid.nr)
+        # a box's priority: how far it holds a cell below the best value seen there,
+        # weighted by what that cell is worth to the bound
+        gain = weight[cell] * np.maximum((1.0 - spec.refine_tol) * seen[cell] - f_lo[box],
+                                         0.0)
+        gain[~np.isfinite(gain)] = np.finfo(float).max  # a cell with no centre seen yet
+        prio = np.zeros(lo.shape[0])
+        np.maximum.at(prio, box, gain)
+        # and the boxes holding the region's smallest bound m down (the ellipse, the
+        # trivial bound), the lowest first
+        low = np.flatnonzero(f_lo < (1.0 - spec.refine_tol) * float(np.min(f_c)))
+        low = low[np.argsort(f_lo[low], kind="stable")[:MIN_SPLIT]]
+        prio[low] = np.maximum(prio[low], np.finfo(float).tiny)
+        split = np.flatnonzero(prio > 0)
+        if split.size == 0:
+            stopped_by = "no_refinement"
+            break
+        room = min(spec.max_boxes - work, spec.max_live - lo.shape[0]) // 2
+        if room <= 0:
+            stopped_by = "max_boxes" if spec.max_boxes - work < 2 else "max_live"
+            break
+        # the boxes carrying most of the priority (Doerfler marking), within the budgets
+        order = split[np.argsort(-prio[split], kind="stable")]
+        cum = np.cumsum(np.minimum(prio[order], 1e300))
+        n_mark = int(np.searchsorted(cum, spec.mark_fraction * cum[-1]) + 1)
+        split = np.union1d(order[:min(max(n_mark, MIN_SPLIT), room)], low[:room])[:room]
+        rounds += 1
+        # bisect the chosen boxes along their widest side
+        wid = hi[split] - lo[split]
+        ax = np.argmax(wid, axis=1)
+        mid = lo[split, ax] + 0.5 * wid[np.arange(split.size), ax]
+        lo_a, hi_a = lo[split].copy(), hi[split].copy()
+        lo_b, hi_b = lo[split].copy(), hi[split].copy()
+        hi_a[np.arange(split.size), ax] = mid
+        lo_b[np.arange(split.size), ax] = mid
+        new_lo, new_hi = np.concatenate([lo_a, lo_b]), np.concatenate([hi_a, hi_b])
+        new_f = _enclose_factor(fn, new_lo, new_hi)
+        with np.errstate(all="ignore"):
+            (fc_val,) = fn(0.5 * (new_lo + new_hi))
+        new_c = np.asarray(fc_val, float).reshape(-1)
+        if CHECK_VALUES and np.any(new_f > new_c + 1e-9 * np.abs(new_c)):
+            raise RuntimeError(f"{m.name}: an enclosure of the conformal factor lies above its "
+                               "value at the box's centre: the enclosure is wrong (a bug)")
+        work += new_lo.shape[0]
+        rest = np.ones(lo.shape[0], bool)
+        rest[split] = False
+        lo = np.concatenate([lo[rest], new_lo])
+        hi = np.concatenate([hi[rest], new_hi])
+        f_lo = np.concatenate([f_lo[rest], new_f])
+        f_c = np.concatenate([f_c[rest], np.where(np.isfinite(new_c), new_c, np.inf)])
+    t_boxes = time.perf_counter() - t0
+
+    # the verified potential on the (s, r) plane
+    t0 = time.perf_counter()
+    assert grid is not None
+    pot, scale, lp_status, _ = _potential(grid, g)
+    lp_solves += 1
+    t_lp = time.perf_counter() - t0
+    # the trivial bound, rounded down: m |y - x|
+    trivial = m_low * dist * (1.0 - _SLACK)
+    lower = min(max(pot, trivial), upper)
+    ratio = lower / upper
+    status, message = CertifyStatus.BUDGET_REACHED, ""
+    if not math.isfinite(scale):
+        status = CertifyStatus.LP_FAILED
+        stopped_by = "lp_failed"
+        message = f"the potential's cone program failed ({lp_status}): lower is the trivial bound"
+    elif 1.0 - ratio <= spec.target_gap:
+        status = CertifyStatus.CERTIFIED
+    total = time.perf_counter() - t_start
+    return ConformalCertifyResult(
+        metric=m.name, start=x, goal=y, lower=lower, upper=upper, ratio=ratio,
+        gap=1.0 - ratio, trivial=trivial, potential_lower=pot, min_factor=m_low,
+        euclidean=dist, ellipse=radius, boxes=int(lo.shape[0]), enclosures=int(work),
+        cells=int(np.sum(np.isfinite(g))), rounds=rounds, scale=scale,
+        lp_status=lp_status, solver_status=solver_status, stopped_by=stopped_by,
+        status=status, message=message,
+        method=(f"verified piecewise-linear potential on the (s, r) plane of the chord "
+                f"({grid.ns} x {grid.nr} cells), cell bounds from interval enclosures of "
+                f"the conformal factor over {int(lo.shape[0])} boxes covering the "
+                f"reachable ellipsoid"),
+        spec={k: getattr(spec, k) for k in spec.__dataclass_fields__},
+        times={"solve": t_solve, "boxes": t_boxes, "lp": t_lp, "total": total},
+        wall_time=total, path=pts)
