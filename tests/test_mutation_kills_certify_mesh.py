@@ -97,9 +97,11 @@ def _brute_distance(p: np.ndarray, path: np.ndarray) -> float:
 
 @pytest.mark.parametrize("chunk", [4096, 7, 1])
 def test_distance_to_path_is_the_brute_force_distance(chunk: int) -> None:
-    rng = np.random.default_rng(2)
-    path = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 0.0], [1.0, 1.0], [-0.5, 0.2]])
-    pts = rng.uniform(-1.0, 2.0, size=(50, 2))
+    """Short segments (|e|**2 < 1) and a repeated point; points drawn afresh for each
+    chunk size (so no array of an earlier call can be met again in fresh memory)."""
+    rng = np.random.default_rng(2 + chunk)
+    path = 0.3 * np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 0.0], [1.0, 1.0], [-0.5, 0.2]])
+    pts = rng.uniform(-0.3, 0.6, size=(50 + chunk % 5, 2))
     got = _distance_to_path(pts, path, chunk=chunk)
     ref = [_brute_distance(p, path) for p in pts]
     np.testing.assert_allclose(got, ref, rtol=1e-13, atol=1e-15)
@@ -150,9 +152,11 @@ def test_hex_lattice_covers_the_box_and_nests(h: float) -> None:
 
 
 def test_initial_points_are_graded_inside_and_start_with_the_ends() -> None:
+    """The square [-1, 1]^2 (test of the rest below) and the ends on lattice points of
+    the finest level (the lattice's own copies of them must be left out)."""
     spec = Spec(h_path=0.05, corridor=0.1, grade=0.6, h_far=0.25)
     poly = np.array([[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]])
-    s, g = np.array([-0.5, 0.013]), np.array([0.5, -0.021])
+    s, g = np.array([-0.5, 0.0]), np.array([0.5, 0.0])
     path = np.stack([np.linspace(s[0], g[0], 9), np.linspace(s[1], g[1], 9)], 1)
     pts = _initial_points(poly, path, s, g, spec)
     np.testing.assert_array_equal(pts[0], s)
@@ -198,6 +202,28 @@ def test_initial_points_are_graded_inside_and_start_with_the_ends() -> None:
     assert all(tuple(p) in kept for p in np.round(lat, 9))
     # the first level's points keep 0.3 h from the polygon, every level nests in it
     assert np.all(np.abs(rest[inner & (nn < 0.06)]).max(axis=1) <= 1.0 - 0.3 * 0.05 + 1e-12)
+
+
+def test_initial_points_boundary_of_a_shifted_polygon() -> None:
+    """A polygon away from the origin: every edge sampled from its corner on, consecutive
+    boundary points at least h_path and at most the local spacing (+ h_path / 2, the
+    candidates' distance) apart."""
+    spec = Spec(h_path=0.1, corridor=0.1, grade=0.6, h_far=0.2)
+    poly = np.array([[1.0, 2.0], [2.5, 2.0], [2.5, 3.0], [1.0, 3.0]])
+    s, g = np.array([1.5, 2.5]), np.array([2.0, 2.5])
+    pts = _initial_points(poly, np.stack([s, g]), s, g, spec)[2:]
+    for a, b in zip(poly, np.roll(poly, -1, axis=0)):
+        e = (b - a) / np.linalg.norm(b - a)
+        off = pts - a
+        on = np.abs(off[:, 0] * e[1] - off[:, 1] * e[0]) < 1e-12
+        t = np.sort(off[on] @ e)
+        t = t[(t > -1e-12) & (t < np.linalg.norm(b - a) + 1e-12)]
+        assert t[0] == pytest.approx(0.0, abs=1e-12) and t[-1] == pytest.approx(
+            np.linalg.norm(b - a), abs=1e-12)
+        gaps = np.diff(t)
+        # the candidates are at most h_path / 2 apart: a gap exceeds the spacing by less
+        assert gaps.max() <= spec.h_far + 0.5 * spec.h_path + 1e-9
+        assert gaps[:-1].min() >= spec.h_path - 1e-9  # the last gap ends at a corner
 
 
 def test_initial_points_with_equal_spacings_are_one_lattice() -> None:
@@ -303,6 +329,42 @@ def test_slivers_are_dropped_and_located_as_none() -> None:
 def test_a_mesh_of_too_few_points_is_refused() -> None:
     with pytest.raises(InputError, match="mesh of 2 points cannot be triangulated"):
         _Mesh(np.array([[0.0, 0.0], [1.0, 0.0]]))
+    with pytest.raises(InputError, match="mesh of 3 points cannot be triangulated"):
+        _Mesh(np.array([[0.0, 0.0], [1.0, 0.0], [2.0, 0.0]]))
+
+
+def test_zero_area_slivers_are_dropped_and_near_slivers_kept(monkeypatch) -> None:
+    """Delaunay's simplices with two extra triangles made up here: one of zero area (three
+    collinear vertices: dropped, and a point located in it reported as in no triangle) and
+    one of area2 1.3e-14 (relative ~4e-14 of the largest: kept, the threshold is 1e-14
+    relative)."""
+    import scipy.spatial
+
+    real = scipy.spatial.Delaunay
+    # 5 = (0.3, 0.3), 6 = (0.5, 0.6), 7 = 2 * 6 - 5 off the line 5-6 by ~4e-14
+    pts = np.array([[0.0, 0.0], [0.5, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0],
+                    [0.3, 0.3], [0.5, 0.6], [0.7 - 3e-14, 0.9 + 2e-14]])
+
+    class Fake:
+        def __init__(self, points):
+            self.inner = real(points)
+            self.simplices = np.concatenate([self.inner.simplices, [[0, 1, 2], [5, 6, 7]]])
+
+        def find_simplex(self, q):
+            out = self.inner.find_simplex(q)
+            out[np.all(q == [-5.0, -5.0], axis=1)] = len(self.simplices) - 2
+            out[np.all(q == [-6.0, -6.0], axis=1)] = len(self.simplices) - 1
+            return out
+
+    monkeypatch.setattr(scipy.spatial, "Delaunay", Fake)
+    mesh = _Mesh(pts)
+    n = len(mesh.delaunay.inner.simplices)
+    assert mesh.n_tri == n + 1  # the zero-area one dropped, the thin one kept
+    np.testing.assert_array_equal(mesh.tri[-1], [5, 6, 7])
+    np.testing.assert_array_equal(mesh.simplex_row, [*range(n), -1, n])
+    np.testing.assert_array_equal(mesh.locate(np.array([[-5.0, -5.0], [-6.0, -6.0],
+                                                        [9.0, 9.0]])), [-1, n, -1])
+    assert np.all(np.isfinite(mesh.r2))
 
 
 class _Lobes:
