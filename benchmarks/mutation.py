@@ -100,11 +100,11 @@ def prepare(group: str, work: Path) -> Path:
     return where
 
 
-def run(group: str, work: Path, children: int) -> dict:
+def run(group: str, work: Path, children: int, niceness: int = 10) -> dict:
     where = prepare(group, work)
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
-    proc = subprocess.run(["nice", "-n", "10", _mutmut(), "run", "--max-children",
+    proc = subprocess.run(["nice", "-n", str(niceness), _mutmut(), "run", "--max-children",
                            str(children)], cwd=where, capture_output=True, text=True,
                           check=False)
     wall = time.perf_counter() - t0
@@ -145,6 +145,8 @@ def main(argv: list[str] | None = None) -> None:
                     f"{', '.join(g for g in GROUPS if g not in DEFAULT)})")
     ap.add_argument("--max-children", type=int, default=1,
                     help="mutmut's worker processes (default 1: the machine is shared)")
+    ap.add_argument("--nice", type=int, default=10,
+                    help="niceness of mutmut (default 10: other work goes first)")
     ap.add_argument("--work", type=Path, default=ROOT / "build" / "mutation",
                     help="where the trees are unpacked and mutated")
     args = ap.parse_args(argv)
@@ -157,7 +159,7 @@ def main(argv: list[str] | None = None) -> None:
     rows, sections = [], []
     for g in args.groups:
         print(f"mutating {g} ...", flush=True)
-        r = run(g, args.work, args.max_children)
+        r = run(g, args.work, args.max_children, args.nice)
         if "error" in r:
             rows.append([f"`{g}`", "-", "-", "-", "-", "error", f"{r['cpu']:.0f}",
                          f"{r['wall']:.0f}"])
