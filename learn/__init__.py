@@ -1,7 +1,8 @@
 """learn: the midpoint-tree actor-critic of the paper (Algorithm 1) and its variants.
 
-Train with :func:`train` and a :class:`TrainConfig` (:func:`default_config` gives the
-documented per-environment defaults); load a trained or shipped policy with
+Train any method's config with :func:`train_run` (a :class:`TrainConfig` for the midpoint
+learner: :func:`default_config` gives the documented per-environment defaults; every
+method's config extends :class:`RunConfig`); load a trained or shipped policy with
 :func:`load_policy` and generate paths with ``policy.generate(starts, goals)``, or with
 the policy-guided route search ``policy.search(starts, goals)`` (:mod:`learn.search`).
 The paper's baselines sit beside the midpoint learner (:mod:`learn.seq` with its
@@ -9,7 +10,9 @@ gymnasium environment in :mod:`learn.env`, :mod:`learn.pg`). Every method is a p
 one run loop (:class:`learn.loop.RunLoop`) registered in :mod:`learn.registry`, which the
 CLI, sweeps and :func:`load_policy` read; :mod:`learn.runs` trains and loads any method
 and names the paper's variants, and :mod:`learn.methods` holds the actor losses and extra
-terms of the midpoint learner.
+terms of the midpoint learner. A loaded policy of any method is a :class:`PathPolicy`
+(:class:`MidpointPolicy` if it predicts midpoints); :mod:`learn.examples.toy_method` is a
+whole method in one file, to copy.
 """
 
 from learn.base import TrainResult
@@ -35,7 +38,16 @@ from learn.policy import (
     load_policy,
     shipped_policies,
 )
-from learn.registry import Method, Variant, get_method, list_methods, register_method
+from learn.registry import (
+    Method,
+    MidpointPolicy,
+    PathPolicy,
+    Variant,
+    get_method,
+    list_methods,
+    register_method,
+)
+from learn.run_config import RunConfig
 from learn.runs import VARIANTS, load_any_policy, make_config, run_one, train_run
 from learn.search import SearchResult, SearchSpec, equalize_paths, search_paths
 from learn.storage import CorruptFileError
@@ -50,7 +62,10 @@ __all__ = [
     "Critic",
     "EvalResult",
     "Method",
+    "MidpointPolicy",
+    "PathPolicy",
     "Policy",
+    "RunConfig",
     "RunLoop",
     "SearchResult",
     "SearchSpec",

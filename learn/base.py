@@ -1,10 +1,8 @@
-"""What every learning method shares: the config mixin and the end of a run.
+"""What every learning method shares: the loaded policy, the end of a run, the signals.
 
-:class:`RunConfig` gives the config dataclasses of the midpoint learner
-(:class:`learn.TrainConfig`) and of the baselines (:class:`learn.seq.SeqConfig`,
-:class:`learn.pg.PGConfig`) one implementation of the type checks of their fields (configs
-also come from JSON files and ``--set FIELD=VALUE``), the dict round trip of
-``config.json`` and the task's depth and threshold. :func:`finish_run` marks a run finished
+:class:`LoadedPolicy` is the base of every method's trained policy (its config, metric,
+depth, eps and source). The config every method extends, :class:`RunConfig`, is in
+:mod:`learn.run_config` (re-exported here). :func:`finish_run` marks a run finished
 (``result.json``) and builds its :class:`TrainResult`. :class:`StopOnSignal` lets every
 training loop end cleanly on SIGINT / SIGTERM: it finishes the iteration it is in, saves a
 resumable checkpoint and raises :class:`TrainingInterrupted`.
@@ -12,19 +10,16 @@ resumable checkpoint and raises :class:`TrainingInterrupted`.
 
 from __future__ import annotations
 
-import dataclasses
-import itertools
 import signal
 import threading
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Any
 
 import numpy as np
 
-import finsler
 from finsler.errors import InputError
-from finsler.limits import check_memory
+from learn.run_config import RunConfig, check_choice, check_hidden
 from learn.storage import write_result
 
 __all__ = [
@@ -34,109 +29,9 @@ __all__ = [
     "TrainResult",
     "TrainingInterrupted",
     "check_choice",
+    "check_hidden",
     "finish_run",
 ]
-
-_C = TypeVar("_C", bound="RunConfig")
-_KINDS = {"str": (str,), "int": (int,), "float": (int, float), "bool": (bool,)}
-
-
-def check_choice(name: str, value: str, allowed: tuple[str, ...]) -> None:
-    """Raise :class:`InputError` unless ``value`` is one of ``allowed``."""
-    if value not in allowed:
-        raise InputError(f"{name} must be one of {', '.join(allowed)}; got {value!r}")
-
-
-def check_hidden(hidden: tuple[int, ...], dim: int = 8, name: str = "hidden") -> None:
-    """Raise :class:`InputError` unless ``hidden`` (the config field ``name``) are positive
-    layer widths whose MLPs (inputs ~ ``2 * dim`` + a few) fit in memory
-    (:func:`finsler.limits.check_memory`, before any network is built)."""
-    if not hidden or any(h < 1 for h in hidden):
-        raise InputError(f"{name} sizes must be positive, got {hidden!r}")
-    widths = [2 * dim + 4, *hidden, 2 * dim]
-    weights = sum((a + 1) * b for a, b in itertools.pairwise(widths))
-    check_memory((weights,), f"{name} {list(hidden)} (about {weights:.3g} weights per "
-                 "network)", hint="choose smaller layers", itemsize=4, copies=4)
-
-
-class RunConfig:
-    """Mixin for a method's config dataclass with fields ``env``, ``device``, ``depth``
-    (``None`` = the task's) and ``eps`` (``None`` = the task's)."""
-
-    env: str
-    device: str
-    depth: int | None
-    eps: float | None
-
-    def _check_types(self) -> None:
-        """Raise :class:`InputError` naming the first field of the wrong type (fields
-        annotated ``str``, ``int``, ``float``, ``bool``, ``tuple[int, ...]``, each maybe
-        ``| None``, with or without ``from __future__ import annotations``; fields of other
-        types are left to the config's own checks)."""
-        for f in dataclasses.fields(self):  # type: ignore[arg-type]
-            v = getattr(self, f.name)
-            ann = f.type.__name__ if isinstance(f.type, type) else str(f.type)
-            if ann.endswith(" | None"):
-                if v is None:
-                    continue
-                ann = ann[: -len(" | None")]
-            if ann == "tuple[int, ...]":
-                ok = isinstance(v, (tuple, list)) and all(
-                    isinstance(h, int) and not isinstance(h, bool) for h in v)
-            elif ann in _KINDS:
-                ok = isinstance(v, _KINDS[ann]) and (ann == "bool" or not isinstance(v, bool))
-            else:
-                continue
-            if not ok:
-                raise InputError(f"config field {f.name} must be {ann}, got {v!r}")
-
-    def _check_env_and_device(self) -> None:
-        finsler.registry.check_name(self.env, "environment")
-        if self.device not in ("cpu", "cuda") and not self.device.startswith("cuda:"):
-            raise InputError(f"device must be 'cpu' or 'cuda', got {self.device!r}")
-
-    @property
-    def metric(self) -> finsler.Metric:
-        return finsler.get_metric(self.env)
-
-    @property
-    def max_depth(self) -> int:
-        """The tree depth D of evaluation (``depth`` or the task's)."""
-        return int(self.depth if self.depth is not None else self.metric.task.depth)
-
-    @property
-    def eval_eps(self) -> float:
-        """The success threshold of evaluation (``eps`` or the task's)."""
-        return float(self.eps if self.eps is not None else self.metric.task.eps)
-
-    def to_dict(self) -> dict[str, Any]:
-        d = dataclasses.asdict(self)  # type: ignore[call-overload]
-        for k, v in d.items():
-            if isinstance(v, tuple):
-                d[k] = list(v)
-        return d
-
-    @classmethod
-    def from_dict(cls: type[_C], d: dict[str, Any]) -> _C:
-        """Build from a dict (unknown keys are an error naming them)."""
-        if not isinstance(d, dict):
-            raise InputError(f"a {cls.__name__} needs a dict, got {type(d).__name__}")
-        names = {f.name for f in dataclasses.fields(cls)}  # type: ignore[arg-type]
-        unknown = sorted(set(d) - names)
-        if unknown:
-            raise InputError(f"unknown config field(s) of {cls.__name__}: "
-                             f"{', '.join(unknown)}")
-        return cls(**d)
-
-    def replace(self: _C, **changes: Any) -> _C:
-        """A copy with ``changes`` (unknown fields are an error naming them)."""
-        names = {f.name for f in dataclasses.fields(self)}  # type: ignore[arg-type]
-        unknown = sorted(set(changes) - names)
-        if unknown:
-            raise InputError(f"unknown config field(s) of {type(self).__name__}: "
-                             f"{', '.join(unknown)}")
-        return dataclasses.replace(self, **changes)  # type: ignore[type-var]
-
 
 @dataclass
 class LoadedPolicy:
@@ -159,12 +54,14 @@ class LoadedPolicy:
         return (f"{type(self).__name__}(env={self.metric.name!r}, depth={self.depth}, "
                 f"source={self.source!r})")
 
-    def _depth(self, depth: Any) -> int:
+    def check_depth(self, depth: Any) -> int:
         """``depth`` checked (a non-negative integer), or the policy's own if None."""
         d = self.depth if depth is None else depth
         if not isinstance(d, (int, np.integer)) or isinstance(d, bool) or d < 0:
             raise InputError(f"depth must be a non-negative integer, got {depth!r}")
         return int(d)
+
+    _depth = check_depth  # the name before issue 49
 
 
 @dataclass

@@ -10,19 +10,31 @@ with the toolkit (chosen to reach the issue's bars on a 2-core CPU);
 from __future__ import annotations
 
 import json
-import platform
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, ClassVar
 
 import finsler
 from finsler.errors import InputError
-from finsler.spec import MetricSpec, class_path, ensure_registered
-from learn.base import RunConfig, check_choice, check_hidden
 from learn.methods import actor_loss_of, derivative_terms, describe
+from learn.run_config import (
+    RunConfig,
+    build_metric,
+    check_choice,
+    check_hidden,
+    check_run_metric,
+    ensure_registered,
+    metric_class_path,
+    metric_info,
+    package_versions,
+    resolve_metric,
+    run_header,
+)
 
 __all__ = [
     "METHODS",
     "MetricConfig",
+    "RunConfig",
     "TrainConfig",
     "beyond_paper",
     "build_metric",
@@ -49,102 +61,28 @@ _ACTIVATIONS = ("relu", "tanh")
 _ENERGY_SCALES = ("none", "straight")
 _ENERGY_SCHEDULES = ("constant", "lr")
 
-
-# ----------------------------------------------------------------------------------------
-# The run's metric: registered name + parameters (+ the class of a user metric). The
-# metric's identity is finsler's (finsler.MetricSpec); these are the names learn has
-# always exported.
-# ----------------------------------------------------------------------------------------
-#: ``module:qualname`` of a metric class defined outside :mod:`finsler` (None for the
-#: toolkit's own metrics): :func:`finsler.spec.class_path`.
-metric_class_path = class_path
-
-
-def resolve_metric(env: str, params: Any = None,
-                   metric_class: str | None = None) -> tuple[dict[str, Any], str | None]:
-    """Check a run's metric and return ``(full parameters, class path)``: the parts of
-    :meth:`finsler.MetricSpec.resolve` (unknown names and ill-typed values raise
-    :class:`InputError` naming the allowed parameters; a user metric's module is imported
-    from ``metric_class`` if ``env`` is not registered)."""
-    spec = MetricSpec.resolve(env, params, metric_class)
-    return dict(spec.params), spec.class_path
-
-
-def build_metric(env: str, params: dict[str, Any] | None = None) -> finsler.Metric:
-    """The registered metric ``env`` with ``params`` (:meth:`finsler.MetricSpec.build`)."""
-    return MetricSpec(env, dict(params or {})).build()
-
-
-def metric_info(cfg: Any) -> dict[str, Any]:
-    """``config.json``'s ``metric`` section: :meth:`finsler.Metric.info` plus the full
-    parameters and, for a user metric, its class (``module:qualname``)."""
-    return {**cfg.metric.info(), "params": dict(cfg.metric_params or {}),
-            "class": cfg.metric_class}
-
-
-def check_run_metric(cfg: Any, source: str, env: str | None = None,
-                     metric_params: dict[str, Any] | None = None) -> None:
-    """Raise :class:`InputError` unless the run ``cfg`` (loaded from ``source``) is on
-    metric ``env`` (if given) with ``metric_params`` (if given; compared after completing
-    them to the full set, so ``{"a": 0.2}`` equals the run's ``{"a": 0.2}`` and unnamed
-    parameters must have their defaults)."""
-    if env is not None and env != cfg.env:
-        raise InputError(f"--env {env} does not match the run's environment {cfg.env}")
-    if metric_params is None:
-        return
-    given = MetricSpec.resolve(cfg.env, metric_params, cfg.metric_class)
-    diff = cfg.metric_spec.param_differences(given)
-    if diff:
-        text = ", ".join(f"{k}={a!r} (given {b!r})" for k, (a, b) in diff.items())
-        raise InputError(f"{source} was trained on {cfg.env} with other metric parameters: "
-                         f"{text}; a policy is only loaded for the metric it learned")
+#: The base of the method configs before issue 49, now :class:`learn.run_config.RunConfig`
+#: (which holds the run's metric and every run field); kept as a name.
+MetricConfig = RunConfig
 
 
 @dataclass
-class MetricConfig(RunConfig):
-    """Base of the method configs (a dataclass: a method's config subclasses it with
-    ``@dataclass`` and adds its own fields after these three): the run's metric is ``env``
-    with ``metric_params`` (validated and completed to the full parameter set when the
-    config is built; old configs without the field get the defaults), and ``metric_class``
-    locates a user metric's class so that loading a run re-imports it. Together:
-    :attr:`metric_spec`."""
+class TrainConfig(RunConfig):
+    """Every setting of one training run of Algorithm 1 (saved as ``config.json``): the
+    run fields of :class:`learn.run_config.RunConfig` (``method``: the actor loss,
+    ``midpoint`` (eq. 6), ``inter`` (eq. 17) or ``two-to-one`` (eq. 18); ``timesteps``:
+    the budget T of evaluations of C, all-inclusive: the collected trees (the paper's
+    timesteps) and every evaluation an extra actor term makes, in every epoch; also the
+    horizon of the learning-rate schedule and of the paper's depth schedule; the
+    evaluations of the validation set that select checkpoints are not counted;
+    ``eval_every``: collections between evaluations), then the learner's own."""
 
-    env: str = "matsumoto"
-    """Registered metric name (``finsler.list_metrics()``)."""
-    metric_params: dict[str, Any] | None = None
-    """Parameters of the metric (``finsler.get_metric(env, **metric_params)``); None or {}
-    = its defaults. Completed to the full parameter set when the config is built."""
-    metric_class: str | None = None
-    """``module:qualname`` of a metric class registered outside the toolkit (filled in
-    automatically; re-imported when the run is loaded in another process)."""
+    config_methods: ClassVar[tuple[str, ...]] = METHODS
+    # eval_pairs 500 (was 100): at 93 % success the binomial standard deviation of 100
+    # pairs is 2.6 points, so the best of 20 evaluations was chosen mostly by noise and
+    # "last within 3 points of the best" could not be told; with 500 it is 1.1 points.
+    run_defaults: ClassVar[Mapping[str, Any]] = {"eval_every": 50, "eval_pairs": 500}
 
-    def _check_types(self) -> None:
-        params = self.metric_params
-        self.metric_params = None  # RunConfig's check knows scalar fields only
-        try:
-            super()._check_types()
-        finally:
-            self.metric_params = params
-        self.metric_params, self.metric_class = resolve_metric(
-            self.env, params, self.metric_class)
-
-    @property
-    def metric_spec(self) -> MetricSpec:
-        """The run's metric as a :class:`finsler.MetricSpec`."""
-        return MetricSpec(self.env, dict(self.metric_params or {}), self.metric_class)
-
-    @property
-    def metric(self) -> finsler.Metric:
-        """The run's metric: ``env`` with ``metric_params``."""
-        return self.metric_spec.build()
-
-
-@dataclass
-class TrainConfig(MetricConfig):
-    """Every setting of one training run of Algorithm 1 (saved as ``config.json``)."""
-
-    method: str = "midpoint"
-    """Actor loss: ``midpoint`` (eq. 6), ``inter`` (eq. 17) or ``two-to-one`` (eq. 18)."""
     actor_loss_power: float = 2.0
     """Beyond the paper, model-free (the critic's values only): ``p`` of the midpoint loss
     ``2**(1 - 2/p) (|V(s, m)|**p + |V(m, g)|**p)**(2/p)``; ``p = 2`` is eq. (6) itself.
@@ -152,23 +90,6 @@ class TrainConfig(MetricConfig):
     both halves ``d/2``, the loss ``d**2 / 2``), but a larger ``p`` makes an uneven split
     cost more against a longer route, so critic and actor errors end in better-balanced
     halves (success bounds the largest segment). ``method="midpoint"`` only."""
-    timesteps: int = 20_000_000
-    """Budget T of evaluations of C, all-inclusive: the collected trees (the paper's
-    timesteps) and every evaluation an extra actor term makes, in every epoch; also the
-    horizon of the learning-rate schedule and of the paper's depth schedule. The
-    evaluations of the validation set that select checkpoints are not counted."""
-    minutes: float | None = None
-    """Optional wall-clock limit; training stops at whichever limit comes first."""
-    seed: int = 0
-    """Seed of the run's numpy and torch generators and of the network initialisation."""
-    device: str = "cpu"
-    """``cpu`` or ``cuda``."""
-    threads: int = 1
-    """torch intra-op threads (1 keeps runs bit-reproducible and leaves cores free)."""
-    depth: int | None = None
-    """Maximum tree depth D_max; None = the task's depth."""
-    eps: float | None = None
-    """Success threshold for the evaluations logged during training; None = the task's."""
     select_eps: float | None = None
     """Beyond the paper (None = off): the best checkpoint is the one with the highest
     validation success at this tighter tolerance (then at ``eps``, then the lowest mean
@@ -323,28 +244,10 @@ class TrainConfig(MetricConfig):
     """Rounds of targets kept (a replay buffer)."""
     expert_critic: bool = True
     """Add the searched sub-paths' costs to the critic's data."""
-    eval_every: int = 50
-    """Iterations (collections) between evaluations on the validation pair set; each
-    evaluation also writes the latest checkpoint (deterministic resume points)."""
-    eval_pairs: int = 500
-    """Size of the validation set (``finsler.validation_pairs``: its own seed, distinct
-    from the default evaluation set) on which ``checkpoint_best`` is chosen. 500 (was 100):
-    at 93 % success the binomial standard deviation of 100 pairs is 2.6 points, so the
-    best of 20 evaluations was chosen mostly by noise and "last within 3 points of the
-    best" could not be told; with 500 it is 1.1 points."""
-
     # ------------------------------------------------------------------------------------
-    def __post_init__(self) -> None:
-        self._check_types()
-        self.hidden = tuple(int(h) for h in self.hidden)
-        if self.critic_hidden is not None:
-            self.critic_hidden = tuple(int(h) for h in self.critic_hidden)
-        self.validate()
-
     def validate(self) -> None:
-        """Raise :class:`finsler.InputError` naming the first impossible option."""
-        self._check_env_and_device()
-        check_choice("method", self.method, METHODS)
+        """Raise :class:`finsler.InputError` naming the first impossible option of the
+        learner (the run fields are :class:`RunConfig`'s to check)."""
         check_choice("targets", self.targets, _TARGETS)
         check_choice("depth_schedule", self.depth_schedule, _SCHEDULES)
         check_choice("lr_schedule", self.lr_schedule, _LR_SCHEDULES)
@@ -360,18 +263,11 @@ class TrainConfig(MetricConfig):
         if not (isinstance(p, (int, float)) and not isinstance(p, bool) and 1 < p <= 64):
             raise InputError(f"actor_loss_power must be a number in (1, 64], got {p!r}")
         actor_loss_of(self.method, p)  # the power applies to method 'midpoint' only
-        for name in ("timesteps", "minibatch_size", "collection_size", "epochs", "threads",
-                     "eval_every", "eval_pairs", "path_energy_pairs", "route_pairs",
-                     "expert_pairs", "expert_every", "expert_keep"):
+        for name in ("minibatch_size", "collection_size", "epochs", "path_energy_pairs",
+                     "route_pairs", "expert_pairs", "expert_every", "expert_keep"):
             v = getattr(self, name)
             if not isinstance(v, int) or isinstance(v, bool) or v < 1:
                 raise InputError(f"{name} must be a positive integer, got {v!r}")
-        if self.minutes is not None and not (self.minutes > 0):
-            raise InputError(f"minutes must be positive, got {self.minutes!r}")
-        if self.depth is not None and (not isinstance(self.depth, int) or self.depth < 1):
-            raise InputError(f"depth must be a positive integer, got {self.depth!r}")
-        if self.eps is not None and not (self.eps > 0 and self.eps < float("inf")):
-            raise InputError(f"eps must be positive and finite, got {self.eps!r}")
         check_hidden(self.hidden)
         if self.critic_hidden is not None:
             check_hidden(self.critic_hidden, name="critic_hidden")
@@ -608,28 +504,6 @@ def beyond_paper(cfg: TrainConfig) -> dict[str, dict[str, Any]]:
         if k not in skip and ref[k] != v:
             out[k] = {"used": v, "paper": ref[k]}
     return out
-
-
-def package_versions() -> dict[str, str]:
-    """Versions of python, torch, numpy, casadi (recorded in every run's config)."""
-    import casadi
-    import numpy
-    import torch
-
-    return {
-        "python": platform.python_version(),
-        "torch": torch.__version__,
-        "numpy": numpy.__version__,
-        "casadi": casadi.__version__,
-    }
-
-
-def run_header(cfg: Any) -> dict[str, Any]:
-    """The first sections of every run's ``config.json``: the config, the metric (with its
-    full parameters) and the task (depth, eps, segments)."""
-    return {"config": cfg.to_dict(), "metric": metric_info(cfg),
-            "task": {"depth": cfg.max_depth, "eps": cfg.eval_eps,
-                     "segments": 2**cfg.max_depth}}
 
 
 def run_document(cfg: TrainConfig) -> dict[str, Any]:

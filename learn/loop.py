@@ -2,11 +2,18 @@
 
 A method is a subclass of :class:`RunLoop` that supplies what only it knows:
 
-* ``config_class`` (its config dataclass, a :class:`learn.base.RunConfig` with ``env``,
-  ``method``, ``seed``, ``timesteps``, ``minutes``, ``device``, ``eval_pairs``), ``label``
-  (the progress bar's), ``free_on_resume`` (the config fields a resume may change);
+* ``config_class`` (its config dataclass on :class:`learn.run_config.RunConfig`, which
+  holds every run field), ``label`` (the progress bar's), ``free_on_resume`` (the config
+  fields a resume may change) and ``recorded_on_resume`` (those of them that a resume
+  writes into ``config.json``), and :meth:`RunLoop.check_resume` (a method's own rule
+  about what a resume may change);
 * :meth:`RunLoop.setup`: networks, optimisers, generators for ``self.cfg`` (and
-  :meth:`RunLoop.start`: what a NEW run does once before its first row);
+  :meth:`RunLoop.start`: what a NEW run does once before its first row). Before it the
+  loop has set what every method needs: ``self.device`` (``cfg.device`` resolved), the
+  torch threads (``cfg.threads``), ``self.metric``, ``self.dim``, ``self.depth_max`` and
+  ``self.validation_pairs`` (``finsler.validation_pairs(metric, cfg.eval_pairs)``);
+  :meth:`RunLoop.seeded` and :meth:`RunLoop.generators` give the seeded initialisation
+  and generators;
 * :meth:`RunLoop.iterate`: one iteration, adding the evaluations of C it made to
   ``timesteps`` (all-inclusive; ``timesteps_paper``, ``timesteps_derivative`` as they
   apply) and 1 to ``iteration``;
@@ -31,18 +38,25 @@ about runs. Register the method with :func:`learn.registry.register_method`.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import sys
 import time
 from abc import ABC, abstractmethod
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any, ClassVar
 
+import numpy as np
+import torch
+
+import finsler
 from finsler.errors import InputError
-from learn.base import RunConfig, StopOnSignal, TrainResult, finish_run
-from learn.config import check_run_metric, package_versions, run_header
+from learn.base import StopOnSignal, TrainResult, finish_run
+from learn.networks import resolve_device
+from learn.registry import BUILTIN_MODULES
+from learn.run_config import RunConfig, check_run_metric, package_versions, run_header
 from learn.storage import (
     BEST_FILE,
     CONFIG_FILE,
@@ -121,6 +135,11 @@ class RunLoop(ABC):
     free_on_resume: ClassVar[tuple[str, ...]] = ("minutes", "device", "eval_pairs")
     """Config fields a resumed run may change (run control, not the run itself); the
     given values are used."""
+    recorded_on_resume: ClassVar[tuple[str, ...]] = ()
+    """Fields of ``free_on_resume`` that say what the run does, not only how it is run: a
+    resume that changes one rewrites ``config.json`` with the new values when it starts
+    (the midpoint learner's polish settings). Changes of the others (``minutes``,
+    ``device``, ...) leave ``config.json`` as the run began."""
     final_columns: ClassVar[tuple[str, ...]] = ()
     """Columns of the last metrics row copied into :attr:`TrainResult.final` besides the
     success rate, lengths and throughput."""
@@ -132,6 +151,7 @@ class RunLoop(ABC):
                              f"got {type(cfg).__name__}")
         self.run_dir = check_run_dir(Path(run_dir), resume)
         self.progress = progress
+        self._record_config = False
         if resume:
             cfg = self._resume_config(cfg)
         self.cfg: Any = cfg
@@ -143,6 +163,13 @@ class RunLoop(ABC):
         self.best: dict[str, Any] = {"success_rate": -1.0, "mean_max_segment_cost": math.inf}
         self.history: list[dict[str, Any]] = []
         self._t0 = time.perf_counter()
+        # what every method's setup needs, the same way for each
+        self.device = resolve_device(cfg.device)
+        torch.set_num_threads(cfg.threads)
+        self.metric = cfg.metric
+        self.dim = self.metric.dim
+        self.depth_max = cfg.max_depth
+        self.validation_pairs = finsler.validation_pairs(self.metric, cfg.eval_pairs)
         self.setup()
         if resume:
             latest = self.run_dir / LATEST_FILE
@@ -161,7 +188,14 @@ class RunLoop(ABC):
     def setup(self) -> None:
         """Build the networks, optimisers and generators of ``self.cfg`` (and the method's
         own counters), seeded by the config: a new run and a resumed one build the same
-        before the checkpoint is loaded."""
+        before the checkpoint is loaded. ``self.device``, ``self.metric``, ``self.dim``,
+        ``self.depth_max`` and ``self.validation_pairs`` are set already."""
+
+    def check_resume(self, saved: RunConfig, resumed: RunConfig) -> None:  # noqa: B027
+        """A method's own rule about resuming (called before :meth:`setup`, after the
+        loop's check that only ``free_on_resume`` fields differ): ``saved`` is the run's
+        ``config.json``, ``resumed`` the config the run continues with; raise
+        :class:`InputError` to refuse (default: nothing more to check)."""
 
     def start(self) -> None:  # noqa: B027 (optional hook)
         """What a new run does once, before its config is written (not on resume)."""
@@ -222,6 +256,22 @@ class RunLoop(ABC):
         """Extra entries of ``result.json``."""
         return {}
 
+    # -- helpers for a method's setup ------------------------------------------------------
+    @contextlib.contextmanager
+    def seeded(self) -> Iterator[None]:
+        """A block whose torch draws (network initialisation) come from ``cfg.seed``; the
+        global torch generator is as before afterwards."""
+        with torch.random.fork_rng(devices=[]):
+            torch.manual_seed(self.cfg.seed)
+            yield
+
+    def generators(self) -> tuple[np.random.Generator, torch.Generator]:
+        """A numpy generator seeded with ``cfg.seed`` and a torch generator on the device
+        seeded with ``cfg.seed + 1`` (a method saves their states in :meth:`state_dict`)."""
+        gen = torch.Generator(device=self.device)
+        gen.manual_seed(self.cfg.seed + 1)
+        return np.random.default_rng(self.cfg.seed), gen
+
     # -- the loop -------------------------------------------------------------------------
     def _resume_config(self, cfg: RunConfig) -> RunConfig:
         saved = self.config_class.from_dict(read_config_section(self.run_dir))
@@ -233,13 +283,17 @@ class RunLoop(ABC):
         if changed:
             raise InputError("cannot resume with different settings: " + ", ".join(
                 f"{k} ({old[k]!r} in the run, {new[k]!r} given)" for k in changed))
-        return saved.replace(**{k: getattr(cfg, k) for k in self.free_on_resume})
+        resumed = saved.replace(**{k: getattr(cfg, k) for k in self.free_on_resume})
+        self.check_resume(saved, resumed)
+        self._record_config = any(getattr(saved, k) != getattr(resumed, k)
+                                  for k in self.recorded_on_resume)
+        return resumed
 
     def _config_json(self) -> str:
         doc = {**run_header(self.cfg), **self.run_document()}
         doc.setdefault("versions", package_versions())
         module = type(self).__module__
-        if module.split(".")[0] != "learn":  # a method registered outside the toolkit
+        if module not in BUILTIN_MODULES:  # a method registered outside the toolkit's own
             doc["method_module"] = module
             where = getattr(sys.modules.get(module), "__file__", None)
             if where:  # to say what to import when the module is not importable
@@ -311,6 +365,9 @@ class RunLoop(ABC):
         bar = tqdm(total=total, initial=min(self.timesteps, total), unit="C",
                    unit_scale=True, disable=not self.progress,
                    desc=f"{self.label} {cfg.env}", dynamic_ncols=True)
+        if self._record_config:  # a resume changed a recorded_on_resume field
+            atomic_write_text(self.run_dir / CONFIG_FILE, self._config_json())
+            self._record_config = False
         self.begin()
         if self.iteration == 0 and not self.history:
             self._log_and_checkpoint()

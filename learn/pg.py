@@ -45,10 +45,10 @@ from __future__ import annotations
 
 import copy
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 import torch
@@ -57,12 +57,12 @@ from torch import nn
 
 import finsler
 from finsler.errors import InputError
-from learn.base import LoadedPolicy, TrainResult, check_choice, check_hidden
-from learn.config import MetricConfig, ensure_registered
+from learn.base import LoadedPolicy, TrainResult
 from learn.loop import RunLoop, best_record, eval_columns, load_run, load_weights
 from learn.networks import mlp, resolve_device
 from learn.policy import EvalResult, check_pairs, evaluate_paths
-from learn.registry import Method, register_method
+from learn.registry import Method, deprecated_entry, register_method
+from learn.run_config import RunConfig, check_choice, check_hidden, ensure_registered
 from learn.tree import build_tree
 
 __all__ = [
@@ -96,26 +96,17 @@ _ACTIVATIONS = ("tanh", "relu")
 # Configuration
 # ----------------------------------------------------------------------------------------
 @dataclass
-class PGConfig(MetricConfig):
-    """Every setting of one PG training run (saved as ``config.json``)."""
+class PGConfig(RunConfig):
+    """Every setting of one PG training run (saved as ``config.json``): the run fields of
+    :class:`learn.run_config.RunConfig` (``timesteps``: the budget of evaluations of C,
+    all-inclusive, here equal to the paper's count; None = the schedule's total,
+    :func:`schedule_total`, the paper's total for the environment; ``depth``: the number
+    of policies D_max; ``eval_every``: cycles between evaluations, and every level's last
+    cycle is evaluated too), then PG's own."""
 
-    method: str = "pg"
-    """Always ``pg``."""
-    seed: int = 0
-    """Seed of the run's numpy and torch generators and of the network initialisation."""
-    timesteps: int | None = None
-    """Budget of evaluations of C (all-inclusive; here equal to the paper's count). None =
-    the schedule's total (:func:`schedule_total`, the paper's total for the environment)."""
-    minutes: float | None = None
-    """Optional wall-clock limit (cumulative across resumes); whichever limit comes first."""
-    device: str = "cpu"
-    """``cpu`` or ``cuda``."""
-    threads: int = 1
-    """torch intra-op threads."""
-    depth: int | None = None
-    """Number of policies D_max; None = the task's depth (``metric.task.depth``)."""
-    eps: float | None = None
-    """Success threshold of the logged evaluations; None = the task's."""
+    config_methods: ClassVar[tuple[str, ...]] = ("pg",)
+    run_defaults: ClassVar[Mapping[str, Any]] = {"timesteps": None}
+
     hidden: tuple[int, ...] = (64, 64)
     """Hidden layer sizes of every policy (paper: 64, 64)."""
     activation: str = "tanh"
@@ -159,16 +150,8 @@ class PGConfig(MetricConfig):
     swap_augment: bool = False
     """Also train on every pair reversed (g, s) with the same midpoint and advantage (the
     authors' code does; questionable for non-reversible metrics)."""
-    eval_every: int = 10
-    """Cycles between evaluations on the validation set (each also saves checkpoint_latest);
-    every level's last cycle is also evaluated."""
-    eval_pairs: int = 100
-    """Size of the validation set (``finsler.validation_pairs``)."""
-
-    def __post_init__(self) -> None:
-        self._check_types()
-        self.hidden = tuple(int(h) for h in self.hidden)
-        self.validate()
+    def complete(self) -> None:
+        """The schedule's defaults for the environment, and its total as the budget."""
         first, other = _CYCLES.get(self.env, _DEFAULT_CYCLES)
         if self.cycles_first is None:
             self.cycles_first = first
@@ -178,17 +161,12 @@ class PGConfig(MetricConfig):
             self.timesteps = schedule_total(self)
 
     def validate(self) -> None:
-        """Raise :class:`InputError` naming the first impossible field."""
-        self._check_env_and_device()
-        if self.method != "pg":
-            raise InputError(f"method must be 'pg' for a PGConfig, got {self.method!r}")
+        """Raise :class:`InputError` naming the first impossible field of PG's own (the run
+        fields are :class:`RunConfig`'s to check)."""
         check_choice("activation", self.activation, _ACTIVATIONS)
         check_choice("objective", self.objective, _OBJECTIVES)
         check_choice("surrogate", self.surrogate, _SURROGATES)
-        if self.seed < 0:
-            raise InputError(f"seed must be a non-negative integer, got {self.seed!r}")
-        for name in ("threads", "pairs_per_cycle", "epochs", "eval_every", "eval_pairs",
-                     "timesteps", "cycles_first", "cycles_other", "depth"):
+        for name in ("pairs_per_cycle", "epochs", "cycles_first", "cycles_other"):
             v = getattr(self, name)
             if v is not None and v < 1:
                 raise InputError(f"{name} must be a positive integer, got {v!r}")
@@ -203,10 +181,6 @@ class PGConfig(MetricConfig):
             raise InputError(f"entropy_coef must be finite and >= 0, got {self.entropy_coef!r}")
         if not math.isfinite(self.init_c):
             raise InputError(f"init_c must be finite, got {self.init_c!r}")
-        if self.minutes is not None:
-            _real("minutes", self.minutes, 0.0, math.inf)
-        if self.eps is not None:
-            _real("eps", self.eps, 0.0, math.inf)
 
     # ------------------------------------------------------------------------------------
     @property
@@ -464,21 +438,12 @@ class PGTrainer(RunLoop):
 
     def setup(self) -> None:
         cfg = self.cfg
-        self.device = resolve_device(cfg.device)
-        torch.set_num_threads(cfg.threads)
-        self.metric = cfg.metric
-        self.dim = self.metric.dim
-        self.depth_max = cfg.max_depth
-        pairs = finsler.validation_pairs(self.metric, cfg.eval_pairs)
-        self.eval_pairs = torch.as_tensor(pairs, dtype=torch.float64, device=self.device)
-
-        with torch.random.fork_rng(devices=[]):
-            torch.manual_seed(cfg.seed)
+        self.eval_pairs = torch.as_tensor(self.validation_pairs, dtype=torch.float64,
+                                          device=self.device)
+        with self.seeded():
             self.policies = _build_policies(cfg, self.metric).to(self.device)
         self.opts = [torch.optim.Adam(p.parameters(), lr=cfg.lr) for p in self.policies]
-        self.np_rng = np.random.default_rng(cfg.seed)
-        self.gen = torch.Generator(device=self.device)
-        self.gen.manual_seed(cfg.seed + 1)
+        self.np_rng, self.gen = self.generators()
 
         self.level = 1  # depth of the policy being trained
         self.level_best: dict[str, Any] | None = None  # best state of pi_level on validation
@@ -615,9 +580,11 @@ class PGTrainer(RunLoop):
 
 def train_pg(cfg: PGConfig, out: str | Path, resume: bool = False,
              progress: bool = True) -> TrainResult:
-    """Train PG with ``cfg`` into run directory ``out`` (``resume`` continues the run saved
-    there exactly as an uninterrupted run would; a non-empty ``out`` without ``resume`` is
-    refused)."""
+    """Deprecated: :func:`learn.train_run` (the one entry point for every method) trains
+    ``cfg`` the same way. Train PG with ``cfg`` into run directory ``out`` (``resume``
+    continues the run saved there exactly as an uninterrupted run would; a non-empty
+    ``out`` without ``resume`` is refused)."""
+    deprecated_entry("learn.pg.train_pg")
     return PGTrainer(cfg, out, resume=resume, progress=progress).run()
 
 

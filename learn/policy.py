@@ -181,7 +181,7 @@ class Policy(LoadedPolicy):
     def generate(self, starts: Any, goals: Any, depth: int | None = None) -> np.ndarray:
         """Paths by recursive midpoint insertion: ``(K, dim)`` x2 -> ``(K, 2**D + 1, dim)``
         float64 (D = ``depth`` or the task's depth). Endpoints are the given points."""
-        d = self._depth(depth)
+        d = self.check_depth(depth)
         s, g = self._pair_points(starts, goals)
         return generate_paths(self.actor, self.metric, s, g, int(d)).cpu().numpy()
 
@@ -194,7 +194,7 @@ class Policy(LoadedPolicy):
         than :meth:`generate`'s path, pair by pair; successful (every segment cost <=
         ``eps``, default the task's) wherever that path is. Returns the paths and the
         evaluations of C the search made."""
-        d = self._depth(depth)
+        d = self.check_depth(depth)
         s, g = self._pair_points(starts, goals)
         return search_paths(self.metric, predictor(self.actor, self.metric), s, g, d,
                             self.eps if eps is None else eps, spec)

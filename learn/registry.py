@@ -10,24 +10,40 @@ two-to-one, :mod:`learn.pg`, :mod:`learn.seq`) are imported on first need; a met
 user's file is imported with ``--method-module FILE.py`` (:func:`import_method_modules`)
 and its module is recorded in each run's ``config.json`` (``method_module``, and the file
 in ``method_file``) so that loading the run re-imports it (when it is importable; else the
-error names the file to pass with ``--method-module``).
+error names the file to pass with ``--method-module``). The shipped example
+:mod:`learn.examples.toy_method` is such a method (``--method-module
+learn.examples.toy_method``).
+
+What a loaded policy offers every command is the protocol :class:`PathPolicy` (and
+:class:`MidpointPolicy` for a policy that predicts midpoints); :func:`learn.train_run`
+trains any registered method's config (:meth:`Method.train`).
 """
 
 from __future__ import annotations
 
 import difflib
 import importlib
+import warnings
 from collections.abc import Callable, Iterable, Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
 from finsler.errors import InputError
 from finsler.modules import import_user_module
 
+if TYPE_CHECKING:
+    import numpy as np
+
+    import finsler
+
 __all__ = [
+    "BUILTIN_MODULES",
     "Method",
+    "MidpointPolicy",
+    "PathPolicy",
     "Variant",
+    "deprecated_entry",
     "find_variant",
     "get_method",
     "import_method_modules",
@@ -41,6 +57,49 @@ __all__ = [
 #: The toolkit's own method modules, imported (in this order) when a name is not yet
 #: registered: each registers its methods on import.
 BUILTIN_MODULES = ("learn.train", "learn.seq", "learn.pg")
+
+
+@runtime_checkable
+class PathPolicy(Protocol):
+    """What a method's ``load_policy`` returns (a :class:`learn.base.LoadedPolicy` has the
+    attributes): the policy of a run, which every command that reads runs (``geodesics
+    evaluate``, ``report``, ``check --run``, ``solve --warm-start``) uses through these
+    names only. ``isinstance(policy, PathPolicy)`` checks that they are there."""
+
+    metric: finsler.Metric
+    """The metric the policy was trained on (with the run's parameters)."""
+    config: Any
+    """The run's config (a :class:`learn.run_config.RunConfig`)."""
+    depth: int
+    """The depth D of its paths (``2**D`` segments) unless asked otherwise."""
+    eps: float
+    """Its success threshold."""
+    source: str
+    """The run directory (or shipped policy) it came from."""
+    checkpoint: str
+    """The checkpoint file its weights came from."""
+
+    def generate(self, starts: Any, goals: Any, depth: int | None = None) -> np.ndarray:
+        """Paths ``(K, dim)`` x2 -> ``(K, 2**D + 1, dim)`` float64 from the starts to the
+        goals (D = ``depth`` or the policy's)."""
+        ...
+
+    def evaluate(self, pairs: Any = None, eps: float | None = None,
+                 depth: int | None = None) -> Any:
+        """Section 5.1 evaluation on ``pairs`` ``(K, 2, dim)`` (default:
+        ``finsler.default_pairs``): a :class:`learn.policy.EvalResult`."""
+        ...
+
+
+@runtime_checkable
+class MidpointPolicy(PathPolicy, Protocol):
+    """A :class:`PathPolicy` that predicts midpoints (every midpoint-tree method: the
+    midpoint learner, PG, the example; Seq walks step by step and has none): the midpoint
+    checks of ``geodesics check`` and the reports' midpoint errors use it."""
+
+    def midpoint(self, starts: Any, goals: Any) -> np.ndarray:
+        """Predicted midpoints ``(K, dim)`` of the pairs (``(dim,)`` for one pair)."""
+        ...
 
 
 @dataclass(frozen=True)
@@ -70,9 +129,8 @@ class Method:
     trainer: type
     """A :class:`learn.loop.RunLoop` subclass: ``trainer(cfg, out, resume=, progress=)``."""
     load_policy: Callable[..., Any]
-    """``load_policy(run_dir, checkpoint=, device=, env=, metric_params=)`` -> a policy
-    with ``metric``, ``config``, ``source``, ``checkpoint``, ``generate`` and
-    ``evaluate``."""
+    """``load_policy(run_dir, checkpoint=, device=, env=, metric_params=)`` -> a
+    :class:`PathPolicy` (a :class:`MidpointPolicy` if it predicts midpoints)."""
     default_config: Callable[..., Any]
     """``default_config(env, **fields)`` -> the method's config."""
     config_methods: tuple[str, ...] = ()
@@ -93,15 +151,28 @@ class Method:
 
     @property
     def builtin(self) -> bool:
-        return self.module.split(".")[0] == "learn"
+        """True for the toolkit's own methods (imported on first need); a method of any
+        other module (the shipped example :mod:`learn.examples.toy_method` too) is
+        imported by name in sweep workers and recorded in its runs' ``config.json``."""
+        return self.module in BUILTIN_MODULES
 
     def train(self, cfg: Any, out: str | Path, resume: bool = False,
               progress: bool = True) -> Any:
-        """Train ``cfg`` into run directory ``out``: the :class:`learn.base.TrainResult`."""
+        """Train ``cfg`` into run directory ``out``: the :class:`learn.base.TrainResult`
+        (what :func:`learn.train_run` calls for ``cfg.method``)."""
         return self.trainer(cfg, out, resume=resume, progress=progress).run()
 
 
 _METHODS: dict[str, Method] = {}
+
+
+def deprecated_entry(name: str) -> None:
+    """Warn (:class:`DeprecationWarning`, at the caller's line) that ``name()``, one
+    method's own training function, is deprecated for the one entry point
+    :func:`learn.train_run`."""
+    warnings.warn(f"{name}() is deprecated: use learn.train_run(cfg, out, resume=..., "
+                  "progress=...), the one entry point that trains every method's config",
+                  DeprecationWarning, stacklevel=3)
 
 
 def register_method(method: Method) -> Method:

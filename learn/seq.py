@@ -29,17 +29,17 @@ from __future__ import annotations
 import dataclasses
 import math
 import random
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 import torch
 
 import finsler
 from finsler.errors import InputError
-from learn.base import LoadedPolicy, TrainResult, check_hidden
-from learn.config import MetricConfig, ensure_registered, package_versions
+from learn.base import LoadedPolicy, TrainResult
 from learn.env import (
     TIME_LIMITS,
     ZERO_ACTION_REWARD,
@@ -52,7 +52,8 @@ from learn.env import (
 from learn.loop import RunLoop, best_record, eval_columns, load_run, load_weights
 from learn.networks import resolve_device
 from learn.policy import EvalResult, check_pairs
-from learn.registry import Method, register_method
+from learn.registry import Method, deprecated_entry, register_method
+from learn.run_config import RunConfig, check_hidden, ensure_registered, package_versions
 
 __all__ = [
     "SEGMENT_RTOL",
@@ -92,29 +93,22 @@ _PAPER_ROLLOUT = 2048
 
 
 @dataclass
-class SeqConfig(MetricConfig):
-    """Every setting of one Seq run (saved as ``config.json``). PPO settings not listed are
+class SeqConfig(RunConfig):
+    """Every setting of one Seq run (saved as ``config.json``): the run fields of
+    :class:`learn.run_config.RunConfig` (``seed`` also seeds SB3's global generators and
+    the environments, copy ``i`` with ``seed + i``; ``timesteps``: the budget of
+    ALL-INCLUSIVE evaluations of F or C made by the environments, 3 per step and 2 per
+    reset candidate; paper: 2e7 (Matsumoto, Panda), 8e7 (car-like) env steps; ``device``
+    is SB3's networks', the environments run on numpy; ``depth``: episodes last at most
+    ``2**depth`` steps, paper n = 2**D_max; ``eps``: the step cost of eq. (57) and the
+    success threshold; ``eval_every``: all-inclusive timesteps between evaluations,
+    checked after every rollout), then Seq's own. PPO settings not listed are
     stable-baselines3's defaults (normalised advantages, orthogonal initialisation, log-std
     initialised at 0, no target KL, no value clipping)."""
 
-    method: str = "seq"
-    """Always ``seq``."""
-    seed: int = 0
-    """Seed of SB3 (global python/numpy/torch generators, network initialisation) and of
-    the environments (copy ``i`` is seeded with ``seed + i``)."""
-    timesteps: int = 20_000_000
-    """Budget of ALL-INCLUSIVE evaluations of F or C made by the environments (3 per step,
-    2 per reset candidate); paper: 2e7 (Matsumoto, Panda), 8e7 (car-like) env steps."""
-    minutes: float | None = None
-    """Optional wall-clock limit across resumes; training stops at whichever comes first."""
-    device: str = "cpu"
-    """``cpu`` or ``cuda`` (SB3's networks; the environments run on numpy)."""
-    threads: int = 1
-    """torch intra-op threads (1 keeps runs bit-reproducible and leaves cores free)."""
-    depth: int | None = None
-    """Episodes last at most ``2**depth`` steps (paper: n = 2**D_max); None = the task's."""
-    eps: float | None = None
-    """Step cost of eq. (57) and success threshold; None = the task's."""
+    config_methods: ClassVar[tuple[str, ...]] = ("seq",)
+    run_defaults: ClassVar[Mapping[str, Any]] = {"eval_every": 200_000}
+
     reject_solved: bool = True
     """Redraw start/goal pairs already within eps (the authors' code does)."""
     lr: float = 3e-3
@@ -147,36 +141,13 @@ class SeqConfig(MetricConfig):
     """Hidden layers of the actor and of the critic (paper: 64, 64)."""
     activation: str = "tanh"
     """``tanh`` (paper, SB3's default) or ``relu``."""
-    eval_every: int = 200_000
-    """All-inclusive timesteps between evaluations on the validation pair set (checked
-    after every rollout); each evaluation also writes the latest checkpoint."""
-    eval_pairs: int = 100
-    """Size of the validation set (``finsler.validation_pairs``) on which
-    ``checkpoint_best`` is chosen."""
-
-    def __post_init__(self) -> None:
-        self._check_types()
-        self.hidden = tuple(int(h) for h in self.hidden)
-        self.validate()
-
     def validate(self) -> None:
-        """Raise :class:`finsler.InputError` naming the first impossible field."""
-        self._check_env_and_device()
-        if self.method != "seq":
-            raise InputError(f"method must be 'seq' for a SeqConfig, got {self.method!r}")
-        for name in ("timesteps", "threads", "batch_size", "n_envs", "n_steps", "n_epochs",
-                     "eval_every", "eval_pairs"):
+        """Raise :class:`finsler.InputError` naming the first impossible field of Seq's
+        own (the run fields are :class:`RunConfig`'s to check)."""
+        for name in ("batch_size", "n_envs", "n_steps", "n_epochs"):
             v = getattr(self, name)
             if v < 1:
                 raise InputError(f"{name} must be a positive integer, got {v!r}")
-        if self.seed < 0:
-            raise InputError(f"seed must be a non-negative integer, got {self.seed!r}")
-        if self.minutes is not None and not (0 < self.minutes < math.inf):
-            raise InputError(f"minutes must be positive and finite, got {self.minutes!r}")
-        if self.depth is not None and self.depth < 1:
-            raise InputError(f"depth must be a positive integer, got {self.depth!r}")
-        if self.eps is not None and not (0 < self.eps < math.inf):
-            raise InputError(f"eps must be positive and finite, got {self.eps!r}")
         if not (0 < self.lr < 1):
             raise InputError(f"lr must be in (0, 1), got {self.lr!r}")
         if self.time_limit not in TIME_LIMITS:
@@ -429,7 +400,7 @@ class SeqPolicy(LoadedPolicy):
         ``2**D - 1`` steps fit), then ``g`` repeated; a pair that does not get there
         within that many steps gets ``p_0..p_{n-1}, g`` (its last segment shows how far
         it was). Starts are ``p_0``, goals the last point."""
-        d = self._depth(depth)
+        d = self.check_depth(depth)
         s = self.metric.domain.check(starts, "starts")
         g = self.metric.domain.check(goals, "goals")
         if s.shape != g.shape:
@@ -447,7 +418,7 @@ class SeqPolicy(LoadedPolicy):
         p = finsler.default_pairs(self.metric) if pairs is None else check_pairs(
             self.metric, pairs)
         e = self.eps if eps is None else eps
-        res, _ = evaluate_seq(_policy_fn(self.policy), self.metric, p, e, self._depth(depth))
+        res, _ = evaluate_seq(_policy_fn(self.policy), self.metric, p, e, self.check_depth(depth))
         return res
 
 
@@ -500,10 +471,7 @@ class SeqTrainer(RunLoop):
         from stable_baselines3.common.logger import Logger
 
         cfg = self.cfg
-        self.device = resolve_device(cfg.device)
-        torch.set_num_threads(cfg.threads)
-        self.metric = cfg.metric
-        self.eval_pairs = finsler.validation_pairs(self.metric, cfg.eval_pairs)
+        self.eval_pairs = self.validation_pairs
         self.venv = GeodesicVecEnv(self.metric, cfg.n_envs, eps=cfg.eval_eps,
                                    depth=cfg.max_depth, reject_solved=cfg.reject_solved,
                                    time_limit=cfg.time_limit)
@@ -647,7 +615,9 @@ class SeqTrainer(RunLoop):
 
 def train_seq(cfg: SeqConfig, out: str | Path, resume: bool = False,
               progress: bool = True) -> TrainResult:
-    """Train Seq (PPO, appendix B.2) with ``cfg`` into run directory ``out``.
+    """Deprecated: :func:`learn.train_run` (the one entry point for every method) trains
+    ``cfg`` the same way. Train Seq (PPO, appendix B.2) with ``cfg`` into run directory
+    ``out``.
 
     Every ``eval_every`` all-inclusive timesteps (checked after each rollout) the
     deterministic policy is evaluated on ``finsler.validation_pairs`` (all pairs rolled
@@ -666,6 +636,7 @@ def train_seq(cfg: SeqConfig, out: str | Path, resume: bool = False,
     outcome. SB3 uses the process-global generators, which this function seeds
     (``seed``) and leaves advanced.
     """
+    deprecated_entry("learn.seq.train_seq")
     return SeqTrainer(cfg, out, resume=resume, progress=progress).run()
 
 

@@ -56,8 +56,8 @@ from learn.policy import (
     generate_paths,
     load_midpoint_policy,
 )
-from learn.registry import Method, Variant, register_method
-from learn.storage import CONFIG_FILE, LATEST_FILE, atomic_write_text, load_checkpoint
+from learn.registry import Method, Variant, deprecated_entry, register_method
+from learn.storage import LATEST_FILE, load_checkpoint
 from learn.tree import build_tree, level_pairs, mc_targets, td_lambda_targets
 
 __all__ = ["TrainResult", "Trainer", "actor_loss", "read_run_config", "resolve_device",
@@ -93,32 +93,25 @@ class Trainer(RunLoop):
     free_on_resume = (*RunLoop.free_on_resume, *_POLISH_FIELDS)
     """A finished run may be resumed with polish settings (the polish starts after the
     budget, so it is the polish a new run with them would make); once the polish has
-    begun only ``polish_steps`` may change."""
-    _config_changed = False  # set by _resume_config (called before setup)
+    begun only ``polish_steps`` may change (:meth:`check_resume`)."""
+    recorded_on_resume = _POLISH_FIELDS
+    """New polish settings are written into ``config.json`` when the resumed run starts."""
 
     def setup(self) -> None:
         cfg = self.cfg
-        self.device = resolve_device(cfg.device)
-        torch.set_num_threads(cfg.threads)
-        self.metric = cfg.metric
-        self.dim = self.metric.dim
-        self.depth_max = cfg.max_depth
-        self.eval_pairs = finsler.validation_pairs(self.metric, cfg.eval_pairs)
+        self.eval_pairs = self.validation_pairs
         self.loss = actor_loss_of(cfg.method, cfg.actor_loss_power)
         self.terms = actor_terms(cfg)
 
         # networks, initialised from the seed without touching the global RNG
-        with torch.random.fork_rng(devices=[]):
-            torch.manual_seed(cfg.seed)
+        with self.seeded():
             self.actor = build_actor(cfg, self.metric).to(self.device)
             self.critic = build_critic(cfg, self.metric).to(self.device)
         adam = dict(fused=True) if cfg.fused_adam else {}
         self.opt_actor = torch.optim.Adam(self.actor.parameters(), lr=cfg.lr, **adam)
         self.opt_critic = torch.optim.Adam(self.critic.parameters(), lr=cfg.lr, **adam)
         self.opt_polish = torch.optim.Adam(self.actor.parameters(), lr=cfg.polish_lr, **adam)
-        self.np_rng = np.random.default_rng(cfg.seed)
-        self.gen = torch.Generator(device=self.device)
-        self.gen.manual_seed(cfg.seed + 1)
+        self.np_rng, self.gen = self.generators()
 
         self.trees = 0
         self.updates = 0
@@ -327,9 +320,8 @@ class Trainer(RunLoop):
         return lr
 
     # -- the polish after the budget (values of the critic only) ----------------------------
-    def _resume_config(self, cfg: TrainConfig) -> TrainConfig:
-        resumed = super()._resume_config(cfg)
-        saved = TrainConfig.from_dict(read_config_section(self.run_dir))
+    def check_resume(self, saved: TrainConfig, resumed: TrainConfig) -> None:  # type: ignore[override]
+        """Once the polish has begun, only ``polish_steps`` of its settings may change."""
         changed = [k for k in _POLISH_FIELDS if getattr(saved, k) != getattr(resumed, k)]
         fixed = [k for k in changed if k != "polish_steps"]
         latest = self.run_dir / LATEST_FILE
@@ -341,8 +333,6 @@ class Trainer(RunLoop):
                     f"begun ({polished} steps) with " + ", ".join(
                         f"{k}={getattr(saved, k)!r}" for k in fixed)
                     + "; only polish_steps may change now (nothing was changed)")
-        self._config_changed = bool(changed)
-        return resumed
 
     def _polishing(self) -> bool:
         return self.timesteps >= self.cfg.timesteps
@@ -388,9 +378,6 @@ class Trainer(RunLoop):
     # -- one iteration and its evaluation (the loop calls these) ----------------------------
     def begin(self) -> None:
         self.lr = self._set_lr()
-        if self._config_changed:  # a resume with new polish settings: record them
-            atomic_write_text(self.run_dir / CONFIG_FILE, self._config_json())
-            self._config_changed = False
 
     def iterate(self) -> None:
         """Collect a batch of trees (the paper's timesteps), then :meth:`update`; after
@@ -436,8 +423,11 @@ class Trainer(RunLoop):
 
 def train(cfg: TrainConfig, out: str | Path, resume: bool = False,
           progress: bool = True) -> TrainResult:
-    """Train a midpoint policy with ``cfg`` into run directory ``out`` (``resume``
-    continues the run saved there, replaying exactly what an uninterrupted run does)."""
+    """Deprecated: :func:`learn.train_run` (the one entry point for every method) trains
+    ``cfg`` the same way. Train a midpoint policy with ``cfg`` into run directory ``out``
+    (``resume`` continues the run saved there, replaying exactly what an uninterrupted
+    run does)."""
+    deprecated_entry("learn.train")
     return Trainer(cfg, out, resume=resume, progress=progress).run()
 
 

@@ -157,7 +157,7 @@ def test_path_energy_term_alone_learns_euclidean_midpoints(tmp_path) -> None:
                                minibatch_size=256, epochs=1, eval_every=1000,
                                path_energy_weight=10.0, path_energy_pairs=32)
     pairs = finsler.sample_pairs(finsler.get_metric("euclidean"), 300, seed=5)
-    learn.train(cfg, tmp_path / "run", progress=False)
+    learn.train_run(cfg, tmp_path / "run", progress=False)
     pol = learn.load_policy(tmp_path / "run", checkpoint="latest")
     err = np.linalg.norm(pol.midpoint(pairs[:, 0], pairs[:, 1])
                          - 0.5 * (pairs[:, 0] + pairs[:, 1]), axis=1)
@@ -591,7 +591,7 @@ def test_same_seed_same_midpoints_different_seed_different(tmp_path, extras) -> 
     mids = []
     for k, seed in enumerate((3, 3, 4)):
         out = tmp_path / f"run{k}"
-        learn.train(_small(seed=seed, timesteps=6_000, **extras), out, progress=False)
+        learn.train_run(_small(seed=seed, timesteps=6_000, **extras), out, progress=False)
         mids.append(learn.load_policy(out).midpoint(pairs[:, 0], pairs[:, 1]))
     assert np.array_equal(mids[0], mids[1])
     assert not np.allclose(mids[0], mids[2])
@@ -632,7 +632,7 @@ _EXPERT = {"expert_weight": 1.0, "expert_pairs": 8, "expert_every": 2, "expert_k
 @pytest.mark.parametrize("extras", [{}, _EXTRAS, _EXPERT])
 def test_resume_equals_uninterrupted(tmp_path, monkeypatch, extras) -> None:
     cfg = _small(timesteps=12_000, eval_every=3, **extras)
-    full = learn.train(cfg, tmp_path / "full", progress=False)
+    full = learn.train_run(cfg, tmp_path / "full", progress=False)
 
     calls = [0]
     real_update = Trainer.update
@@ -645,11 +645,11 @@ def test_resume_equals_uninterrupted(tmp_path, monkeypatch, extras) -> None:
 
     monkeypatch.setattr(Trainer, "update", crashing_update)
     with pytest.raises(RuntimeError, match="simulated crash"):
-        learn.train(cfg, tmp_path / "crash", progress=False)
+        learn.train_run(cfg, tmp_path / "crash", progress=False)
     monkeypatch.setattr(Trainer, "update", real_update)
     with pytest.raises(finsler.InputError, match="--resume"):
-        learn.train(cfg, tmp_path / "crash", progress=False)
-    resumed = learn.train(cfg, tmp_path / "crash", resume=True, progress=False)
+        learn.train_run(cfg, tmp_path / "crash", progress=False)
+    resumed = learn.train_run(cfg, tmp_path / "crash", resume=True, progress=False)
 
     a = learn.storage.load_checkpoint(tmp_path / "full" / learn.storage.LATEST_FILE)
     b = learn.storage.load_checkpoint(tmp_path / "crash" / learn.storage.LATEST_FILE)
@@ -679,7 +679,7 @@ def _weights(run: Path) -> dict:
 def test_polish_makes_no_evaluation_of_c_and_a_resumed_run_polishes_as_a_new_one(
         tmp_path, monkeypatch) -> None:
     cfg = _small(timesteps=6_000, eval_every=2)
-    plain = learn.train(cfg, tmp_path / "plain", progress=False)
+    plain = learn.train_run(cfg, tmp_path / "plain", progress=False)
     calls = [0]
     real = finsler.Metric.path_costs
 
@@ -688,9 +688,9 @@ def test_polish_makes_no_evaluation_of_c_and_a_resumed_run_polishes_as_a_new_one
         return real(self, points, check=check)
 
     # a new run with the polish, and the finished plain run resumed with it
-    new = learn.train(cfg.replace(**_POLISH), tmp_path / "new", progress=False)
+    new = learn.train_run(cfg.replace(**_POLISH), tmp_path / "new", progress=False)
     monkeypatch.setattr(finsler.Metric, "path_costs", spy)
-    resumed = learn.train(cfg.replace(**_POLISH), tmp_path / "plain", resume=True,
+    resumed = learn.train_run(cfg.replace(**_POLISH), tmp_path / "plain", resume=True,
                           progress=False)
     monkeypatch.setattr(finsler.Metric, "path_costs", real)
     # no evaluation of C to learn: the budget's count is unchanged, and C was called only
@@ -741,10 +741,10 @@ def test_polish_moves_an_undertrained_actor_towards_the_true_midpoints(tmp_path)
 
 def test_polish_settings_are_fixed_once_the_polish_began(tmp_path) -> None:
     cfg = _small(timesteps=3_000, **_POLISH)
-    learn.train(cfg, tmp_path / "r", progress=False)
+    learn.train_run(cfg, tmp_path / "r", progress=False)
     with pytest.raises(finsler.InputError, match=r"polish_lr.*only polish_steps"):
-        learn.train(cfg.replace(polish_lr=1e-3), tmp_path / "r", resume=True, progress=False)
-    more = learn.train(cfg.replace(polish_steps=50), tmp_path / "r", resume=True,
+        learn.train_run(cfg.replace(polish_lr=1e-3), tmp_path / "r", resume=True, progress=False)
+    more = learn.train_run(cfg.replace(polish_steps=50), tmp_path / "r", resume=True,
                        progress=False)
     assert more.history[-1]["iteration"] - more.history[-2]["iteration"] == 5
 
@@ -752,7 +752,7 @@ def test_polish_settings_are_fixed_once_the_polish_began(tmp_path) -> None:
 def test_select_eps_keeps_the_checkpoint_best_at_the_tighter_tolerance(tmp_path) -> None:
     cfg = _small(timesteps=12_000, eval_every=1)
     tight = 0.6 * cfg.eval_eps
-    learn.train(cfg.replace(select_eps=tight), tmp_path / "r", progress=False)
+    learn.train_run(cfg.replace(select_eps=tight), tmp_path / "r", progress=False)
     rows = learn.storage.read_metrics(tmp_path / "r" / "metrics.csv")
     assert len(rows) > 5 and all("success_rate_select" in r for r in rows)
     # the rule: success at select_eps, then at eps, then the lowest mean largest segment
@@ -769,14 +769,14 @@ def test_select_eps_keeps_the_checkpoint_best_at_the_tighter_tolerance(tmp_path)
     doc = learn.storage.read_json(tmp_path / "r" / "config.json")
     assert "select_eps" in doc["selection"] and doc["beyond_paper"]["select_eps"]["used"] == tight
     with pytest.raises(finsler.InputError, match="select_eps"):
-        learn.train(cfg.replace(select_eps=None), tmp_path / "r", resume=True, progress=False)
+        learn.train_run(cfg.replace(select_eps=None), tmp_path / "r", resume=True, progress=False)
 
 
 def test_resume_refuses_changed_settings(tmp_path) -> None:
     cfg = _small(timesteps=5_000)
-    learn.train(cfg, tmp_path / "r", progress=False)
+    learn.train_run(cfg, tmp_path / "r", progress=False)
     with pytest.raises(finsler.InputError, match="lr"):
-        learn.train(cfg.replace(lr=0.5), tmp_path / "r", resume=True, progress=False)
+        learn.train_run(cfg.replace(lr=0.5), tmp_path / "r", resume=True, progress=False)
 
 
 # ----------------------------------------------------------------------------------------
@@ -849,7 +849,7 @@ def test_all_inclusive_count_equals_a_hand_count(tmp_path, monkeypatch) -> None:
     seen = _count_torch_costs(monkeypatch)
     cfg = _small(timesteps=3000, epochs=1, eval_every=1, path_energy_weight=1.0,
                  path_energy_pairs=8, route_candidates=4, route_pairs=16)
-    res = learn.train(cfg, tmp_path / "r", progress=False)
+    res = learn.train_run(cfg, tmp_path / "r", progress=False)
     rows = res.history
     assert [r["timesteps"] for r in rows] == [0, 1304, 2608, 3912]
     assert [r["timesteps_paper"] for r in rows] == [0, 344, 688, 1032]
@@ -872,7 +872,7 @@ def test_hand_count_with_two_epochs_counts_the_terms_in_every_epoch(tmp_path,
     seen = _count_torch_costs(monkeypatch)
     cfg = _small(timesteps=3000, epochs=2, eval_every=1, path_energy_weight=1.0,
                  path_energy_pairs=8, route_candidates=4, route_pairs=16)
-    res = learn.train(cfg, tmp_path / "r", progress=False)
+    res = learn.train_run(cfg, tmp_path / "r", progress=False)
     rows = res.history
     assert [r["timesteps"] for r in rows] == [0, 1624, 3248]
     assert [r["timesteps_paper"] for r in rows] == [0, 344, 688]
@@ -888,7 +888,7 @@ def test_best_checkpoint_is_chosen_on_the_validation_set(tmp_path, monkeypatch) 
 
     monkeypatch.setattr(finsler, "default_pairs", forbidden)
     cfg = _small(timesteps=8_000, eval_every=1, eval_pairs=30)
-    res = learn.train(cfg, tmp_path / "r", progress=False)
+    res = learn.train_run(cfg, tmp_path / "r", progress=False)
     monkeypatch.undo()
     m = finsler.get_metric("euclidean")
     val = finsler.validation_pairs(m, 30)
@@ -904,7 +904,7 @@ def test_best_checkpoint_is_chosen_on_the_validation_set(tmp_path, monkeypatch) 
 def test_config_json_records_versions_and_beyond_paper_choices(tmp_path) -> None:
     import json
 
-    learn.train(_small(timesteps=2_000), tmp_path / "r", progress=False)
+    learn.train_run(_small(timesteps=2_000), tmp_path / "r", progress=False)
     doc = json.loads((tmp_path / "r" / "config.json").read_text())
     assert set(doc["versions"]) == {"python", "torch", "numpy", "casadi"}
     assert doc["config"]["seed"] == 0 and doc["task"] == {"depth": 3, "eps": 0.2,
@@ -917,7 +917,7 @@ def test_config_json_records_versions_and_beyond_paper_choices(tmp_path) -> None
 def test_load_policy_errors(tmp_path) -> None:
     with pytest.raises(finsler.InputError, match="does not exist"):
         learn.load_policy(tmp_path / "nowhere")
-    learn.train(_small(timesteps=2_000), tmp_path / "r", progress=False)
+    learn.train_run(_small(timesteps=2_000), tmp_path / "r", progress=False)
     pol = learn.load_policy(tmp_path / "r")
     with pytest.raises(finsler.DomainError):
         pol.generate(np.array([[3.0, 0.0]]), np.array([[0.0, 0.0]]))
@@ -930,7 +930,7 @@ def test_load_policy_errors(tmp_path) -> None:
 
 
 def test_generate_shapes_and_endpoints(tmp_path) -> None:
-    learn.train(_small(timesteps=2_000), tmp_path / "r", progress=False)
+    learn.train_run(_small(timesteps=2_000), tmp_path / "r", progress=False)
     pol = learn.load_policy(tmp_path / "r")
     pairs = finsler.default_pairs(pol.metric, 7)
     paths = pol.generate(pairs[:, 0], pairs[:, 1])

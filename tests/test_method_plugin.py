@@ -1,5 +1,7 @@
-"""A learning method written in one file outside the package (tests/plugins/toy_method.py)
-trains, resumes, evaluates and sweeps through the CLI like a built-in method."""
+"""A learning method written in one file (the shipped example learn/examples/toy_method.py,
+given by its path as a user's copy would be, and by its module name) trains, resumes,
+evaluates and sweeps through the CLI like a built-in method; it declares no run field
+again and every registered method's policy has the policy protocol."""
 
 from __future__ import annotations
 
@@ -9,7 +11,6 @@ import re
 import shutil
 import sys
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import pytest
@@ -19,11 +20,15 @@ from typer.testing import CliRunner
 import finsler
 import learn
 from learn import registry
-from learn.config import MetricConfig
+from learn.run_config import RUN_FIELDS, RunConfig
 from learn.storage import read_metrics
 from validation.cli import app
 
-PLUGIN = Path(__file__).resolve().parent / "plugins" / "toy_method.py"
+ROOT = Path(__file__).resolve().parents[1]
+#: The shipped example, given by its path (imported as module ``toy_method``, as a copy
+#: of it in a user's folder would be).
+PLUGIN = ROOT / "learn" / "examples" / "toy_method.py"
+GUIDE = ROOT / "docs" / "guides" / "methods.md"
 ENV = "euclidean"  # task depth 4: 16 segments; C is the exact length of a segment
 #: Evaluations of C per toy iteration, by hand: 4 directions x (+, -) x 32 pairs x 2**4.
 PER_ITERATION = 4 * 2 * 32 * 16
@@ -65,6 +70,7 @@ def runs(tmp_path_factory):
         if "toy" in registry.list_methods():
             registry.unregister_method("toy")
         sys.modules.pop("toy_method", None)
+        sys.modules.pop("learn.examples.toy_method", None)
         sys.path[:] = path_before
         torch.set_num_threads(threads)
 
@@ -168,6 +174,14 @@ def test_a_plugin_policy_warm_starts_an_exact_solve(runs) -> None:
     assert doc["results"][0]["length"] == pytest.approx(np.hypot(0.6, 0.1), rel=1e-9)
 
 
+def _forget_example() -> None:
+    """Unregister the method "toy" and forget the shipped example's module (the state of a
+    new process)."""
+    if "toy" in registry.list_methods():
+        registry.unregister_method("toy")
+    sys.modules.pop("learn.examples.toy_method", None)
+
+
 def _one_line_error(res, *parts: str) -> None:
     assert res.exit_code == 2, res.output
     text = res.output.strip()
@@ -202,41 +216,174 @@ def test_a_run_whose_module_cannot_be_imported_names_the_file(runs, tmp_path) ->
                     f"'toy-elsewhere'; pass --method-module {PLUGIN}")
 
 
-def test_the_readme_commands_run(runs, tmp_path) -> None:
-    """The README's commands of "Adding a learning method", with budgets 1/12 of its."""
-    readme = (PLUGIN.parents[2] / "README.md").read_text()
-    section = readme.split("### Adding a learning method", 1)[1].split("\n## ", 1)[0]
-    block = re.search(r"```bash\n(.*?)```", section, flags=re.S).group(1)
+def test_the_guide_commands_run(runs, tmp_path) -> None:
+    """The guide's commands (docs/guides/methods.md), with budgets 1/12 of its: the
+    shipped example by its module name, as an installed package has it."""
+    block = re.search(r"```bash\n(.*?)```", GUIDE.read_text(), flags=re.S).group(1)
     lines = block.strip().splitlines()
-    assert lines[0] == "M=tests/plugins/toy_method.py"
-    commands = [line.replace("$M", str(PLUGIN)).replace("runs/", f"{tmp_path}/")
-                for line in lines[1:]]
+    assert lines[0] == "M=learn.examples.toy_method"
+    commands = [line.replace("$M", "learn.examples.toy_method")
+                .replace("runs/", f"{tmp_path}/") for line in lines[1:]]
     assert [c.split()[1] for c in commands] == ["train", "train", "evaluate", "sweep"]
     for command in commands:
         args = re.sub(r"--timesteps (\d+)", lambda m: f"--timesteps {int(m[1]) // 12}",
                       command).split()[1:]
         res = _cli(*args, *(["--quiet"] if args[0] in ("train", "sweep") else []))
         assert res.exit_code == 0, (command, res.output)
+    # the run records the shipped module, so loading it needs no --method-module
+    doc = json.loads((tmp_path / "toy" / "config.json").read_text())
+    assert doc["method_module"] == "learn.examples.toy_method"
+    _forget_example()  # as in a new process: loading the run imports the module
     assert learn.load_policy(tmp_path / "toy").metric.name == "matsumoto"
     rows = read_metrics(tmp_path / "toy" / "metrics.csv")
     assert rows[-1]["timesteps"] >= 400000 // 12  # resumed to the second budget
+    assert (tmp_path / "toy-sweep" / "matsumoto" / "toy" / "seed-1" / "result.json").is_file()
+
+
+def test_the_example_ships_in_the_package() -> None:
+    """learn/examples is a package that setuptools' discovery of pyproject.toml finds."""
+    import tomllib
+    from setuptools import find_packages
+
+    tool = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]
+    found = find_packages(str(ROOT), include=tool["packages"]["find"]["include"])
+    assert "learn.examples" in found and "learn" in found
+    assert (ROOT / "learn" / "examples" / "__init__.py").is_file()
+
+
+def test_no_method_declares_a_run_field_again() -> None:
+    """Every registered method's config (and the example's) takes its run fields from
+    RunConfig: not one is declared in the method's own class."""
+    import inspect
+
+    import learn.examples.toy_method as toy
+
+    configs = {m.config_class for m in map(registry.get_method, registry.list_methods())}
+    configs.add(toy.ToyConfig)
+    assert len(configs) >= 4
+    for cls in configs:
+        assert issubclass(cls, RunConfig)
+        for klass in cls.__mro__[: cls.__mro__.index(RunConfig)]:
+            source = inspect.getsource(klass)
+            for name in RUN_FIELDS:  # no annotation "name:" in the class body
+                assert not re.search(rf"^    {name}:", source, flags=re.M), (klass, name)
+    with pytest.raises(TypeError, match="declares the run field"):
+        @dataclasses.dataclass
+        class Again(RunConfig):
+            seed: int = 3
+
+
+def test_a_method_config_has_its_defaults_and_the_run_checks() -> None:
+    from learn.examples.toy_method import ToyConfig
+
+    cfg = ToyConfig("euclidean")
+    assert (cfg.method, cfg.timesteps, cfg.eval_every, cfg.eval_pairs) == ("toy", 20_000, 5,
+                                                                          100)
+    assert [f.name for f in dataclasses.fields(cfg)][:3] == ["env", "metric_params",
+                                                             "metric_class"]
+    for field, value in (("minutes", 0.0), ("minutes", float("inf")), ("seed", -1),
+                         ("method", "pg"), ("threads", 0), ("eval_pairs", 0),
+                         ("depth", 0), ("eps", float("nan")), ("device", "tpu")):
+        with pytest.raises(finsler.InputError, match=field):
+            ToyConfig("euclidean", **{field: value})
+    with pytest.raises(finsler.InputError, match="CPU only"):
+        ToyConfig("euclidean", device="cuda")
 
 
 @pytest.mark.parametrize("as_text", [False, True])
 def test_a_method_config_checks_the_field_types_it_knows(as_text) -> None:
     """A user config's fields are type-checked whether its annotations are types or text
     (``from __future__ import annotations``); other field types are left to the config."""
-    spec = [("env", str, "euclidean"), ("metric_params", dict[str, Any] | None, None),
-            ("metric_class", str | None, None), ("seed", int, 0),
-            ("width", tuple[int, ...], (4,)), ("weights", list[float], None)]
+    spec = [("count", int, 0), ("width", tuple[int, ...], (4,)),
+            ("weights", list[float], None)]
     fields = [(name, (t.__name__ if isinstance(t, type) else str(t)) if as_text else t,
                dataclasses.field(default=d)) for name, t, d in spec]
-    cls = dataclasses.make_dataclass("UserConfig", fields, bases=(MetricConfig,),
-                                     namespace={"__post_init__": MetricConfig._check_types})
-    assert cls(weights=[0.5]).metric_params == {"n": 2}
+    cls = dataclasses.make_dataclass("UserConfig", fields, bases=(RunConfig,), namespace={
+        "config_methods": ("user",), "run_defaults": {"env": "euclidean"}})
+    cfg = cls(weights=[0.5], width=[3, 2])
+    assert cfg.metric_params == {"n": 2} and cfg.width == (3, 2)  # a JSON list: a tuple
     with pytest.raises(finsler.InputError, match="config field seed must be int, got 'x'"):
         cls(seed="x")
+    with pytest.raises(finsler.InputError, match="config field count must be int"):
+        cls(count=1.5)
     with pytest.raises(finsler.InputError, match=r"width must be tuple\[int, \.\.\.\]"):
         cls(width=(1, "a"))
     with pytest.raises(finsler.InputError, match="metric_class must be str"):
         cls(metric_class=3)
+
+
+def test_every_registered_method_policy_has_the_protocol(runs, tmp_path) -> None:
+    """One tiny run of every registered method (budget 1: the first row and checkpoint
+    only, one iteration at most) through the one entry point; its loaded policy is a
+    learn.PathPolicy, and a MidpointPolicy exactly where it predicts midpoints."""
+    _forget_example()
+    import learn.examples.toy_method  # registers "toy" by its module name
+
+    pairs = finsler.default_pairs(finsler.get_metric(ENV))[:3]
+    seen = set()
+    try:
+        for name in registry.list_methods():
+            method = registry.get_method(name)
+            if method.name in seen:
+                continue
+            seen.add(method.name)
+            cfg = method.default_config(ENV, timesteps=1)
+            res = learn.train_run(cfg, tmp_path / method.name, progress=False)
+            assert res.iterations <= 1
+            pol = method.load_policy(tmp_path / method.name)
+            assert isinstance(pol, learn.PathPolicy), method.name
+            paths = pol.generate(pairs[:, 0], pairs[:, 1])
+            assert paths.shape == (3, 2**pol.depth + 1, 2)
+            assert 0.0 <= pol.evaluate(pairs).success_rate <= 1.0
+            assert isinstance(pol, learn.MidpointPolicy) == (method.name != "seq")
+            if isinstance(pol, learn.MidpointPolicy):
+                mid = pol.midpoint(pairs[:, 0], pairs[:, 1])
+                assert mid.shape == (3, 2) and np.all(np.isfinite(mid))
+    finally:
+        _forget_example()
+    assert seen >= {"midpoint", "pg", "seq", "toy"}
+
+
+def test_the_old_entry_points_warn_and_still_work(tmp_path) -> None:
+    from learn.pg import train_pg
+    from learn.seq import train_seq
+
+    for old in (learn.train, train_pg, train_seq):
+        with pytest.warns(DeprecationWarning, match=r"use learn\.train_run\(cfg, out"), \
+                pytest.raises(finsler.InputError, match="needs a"):
+            old(object(), tmp_path / "x", progress=False)
+    with pytest.warns(DeprecationWarning, match="learn.train"):
+        res = learn.train(learn.default_config(ENV, timesteps=1), tmp_path / "m",
+                          progress=False)
+    assert res.iterations == 1
+
+
+def _learn_imports(module: str) -> set[str]:
+    """The learn modules ``module`` imports, directly or through others (read from the
+    source: every ``import`` / ``from learn... import``, lazy ones inside functions too)."""
+    import ast
+
+    seen, todo = set(), [module]
+    while todo:
+        name = todo.pop()
+        path = ROOT / (name.replace(".", "/") + ".py")
+        if name in seen or not path.is_file():
+            continue
+        seen.add(name)
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.ImportFrom) and node.module:
+                todo.append(node.module)
+            elif isinstance(node, ast.Import):
+                todo += [a.name for a in node.names]
+    return {m for m in seen if m.startswith("learn.") and m != module}
+
+
+def test_the_run_loop_stands_below_every_method() -> None:
+    """The generic loop and RunConfig import nothing of a method (issue 49): not the
+    midpoint learner's config, terms, expert iteration or route search."""
+    below = {"learn.run_config", "learn.base", "learn.storage", "learn.networks",
+             "learn.registry"}
+    assert _learn_imports("learn.run_config") == set()
+    assert _learn_imports("learn.loop") <= below
+    for specific in ("learn.config", "learn.methods", "learn.expert", "learn.search"):
+        assert specific in _learn_imports("learn.train")  # the check can fail

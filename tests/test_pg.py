@@ -29,8 +29,8 @@ from learn.pg import (
     pg_loss,
     sample_training_paths,
     schedule_total,
-    train_pg,
 )
+from learn.runs import train_run
 from learn.storage import read_json, read_metrics
 
 torch.set_num_threads(1)
@@ -209,14 +209,14 @@ def test_accounting_equals_hand_count(tmp_path, monkeypatch):
         return orig(self, x, y, check=check)
 
     monkeypatch.setattr(cls, "cost", counting)
-    res = train_pg(cfg, tmp_path / "run", progress=False)
+    res = train_run(cfg, tmp_path / "run", progress=False)
     assert res.timesteps == hand == counted["n"]
     final = read_metrics(tmp_path / "run" / "metrics.csv")[-1]
     assert final["timesteps"] == final["timesteps_paper"] == hand
     assert final["timesteps_derivative"] == 0
     assert res.iterations == 8
     # a budget that does not fit the next cycle stops before it
-    res2 = train_pg(cfg.replace(timesteps=6 * (2 * 2 + 4) + 5), tmp_path / "run2",
+    res2 = train_run(cfg.replace(timesteps=6 * (2 * 2 + 4) + 5), tmp_path / "run2",
                     progress=False)
     assert res2.timesteps == 6 * (2 * 2 + 4) and res2.iterations == 3
 
@@ -230,7 +230,7 @@ def _rows(path):
 
 def test_tiny_run_contract_selection_and_determinism(tmp_path):
     cfg = tiny()
-    res = train_pg(cfg, tmp_path / "a", progress=False)
+    res = train_run(cfg, tmp_path / "a", progress=False)
     run = tmp_path / "a"
     for name in ("config.json", "metrics.csv", "checkpoint_latest.pt", "checkpoint_best.pt",
                  "result.json"):
@@ -271,18 +271,18 @@ def test_tiny_run_contract_selection_and_determinism(tmp_path):
     assert np.allclose(paths[:, 0], val[:4, 0]) and np.allclose(paths[:, -1], val[:4, 1])
 
     # same seed, same rows (wall-clock columns aside); another seed differs
-    train_pg(cfg, tmp_path / "b", progress=False)
+    train_run(cfg, tmp_path / "b", progress=False)
     assert _rows(run / "metrics.csv") == _rows(tmp_path / "b" / "metrics.csv")
-    train_pg(cfg.replace(seed=4), tmp_path / "c", progress=False)
+    train_run(cfg.replace(seed=4), tmp_path / "c", progress=False)
     assert _rows(run / "metrics.csv") != _rows(tmp_path / "c" / "metrics.csv")
     # a non-empty directory is refused without resume
     with pytest.raises(InputError, match="not empty"):
-        train_pg(cfg, run, progress=False)
+        train_run(cfg, run, progress=False)
 
 
 def test_resume_after_interruption_equals_uninterrupted(tmp_path, monkeypatch):
     cfg = tiny(eval_every=3)
-    train_pg(cfg, tmp_path / "full", progress=False)
+    train_run(cfg, tmp_path / "full", progress=False)
 
     orig = PGTrainer.cycle
 
@@ -293,10 +293,10 @@ def test_resume_after_interruption_equals_uninterrupted(tmp_path, monkeypatch):
 
     monkeypatch.setattr(PGTrainer, "cycle", interrupted)
     with pytest.raises(KeyboardInterrupt):
-        train_pg(cfg, tmp_path / "cut", progress=False)
+        train_run(cfg, tmp_path / "cut", progress=False)
     assert not (tmp_path / "cut" / "result.json").exists()
     monkeypatch.setattr(PGTrainer, "cycle", orig)
-    train_pg(cfg, tmp_path / "cut", resume=True, progress=False)
+    train_run(cfg, tmp_path / "cut", resume=True, progress=False)
 
     assert _rows(tmp_path / "full" / "metrics.csv") == _rows(tmp_path / "cut" / "metrics.csv")
     a = load_pg_policy(tmp_path / "full", checkpoint="latest").policies.state_dict()
@@ -307,7 +307,7 @@ def test_resume_after_interruption_equals_uninterrupted(tmp_path, monkeypatch):
         "iteration"]
     # resuming with different settings is refused, naming the field
     with pytest.raises(InputError, match="lr"):
-        train_pg(cfg.replace(lr=1e-3), tmp_path / "cut", resume=True, progress=False)
+        train_run(cfg.replace(lr=1e-3), tmp_path / "cut", resume=True, progress=False)
 
 
 def test_only_the_trained_policy_changes(tmp_path):
@@ -347,12 +347,12 @@ def test_config_round_trip_and_unknown_keys():
     with pytest.raises(InputError, match="environment"):
         default_pg_config("nowhere")
     with pytest.raises(InputError):
-        train_pg(object(), "/nonexistent", progress=False)  # type: ignore[arg-type]
+        PGTrainer(object(), "/nonexistent", progress=False)  # type: ignore[arg-type]
 
 
 def test_policy_rejects_bad_depth(tmp_path):
     cfg = tiny(cycles_first=1, cycles_other=1)
-    train_pg(cfg, tmp_path / "r", progress=False)
+    train_run(cfg, tmp_path / "r", progress=False)
     pol = load_pg_policy(tmp_path / "r")
     with pytest.raises(InputError, match="depth"):
         pol.generate([[0.0, 0.0]], [[0.5, 0.5]], depth=4)

@@ -119,17 +119,17 @@ def test_a_signal_saves_a_resumable_checkpoint_and_resume_is_exact(
     import torch
 
     cfg = runs.make_config("euclidean", "midpoint", timesteps=30_000, **_TINY)
-    full = learn.train(cfg, tmp_path / "full", progress=False)
+    full = learn.train_run(cfg, tmp_path / "full", progress=False)
     before = signal.getsignal(signal.SIGTERM)  # SIG_DFL, or Ray's if a Ray test ran first
     _signal_at(monkeypatch, 5, getattr(signal, sig_name))
     with pytest.raises(learn.base.TrainingInterrupted, match=sig_name) as err:
-        learn.train(cfg, tmp_path / "cut", progress=False)
+        learn.train_run(cfg, tmp_path / "cut", progress=False)
     monkeypatch.undo()
     assert err.value.iterations == 5 and err.value.timesteps < full.timesteps
     assert runs.run_status(tmp_path / "cut") == "unfinished"  # no result.json
     # the handlers are back: the next signal is not swallowed
     assert signal.getsignal(signal.SIGTERM) is before
-    resumed = learn.train(cfg, tmp_path / "cut", resume=True, progress=False)
+    resumed = learn.train_run(cfg, tmp_path / "cut", resume=True, progress=False)
     assert resumed.timesteps == full.timesteps
     a = learn.storage.load_checkpoint(tmp_path / "full" / "checkpoint_latest.pt")
     b = learn.storage.load_checkpoint(tmp_path / "cut" / "checkpoint_latest.pt")

@@ -15,6 +15,7 @@ import torch
 
 import finsler
 from finsler.errors import InputError
+from learn.runs import train_run
 from learn.seq import (
     WALL_COLUMNS,
     ZERO_ACTION_REWARD,
@@ -25,7 +26,6 @@ from learn.seq import (
     default_seq_config,
     evaluate_seq,
     load_seq_policy,
-    train_seq,
 )
 from learn.storage import LATEST_FILE, load_checkpoint, read_json, read_metrics
 
@@ -298,7 +298,7 @@ def _rows_without_wall(path) -> list[dict]:
 
 def test_tiny_run_writes_the_contract_files_and_selects_on_validation(tmp_path) -> None:
     cfg = _tiny()
-    res = train_seq(cfg, tmp_path / "r", progress=False)
+    res = train_run(cfg, tmp_path / "r", progress=False)
     run = tmp_path / "r"
     for f in ("config.json", "metrics.csv", "checkpoint_latest.pt", "checkpoint_best.pt",
               "result.json"):
@@ -333,14 +333,14 @@ def test_tiny_run_writes_the_contract_files_and_selects_on_validation(tmp_path) 
     assert paths.shape == (2, 17, 2) and np.all(paths[:, -1] == 0.5)
     assert load_seq_policy(run, checkpoint="latest").checkpoint == "checkpoint_latest.pt"
     with pytest.raises(InputError, match="not empty"):
-        train_seq(cfg, run, progress=False)
+        train_run(cfg, run, progress=False)
 
 
 def test_same_seed_same_metrics_different_seed_different(tmp_path) -> None:
     cfg = _tiny(timesteps=1_800)
-    train_seq(cfg, tmp_path / "a", progress=False)
-    train_seq(cfg, tmp_path / "b", progress=False)
-    train_seq(cfg.replace(seed=1), tmp_path / "c", progress=False)
+    train_run(cfg, tmp_path / "a", progress=False)
+    train_run(cfg, tmp_path / "b", progress=False)
+    train_run(cfg.replace(seed=1), tmp_path / "c", progress=False)
     a, b, c = (_rows_without_wall(tmp_path / x) for x in "abc")
     assert a == b and len(a) >= 2
     assert a != c
@@ -348,7 +348,7 @@ def test_same_seed_same_metrics_different_seed_different(tmp_path) -> None:
 
 def test_resume_continues_exactly_like_an_uninterrupted_run(tmp_path, monkeypatch) -> None:
     cfg = _tiny(timesteps=2_400, eval_every=700)
-    train_seq(cfg, tmp_path / "full", progress=False)
+    train_run(cfg, tmp_path / "full", progress=False)
 
     calls = {"n": 0}
     orig = SeqTrainer.train_rollout
@@ -361,11 +361,11 @@ def test_resume_continues_exactly_like_an_uninterrupted_run(tmp_path, monkeypatc
 
     monkeypatch.setattr(SeqTrainer, "train_rollout", crashing)
     with pytest.raises(RuntimeError, match="simulated crash"):
-        train_seq(cfg, tmp_path / "crash", progress=False)
+        train_run(cfg, tmp_path / "crash", progress=False)
     monkeypatch.setattr(SeqTrainer, "train_rollout", orig)
     before = _rows_without_wall(tmp_path / "crash")
     assert not (tmp_path / "crash" / "result.json").exists()
-    train_seq(cfg, tmp_path / "crash", resume=True, progress=False)
+    train_run(cfg, tmp_path / "crash", resume=True, progress=False)
     after = _rows_without_wall(tmp_path / "crash")
     assert after[: len(before)] == before and len(after) > len(before)
     assert int(after[-1]["timesteps"]) > int(before[-1]["timesteps"])
@@ -377,7 +377,7 @@ def test_resume_continues_exactly_like_an_uninterrupted_run(tmp_path, monkeypatc
     assert a["counters"]["timesteps"] == b["counters"]["timesteps"]
     # resuming with another training setting is refused
     with pytest.raises(InputError, match="lr"):
-        train_seq(cfg.replace(lr=1e-4), tmp_path / "crash", resume=True, progress=False)
+        train_run(cfg.replace(lr=1e-4), tmp_path / "crash", resume=True, progress=False)
 
 
 @pytest.mark.parametrize("over,match", [

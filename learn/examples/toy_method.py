@@ -1,21 +1,26 @@
 """A learning method in one file: the straight-line midpoint plus a learned offset.
 
-An example to copy for a method of your own (README, "Adding a learning method"). Import it
-with ``--method-module tests/plugins/toy_method.py``; ``geodesics train --method toy``,
-``evaluate --run`` and ``sweep --methods toy`` then use it like a built-in method.
+An example to copy for a method of your own (docs/guides/methods.md, "Adding a learning
+method"); it uses public names of :mod:`learn` only. Import it with ``--method-module
+learn.examples.toy_method`` (or a copy of this file with ``--method-module
+path/to/my_method.py``); ``geodesics train --method toy``, ``evaluate --run`` and ``sweep
+--methods toy`` then use it like a built-in method.
 
 Policy: ``m(s, g) = (s + g) / 2 + |g - s| * MLP(s, g)``, projected into the domain; a path
 is the tree of recursive midpoint insertion to the task's depth D (``2**D`` segments).
 Training lowers the mean path length ``sum_i C(p_i, p_{i+1})`` of sampled pairs by random
 search on the weights (values of C only: model-free); every evaluation of C made is
-counted in ``timesteps``. The run directory, resume, budget, minutes, signals, metrics
-rows and checkpoints are the run loop's (``learn.loop.RunLoop``).
+counted in ``timesteps``. The run fields (env, seed, budget, minutes, device, threads,
+depth, eps, evaluation cadence) and their checks are :class:`learn.run_config.RunConfig`'s;
+the run directory, resume, budget, minutes, signals, metrics rows and checkpoints are the
+run loop's (:class:`learn.loop.RunLoop`).
 """
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 import torch
@@ -24,42 +29,39 @@ from torch.nn.utils import parameters_to_vector, vector_to_parameters
 
 import finsler
 from finsler.errors import InputError
-from learn.base import LoadedPolicy, check_hidden
-from learn.config import MetricConfig
+from learn.base import LoadedPolicy
 from learn.loop import RunLoop, best_record, eval_columns, load_run, load_weights
 from learn.policy import check_pairs, evaluate_paths
 from learn.registry import Method, register_method
+from learn.run_config import RunConfig, check_hidden
 from learn.tree import build_tree
+
+__all__ = ["ToyConfig", "ToyPolicy", "ToyTrainer", "load_toy_policy", "offset_net",
+           "toy_paths"]
 
 
 @dataclass
-class ToyConfig(MetricConfig):
-    """Every setting of a toy run (saved in the run's ``config.json``)."""
+class ToyConfig(RunConfig):
+    """Every setting of a toy run (saved in the run's ``config.json``): RunConfig's run
+    fields (env, metric_params, metric_class, method, seed, timesteps, minutes, device,
+    threads, depth, eps, eval_every, eval_pairs), then the toy's own."""
 
-    # env, metric_params, metric_class: MetricConfig's; then the fields every method has
-    method: str = "toy"
-    seed: int = 0
-    timesteps: int = 20_000  # budget: evaluations of C, all-inclusive
-    minutes: float | None = None
-    device: str = "cpu"
-    depth: int | None = None  # None: the task's depth
-    eps: float | None = None  # None: the task's success threshold
-    eval_every: int = 5  # iterations between metrics rows (and checkpoints)
-    eval_pairs: int = 100  # validation pairs that select checkpoint_best
+    config_methods: ClassVar[tuple[str, ...]] = ("toy",)  # the values of ``method``
+    # RunConfig's defaults that differ for the toy (a budget of evaluations of C, and
+    # iterations between metrics rows); the fields themselves are never declared again
+    run_defaults: ClassVar[Mapping[str, Any]] = {"timesteps": 20_000, "eval_every": 5}
+
     hidden: int = 16  # the toy's own settings: MLP width,
     batch: int = 32  # pairs per iteration,
     directions: int = 4  # random directions per iteration (2 batches of paths each),
     sigma: float = 0.02  # their scale,
     lr: float = 0.01  # and the step size
 
-    def __post_init__(self) -> None:
-        self._check_types()  # field types; completes metric_params
-        self._check_env_and_device()
+    def validate(self) -> None:
+        """The toy's own checks (field types and the run fields are checked already)."""
         if self.device != "cpu":
             raise InputError(f"the toy method runs on the CPU only, got {self.device!r}")
-        if self.method != "toy":
-            raise InputError(f"method must be 'toy' for a ToyConfig, got {self.method!r}")
-        for name in ("timesteps", "eval_every", "eval_pairs", "batch", "directions"):
+        for name in ("batch", "directions"):
             if getattr(self, name) < 1:
                 raise InputError(f"{name} must be positive, got {getattr(self, name)!r}")
         check_hidden((self.hidden,), self.metric.dim)  # positive, fits in memory
@@ -85,8 +87,8 @@ def toy_paths(net: nn.Module, metric: finsler.Metric, s: torch.Tensor, g: torch.
 
 class ToyPolicy(LoadedPolicy):
     """A trained toy policy: ``generate``, ``midpoint`` and ``evaluate`` as the built-in
-    policies (``config``, ``metric``, ``depth``, ``eps``, ``source``, ``checkpoint``:
-    LoadedPolicy's)."""
+    policies (a :class:`learn.MidpointPolicy`; ``config``, ``metric``, ``depth``, ``eps``,
+    ``source``, ``checkpoint``: LoadedPolicy's)."""
 
     def __init__(self, net: nn.Module, config: ToyConfig, source: str = "",
                  checkpoint: str = "") -> None:
@@ -101,7 +103,7 @@ class ToyPolicy(LoadedPolicy):
             raise InputError(f"starts and goals must both be (K, dim), got {tuple(s.shape)}, "
                              f"{tuple(g.shape)}")
         with torch.no_grad():
-            return toy_paths(self.net, self.metric, s, g, self._depth(depth)).numpy()
+            return toy_paths(self.net, self.metric, s, g, self.check_depth(depth)).numpy()
 
     def midpoint(self, starts: Any, goals: Any) -> np.ndarray:
         """Predicted midpoints ``(K, dim)``."""
@@ -126,14 +128,10 @@ class ToyTrainer(RunLoop):
     free_on_resume = ("minutes", "device", "eval_pairs", "timesteps")
 
     def setup(self) -> None:
-        cfg = self.cfg
-        self.metric = cfg.metric
-        torch.set_num_threads(1)  # a tiny network: more threads only contend
-        with torch.random.fork_rng(devices=[]):
-            torch.manual_seed(cfg.seed)
-            self.net = offset_net(self.metric.dim, cfg.hidden)
-        self.rng = np.random.default_rng(cfg.seed)
-        self.val_pairs = finsler.validation_pairs(self.metric, cfg.eval_pairs)
+        # self.metric, self.device, self.validation_pairs, torch threads: the loop's
+        with self.seeded():  # the initial weights from cfg.seed
+            self.net = offset_net(self.metric.dim, self.cfg.hidden)
+        self.rng, _ = self.generators()
         self.train_length = float("nan")
 
     def mean_length(self, theta: torch.Tensor, ends: torch.Tensor) -> float:
@@ -164,7 +162,7 @@ class ToyTrainer(RunLoop):
         self.iteration += 1
 
     def evaluation(self) -> tuple[dict[str, Any], dict[str, Any]]:
-        ev = ToyPolicy(self.net, self.cfg).evaluate(self.val_pairs)
+        ev = ToyPolicy(self.net, self.cfg).evaluate(self.validation_pairs)
         return ({**eval_columns(ev), "train_length": round(self.train_length, 10)},
                 best_record(ev, timesteps=self.timesteps))
 
