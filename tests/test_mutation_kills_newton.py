@@ -1,0 +1,113 @@
+"""solvers.newton and solvers.batched against independent references, FAST (with
+tests/test_newton.py the mutation-testing selection of both modules, see
+docs/guides/mutation-testing.md): the first-order residual of Euclidean paths in closed
+form (the energy sum |x_j - x_{j-1}|**2 has gradient 2 (2 x_j - x_{j-1} - x_{j+1})), its
+projection at the domain's boundary, and the batch driver's dropping of losing rows
+worked out by hand on a made-up state."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+import finsler
+from solvers.batched import _Runner, residuals
+from solvers.inputs import domain_scale
+from solvers.newton import NewtonStatus, energy_residual
+
+
+def euclid_residual(pts: np.ndarray, scale: float) -> np.ndarray:
+    """|grad E|_inf * scale / E of Euclidean paths (B, n+1, d), every point inside."""
+    d = np.diff(pts, axis=1)
+    e = np.sum(d * d, axis=(1, 2))
+    g = 2.0 * (d[:, :-1] - d[:, 1:])
+    return np.max(np.abs(g), axis=(1, 2)) * scale / e
+
+
+def test_residuals_of_euclidean_paths_in_closed_form() -> None:
+    m = finsler.get_metric("euclidean")
+    assert domain_scale(m) == 2.0  # the box [-1, 1]^2
+    rng = np.random.default_rng(4)
+    line = np.linspace([-0.5, -0.2], [0.4, 0.3], 7)
+    pts = np.stack([line, line + np.r_[0, 1, 1, 1, 1, 1, 0][:, None] * rng.normal(
+        scale=0.05, size=(7, 2)), line + np.r_[0, 0, 0, 1, 0, 0, 0][:, None] * 0.1])
+    got = residuals(m, pts)
+    ref = euclid_residual(pts, 2.0)
+    assert got[0] < 1e-12  # the straight line, evenly spaced: a minimiser
+    np.testing.assert_allclose(got[1:], ref[1:], rtol=1e-10)
+    np.testing.assert_allclose(energy_residual(m, pts, 3.0), euclid_residual(pts, 3.0),
+                               rtol=1e-10, atol=1e-12)
+    # two points (no interior point): residual 0 by definition
+    np.testing.assert_array_equal(residuals(m, pts[:, [0, -1]]), [0.0, 0.0, 0.0])
+
+
+def test_the_residual_drops_the_part_of_the_gradient_that_leaves_the_domain() -> None:
+    """A path bent to the box's side x_0 = 1: the interior point on the side, pulled back
+    inwards by the energy (descent towards the chord) keeps its whole gradient; a path
+    through a point on the side that the chord lies beyond (descent pushes outwards)
+    loses the outward component there."""
+    m = finsler.get_metric("euclidean")
+    inwards = np.array([[[0.6, -0.5], [1.0, 0.0], [0.6, 0.5]]])
+    np.testing.assert_allclose(residuals(m, inwards), euclid_residual(inwards, 2.0),
+                               rtol=1e-10)
+    # ends outside the box (x_0 = 1.4 would be the straight line): the middle point at the
+    # side, gradient 2 (2 x - a - b) = (-1.6, 0) pushes outwards: projected away -> 0
+    outwards = np.array([[[0.6, -0.5], [1.0, 0.0], [0.6, 0.5]]])
+    outwards[0, 1, 0] = 1.0
+    outwards[0, [0, 2], 0] = 1.2  # descent direction +x_0: leaves the domain
+    assert residuals(m, outwards)[0] == pytest.approx(0.0, abs=1e-12)
+    # the same path with a sideways bend: only the tangential part (along x_1) remains
+    side = outwards.copy()
+    side[0, 1, 1] = 0.1
+    d = np.diff(side, axis=1)
+    e = np.sum(d * d)
+    tangential = abs(2.0 * (2 * side[0, 1, 1] - side[0, 0, 1] - side[0, 2, 1]))
+    assert residuals(m, side)[0] == pytest.approx(tangential * 2.0 / e, rel=1e-10)
+
+
+def _state(status, energy, active):
+    dropped: list[np.ndarray] = []
+    st = SimpleNamespace(status=np.array(status), energy=np.array(energy, float),
+                         active=np.array(active, dtype=np.int64),
+                         drop=lambda rows: dropped.append(np.array(rows)))
+    return st, dropped
+
+
+C, R = NewtonStatus.CONVERGED, NewtonStatus.MAX_ITERATIONS
+
+
+def test_drop_losers_stops_rows_above_factor_times_their_pairs_best() -> None:
+    """Pairs 0, 1, 2: pair 0's best converged energy 1.0 (row 0; row 1 converged at 3.0 is
+    not active), pair 1's 2.0 (row 3), pair 2 none converged. Active rows 2 (pair 0, 1.25),
+    4 (pair 1, 2.7), 5 (pair 1, 2.5), 6 (pair 2, 100): with factor 1.3, row 4 (2.7 > 2.6)
+    is dropped; row 2 (1.25 <= 1.3), row 5 (2.5 <= 2.6) and row 6 (no converged row in its
+    pair) run on."""
+    pair = np.array([0, 0, 0, 1, 1, 1, 2])
+    st, dropped = _state([C, C, R, C, R, R, R], [1.0, 3.0, 1.25, 2.0, 2.7, 2.5, 100.0],
+                         [2, 4, 5, 6])
+    _Runner._drop_losers(st, pair, 1.3)
+    assert len(dropped) == 1
+    np.testing.assert_array_equal(dropped[0], [4])
+    st, dropped = _state([C, C, R, C, R, R, R], [1.0, 3.0, 1.25, 2.0, 2.7, 2.5, 100.0],
+                         [2, 4, 5, 6])
+    _Runner._drop_losers(st, pair, 1.2)  # 1.25 > 1.2, 2.5 > 2.4 too
+    np.testing.assert_array_equal(dropped[0], [2, 4, 5])
+    st, dropped = _state([C, C, R, C, R, R, R], [1.0, 3.0, 1.3, 2.0, 2.6, 2.5, 100.0],
+                         [2, 4, 5, 6])
+    _Runner._drop_losers(st, pair, 1.3)  # equal to factor * best: kept (strictly above)
+    assert dropped == [] or dropped[0].size == 0
+
+
+def test_drop_losers_does_nothing_without_a_converged_row_or_an_active_one() -> None:
+    pair = np.array([0, 0, 1])
+    st, dropped = _state([R, R, R], [1.0, 9.0, 5.0], [0, 1, 2])
+    _Runner._drop_losers(st, pair, 1.3)
+    assert dropped == []
+    st, dropped = _state([C, C, R], [1.0, 9.0, 5.0], [])
+    _Runner._drop_losers(st, pair, 1.3)
+    assert dropped == []
+    st, dropped = _state([C, R, R], [1.0, 9.0, 5.0], [1, 2])  # pair 1: none converged
+    _Runner._drop_losers(st, pair, 1.3)
+    np.testing.assert_array_equal(dropped[0], [1])
