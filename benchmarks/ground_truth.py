@@ -79,9 +79,11 @@ def cache_path(metric: finsler.Metric, seed: int, k: int, n: int, starts: int) -
 
 
 def best_known(metric: finsler.Metric, pairs: np.ndarray, n: int, starts: int, seed: int,
-               chunk: int) -> dict[str, np.ndarray]:
+               chunk: int, first: int | None = None) -> dict[str, np.ndarray]:
     """The multistart's energy per pair and the families that reached it (within 1e-4),
-    resumed from and saved to the cache after every chunk."""
+    resumed from and saved to the cache after every chunk; ``first``: only the first so
+    many pairs (the cache stays that of all ``pairs``)."""
+    first = len(pairs) if first is None else first
     path = cache_path(metric, seed, len(pairs), n, starts)
     fields = ("energy", "converged", "families", "best_seed", "cpu")
     done: dict[str, list] = {f: [] for f in fields}
@@ -91,7 +93,7 @@ def best_known(metric: finsler.Metric, pairs: np.ndarray, n: int, starts: int, s
         if "converged" not in done:  # an older cache: NaN for what did not converge
             done["converged"] = list(np.isfinite(np.asarray(done["energy"], float)))
     plan = multistart_plan(metric, starts)
-    while len(done["energy"]) < len(pairs):
+    while len(done["energy"]) < first:
         a = len(done["energy"])
         part = pairs[a:a + chunk]
         c0 = time.process_time()
@@ -117,7 +119,7 @@ def best_known(metric: finsler.Metric, pairs: np.ndarray, n: int, starts: int, s
         tmp.replace(path)
         print(f"  {metric.name}: best known {len(done['energy'])}/{len(pairs)} pairs "
               f"({cpu:.1f} s CPU per pair)", flush=True)
-    return {k: np.asarray(v) for k, v in done.items()}
+    return {k: np.asarray(v)[:first] for k, v in done.items()}
 
 
 #: The metrics finslerax's worker (``peer_workers.py``) knows, and their parameters there.
@@ -154,22 +156,66 @@ def finslerax_energies(m: finsler.Metric, pairs: np.ndarray, n: int, python: str
             f"project's to {gap:.1e})" + (f"; error: {fx['error']}" if fx.get("error") else "")}
 
 
-def run_metric(name: str, k: int, seed: int, starts: int, chunk: int, repeats: int = 1,
-               finslerax: str | None = None) -> dict[str, object]:
-    m = finsler.get_metric(name)
-    n = 2 ** m.task.depth
-    pairs = finsler.sample_pairs(m, k, seed)
-    print(f"{name}: {k} pairs, {n} segments", flush=True)
-    best = best_known(m, pairs, n, starts, seed, chunk)
+def default_records(m: finsler.Metric, pairs: np.ndarray, n: int, repeats: int
+                    ) -> dict[str, object]:
+    """The default ``solve_batch(m, pairs, segments=n, workers=1)`` after one untimed pair
+    (lowering, graph): per pair its energy (as returned: a status that is not converged
+    is counted, not hidden), status, best seed, seeds tried and whether its seeds
+    disagree; wall and CPU time per pair (median of ``repeats`` runs)."""
     solve_batch(m, pairs[:1], segments=n, workers=1, progress=False)  # builds, not timed
     times = []
     for _ in range(repeats):
         t0, c0 = time.perf_counter(), time.process_time()
         rs = solve_batch(m, pairs, segments=n, workers=1, progress=False)
-        times.append(((time.perf_counter() - t0) / k, (time.process_time() - c0) / k))
-    wall, cpu = (float(np.median([t[i] for t in times])) for i in (0, 1))
-    # energies as returned (a status that is not converged is counted, not hidden)
-    e_def = np.array([r.energy if np.isfinite(r.energy) else np.inf for r in rs])
+        times.append(((time.perf_counter() - t0) / len(pairs),
+                      (time.process_time() - c0) / len(pairs)))
+    return {"energy": [float(r.energy) if np.isfinite(r.energy) else float("inf")
+                       for r in rs],
+            "converged": [bool(r.converged) for r in rs],
+            "best_seed": [r.best_seed for r in rs],
+            "seeds": [int(r.seeds_tried) for r in rs],
+            "disagree": [r.alternative_gap is not None for r in rs],
+            "wall": float(np.median([t[0] for t in times])),
+            "cpu": float(np.median([t[1] for t in times]))}
+
+
+def merge_parts(paths: list[Path], name: str, k: int, seed: int, n: int, upto: int
+                ) -> dict[str, object]:
+    """The records of ``--part`` runs (JSON files) of one metric joined in pair order;
+    they must cover pairs 0..upto-1 of the ``k`` drawn once, with the same seed and size.
+    Times: the mean per pair over all parts (each part one process, one thread)."""
+    parts = sorted((json.loads(Path(p).read_text()) for p in paths), key=lambda d: d["a"])
+    want = {"metric": name, "K": k, "seed": seed, "N": n}
+    a = 0
+    for d in parts:
+        if {f: d[f] for f in want} != want or d["a"] != a:
+            raise SystemExit(f"--merge: parts must be {want} and cover pairs 0..{upto - 1} in "
+                             f"order; got {({f: d[f] for f in want}, d['a'], d['b'])}")
+        a = d["b"]
+    if a != upto:
+        raise SystemExit(f"--merge: the parts cover pairs 0..{a - 1}, not 0..{upto - 1}")
+    out: dict[str, object] = {f: [x for d in parts for x in d[f]] for f in
+                              ("energy", "converged", "best_seed", "seeds", "disagree")}
+    for t in ("wall", "cpu"):
+        out[t] = sum(d[t] * (d["b"] - d["a"]) for d in parts) / upto
+    return out
+
+
+def run_metric(name: str, k: int, seed: int, starts: int, chunk: int, repeats: int = 1,
+               finslerax: str | None = None, parts: list[Path] | None = None,
+               first: int | None = None) -> dict[str, object]:
+    m = finsler.get_metric(name)
+    n = 2 ** m.task.depth
+    drawn = finsler.sample_pairs(m, k, seed)
+    best = best_known(m, drawn, n, starts, seed, chunk, first)
+    pairs = drawn[:first]
+    if first is not None:
+        k = first
+    print(f"{name}: {k} pairs, {n} segments", flush=True)
+    rec = (merge_parts(parts, name, len(drawn), seed, n, k) if parts
+           else default_records(m, pairs, n, repeats))
+    wall, cpu = rec["wall"], rec["cpu"]
+    e_def = np.asarray(rec["energy"], dtype=np.float64)
     e_ms = np.where(np.isfinite(best["energy"]), best["energy"], np.inf)
     e_best = np.minimum(e_def, e_ms)
     peer = None
@@ -189,21 +235,21 @@ def run_metric(name: str, k: int, seed: int, starts: int, chunk: int, repeats: i
             if f:
                 win_ms[f] = win_ms.get(f, 0) + 1
     win_def: dict[str, int] = {}
-    for r, g in zip(rs, gap, strict=True):
+    for b, g in zip(rec["best_seed"], gap, strict=True):
         if g <= TIGHT:
-            f = seed_family(r.best_seed)
+            f = seed_family(b)
             win_def[f] = win_def.get(f, 0) + 1
-    disagree = sum(1 for r in rs if r.alternative_gap is not None)
     worst = int(np.argmax(gap))
     return {
         "metric": name, "K": k, "N": n, "within_tight": int(np.sum(gap <= TIGHT)),
         "within_loose": int(np.sum(gap <= LOOSE)), "worst_gap": float(gap[worst]),
         "worst_pair": worst, "wall": wall, "cpu": cpu, "best_cpu": float(np.mean(best["cpu"])),
-        "beat": beat, "not_converged": sum(1 for r in rs if not r.converged),
+        "beat": beat, "not_converged": int(np.sum(~np.asarray(rec["converged"], bool))),
         "ms_not_converged": int(np.sum(~best["converged"])),
         "families_multistart": win_ms, "families_default": win_def,
-        "seeds_default": float(np.mean([r.seeds_tried for r in rs])),
-        "disagree": disagree, "gaps": gap, "peer": peer, "above_1e3": int(np.sum(gap > 1e-3)),
+        "seeds_default": float(np.mean(rec["seeds"])),
+        "disagree": int(np.sum(rec["disagree"])), "gaps": gap, "peer": peer,
+        "above_1e3": int(np.sum(gap > 1e-3)), "parts": len(parts or ()),
     }
 
 
@@ -229,6 +275,17 @@ def main() -> None:
                     help="python of a venv with finslerax 1.1 and jax[cpu] (see "
                          "benchmarks/peers.py): compare on matsumoto and randers; default "
                          "$FINSLERAX_PYTHON, none: no comparison")
+    ap.add_argument("--part", metavar="A:B",
+                    help="only the default on pairs A..B-1 of one metric, its per-pair "
+                         "records written to --json (no best known, no results file): "
+                         "parts run as separate processes, then --merge")
+    ap.add_argument("--json", type=Path, help="where --part writes its records")
+    ap.add_argument("--first", type=int, metavar="N",
+                    help="only the first N of the K pairs drawn (one metric; the same "
+                         "pairs as in a run on all K, the cache that of K)")
+    ap.add_argument("--merge", type=Path, nargs="+", metavar="PART.json",
+                    help="the table of one metric from --part records (covering all K "
+                         "pairs) against the best known, instead of solving the default")
     args = ap.parse_args()
     if args.repeats < 1:
         raise SystemExit("--repeats must be at least 1")
@@ -243,6 +300,23 @@ def main() -> None:
         count[nm] = int(k)
     if min(count.values()) < 1:
         raise SystemExit("--pairs must be at least 1")
+    if (args.part or args.merge or args.first) and len(names) != 1:
+        raise SystemExit("--part, --merge and --first take one metric (--metrics NAME)")
+    if args.first is not None and not 1 <= args.first <= count[names[0]]:
+        raise SystemExit(f"--first must be between 1 and K = {count[names[0]]}")
+    if args.part:
+        a, _, b = args.part.partition(":")
+        k = count[names[0]]
+        if not (a.isdigit() and b.isdigit() and 0 <= int(a) < int(b) <= k) or not args.json:
+            raise SystemExit(f"--part wants A:B with 0 <= A < B <= {k}, and --json OUT")
+        m = finsler.get_metric(names[0])
+        n = 2 ** m.task.depth
+        rec = default_records(m, finsler.sample_pairs(m, k, args.seed)[int(a):int(b)], n,
+                              args.repeats)
+        rec.update(metric=m.name, K=k, seed=args.seed, N=n, a=int(a), b=int(b))
+        finsler.atomic_write_text(args.json, json.dumps(rec), "--json")
+        print(f"{m.name} pairs {a}..{int(b) - 1}: {rec['cpu']:.2f} s CPU per pair", flush=True)
+        return
     out = ResultsFile("ground_truth", title="Ground truth: the default exact solve against "
                       "a wide multistart on fresh pairs")
     out.add(f"Fresh pairs `finsler.sample_pairs(metric, K, {args.seed})` at "
@@ -258,7 +332,7 @@ def main() -> None:
     rows, notes, peer_rows, peer_notes = [], [], [], []
     for nm in names:
         r = run_metric(nm, count[nm], args.seed, args.best_starts, args.chunk, args.repeats,
-                       args.finslerax_python)
+                       args.finslerax_python, args.merge, args.first)
         if r["peer"] is not None:
             pr = r["peer"]
             if "skipped" in pr:
@@ -283,7 +357,12 @@ def main() -> None:
                      f"{_fmt(r['families_multistart'])}; by the default (family of its "
                      f"best seed on pairs within 1e-4) {_fmt(r['families_default'])}; worst "
                      f"pair {r['worst_pair']}; gaps above 1e-4 at pairs "
-                     f"{np.flatnonzero(r['gaps'] > TIGHT).tolist()}")
+                     f"{np.flatnonzero(r['gaps'] > TIGHT).tolist()}"
+                     + (f"; the default ran as {r['parts']} processes of one thread each "
+                        "(`--part`, then `--merge`), its times the mean per pair over them"
+                        if r["parts"] else "")
+                     + (f"; the first {r['K']} of `sample_pairs(metric, {count[nm]}, "
+                        f"{args.seed})` (`--first`)" if args.first else ""))
         print(markdown_table(["metric", "K", "N", "within 1e-4", "within 1e-2", "worst gap",
                               "wall ms/pair", "CPU ms/pair", "default beat multistart",
                               "not converged (default / multistart)", "seeds", "seeds disagree",
