@@ -29,6 +29,12 @@ over boxes (:func:`finsler.intervals.enclose`, outward rounding) and three facts
    1e-9``), so the bound holds whatever the solver's tolerance. The 1-D chord potential
    (``Phi(s)`` alone) is the special case ``r_cells = 1``: the plane adds that a path must
    pay to leave the chord for the cheap regions away from it.
+4. **Cyclic coordinates.** Coordinates ``f`` does not depend on (the Panda's last joint)
+   are left out of the boxes: with ``q = (q_A, q_F)``, ``phi = p e_F . q_F + Psi(s, r)``
+   (``s, r`` of ``q_A``) is a subsolution when ``|grad Psi| <= sqrt(g**2 - p**2)``
+   (Clairaut), so ``d >= p |y_F - x_F| + Psi(goal) - Psi(start)``, best over a few
+   momenta ``p`` in ``[0, m]``; and a path shorter than ``U`` has ``L_A <= sqrt(U**2 -
+   (m |y_F - x_F|)**2)`` (Minkowski), a smaller ellipsoid in fewer dimensions.
 
 Refinement: a box is split (along its widest side) while its enclosure of ``f`` is below
 ``1 - refine_tol`` times the smallest value of ``f`` seen at box centres in any cell it
@@ -72,6 +78,9 @@ _CHUNK = 100_000
 CHECK_VALUES = True
 #: cvxpy solvers of the potential's cone program, tried in turn.
 CONE_SOLVERS = ("CLARABEL", "SCS")
+#: Momenta tried for the free coordinates, as fractions of the smallest factor ``m``.
+MOMENTA = (0.0, 0.3, 0.5, 0.65, 0.8, 0.9, 0.97)
+_U = 2.0**-53
 #: Fewest boxes split per round (the enclosures are vectorised: small rounds are slow).
 MIN_SPLIT = 2000
 
@@ -127,10 +136,14 @@ class ConformalCertifyResult(Result):
     ``lower`` is the larger of ``potential_lower`` (the verified planar potential) and
     ``trivial`` (``min_factor * |goal - start|``, ``min_factor`` the proven smallest value
     of ``f`` over the reachable region); ``ratio = lower / upper``, ``gap = 1 - ratio``.
+    ``min_factor_seen`` is the smallest value of ``f`` at a box centre: ``min_factor_seen
+    * |goal - start|`` is at least the trivial bound with the exact minimum.
     ``boxes`` are the boxes kept at the end, ``enclosures`` the boxes enclosed in all (the
     work), ``cells`` the ``(s, r)`` cells with a bound, ``scale`` the factor the potential
     was divided by after the exact check of its gradients (1 + the solver's tolerance).
-    ``stopped_by``: ``no_refinement`` (no box holds a cell down), ``max_boxes``,
+    ``active_dims``: the coordinates ``f`` depends on (the boxes live there; the others
+    are cyclic and carry the ``momentum`` of the best potential); ``cone_programs`` the
+    potentials solved. ``stopped_by``: ``no_refinement`` (no box holds a cell down), ``max_boxes``,
     ``max_live`` or ``max_rounds`` (the budgets), or a failure's label. ``times`` in
     seconds (solve, boxes, lp, total); ``wall_time`` their total."""
 
@@ -144,12 +157,16 @@ class ConformalCertifyResult(Result):
     trivial: float
     potential_lower: float
     min_factor: float
+    min_factor_seen: float
     euclidean: float
     ellipse: float
     boxes: int
     enclosures: int
     cells: int
     rounds: int
+    active_dims: int
+    momentum: float
+    cone_programs: int
     scale: float
     lp_status: str
     solver_status: str
@@ -169,30 +186,44 @@ class ConformalCertifyResult(Result):
         return out
 
 
-def _factor_function(metric: Metric) -> LoweredFunction:
-    """The lowered conformal factor ``q -> f(q)`` (cached on the metric)."""
-    def build() -> LoweredFunction:
+def _factor_function(metric: Metric, reduce: bool) -> tuple[LoweredFunction, np.ndarray]:
+    """The lowered conformal factor ``q_A -> f`` and the mask of its coordinates ``A``:
+    with ``reduce``, only those ``f`` depends on (cached on the metric)."""
+    def build() -> tuple[LoweredFunction, np.ndarray]:
         q = ca.SX.sym("q", metric.dim)
         f = ca.SX(metric.conformal_factor_sx(q))
         if f.numel() != 1:
             raise InputError(f"{metric.name}: conformal_factor_sx must return a scalar, got "
                              f"shape {f.shape}")
-        return lower(ca.Function(f"conformal_factor_{metric._ident}", [q], [f]))
-    return metric.derived("certify.conformal_factor", build)
+        active = np.array([not reduce or bool(ca.depends_on(f, q[i]))
+                           for i in range(metric.dim)])
+        if not active.any():
+            active[0] = True
+        qa = ca.SX.sym("qa", int(active.sum()))
+        full = ca.vertcat(*[qa[int(active[:i].sum())] if active[i] else ca.SX(0.0)
+                            for i in range(metric.dim)])
+        fa = ca.substitute(f, q, full)
+        return lower(ca.Function(f"conformal_factor_{metric._ident}", [qa], [fa])), active
+    return metric.derived(f"certify.conformal_factor.{reduce}", build)
 
 
-def _constraint_function(metric: Metric) -> tuple[LoweredFunction, np.ndarray,
-                                                  np.ndarray] | None:
-    """The domain's constraints ``q -> g(q)`` with bounds ``lb <= g <= ub``, or None."""
+def _constraint_function(metric: Metric, active: np.ndarray
+                         ) -> tuple[LoweredFunction, np.ndarray, np.ndarray] | None:
+    """The domain's constraints on the coordinates ``active`` alone, ``q_A -> g`` with
+    bounds ``lb <= g <= ub`` (those involving other coordinates are left out: a
+    superset), or None."""
     def build() -> Any:
         q = ca.SX.sym("q", metric.dim)
-        cons = metric.domain.constraints_sx(q)
+        free = [q[i] for i in range(metric.dim) if not active[i]]
+        cons = [c for c in metric.domain.constraints_sx(q)
+                if not any(ca.depends_on(ca.SX(c[0]), v) for v in free)]
         if not cons:
             return None
+        qa = ca.vertcat(*[q[i] for i in range(metric.dim) if active[i]])
         g = ca.vertcat(*[ca.SX(c[0]) for c in cons])
-        return (lower(ca.Function(f"domain_{metric._ident}", [q], [ca.densify(g)])),
+        return (lower(ca.Function(f"domain_{metric._ident}", [qa], [ca.densify(g)])),
                 np.array([c[1] for c in cons], float), np.array([c[2] for c in cons], float))
-    return metric.derived("certify.domain_constraints", build)
+    return metric.derived(f"certify.domain_constraints.{active.tobytes().hex()}", build)
 
 
 def _enclose_factor(fn: LoweredFunction, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
@@ -387,6 +418,49 @@ def _potential(grid: _Grid, g: np.ndarray) -> tuple[float, float, str, np.ndarra
     return max(bound * (1.0 - _SLACK), 0.0), scale, str(prob.status), weight
 
 
+def _reduced(g: np.ndarray, p: float) -> np.ndarray:
+    """``sqrt(g**2 - p**2)`` rounded down (0 where ``g <= p``): the bound left for the
+    active coordinates when the free ones carry the momentum ``p``."""
+    if p <= 0.0:
+        return g
+    with np.errstate(invalid="ignore", over="ignore"):
+        g2 = g * g * (1.0 - 4 * _U) - p * p * (1.0 + 4 * _U)
+        out = np.sqrt(np.maximum(g2, 0.0) * (1.0 - 4 * _U)) * (1.0 - 4 * _U)
+    return np.where(np.isinf(g), np.inf, out)
+
+
+def _best_potential(grid: _Grid, g: np.ndarray, m_low: float, free_dist: float
+                    ) -> tuple[float, float, str, float, int]:
+    """The best bound ``p |free move| + Psi(goal) - Psi(start)`` over momenta ``p`` in
+    ``[0, m]`` (``phi = p e_F . q_F + Psi(s, r)``: ``|grad phi|**2 = p**2 + |grad
+    Psi|**2 <= f**2`` where ``|grad Psi| <= sqrt(g**2 - p**2)``; the coordinates ``f``
+    does not depend on are cyclic, Clairaut's integral) -> (bound, scale, status, p,
+    cone programs solved)."""
+    def run(p: float) -> tuple[float, float, str]:
+        bound, scale, status, _ = _potential(grid, _reduced(g, p))
+        return bound + p * free_dist * (1.0 - _SLACK), scale, status
+
+    if free_dist <= 0.0 or m_low <= 0.0:
+        bound, scale, status = run(0.0)
+        return bound, scale, status, 0.0, 1
+    tried = {p: run(p) for p in m_low * np.array(MOMENTA)}
+    fine = [p for p in tried if math.isfinite(tried[p][1])]
+    if fine:  # one golden-section refinement round around the best
+        best = max(fine, key=lambda p: tried[p][0])
+        grid_p = sorted(tried)
+        k = grid_p.index(best)
+        for q in (0.5 * (grid_p[max(k - 1, 0)] + best),
+                  0.5 * (best + grid_p[min(k + 1, len(grid_p) - 1)])):
+            if q not in tried:
+                tried[q] = run(q)
+    fine = [p for p in tried if math.isfinite(tried[p][1])]
+    if not fine:
+        p = min(tried)
+        return 0.0, float("nan"), tried[p][2], p, len(tried)
+    best = max(fine, key=lambda p: tried[p][0])
+    return (*tried[best], best, len(tried))
+
+
 def certify_conformal(metric: Metric | str, start: Any, goal: Any,
                       spec: ConformalSpec | None = None, *, path: Any = None
                       ) -> ConformalCertifyResult:
@@ -437,12 +511,20 @@ def certify_conformal(metric: Metric | str, start: Any, goal: Any,
 
     # boxes: branch and bound on the reachable region
     t0 = time.perf_counter()
-    fn = _factor_function(m)
-    cons = _constraint_function(m)
+    fn, active = _factor_function(m, True)
+    if float(np.linalg.norm((y - x)[active])) <= 1e-9 * dist:  # only free coordinates move
+        fn, active = _factor_function(m, False)
+    cons = _constraint_function(m, active)
+    free_dist = float(np.linalg.norm((y - x)[~active]))
+    full_dist, x_full, y_full = dist, x, y
+    x, y = x[active], y[active]
+    dist = float(np.linalg.norm(y - x))
     u = (y - x) / dist
-    lo, hi = dom_lo[None, :].copy(), dom_hi[None, :].copy()
+    lo, hi = dom_lo[None, active].copy(), dom_hi[None, active].copy()
     f_lo = _enclose_factor(fn, lo, hi)
-    f_c = np.full(1, np.inf)
+    with np.errstate(all="ignore"):
+        f_c = np.asarray(fn(0.5 * (lo + hi))[0], float).reshape(-1)
+    f_c = np.where(np.isfinite(f_c), f_c, np.inf)
     work, rounds = 1, 0
     stopped_by = "max_rounds"
     grid: _Grid | None = None
@@ -451,10 +533,20 @@ def certify_conformal(metric: Metric | str, start: Any, goal: Any,
     radius = math.inf
     weight: np.ndarray | None = None
     lp_boxes, lp_solves = 0, 0
+
+    def ellipse(m_low: float) -> float:
+        """``U_A / m``: the largest Euclidean length, in the active coordinates, of a path
+        shorter than ``U`` on which ``f >= m`` (Minkowski: ``U**2 >= L_A**2 + (m
+        |free move|)**2``)."""
+        if m_low <= 0:
+            return math.inf
+        ua = math.sqrt(max(upper * upper - (m_low * free_dist * (1.0 - _SLACK)) ** 2, 0.0))
+        return ua / m_low * (1.0 + _SLACK)
+
     while True:
         # the region: drop boxes outside the domain or the ellipse of the current m
         m_low = float(np.min(f_lo)) if f_lo.size else 0.0
-        radius = upper / m_low * (1.0 + _SLACK) if m_low > 0 else math.inf
+        radius = ellipse(m_low)
         keep = ~_outside_domain(cons, lo, hi)
         if math.isfinite(radius):
             keep &= (_box_point_distance(lo, hi, x) + _box_point_distance(lo, hi, y)
@@ -466,9 +558,9 @@ def certify_conformal(metric: Metric | str, start: Any, goal: Any,
         m_new = float(np.min(f_lo))
         if m_new > m_low:  # fewer boxes: a larger m, a smaller ellipse (next round)
             m_low = m_new
-            radius = upper / m_low * (1.0 + _SLACK)
+            radius = ellipse(m_low)
         if not math.isfinite(radius):
-            radius = 2.0 * float(np.linalg.norm(dom_hi - dom_lo)) + dist
+            radius = 2.0 * float(np.linalg.norm((dom_hi - dom_lo)[active])) + dist
         grid = _Grid.make(dist, radius, spec)
         rng = grid.ranges(*_box_sr(lo, hi, x, u))
         g = _cell_bounds(grid, f_lo, rng)
@@ -481,7 +573,7 @@ def certify_conformal(metric: Metric | str, start: Any, goal: Any,
         np.minimum.at(seen, ci[0] * grid.nr + ci[2], f_c)
         if weight is None or weight.size != g.size or lo.shape[0] > 1.3 * lp_boxes:
             # the bound's sensitivity to each cell's g (the cone program's duals)
-            weight = _potential(grid, g)[3]
+            weight = _potential(grid, _reduced(g, m_low * free_dist / full_dist))[3]
             lp_boxes = lo.shape[0]
             lp_solves += 1
         box, cell = _expand(*rng, grid.nr)
@@ -539,10 +631,11 @@ def certify_conformal(metric: Metric | str, start: Any, goal: Any,
     # the verified potential on the (s, r) plane
     t0 = time.perf_counter()
     assert grid is not None
-    pot, scale, lp_status, _ = _potential(grid, g)
-    lp_solves += 1
+    pot, scale, lp_status, momentum, solves = _best_potential(grid, g, m_low, free_dist)
+    lp_solves += solves
     t_lp = time.perf_counter() - t0
     # the trivial bound, rounded down: m |y - x|
+    x, y, dist = x_full, y_full, full_dist
     trivial = m_low * dist * (1.0 - _SLACK)
     lower = min(max(pot, trivial), upper)
     ratio = lower / upper
@@ -557,14 +650,17 @@ def certify_conformal(metric: Metric | str, start: Any, goal: Any,
     return ConformalCertifyResult(
         metric=m.name, start=x, goal=y, lower=lower, upper=upper, ratio=ratio,
         gap=1.0 - ratio, trivial=trivial, potential_lower=pot, min_factor=m_low,
+        min_factor_seen=float(np.min(f_c)),
         euclidean=dist, ellipse=radius, boxes=int(lo.shape[0]), enclosures=int(work),
-        cells=int(np.sum(np.isfinite(g))), rounds=rounds, scale=scale,
+        cells=int(np.sum(np.isfinite(g))), rounds=rounds, active_dims=int(active.sum()),
+        momentum=momentum, cone_programs=lp_solves, scale=scale,
         lp_status=lp_status, solver_status=solver_status, stopped_by=stopped_by,
         status=status, message=message,
         method=(f"verified piecewise-linear potential on the (s, r) plane of the chord "
-                f"({grid.ns} x {grid.nr} cells), cell bounds from interval enclosures of "
-                f"the conformal factor over {int(lo.shape[0])} boxes covering the "
-                f"reachable ellipsoid"),
+                f"({grid.ns} x {grid.nr} cells) plus momentum {momentum:.4g} along the "
+                f"{m.dim - int(active.sum())} cyclic coordinates; cell bounds from affine "
+                f"enclosures of the conformal factor over {int(lo.shape[0])} boxes "
+                f"covering the reachable ellipsoid"),
         spec={k: getattr(spec, k) for k in spec.__dataclass_fields__},
         times={"solve": t_solve, "boxes": t_boxes, "lp": t_lp, "total": total},
         wall_time=total, path=pts)
