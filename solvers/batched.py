@@ -9,9 +9,11 @@ way (warm started by interpolation); the best is polished by perturbed restarts 
 final size. IPOPT (:mod:`solvers.transcription`) stays the reference and the fallback: a
 pair whose best candidate the Newton solve could not finish (an active domain constraint,
 a stall, the iteration cap) is finished by IPOPT from that candidate, and metrics the
-batched path does not cover (not ``smooth``: kinks that need IPOPT's slack
-reformulation) are solved by IPOPT alone. Every result names its method and carries the
-first-order optimality residual of its path (:func:`solvers.newton.energy_residual`).
+batched path does not cover by default (not ``smooth``: kinks that need the slack
+reformulation) are solved by IPOPT alone, or on request (``method="newton"``) by the
+batched primal-dual interior point of :mod:`solvers.interior` on that reformulation.
+Every result names its method and carries the first-order optimality residual of its
+path (:func:`solvers.newton.energy_residual`; the KKT residual where ``F`` is not smooth).
 """
 
 from __future__ import annotations
@@ -25,31 +27,47 @@ import numpy as np
 from finsler.metric import Metric
 from solvers.backends import backend_for
 from solvers.inputs import domain_scale
+from solvers.interior import InteriorOptions, covers_interior, interior_energy
 from solvers.newton import NewtonOptions, NewtonState, NewtonStatus, energy_residual
 from solvers.seeding import SeedPlan, graph_seeds, perturbed_batch, resample, seed_batch
 
-__all__ = ["BatchOptions", "BatchSolution", "Rows", "covers", "solve_pairs_batched"]
+__all__ = ["BatchOptions", "BatchSolution", "Rows", "covers", "covers_opt_in",
+           "solve_pairs_batched"]
 
 #: Relative energy difference under which two seeds count as agreeing with the best.
 AGREE_RTOL = 1e-6
 
 
 def covers(metric: Metric) -> bool:
-    """True if the batched Newton path solves ``metric``: ``F`` smooth away from zero
-    velocity (the energy's Hessian exists), as the metric declares; otherwise IPOPT with
-    the metric's smooth reformulation solves it."""
+    """True if the batched Newton path solves ``metric`` by default (``method="auto"``):
+    ``F`` smooth away from zero velocity (the energy's Hessian exists), as the metric
+    declares; otherwise IPOPT with the metric's smooth reformulation solves it (or, on
+    request, ``method="newton"``, the batched interior point of :func:`covers_opt_in`)."""
     return bool(metric.smooth)
+
+
+def covers_opt_in(metric: Metric) -> bool:
+    """True if ``method="newton"`` can solve ``metric`` in batches: a smooth ``F``
+    (:func:`covers`), or one that is not smooth but provides the ``smooth_square_sx`` hook
+    (its slack reformulation), solved by the batched primal-dual interior point
+    (:func:`solvers.interior.interior_energy`). Opt-in for the latter: on measured car-like
+    pairs it does not yet reach IPOPT's optima on every pair (see
+    ``benchmarks/nonsmooth_newton.py``)."""
+    return covers(metric) or covers_interior(metric)
 
 
 @dataclass(frozen=True)
 class BatchOptions:
     """How the batch is run. ``newton``: the Newton settings; ``device``: ``None`` for
     numpy, or a torch device (``"cuda"``); ``local``: modify only the Hessian blocks that
-    are not positive definite (else IPOPT-like global shifts, :class:`NewtonState`)."""
+    are not positive definite (else IPOPT-like global shifts, :class:`NewtonState`);
+    ``interior``: the interior-point settings for a metric that is not smooth (numpy
+    only, :func:`solvers.interior.interior_energy`)."""
 
     newton: NewtonOptions = field(default_factory=NewtonOptions)
     device: Any = None
     local: bool = True
+    interior: InteriorOptions = field(default_factory=InteriorOptions)
 
 
 @dataclass
@@ -187,6 +205,16 @@ class _Runner:
         converged energy stops."""
         if not len(rows):
             return rows
+        if not self.m.smooth:
+            # the slack reformulation by the batched interior point; the reported residual
+            # is left unknown (NaN) so that the results compute the KKT residual of the
+            # points themselves (solvers.nonsmooth.kkt_residual), not the method's own
+            res = interior_energy(self.m, rows.points, self.opts.interior, scale=self.scale)
+            self.evaluations += res.evaluations
+            self.value_evaluations += res.value_evaluations
+            np.add.at(self.iterations, rows.pair, res.iterations)
+            return Rows(rows.pair, rows.names, res.points, res.energy, res.status,
+                        res.iterations, np.full(len(rows), np.nan))
         st = NewtonState(self.m, rows.points, self.opts.newton, self.ops, self.scale,
                          self.opts.local)
         it = 0

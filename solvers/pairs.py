@@ -29,7 +29,7 @@ import numpy as np
 
 from finsler.errors import InputError
 from finsler.metric import Metric
-from solvers.batched import BatchOptions, BatchSolution, covers, solve_pairs_batched
+from solvers.batched import BatchOptions, BatchSolution, covers, covers_opt_in, solve_pairs_batched
 from solvers.inputs import SHORT_PAIR, as_metric, domain_scale
 from solvers.nonsmooth import optimality_residual
 from solvers.result import GeodesicResult, MinMaxResult, Status
@@ -298,14 +298,16 @@ def _ladder(m: Metric, s: np.ndarray, g: np.ndarray, n: int, plan: SeedPlan,
 
 def resolve_method(m: Metric, method: Any) -> str:
     """``"newton"`` or ``"ipopt"`` for ``method`` (``"auto"``: Newton where it covers the
-    metric, :func:`solvers.batched.covers`)."""
+    metric, :func:`solvers.batched.covers`; ``"newton"`` also for a metric that is not
+    smooth but provides ``smooth_square_sx``, :func:`solvers.batched.covers_opt_in`)."""
     if method not in ("auto", "newton", "ipopt"):
         raise InputError(f"method must be 'auto', 'newton' or 'ipopt', got {method!r}")
     if method == "auto":
         return "newton" if covers(m) else "ipopt"
-    if method == "newton" and not covers(m):
-        raise InputError(f"{m.name}: the Newton method needs a smooth F (the metric declares "
-                         "smooth = False); use method='ipopt' or 'auto'")
+    if method == "newton" and not covers_opt_in(m):
+        raise InputError(f"{m.name}: the Newton method needs a smooth F or the "
+                         "smooth_square_sx hook (the metric declares smooth = False without "
+                         "it); use method='ipopt' or 'auto'")
     return method
 
 

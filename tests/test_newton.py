@@ -264,8 +264,16 @@ def test_statuses_and_bad_input() -> None:
         NewtonOptions(gtol=0.0)
     with pytest.raises(InputError, match="method"):
         solvers.solve_geodesic(m, s, g, 8, method="bogus")
+    # a metric declared not smooth without the smooth_square_sx hook (the car-like metric
+    # with the hook withdrawn): no batched method for it (car-like itself opts in through
+    # the interior point, tests/test_newton_nonsmooth.py)
+    from finsler.hooks import MetricHooks
+
+    class NoHook(finsler.CarLike):
+        smooth_square_sx = MetricHooks.smooth_square_sx
+
     with pytest.raises(InputError, match="smooth"):
-        solvers.solve_geodesic("carlike", [0.1, 0.1, 0.0], [0.3, 0.2, 0.1], 8, method="newton")
+        solvers.solve_geodesic(NoHook(), [0.1, 0.1, 0.0], [0.3, 0.2, 0.1], 8, method="newton")
 
 
 def test_residual_is_small_only_at_a_minimiser() -> None:
