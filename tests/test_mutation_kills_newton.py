@@ -111,3 +111,50 @@ def test_drop_losers_does_nothing_without_a_converged_row_or_an_active_one() -> 
     st, dropped = _state([C, R, R], [1.0, 9.0, 5.0], [1, 2])  # pair 1: none converged
     _Runner._drop_losers(st, pair, 1.3)
     np.testing.assert_array_equal(dropped[0], [1])
+
+
+def _bent_paths() -> np.ndarray:
+    line = np.linspace([-0.5, -0.2], [0.4, 0.3], 6)
+    bend = np.r_[0, 1, 1, 1, 1, 0][:, None] * np.array([[0.05, -0.08], [0.1, 0.02],
+                                                        [-0.07, 0.04]])[:, None]
+    return line[None] + bend
+
+
+def test_drop_stops_only_running_problems() -> None:
+    """Problems dropped before any step keep their starting points and report DROPPED;
+    the others converge to the straight line; dropping a converged problem (indices as
+    a plain list) leaves it converged."""
+    from solvers.backends import backend_for
+    from solvers.newton import NewtonOptions, NewtonState
+
+    m = finsler.get_metric("euclidean")
+    paths = _bent_paths()
+    st = NewtonState(m, paths, NewtonOptions(), backend_for(None), 2.0)
+    st.drop([0, 2])
+    assert list(st.active) == [1]
+    while st.running:
+        st.step()
+    st.drop([1])
+    res = st.result()
+    assert list(res.status) == [NewtonStatus.DROPPED, NewtonStatus.CONVERGED,
+                                NewtonStatus.DROPPED]
+    np.testing.assert_array_equal(res.points[[0, 2]], paths[[0, 2]])
+    np.testing.assert_allclose(res.points[1], np.linspace([-0.5, -0.2], [0.4, 0.3], 6),
+                               atol=1e-9)
+
+
+def test_newton_energy_takes_nested_lists_and_reports_the_residual_at_scale_one() -> None:
+    """``paths`` as nested lists solve as the array does; the residual of a problem
+    stopped after one iteration is the closed form's at the default scale 1."""
+    from solvers.newton import NewtonOptions, newton_energy
+
+    m = finsler.get_metric("euclidean")
+    paths = _bent_paths()
+    a = newton_energy(m, paths)
+    b = newton_energy(m, paths.tolist())
+    np.testing.assert_array_equal(a.points, b.points)
+    assert list(a.status) == [NewtonStatus.CONVERGED] * 3
+    one = newton_energy(m, paths + 0.01 * np.sin(np.arange(6))[None, :, None],
+                        NewtonOptions(max_iter=1, line_steps=1, armijo=0.9))
+    assert all(one.status != NewtonStatus.CONVERGED)
+    np.testing.assert_allclose(one.residual, euclid_residual(one.points, 1.0), rtol=1e-8)
