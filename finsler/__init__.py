@@ -25,6 +25,7 @@ if TYPE_CHECKING:
         Minkowski,
         PandaPole,
         Poincare,
+        PoincareSlab,
         Randers,
         Sphere,
     )
@@ -65,6 +66,7 @@ _LAZY = {
     "OutputError": "finsler.files",
     "PandaPole": "finsler.metrics",
     "Poincare": "finsler.metrics",
+    "PoincareSlab": "finsler.metrics",
     "Product": "finsler.domains",
     "Randers": "finsler.metrics",
     "Sphere": "finsler.metrics",
@@ -109,6 +111,7 @@ __all__ = [
     "OutputError",
     "PandaPole",
     "Poincare",
+    "PoincareSlab",
     "Product",
     "Randers",
     "Sphere",

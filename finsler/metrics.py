@@ -25,6 +25,7 @@ __all__ = [
     "Minkowski",
     "PandaPole",
     "Poincare",
+    "PoincareSlab",
     "Randers",
     "Sphere",
 ]
@@ -534,3 +535,42 @@ class Sphere(ClosedFormMetric):
         p = wa * a[:, None] + wb * b[:, None]
         p /= np.linalg.norm(p, axis=-1, keepdims=True)
         return self.from_sphere(p)
+
+
+@dataclass(frozen=True)
+class PoincareSlab(ClosedFormMetric):
+    """A 3-D closed-form reference with a metric that varies in space: the Riemannian
+    product of the Poincare disk and a line, ``F(x, v) = sqrt((2 |v_p| / (1 - |p|**2))**2
+    + v_z**2)`` with ``x = (p, z)`` on (disk ``|p| <= radius``) x ``[-1, 1]``. Both factors
+    are geodesically convex, so ``d = sqrt(d_H(p, q)**2 + (z - w)**2)`` (``d_H`` the
+    hyperbolic distance) and geodesics are a hyperbolic geodesic and a uniform motion in
+    ``z``, both at constant speed. Registered to check 3-D certificates against."""
+
+    radius: float = 0.7
+
+    name: ClassVar[str] = "poincare-slab"
+    unique_geodesics: ClassVar[bool] = True  # a product of Hadamard manifolds
+    task: ClassVar[Task] = Task(depth=5, eps=0.3)
+    reversible: ClassVar[bool] = True
+    convexity_note: ClassVar[str] = "Riemannian: Finsler everywhere"
+
+    def __post_init__(self) -> None:
+        if not (0.0 < self.radius < 1.0):
+            raise InputError(f"poincare-slab radius must be in (0, 1), got {self.radius!r}")
+
+    @property
+    def domain(self) -> Domain:
+        return Product((Disk(radius=self.radius), Box((-1.0,), (1.0,), names=("z",))))
+
+    def F_sx(self, x: ca.SX, v: ca.SX) -> ca.SX:
+        lam = 2.0 / (1.0 - x[0] * x[0] - x[1] * x[1])
+        return ca.sqrt(lam * lam * (v[0] * v[0] + v[1] * v[1]) + v[2] * v[2])
+
+    def _distance(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        dh = Poincare._distance(Poincare(radius=self.radius), x[:, :2], y[:, :2])
+        return np.hypot(dh, y[:, 2] - x[:, 2])
+
+    def _geodesic(self, x: np.ndarray, y: np.ndarray, t: np.ndarray) -> np.ndarray:
+        disk = Poincare(radius=self.radius)._geodesic(x[:, :2], y[:, :2], t)
+        z = x[:, None, 2] + t[None, :] * (y - x)[:, None, 2]
+        return np.concatenate([disk, z[..., None]], -1)

@@ -19,6 +19,7 @@ from finsler.metrics import (
     Minkowski,
     PandaPole,
     Poincare,
+    PoincareSlab,
     Randers,
     Sphere,
 )
@@ -38,7 +39,8 @@ def register_metric(cls: type[Metric]) -> type[Metric]:
     return cls
 
 
-for _cls in (Matsumoto, CarLike, PandaPole, Euclidean, Minkowski, Randers, Poincare, Sphere):
+for _cls in (Matsumoto, CarLike, PandaPole, Euclidean, Minkowski, Randers, Poincare, Sphere,
+             PoincareSlab):
     register_metric(_cls)
 
 

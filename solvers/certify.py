@@ -572,8 +572,11 @@ def certify(
         res = certify_conformal(m, start, goal,
                                 mesh if isinstance(mesh, ConformalSpec) else None, path=path)
         return res.strict() if strict else res  # type: ignore[return-value]
-    if m.dim != 2:
-        raise InputError(f"certify works on 2-D metrics; {m.name} has dimension {m.dim}")
+    if m.dim != 2:  # any other dimension: a verified potential (issue 46, items 1-2)
+        from solvers.certify_nd import certify_nd
+
+        res = certify_nd(m, start, goal, mesh, path=path)  # type: ignore[arg-type]
+        return res.strict() if strict else res  # type: ignore[return-value]
     spec = MeshSpec.preset(mesh) if isinstance(mesh, str) else (mesh or MeshSpec())
     if not isinstance(spec, MeshSpec):
         raise InputError(f"mesh must be a MeshSpec or a preset name, got {type(mesh).__name__}")

@@ -44,8 +44,8 @@ __all__ = ["certify_command", "register"]
 
 def certify_command(
     metric: Annotated[str, typer.Option(
-        help="Registered 2-D metric, or a conformal one of any dimension (see `geodesics "
-             "metrics`).")],
+        help="Registered metric: 2-D, a conformal one of any dimension, or 3-D and up with "
+             "F(x, .) convex (see `geodesics metrics`).")],
     start: Annotated[str, typer.Option(help='Start point, e.g. "0.1,-0.2".')],
     goal: Annotated[str, typer.Option(help='Goal point, e.g. "0.5,0.3".')],
     mesh: Annotated[str, typer.Option(
@@ -82,8 +82,9 @@ def certify_command(
     if m.dim > 3 and m.provides("conformal_factor_sx"):  # n-D conformal (issue 46, item 3)
         _certify_conformal(m, start, goal, target_gap, max_boxes, out, as_json)
         return
-    if m.dim != 2:
-        fail(f"certify works on 2-D metrics; {m.name} has dimension {m.dim}")
+    if m.dim != 2:  # any other dimension, F(x, .) convex (issue 46, items 1-2)
+        _certify_nd(m, start, goal, mesh, h, target_gap, out, as_json)
+        return
     s = parse_point(start, m.dim, "--start")
     g = parse_point(goal, m.dim, "--goal")
     try:
@@ -169,6 +170,55 @@ def _certify_conformal(m: Any, start: str, goal: str, target_gap: float | None,
                    f"{res.trivial:.6g} (min f {res.min_factor:.6g} x |goal - start|)")
         typer.echo(f"work   : {res.enclosures} box enclosures, {res.boxes} boxes kept, "
                    f"{res.cells} cells; {res.times['total']:.2f} s")
+    if res.status is CertifyStatus.LP_FAILED:
+        fail(f"certify {res.status.label}: {res.message}", code=1)
+
+
+def _certify_nd(m: Any, start: str, goal: str, mesh: str, h: float | None,
+                target_gap: float | None, out: Path | None, as_json: bool) -> None:
+    """``geodesics certify`` in dimension 3 and up: a verified piecewise-linear potential
+    (:func:`solvers.certify_nd.certify_nd`)."""
+    import dataclasses
+
+    from solvers.certify_nd import NDSpec, certify_nd
+    from solvers.status import CertifyStatus
+
+    s = parse_point(start, m.dim, "--start")
+    g = parse_point(goal, m.dim, "--goal")
+    try:
+        m.domain.check(s, "--start")
+        m.domain.check(g, "--goal")
+        spec = NDSpec.preset(mesh)
+        changes: dict[str, Any] = {}
+        if h is not None:
+            changes["h_path"] = h
+            changes["h_far"] = max(spec.h_far, h)
+        if target_gap is not None:
+            if not (math.isfinite(target_gap) and 0 < target_gap < 1):
+                raise InputError(f"--target-gap must be in (0, 1), got {target_gap!r}")
+            changes["target_gap"] = target_gap
+        if changes:
+            spec = dataclasses.replace(spec, **changes)
+        if out is not None:
+            check_output_path(out, "--out")
+        res = certify_nd(m, s, g, spec)
+        doc = res.to_dict()
+        if out is not None:
+            atomic_write_text(out, json_text(doc), "certify result")
+    except InputError as err:
+        fail(str(err))
+        return
+    if as_json:
+        typer.echo(json_text(doc))
+    else:
+        typer.echo(f"metric {m.name}: start {tuple(s.tolist())} goal {tuple(g.tolist())}")
+        typer.echo(f"status = {res.status.label}   (stopped by {res.stopped_by})")
+        typer.echo(f"lower  = {res.lower:.10g}   (verified P1 potential on {res.cells} cells, "
+                   f"{res.relevant_cells} in the region; proven ratio {res.verified_ratio:.5f})")
+        typer.echo(f"upper  = {res.upper:.10g}   (path length, proven by interval arithmetic)")
+        typer.echo(f"gap    = {res.gap:.3e}   (upper - lower) / upper")
+        typer.echo(f"time   : {res.times['total']:.2f} s (LP {res.times['lp']:.2f}, verify "
+                   f"{res.times['verify']:.2f})")
     if res.status is CertifyStatus.LP_FAILED:
         fail(f"certify {res.status.label}: {res.message}", code=1)
 
