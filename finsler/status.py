@@ -43,6 +43,9 @@ __all__ = [
     "Outcome",
     "PropertyOutcome",
     "Result",
+    "RunAction",
+    "RunStatus",
+    "RunStop",
     "SolverError",
     "Status",
     "families",
@@ -273,10 +276,71 @@ class PropertyOutcome(str, Outcome):
         return self in (PropertyOutcome.PASSED, PropertyOutcome.MAPPED)
 
 
+class RunStop(str, Outcome):
+    """What ended a learning run (``result.json``'s ``stopped_by``, :mod:`learn.loop`); a
+    ``str`` enum, so ``stopped_by == "timesteps"`` keeps working. ``converged``: the run is
+    finished (``result.json`` written)."""
+
+    TIMESTEPS = "timesteps"
+    """The budget of evaluations of C was spent."""
+    MINUTES = "minutes"
+    """The wall-clock limit ``minutes`` was reached (the run is finished)."""
+    INTERRUPTED = "interrupted"
+    """SIGINT or SIGTERM: the checkpoint is saved, the run is resumable, not finished."""
+
+    __hash__ = str.__hash__  # a dict keyed by the old string finds the member
+
+    @property
+    def converged(self) -> bool:
+        return self is not RunStop.INTERRUPTED
+
+
+class RunStatus(str, Outcome):
+    """The state of a run directory (:func:`learn.runs.run_status`); a ``str`` enum whose
+    values are the words it always returned. ``converged``: the run is finished."""
+
+    FINISHED = "finished"
+    """``result.json`` is there."""
+    UNFINISHED = "unfinished"
+    """A resumable checkpoint, no result yet."""
+    ABSENT = "absent"
+    """Nothing to resume: no run there, or one that stopped before its first checkpoint."""
+
+    __hash__ = str.__hash__
+
+    @property
+    def converged(self) -> bool:
+        return self is RunStatus.FINISHED
+
+
+class RunAction(str, Outcome):
+    """What a sweep did with one run (:func:`learn.runs.run_one`, the ``action`` of
+    ``sweep.json``); a ``str`` enum of the words it always wrote. ``converged``: this
+    sweep trained the run to its end (a ``skipped`` run was finished before, as a
+    ``skipped`` property was not judged: nothing was computed here)."""
+
+    STARTED = "started"
+    """Trained from the start to the end."""
+    RESUMED = "resumed"
+    """Resumed from its checkpoint and trained to the end."""
+    SKIPPED = "skipped"
+    """Finished already: nothing to do."""
+    FAILED = "failed"
+    """Training raised (or its process died); the error is recorded beside it."""
+    PENDING = "pending"
+    """Not reached (the sweep was interrupted first)."""
+
+    __hash__ = str.__hash__
+
+    @property
+    def converged(self) -> bool:
+        return self in (RunAction.STARTED, RunAction.RESUMED)
+
+
 def families() -> tuple[type[Outcome], ...]:
     """Every status enum of the toolkit."""
     return (Status, DistanceStatus, ExpStatus, LogStatus, CertifyStatus, NewtonStatus,
-            CertifyStop, PropertyOutcome)
+            CertifyStop, PropertyOutcome, RunStop, RunStatus, RunAction)
 
 
 # ----------------------------------------------------------------------------------------

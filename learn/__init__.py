@@ -15,6 +15,7 @@ terms of the midpoint learner. A loaded policy of any method is a :class:`PathPo
 whole method in one file, to copy.
 """
 
+from finsler.status import RunAction, RunStatus, RunStop
 from learn.base import TrainResult
 from learn.config import (
     METHODS,
@@ -65,8 +66,11 @@ __all__ = [
     "MidpointPolicy",
     "PathPolicy",
     "Policy",
+    "RunAction",
     "RunConfig",
     "RunLoop",
+    "RunStatus",
+    "RunStop",
     "SearchResult",
     "SearchSpec",
     "TrainConfig",

@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from finsler.errors import InputError
+from finsler.status import Result, RunStop
 from learn.run_config import RunConfig, check_choice, check_hidden
 from learn.storage import write_result
 
@@ -65,8 +66,11 @@ class LoadedPolicy:
 
 
 @dataclass
-class TrainResult:
-    """Summary of a finished (or time-limited) run of any method."""
+class TrainResult(Result):
+    """Summary of a finished (or time-limited) run of any method: a
+    :class:`finsler.status.Result` whose ``status`` is ``stopped_by`` (a
+    :class:`finsler.status.RunStop`: ``timesteps`` or ``minutes``, both finished runs)
+    and ``wall_time`` its ``wall_seconds``."""
 
     run_dir: Path
     timesteps: int
@@ -76,20 +80,43 @@ class TrainResult:
     final: dict[str, float]
     best: dict[str, float]
     history: list[dict[str, Any]] = field(repr=False, default_factory=list)
+    stopped_by: RunStop = RunStop.TIMESTEPS
+    """What ended the run (``result.json``'s ``stopped_by``)."""
+
+    @property
+    def status(self) -> RunStop:  # type: ignore[override]
+        return self.stopped_by
+
+    @property
+    def wall_time(self) -> float:  # type: ignore[override]
+        return self.wall_seconds
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready: the fields (``run_dir`` as text, without the metrics ``history``,
+        which is ``metrics.csv``), ``status``, ``wall_time`` and ``converged``."""
+        out = super().to_dict()
+        out["run_dir"] = str(self.run_dir)
+        out.pop("history", None)
+        return out
 
 
 def finish_run(run_dir: Path, history: list[dict[str, Any]], best: dict[str, Any],
-               stopped_by: str, timesteps: int, iterations: int,
+               stopped_by: RunStop | str, timesteps: int, iterations: int,
                extra_final: tuple[str, ...] = (),
-               extra_result: dict[str, Any] | None = None) -> TrainResult:
+               extra_result: dict[str, Any] | None = None,
+               signal_name: str | None = None) -> TrainResult:
     """Write ``result.json`` (the run is finished) and return its :class:`TrainResult`
     (``final``: the last metrics row's success, lengths, throughput and ``extra_final``).
-    ``stopped_by`` a signal name: the run is NOT finished; raise
-    :class:`TrainingInterrupted` instead (the caller saved its checkpoint)."""
-    if stopped_by not in ("timesteps", "minutes"):
-        raise TrainingInterrupted(run_dir, stopped_by, timesteps, iterations)
+    ``stopped_by`` :attr:`RunStop.INTERRUPTED` (or, as before issue 49, a signal's name):
+    the run is NOT finished; raise :class:`TrainingInterrupted` naming ``signal_name``
+    instead (the caller saved its checkpoint)."""
+    if stopped_by not in (RunStop.TIMESTEPS, RunStop.MINUTES):
+        name = signal_name or (stopped_by if stopped_by != RunStop.INTERRUPTED
+                               else "interrupted")
+        raise TrainingInterrupted(run_dir, str(name), timesteps, iterations)
+    stop = RunStop(stopped_by)
     final = history[-1]
-    write_result(run_dir, final, best, stopped_by, extra_result)
+    write_result(run_dir, final, best, stop, extra_result)
     return TrainResult(
         run_dir=Path(run_dir),
         timesteps=timesteps,
@@ -100,6 +127,7 @@ def finish_run(run_dir: Path, history: list[dict[str, Any]], best: dict[str, Any
                                      *extra_final)},
         best=dict(best),
         history=list(history),
+        stopped_by=stop,
     )
 
 

@@ -53,6 +53,7 @@ import torch
 
 import finsler
 from finsler.errors import InputError
+from finsler.status import RunStop
 from learn.base import StopOnSignal, TrainResult, finish_run
 from learn.networks import resolve_device
 from learn.registry import BUILTIN_MODULES
@@ -372,15 +373,15 @@ class RunLoop(ABC):
         if self.iteration == 0 and not self.history:
             self._log_and_checkpoint()
         last_logged = self.iteration
-        stopped_by = "timesteps"
+        stopped_by = RunStop.TIMESTEPS
         with StopOnSignal() as stop:
             try:
                 while self.has_budget():
                     if stop.requested:
-                        stopped_by = stop.requested
+                        stopped_by = RunStop.INTERRUPTED
                         break
                     if cfg.minutes is not None and self._wall() >= 60.0 * cfg.minutes:
-                        stopped_by = "minutes"
+                        stopped_by = RunStop.MINUTES
                         break
                     before = self.timesteps
                     self.iterate()
@@ -395,7 +396,8 @@ class RunLoop(ABC):
                 bar.close()
         return finish_run(self.run_dir, self.history, self.best, stopped_by,
                           self.timesteps, self.iteration, extra_final=self.final_columns,
-                          extra_result=self.result_extra() or None)
+                          extra_result=self.result_extra() or None,
+                          signal_name=stop.requested)
 
 
 def load_run(run: str | Path, checkpoint: str, config_class: type[RunConfig],

@@ -32,6 +32,7 @@ from pathlib import Path
 from typing import Any
 
 from finsler.errors import InputError
+from finsler.status import RunAction, RunStatus
 from learn.loop import read_config_section
 from learn.policy import load_policy, shipped_policies
 from learn.registry import find_variant, get_method, method_of_run, variants
@@ -163,16 +164,17 @@ def warm_start_paths(source: str | Path, metric: Any, pairs: Any,
     return paths, pol
 
 
-def run_status(out: str | Path) -> str:
+def run_status(out: str | Path) -> RunStatus:
     """``finished`` (result.json present), ``unfinished`` (a resumable checkpoint, no
     result) or ``absent`` (nothing to resume: no run there, or one that stopped before
-    its first checkpoint)."""
+    its first checkpoint): a :class:`finsler.status.RunStatus` (a ``str`` enum of these
+    words)."""
     p = Path(out)
     if (p / RESULT_FILE).is_file():
-        return "finished"
+        return RunStatus.FINISHED
     if (p / CONFIG_FILE).is_file() and (p / LATEST_FILE).is_file():
-        return "unfinished"
-    return "absent"
+        return RunStatus.UNFINISHED
+    return RunStatus.ABSENT
 
 
 def _alive(pid: int) -> bool:
@@ -238,15 +240,17 @@ def run_one(env: str, variant: str, seed: int, out: str | Path, timesteps: int |
             **overrides: Any) -> dict[str, Any]:
     """Make sure the run ``(env, variant, seed)`` in ``out`` is finished: skip it if it is,
     resume it if it started, start it otherwise. Returns ``result.json``'s content plus
-    ``"action"``: ``skipped``, ``resumed`` or ``started``."""
+    ``"action"``: a :class:`finsler.status.RunAction`, ``skipped``, ``resumed`` or
+    ``started``."""
     cfg = make_config(env, variant, seed=seed, timesteps=timesteps, minutes=minutes,
                       **overrides)
     with run_lock(out):
         status = run_status(out)
-        if status == "finished":
-            return {**read_json(Path(out) / RESULT_FILE), "action": "skipped"}
-        if status == "absent" and Path(out).is_dir():
+        if status is RunStatus.FINISHED:
+            return {**read_json(Path(out) / RESULT_FILE), "action": RunAction.SKIPPED}
+        if status is RunStatus.ABSENT and Path(out).is_dir():
             _clear_unstarted(Path(out))
-        train_run(cfg, out, resume=status == "unfinished", progress=progress)
+        resume = status is RunStatus.UNFINISHED
+        train_run(cfg, out, resume=resume, progress=progress)
         return {**read_json(Path(out) / RESULT_FILE),
-                "action": "resumed" if status == "unfinished" else "started"}
+                "action": RunAction.RESUMED if resume else RunAction.STARTED}

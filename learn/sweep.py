@@ -42,6 +42,7 @@ from typing import Any
 
 from finsler.cluster import connect_ray
 from finsler.errors import InputError
+from finsler.status import RunAction, RunStatus
 from learn.registry import find_variant, get_method
 from learn.runs import VARIANTS, load_run_config, make_config, run_one, run_status
 from learn.storage import (
@@ -208,7 +209,7 @@ def check_existing(plan: SweepPlan, out: str | os.PathLike[str]) -> None:
     ``minutes``, ``device``, ``eval_pairs``)."""
     for spec in plan.runs():
         path = spec.path(out)
-        if run_status(path) == "absent":
+        if run_status(path) is RunStatus.ABSENT:
             continue
         cfg = load_run_config(path)
         free = get_method(cfg.method).trainer.free_on_resume
@@ -229,12 +230,12 @@ def check_existing(plan: SweepPlan, out: str | os.PathLike[str]) -> None:
 # ----------------------------------------------------------------------------------------
 @dataclass
 class RunOutcome:
-    """What happened to one run: ``action`` is ``skipped``, ``resumed``, ``started``,
-    ``failed`` or ``pending`` (not reached, e.g. interrupted); ``result`` is the run's
-    ``result.json`` (None unless finished)."""
+    """What happened to one run: ``action`` is a :class:`finsler.status.RunAction`,
+    ``skipped``, ``resumed``, ``started``, ``failed`` or ``pending`` (not reached, e.g.
+    interrupted); ``result`` is the run's ``result.json`` (None unless finished)."""
 
     spec: RunSpec
-    action: str = "pending"
+    action: RunAction = RunAction.PENDING
     result: dict[str, Any] | None = None
     error: str | None = None
     seconds: float = 0.0
@@ -270,7 +271,7 @@ class SweepResult:
 
     @property
     def failed(self) -> list[RunOutcome]:
-        return [o for o in self.outcomes if o.action == "failed"]
+        return [o for o in self.outcomes if o.action is RunAction.FAILED]
 
     def rows(self) -> list[dict[str, Any]]:
         return [o.row() for o in self.outcomes]
@@ -310,7 +311,7 @@ def _run_local(spec: RunSpec, out: str, timesteps: int | None, minutes: float | 
         return {"action": res.pop("action"), "result": res,
                 "seconds": time.perf_counter() - t0}
     except Exception as err:  # reported per run; the other runs go on
-        return {"action": "failed", "error": _describe(err),
+        return {"action": RunAction.FAILED, "error": _describe(err),
                 "traceback": traceback.format_exc(), "seconds": time.perf_counter() - t0}
 
 
@@ -320,7 +321,7 @@ def _died(job: tuple, exitcode: int) -> tuple[int, dict[str, Any]]:
     k, _spec, out = job[:3]
     how = (f"killed by signal {-exitcode}" + (" (SIGKILL: the kernel's OOM killer, or kill "
            "-9)" if exitcode == -9 else "") if exitcode < 0 else f"exit code {exitcode}")
-    return k, {"action": "failed", "seconds": 0.0,
+    return k, {"action": RunAction.FAILED, "seconds": 0.0,
                "error": f"the training process died ({how}); its last checkpoint in {out} "
                         "is kept: run the sweep again to resume it"}
 
@@ -391,7 +392,7 @@ def _prepare(spec: RunSpec, out: Path) -> None:
     """A run stopped before its first checkpoint cannot be resumed: clear it so it starts
     afresh (it holds only its config and at most a metrics header)."""
     path = spec.path(out)
-    if run_status(path) == "unfinished" and not (path / LATEST_FILE).is_file():
+    if run_status(path) is RunStatus.UNFINISHED and not (path / LATEST_FILE).is_file():
         for p in path.iterdir():
             if p.is_file():
                 p.unlink()
@@ -424,9 +425,9 @@ def run_sweep(plan: SweepPlan, out: str | os.PathLike[str], workers: int | None 
     outcomes = [RunOutcome(s) for s in plan.runs()]
     todo = []
     for o in outcomes:
-        if run_status(o.spec.path(root)) == "finished":
+        if run_status(o.spec.path(root)) is RunStatus.FINISHED:
             res = run_one(o.spec.env, o.spec.variant, o.spec.seed, o.spec.path(root))
-            o.action, o.result = res.pop("action"), res
+            o.action, o.result = RunAction(res.pop("action")), res
         else:
             todo.append(o)
     backend = {"backend": "ray" if ray_address else "local", "ray": ray_address,
@@ -440,7 +441,7 @@ def run_sweep(plan: SweepPlan, out: str | os.PathLike[str], workers: int | None 
                desc="sweep", disable=not progress, dynamic_ncols=True)
 
     def done(o: RunOutcome, res: dict[str, Any]) -> None:
-        o.action, o.seconds = res["action"], float(res.get("seconds", 0.0))
+        o.action, o.seconds = RunAction(res["action"]), float(res.get("seconds", 0.0))
         o.error = res.get("error")
         o.result = res.get("result")
         _write_sweep_json(root, plan, backend, outcomes)
@@ -508,7 +509,8 @@ def _sweep_ray(plan: SweepPlan, root: Path, todo: list[RunOutcome], workers: int
             try:
                 res = ray.get(ready[0])
             except Exception as err:  # the task or its worker died
-                res = {"action": "failed", "error": f"Ray task failed: {_describe(err)}"}
+                res = {"action": RunAction.FAILED,
+                       "error": f"Ray task failed: {_describe(err)}"}
             if res.get("files"):
                 write_run_files(o.spec.path(root), res.pop("files"), sent)
             done(o, res)

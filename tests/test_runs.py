@@ -10,6 +10,7 @@ import pytest
 
 import finsler
 import learn
+from finsler.status import RunAction, RunStatus, RunStop
 from learn import runs
 from learn.storage import read_json, read_metrics
 
@@ -43,18 +44,18 @@ def test_run_one_starts_skips_and_resumes(tmp_path) -> None:
     out = tmp_path / "euclidean" / "midpoint-free" / "seed-0"
     assert runs.run_status(out) == "absent"
     r = runs.run_one("euclidean", "midpoint-free", 0, out, timesteps=6000, **_TINY)
-    assert r["action"] == "started" and r["stopped_by"] == "timesteps"
-    assert runs.run_status(out) == "finished"
+    assert r["action"] is RunAction.STARTED and r["stopped_by"] == "timesteps"
+    assert runs.run_status(out) is RunStatus.FINISHED and RunStatus.FINISHED == "finished"
     files = {p.name: p.stat().st_mtime_ns for p in out.iterdir()}
     r2 = runs.run_one("euclidean", "midpoint-free", 0, out, timesteps=6000, **_TINY)
-    assert r2["action"] == "skipped" and r2["timesteps"] == r["timesteps"]
+    assert r2["action"] is RunAction.SKIPPED and r2["timesteps"] == r["timesteps"]
     assert {p.name: p.stat().st_mtime_ns for p in out.iterdir()} == files
     # an interrupted run (no result.json) is resumed and reaches the same end
     ref = read_metrics(out / "metrics.csv")
     (out / "result.json").unlink()
-    assert runs.run_status(out) == "unfinished"
+    assert runs.run_status(out) is RunStatus.UNFINISHED
     r3 = runs.run_one("euclidean", "midpoint-free", 0, out, timesteps=6000, **_TINY)
-    assert r3["action"] == "resumed" and r3["timesteps"] == r["timesteps"]
+    assert r3["action"] is RunAction.RESUMED and r3["timesteps"] == r["timesteps"]
     assert [row["timesteps"] for row in read_metrics(out / "metrics.csv")] == [
         row["timesteps"] for row in ref]
 
@@ -120,6 +121,11 @@ def test_a_signal_saves_a_resumable_checkpoint_and_resume_is_exact(
 
     cfg = runs.make_config("euclidean", "midpoint", timesteps=30_000, **_TINY)
     full = learn.train_run(cfg, tmp_path / "full", progress=False)
+    # the summary is a Result of the status family: the budget ended a finished run
+    assert full.status is RunStop.TIMESTEPS and full.converged and full.strict() is full
+    doc = full.to_dict()
+    assert doc["status"] == "timesteps" and doc["run_dir"] == str(tmp_path / "full")
+    assert doc["wall_time"] == full.wall_seconds and "history" not in doc
     before = signal.getsignal(signal.SIGTERM)  # SIG_DFL, or Ray's if a Ray test ran first
     _signal_at(monkeypatch, 5, getattr(signal, sig_name))
     with pytest.raises(learn.base.TrainingInterrupted, match=sig_name) as err:

@@ -60,9 +60,11 @@ def test_shared_names_mean_the_same() -> None:
 def test_public_api_exports_the_family() -> None:
     for family in families():
         assert getattr(finsler.status, family.__name__) is family  # the ground layer
-        if family.__name__ not in ("NewtonStatus", "CertifyStop", "PropertyOutcome"):
+        if family.__name__ not in ("NewtonStatus", "CertifyStop", "PropertyOutcome",
+                                   "RunStop", "RunStatus", "RunAction"):
             # NewtonStatus is internal to the batched solver; CertifyStop comes with a
-            # CertifyResult, PropertyOutcome with the property suite
+            # CertifyResult, PropertyOutcome with the property suite, the Run* families
+            # with learn's runs (exported by learn)
             assert getattr(solvers, family.__name__) is family
     assert solvers.Status.from_ipopt("Solve_Succeeded") is solvers.Status.SUCCESS
     assert solvers.Status.SUCCESS.label == "success"
