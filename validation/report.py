@@ -93,7 +93,7 @@ def load_report_policy(
         # hard task trained this way is weak, and the report says how it was trained)
         cfg = learn.default_config(env, timesteps=3_000_000, eval_every=5,
                                    metric_params=metric_params)
-        learn.train(cfg, run_dir, progress=progress)
+        learn.train_run(cfg, run_dir, progress=progress)
         pol = learn.load_policy(run_dir, checkpoint=checkpoint)
         return pol, run_dir, (
             f"small policy trained by --quick ({cfg.timesteps:.0e} evaluations of C) in "
