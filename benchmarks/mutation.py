@@ -3,6 +3,7 @@ a results file with the score and every surviving mutant (issue 48, item 6).
 
     python benchmarks/mutation.py                       # the DEFAULT groups below
     python benchmarks/mutation.py block_tridiagonal newton --max-children 2
+    python benchmarks/mutation.py --report-only newton  # a run under way, as it stands
 
 For each group: the COMMITTED tree (``git archive HEAD``, so the score is for the commit
 the results file names) is unpacked into ``build/mutation/GROUP/``, its ``[tool.mutmut]``
@@ -114,6 +115,11 @@ def run(group: str, work: Path, children: int, niceness: int = 10) -> dict:
         tail = (proc.stdout + proc.stderr)[-3000:]
         return {"group": group, "error": f"mutmut run exited {proc.returncode}:\n{tail}",
                 "wall": wall, "cpu": cpu}
+    return collect(group, where, wall, cpu)
+
+
+def collect(group: str, where: Path, wall: float | None, cpu: float | None) -> dict:
+    """The statuses, counts and survivors' diffs of a group's (possibly running) run."""
     res = subprocess.run([_mutmut(), "results", "--all", "true"], cwd=where,
                          capture_output=True, text=True, check=True).stdout
     status: dict[str, str] = {}
@@ -147,6 +153,9 @@ def main(argv: list[str] | None = None) -> None:
                     help="mutmut's worker processes (default 1: the machine is shared)")
     ap.add_argument("--nice", type=int, default=10,
                     help="niceness of mutmut (default 10: other work goes first)")
+    ap.add_argument("--report-only", action="store_true",
+                    help="write the results of the runs under --work as they stand (a run "
+                         "still going or stopped: its unchecked mutants are counted apart)")
     ap.add_argument("--work", type=Path, default=ROOT / "build" / "mutation",
                     help="where the trees are unpacked and mutated")
     args = ap.parse_args(argv)
@@ -158,23 +167,31 @@ def main(argv: list[str] | None = None) -> None:
                       "property suite (mutmut)")
     rows, sections = [], []
     for g in args.groups:
-        print(f"mutating {g} ...", flush=True)
-        r = run(g, args.work, args.max_children, args.nice)
+        print(f"{'reading' if args.report_only else 'mutating'} {g} ...", flush=True)
+        if args.report_only:
+            if not (args.work / g / "mutants").exists():
+                raise SystemExit(f"--report-only: no run of {g} under {args.work}")
+            r = collect(g, args.work / g, None, None)
+        else:
+            r = run(g, args.work, args.max_children, args.nice)
         if "error" in r:
-            rows.append([f"`{g}`", "-", "-", "-", "-", "error", f"{r['cpu']:.0f}",
+            rows.append([f"`{g}`", "-", "-", "-", "-", "-", "error", f"{r['cpu']:.0f}",
                          f"{r['wall']:.0f}"])
             sections.append(f"## {g}\n\n```\n{r['error']}\n```\n")
             print(r["error"], file=sys.stderr)
             continue
         c = r["count"]
         total, skipped = len(r["status"]), c.get("skipped", 0)
+        unchecked = c.get("not checked", 0)
         caught = c.get("killed", 0) + c.get("timeout", 0)
-        score = 100.0 * caught / max(total - skipped, 1)
-        rows.append([f"`{g}`", total, c.get("killed", 0), c.get("timeout", 0),
-                     len(r["survivors"]), f"{score:.1f} %", f"{r['cpu']:.0f}",
-                     f"{r['wall']:.0f}"])
+        checked = total - skipped - unchecked
+        score = 100.0 * caught / max(checked, 1)
+        rows.append([f"`{g}`", total, unchecked, c.get("killed", 0), c.get("timeout", 0),
+                     len(r["survivors"]), f"{score:.1f} %",
+                     "-" if r["cpu"] is None else f"{r['cpu']:.0f}",
+                     "-" if r["wall"] is None else f"{r['wall']:.0f}"])
         other = {k: v for k, v in c.items() if k not in ("killed", "timeout", "survived",
-                                                          "no tests")}
+                                                          "no tests", "not checked")}
         head, commits = (args.work / f"{g}.commit").read_text().splitlines()
         text = [f"## {g}", "", f"Mutated and tested: the committed tree of `{head[:10]}` "
                 f"(`git archive`; uncommitted changes play no part); last commits of the "
@@ -188,13 +205,15 @@ def main(argv: list[str] | None = None) -> None:
                          r["diffs"][n].strip(), "```", ""]
         sections.append("\n".join(text))
         print(f"{g}: {caught}/{total - skipped} = {score:.1f} %", flush=True)
-    out.add("Score = (killed + timeout) / (mutants - skipped), against each group's fast "
-            "focused tests only (a lower bound of the whole suite's score). CPU = user + "
-            "system seconds of mutmut and its workers (niced; the machine is shared by "
-            "other work, so wall time varies). Verdicts on the survivors: "
-            "`mutation_report.md`.",
-            markdown_table(["group", "mutants", "killed", "timeout", "survived",
-                            "score", "CPU s", "wall s"], rows),
+    out.add("Score = (killed + timeout) / (mutants checked - skipped), against each "
+            "group's fast focused tests only (a lower bound of the whole suite's score); "
+            "`not checked`: mutants of a run still going or stopped (with `--report-only`). "
+            "CPU = user + system seconds of mutmut and its workers (the machine is shared "
+            "by other work, so wall time varies; `-`: not measured by a report-only run). "
+            "Survived includes `no tests` (no selected test calls the function). Verdicts "
+            "on the survivors: `mutation_report.md`.",
+            markdown_table(["group", "mutants", "not checked", "killed", "timeout",
+                            "survived", "score", "CPU s", "wall s"], rows),
             *sections)
     out.write()
 
