@@ -19,6 +19,7 @@ Needs ``pip install -e ".[mutation]"`` (mutmut >= 3.8).
 from __future__ import annotations
 
 import argparse
+import os
 import re
 import resource
 import shutil
@@ -105,9 +106,14 @@ def run(group: str, work: Path, children: int, niceness: int = 10) -> dict:
     where = prepare(group, work)
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
+    # one thread per library: mutmut forks a worker per mutant from a process that has
+    # imported numpy/torch, and a fork taken while a thread pool holds a lock can hang
+    # without using CPU (mutmut's time limit is on CPU time: it would never fire)
+    env = {**os.environ, **{v: "1" for v in ("OMP_NUM_THREADS", "MKL_NUM_THREADS",
+                                             "OPENBLAS_NUM_THREADS")}}
     proc = subprocess.run(["nice", "-n", str(niceness), _mutmut(), "run", "--max-children",
                            str(children)], cwd=where, capture_output=True, text=True,
-                          check=False)
+                          check=False, env=env)
     wall = time.perf_counter() - t0
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
