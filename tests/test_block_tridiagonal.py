@@ -221,3 +221,29 @@ def test_torch_matches_numpy(method: str, d: int) -> None:
     xln, okln = solve(a, o, r, method, local=True)
     assert okl.all() and okln.all()
     np.testing.assert_allclose(xl, xln, rtol=0, atol=1e-10)
+
+
+@pytest.mark.parametrize("d", [2, 3])
+@pytest.mark.parametrize("method", ["thomas", "cyclic"])
+def test_each_order_shifts_its_own_schur_complement(d: int, method: str) -> None:
+    """Three blocks, the middle one indefinite, coupled to both neighbours: block Thomas
+    meets the pivot S = A1 - B0^T A0^-1 B0, cyclic reduction (blocks 0 and 2 first)
+    S' = S - B1 A2^-1 B1^T; each shifts its own pivot by its Gershgorin bound (the last
+    pivot stays definite: A2 is large), so the two orders give different, each exactly
+    predicted, solutions of (H + tau I on block 1) x = r."""
+    rng = np.random.default_rng(50 + d)
+    a = np.stack([np.eye(d) * 4.0, np.diag(np.r_[-2.5, np.ones(d - 1)]), np.eye(d) * 60.0])
+    o = rng.normal(size=(3, d, d))
+    o[2] = 0.0
+    r = rng.normal(size=(3, d))
+    s = a[1] - o[0].T @ np.linalg.solve(a[0], o[0])
+    if method == "cyclic":
+        s = s - o[1] @ np.linalg.solve(a[2], o[1].T)
+    assert np.linalg.eigvalsh(s).min() < 0
+    tau = gershgorin_shift(0.5 * (s + s.T), 1.0)
+    h = dense(a, o)
+    h[d:2 * d, d:2 * d] += tau * np.eye(d)
+    ref = np.linalg.solve(h, r.reshape(-1))
+    x, ok = solve(a[None], o[None], r[None], method, local=True)
+    assert ok.all()
+    np.testing.assert_allclose(x[0].reshape(-1), ref, rtol=0, atol=1e-10 * np.abs(ref).max())
