@@ -579,8 +579,9 @@ def certify_conformal(metric: Metric | str, start: Any, goal: Any,
         box, cell = _expand(*rng, grid.nr)
         # a box's priority: how far it holds a cell below the best value seen there,
         # weighted by what that cell is worth to the bound
-        gain = weight[cell] * np.maximum((1.0 - spec.refine_tol) * seen[cell] - f_lo[box],
-                                         0.0)
+        with np.errstate(invalid="ignore"):  # 0 x inf: a cell without a centre seen
+            gain = weight[cell] * np.maximum((1.0 - spec.refine_tol) * seen[cell]
+                                             - f_lo[box], 0.0)
         gain[~np.isfinite(gain)] = np.finfo(float).max  # a cell with no centre seen yet
         prio = np.zeros(lo.shape[0])
         np.maximum.at(prio, box, gain)
