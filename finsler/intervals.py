@@ -72,8 +72,11 @@ class Interval:
     def __init__(self, lo: Any, hi: Any = None) -> None:
         lo = np.asarray(lo, dtype=np.float64)
         hi = lo if hi is None else np.asarray(hi, dtype=np.float64)
-        self.lo = np.where(np.isnan(lo), -np.inf, lo)
-        self.hi = np.where(np.isnan(hi), np.inf, hi)
+        # a sum is NaN if an element is (or if inf - inf occurs): one pass without a
+        # temporary, where the two masks and copies of np.where cost five (every operation
+        # of an enclosure builds an Interval: a third of the time of certify's bounds)
+        self.lo = np.where(np.isnan(lo), -np.inf, lo) if np.isnan(np.sum(lo)) else lo
+        self.hi = np.where(np.isnan(hi), np.inf, hi) if np.isnan(np.sum(hi)) else hi
 
     @staticmethod
     def _rounded(lo: np.ndarray, hi: np.ndarray, ulps: float = _ULP_EXACT) -> Interval:
