@@ -158,3 +158,39 @@ def test_newton_energy_takes_nested_lists_and_reports_the_residual_at_scale_one(
                         NewtonOptions(max_iter=1, line_steps=1, armijo=0.9))
     assert all(one.status != NewtonStatus.CONVERGED)
     np.testing.assert_allclose(one.residual, euclid_residual(one.points, 1.0), rtol=1e-8)
+
+
+def test_newton_energy_passes_scale_on_and_checks_the_number_of_points() -> None:
+    """The residual at scale 2 is the closed form's at 2; three points (one interior
+    point) are the fewest accepted, two are refused."""
+    from finsler.errors import InputError
+    from solvers.newton import NewtonOptions, newton_energy
+
+    m = finsler.get_metric("euclidean")
+    paths = _bent_paths() + 0.01 * np.sin(np.arange(6))[None, :, None]
+    one = newton_energy(m, paths, NewtonOptions(max_iter=1, line_steps=1, armijo=0.9),
+                        scale=2.0)
+    np.testing.assert_allclose(one.residual, euclid_residual(one.points, 2.0), rtol=1e-8)
+    three = newton_energy(m, np.array([[[0.0, 0.0], [0.3, 0.2], [0.4, 0.0]]]))
+    assert three.status[0] == NewtonStatus.CONVERGED
+    np.testing.assert_allclose(three.points[0, 1], [0.2, 0.0], atol=1e-9)
+    with pytest.raises(InputError, match="n >= 2"):
+        newton_energy(m, paths[:, [0, -1]])
+
+
+def test_newton_energy_shifts_only_the_blocks_that_need_it_by_default() -> None:
+    """``local=True`` is the default: on Matsumoto paths whose Hessian is not definite
+    along the way, the default run is the local=True run to the last bit, and the
+    whole-Hessian shift (local=False) takes another course on the third path."""
+    from solvers.newton import newton_energy
+
+    m = finsler.get_metric("matsumoto")
+    line = np.linspace([-0.2, -0.1], [0.2, 0.15], 9)
+    rng = np.random.default_rng(0)
+    p = line[None] + np.r_[0, [1] * 7, 0][:, None] * rng.normal(scale=0.08, size=(3, 9, 2))
+    default = newton_energy(m, p, scale=2.0)
+    local = newton_energy(m, p, scale=2.0, local=True)
+    whole = newton_energy(m, p, scale=2.0, local=False)
+    np.testing.assert_array_equal(default.points, local.points)
+    np.testing.assert_array_equal(default.iterations, local.iterations)
+    assert np.abs(whole.points[2] - local.points[2]).max() > 1e-3
