@@ -194,3 +194,59 @@ def test_newton_energy_shifts_only_the_blocks_that_need_it_by_default() -> None:
     np.testing.assert_array_equal(default.points, local.points)
     np.testing.assert_array_equal(default.iterations, local.iterations)
     assert np.abs(whole.points[2] - local.points[2]).max() > 1e-3
+
+
+def _rows(pair, energy, status):
+    from solvers.batched import Rows
+
+    n = len(pair)
+    return Rows(np.array(pair), [f"r{i}" for i in range(n)], np.arange(n * 6.0).reshape(
+        n, 3, 2), np.array(energy, float), np.array(status, dtype=np.int64),
+        np.arange(n, dtype=np.int64), np.full(n, 0.5))
+
+
+def test_rows_take_keeps_the_results_of_solved_rows_only() -> None:
+    from solvers.batched import Rows
+
+    rows = _rows([0, 0, 1], [3.0, 1.0, 2.0], [C, C, R])
+    t = rows.take([2, 0])
+    assert t.names == ["r2", "r0"] and list(t.pair) == [1, 0]
+    np.testing.assert_array_equal(t.points, rows.points[[2, 0]])
+    np.testing.assert_array_equal(t.energy, [2.0, 3.0])
+    np.testing.assert_array_equal(t.status, [R, C])
+    np.testing.assert_array_equal(t.iterations, [2, 0])
+    np.testing.assert_array_equal(t.residual, [0.5, 0.5])
+    unsolved = Rows(rows.pair, rows.names, rows.points).take([1])
+    assert unsolved.names == ["r1"] and len(unsolved.energy) == 0
+
+
+def test_best_of_picks_per_pair_among_the_marked_rows() -> None:
+    """Pair 0: rows 0 (3.0, converged), 1 (1.0, converged), 2 (0.5, not converged); pair 1:
+    row 3 (2.0, converged). Among all: 1 and 3; among rows 0, 2, 3: 0 (a converged row
+    goes before a lower unconverged one) and 3; among rows 2: 2 and none; among none:
+    none; among rows 0 and 1 only: 1 and none."""
+    from solvers.batched import _best_of
+
+    rows = _rows([0, 0, 0, 1], [3.0, 1.0, 0.5, 2.0], [C, C, R, C])
+    mark = np.array
+    assert list(_best_of(rows, 2, mark([True] * 4))) == [1, 3]
+    assert list(_best_of(rows, 2, mark([True, False, True, True]))) == [0, 3]
+    assert list(_best_of(rows, 2, mark([False, False, True, False]))) == [2, -1]
+    assert list(_best_of(rows, 3, mark([False] * 4))) == [-1, -1, -1]
+    assert list(_best_of(rows, 2, mark([True, True, False, False]))) == [1, -1]
+
+
+def test_drop_losers_with_one_active_row() -> None:
+    pair = np.array([0, 0])
+    st, dropped = _state([C, R], [1.0, 2.0], [1])
+    _Runner._drop_losers(st, pair, 1.3)
+    np.testing.assert_array_equal(dropped[0], [1])
+
+
+def test_the_opt_in_newton_covers_smooth_metrics_and_nonsmooth_ones_with_the_hook() -> None:
+    from solvers.batched import covers, covers_opt_in
+
+    smooth = finsler.get_metric("euclidean")
+    assert covers(smooth) and covers_opt_in(smooth)
+    car = finsler.get_metric("carlike")  # not smooth, provides smooth_square_sx
+    assert not covers(car) and covers_opt_in(car) == bool(car.provides("smooth_square_sx"))
