@@ -181,7 +181,7 @@ def register_method(method: Method) -> Method:
     if not isinstance(method, Method):
         raise InputError(f"register_method needs a learn.registry.Method, got "
                          f"{type(method).__name__}")
-    for other in {id(m): m for m in _METHODS.values()}.values():
+    for other in _distinct_methods():
         if other.name == method.name:
             continue
         taken = set(other.variants) & set(method.variants)
@@ -234,9 +234,19 @@ def list_methods() -> list[str]:
     return list(_METHODS)
 
 
+def _distinct_methods() -> list[Method]:
+    """Every registered method once (a method is registered under each of its names), in
+    registration order; compared by identity, nothing keyed by ``id()``."""
+    out: list[Method] = []
+    for m in _METHODS.values():
+        if not any(m is o for o in out):
+            out.append(m)
+    return out
+
+
 def _entries() -> Iterator[Method]:
     _import_builtins()
-    yield from {id(m): m for m in _METHODS.values()}.values()
+    yield from _distinct_methods()
 
 
 def variants() -> dict[str, Variant]:
@@ -246,7 +256,7 @@ def variants() -> dict[str, Variant]:
 
 def find_variant(name: str) -> tuple[Method, Variant]:
     """The method and :class:`Variant` called ``name`` (:class:`InputError` otherwise)."""
-    for m in {id(m): m for m in _METHODS.values()}.values():
+    for m in _distinct_methods():
         if name in m.variants:
             return m, m.variants[name]
     for m in _entries():
