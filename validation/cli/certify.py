@@ -12,6 +12,12 @@ the proven bound of it by interval arithmetic), ``upper_source`` (``path`` |
 a failure's label), ``status`` (:class:`solvers.CertifyStatus` label: certified |
 budget_reached | time_limit | corrections_too_large | lp_failed), ``message``.
 
+A conformal metric of dimension > 3 (hook ``conformal_factor_sx``, e.g. ``panda-pole``)
+gets a proven lower bound instead (:func:`solvers.certify_conformal.certify_conformal`;
+JSON: ``lower``, ``upper``, ``ratio``, ``gap``, ``trivial``, ``potential_lower``,
+``min_factor``, ``boxes``, ``enclosures``, ``cells``, ``momentum``, ``status``, ...;
+``--max-boxes`` is its work budget, ``--target-gap`` the gap that counts as certified).
+
 Exit code 0 when the interval is certified or a budget ended the refinement (the interval
 is proven either way; ``status`` says which), 1 when the refinement failed (the result,
 with the best interval proven so far, is still printed and written).
