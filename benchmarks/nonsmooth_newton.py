@@ -25,7 +25,7 @@ Usage::
 
     python benchmarks/nonsmooth_newton.py [--pairs 4] [--segments 256] [--seed 20261202]
         [--coarse 32] [--factor 2] [--top 3] [--skip-rows] [--skip-ipopt] [--truth 0]
-        [--no-write]
+        [--tag NAME] [--no-write]
 """
 
 from __future__ import annotations
@@ -177,13 +177,15 @@ def main() -> None:
     ap.add_argument("--skip-ipopt", action="store_true", help="measurement 2 without IPOPT")
     ap.add_argument("--truth", type=int, default=0,
                     help="also solve the first N ground-truth pairs against the cache")
+    ap.add_argument("--tag", default="", help="appended to the results file's name")
     ap.add_argument("--no-write", action="store_true")
     a = ap.parse_args()
     m = finsler.get_metric("carlike")
     pairs = np.asarray(finsler.sample_pairs(m, a.pairs, a.seed))
     plan = dataclasses.replace(SeedPlan.default(m), coarse=a.coarse, factor=a.factor,
                                refine_top=a.top)
-    out = ResultsFile("nonsmooth_newton", "Car-like: batched interior point against IPOPT")
+    out = ResultsFile("nonsmooth_newton" + (f"_{a.tag}" if a.tag else ""),
+                      "Car-like: batched interior point against IPOPT")
     out.add(f"Pairs: `finsler.sample_pairs(carlike, {a.pairs}, {a.seed})`, "
             f"{a.segments} segments, one thread.")
     if not a.skip_rows:

@@ -202,7 +202,8 @@ class _Runner:
     def solve(self, rows: Rows, drop_after: int = 0, drop_factor: float = 1.3) -> Rows:
         """Newton-solve ``rows`` (all of one size); from iteration ``drop_after`` on
         (``0``: never) a running row above ``drop_factor`` times its pair's best
-        converged energy stops."""
+        converged energy stops (smooth metrics; the interior point of a metric that is not
+        smooth runs every row to its end: no early drop)."""
         if not len(rows):
             return rows
         if not self.m.smooth:
