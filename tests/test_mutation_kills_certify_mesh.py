@@ -335,20 +335,24 @@ def test_a_mesh_of_too_few_points_is_refused() -> None:
 
 def test_zero_area_slivers_are_dropped_and_near_slivers_kept(monkeypatch) -> None:
     """Delaunay's simplices with two extra triangles made up here: one of zero area (three
-    collinear vertices: dropped, and a point located in it reported as in no triangle) and
-    one of area2 1.3e-14 (relative ~4e-14 of the largest: kept, the threshold is 1e-14
-    relative)."""
+    vertices on a diagonal, not along an axis: dropped, and a point located in it
+    reported as in no triangle) and one of area2 1.3e-14 (relative ~4e-14 of the
+    largest: kept, the threshold is 1e-14 relative)."""
+
     import scipy.spatial
 
     real = scipy.spatial.Delaunay
     # 5 = (0.3, 0.3), 6 = (0.5, 0.6), 7 = 2 * 6 - 5 off the line 5-6 by ~4e-14
+    # (all shifted by (0.25, 0.75): no vertex at the origin, so the area's formula must
+    # use differences of coordinates)
     pts = np.array([[0.0, 0.0], [0.5, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0],
-                    [0.3, 0.3], [0.5, 0.6], [0.7 - 3e-14, 0.9 + 2e-14]])
+                    [0.3, 0.3], [0.5, 0.6], [0.7 - 3e-14, 0.9 + 2e-14]]) + np.array([0.25, 0.75])
 
     class Fake:
         def __init__(self, points):
             self.inner = real(points)
-            self.simplices = np.concatenate([self.inner.simplices, [[0, 1, 2], [5, 6, 7]]])
+            # 0, 5, 3 lie on the square's diagonal: zero area (to rounding)
+            self.simplices = np.concatenate([self.inner.simplices, [[0, 5, 3], [5, 6, 7]]])
 
         def find_simplex(self, q):
             out = self.inner.find_simplex(q)
