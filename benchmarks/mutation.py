@@ -142,14 +142,17 @@ def collect(group: str, where: Path, wall: float | None, cpu: float | None) -> d
 
 
 _DIFFS = """
-import json, sys
+import json, sys, time
 from mutmut.__main__ import find_mutant, get_diff_for_mutant
 out = {}
 for n in sys.argv[1:]:
-    try:
-        out[n] = get_diff_for_mutant(n, path=find_mutant(n).path)
-    except Exception as err:  # a mutant mutmut cannot show: say so in the results
-        out[n] = f"(no diff: {err})"
+    for attempt in range(5):  # a running mutmut may be rewriting the file it reads
+        try:
+            out[n] = get_diff_for_mutant(n, path=find_mutant(n).path)
+            break
+        except Exception as err:  # a mutant mutmut cannot show: say so in the results
+            out[n] = f"(no diff: {err})"
+            time.sleep(0.5)
 print(json.dumps(out))
 """
 

@@ -250,3 +250,44 @@ def test_the_opt_in_newton_covers_smooth_metrics_and_nonsmooth_ones_with_the_hoo
     assert covers(smooth) and covers_opt_in(smooth)
     car = finsler.get_metric("carlike")  # not smooth, provides smooth_square_sx
     assert not covers(car) and covers_opt_in(car) == bool(car.provides("smooth_square_sx"))
+
+
+def test_a_point_just_inside_the_side_pushed_outwards_counts_as_on_it() -> None:
+    """The projected residual's step moves the point of the largest gradient entry by
+    1e-3 * scale: a point 5e-4 inside the side x_0 = 1, pushed outwards, is projected
+    onto the side, so only delta / t = 5e-4 / (1e-3 * scale / gmax) of its outward
+    component remains (a quarter at scale 2)."""
+    m = finsler.get_metric("euclidean")
+    delta = 5e-4
+    pts = np.array([[[1.2, -0.5], [1.0 - delta, 0.001], [1.2, 0.5]]])
+    d = np.diff(pts, axis=1)
+    e = float(np.sum(d * d))
+    g = 2.0 * (d[0, 0] - d[0, 1])  # the middle point's gradient: outwards in x_0
+    gmax = float(np.max(np.abs(g)))
+    assert g[0] < 0 and abs(g[0]) == gmax
+    want = max(delta * gmax / (1e-3 * 2.0), abs(g[1])) * 2.0 / e
+    assert residuals(m, pts)[0] == pytest.approx(want, rel=1e-9)
+
+
+def test_value_evaluations_add_up_over_every_line_search() -> None:
+    """Every energy-only evaluation (line searches) counts its segments: the total is the
+    sum over the calls, counted here from their arguments."""
+    from solvers.newton import NewtonOptions, NewtonState, newton_energy
+
+    seen: list[int] = []
+    original = NewtonState._energies
+
+    def counting(self, p):
+        seen.append(int(p[0].shape[0] * (p[0].shape[1] - 1)))
+        return original(self, p)
+
+    m = finsler.get_metric("euclidean")
+    mp = pytest.MonkeyPatch()
+    mp.setattr(NewtonState, "_energies", counting)
+    try:  # Armijo 0.9 refuses the full Newton step of a quadratic: line searches follow
+        res = newton_energy(m, _bent_paths(), NewtonOptions(max_iter=4, armijo=0.9,
+                                                            line_steps=3))
+    finally:
+        mp.undo()
+    assert len(seen) >= 2
+    assert res.value_evaluations == sum(seen)
