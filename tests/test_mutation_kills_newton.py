@@ -291,3 +291,23 @@ def test_value_evaluations_add_up_over_every_line_search() -> None:
         mp.undo()
     assert len(seen) >= 2
     assert res.value_evaluations == sum(seen)
+
+
+def test_carried_keeps_one_row_per_optimum_within_the_band() -> None:
+    """keep 2, band 20 %, tol 1e-6. Pair 0: rows 0 (1.0), 1 (1.05, another path), 2 (1.0 +
+    1e-12, the same path as row 0 to 1e-9), 3 (1.5, above the band), all converged: rows 0
+    and 1 go up (row 2 is row 0's optimum again). Pair 1, nothing converged: its two
+    lowest finite rows 5 (1.8) and 4 (2.0), not 6 (inf). Pair 2: one row of infinite
+    energy: none."""
+    from solvers.batched import Rows, _carried
+
+    base = np.zeros((3, 2))
+    pts = np.stack([base, base + 0.3, base + 1e-9, base - 0.3, base, base + 0.1,
+                    base + 0.2, base])
+    rows = Rows(np.array([0, 0, 0, 0, 1, 1, 1, 2]), [f"r{i}" for i in range(8)], pts,
+                np.array([1.0, 1.05, 1.0 + 1e-12, 1.5, 2.0, 1.8, np.inf, np.inf]),
+                np.array([C, C, C, C, R, R, R, R], dtype=np.int64),
+                np.zeros(8, dtype=np.int64), np.zeros(8))
+    assert list(_carried(rows, 3, 2, 0.2, 1e-6)) == [0, 1, 4, 5]
+    assert list(_carried(rows, 3, 3, 0.6, 1e-6)) == [0, 1, 3, 4, 5]  # row 3 in the band
+    assert list(_carried(rows, 3, 1, 0.2, 1e-6)) == [0, 5]
