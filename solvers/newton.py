@@ -116,11 +116,11 @@ class EnergyTerms:
         for a, b in zip(self.grad, src.grad):
             a[k] = b
         for mine, theirs in ((self.diag, src.diag), (self.off, src.off)):
-            seen: set[int] = set()
+            done: list[Any] = []  # symmetric fields share entries: write each once
             for ra, rb in zip(mine, theirs):
                 for a, b in zip(ra, rb):
-                    if id(a) not in seen:  # symmetric fields share entries
-                        seen.add(id(a))
+                    if not any(a is d for d in done):
+                        done.append(a)
                         a[k] = b
 
 

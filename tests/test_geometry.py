@@ -185,6 +185,101 @@ def metric_keyed_caches(source: str, label: str) -> list[str]:
     return found
 
 
+_DICT_MAKERS = ("dict", "defaultdict", "OrderedDict", "WeakValueDictionary")
+
+
+def _module_dicts(tree: ast.Module) -> set[str]:
+    """Names bound at module level to a dict (a display or a dict-making call)."""
+    names = set()
+    for node in tree.body:
+        value = node.value if isinstance(node, (ast.Assign, ast.AnnAssign)) else None
+        targets = (node.targets if isinstance(node, ast.Assign)
+                   else [node.target] if isinstance(node, ast.AnnAssign) else [])
+        is_dict = isinstance(value, (ast.Dict, ast.DictComp)) or (
+            isinstance(value, ast.Call) and ast.unparse(value.func).split(".")[-1] in _DICT_MAKERS)
+        if is_dict:
+            names |= {t.id for t in targets if isinstance(t, ast.Name)}
+    return names
+
+
+def _holds_metric_or_id(key: ast.expr, local: dict[str, ast.expr]) -> bool:
+    """Whether a key expression holds a metric (a name or attribute called ``m``,
+    ``metric`` or ``*metric*``) or an ``id(...)``, looking through local tuple names."""
+    if isinstance(key, ast.Name) and key.id in local:
+        key = local[key.id]
+    if any(isinstance(n, ast.Call) and ast.unparse(n.func) == "id" for n in ast.walk(key)):
+        return True
+    for node in key.elts if isinstance(key, ast.Tuple) else [key]:  # the key's own parts:
+        name = (node.id if isinstance(node, ast.Name)  # values computed from a metric
+                else node.attr if isinstance(node, ast.Attribute) else None)  # (its name,
+        if name is not None and (name == "m" or "metric" in name.lower()):  # parameters)
+            return True  # are not the metric
+    return False
+
+
+def keyed_by_metric_or_id(source: str, label: str) -> list[str]:
+    """``label:NAME`` of every module-level dict looked up or stored with a key that holds
+    a metric or an ``id()``, and ``label:line`` of every other container keyed by ``id()``
+    (a dict display or comprehension, a subscript, ``in``, ``.add``/``.get``)."""
+    tree = ast.parse(source)
+    dicts, found = _module_dicts(tree), set()
+    scopes = [n for n in ast.walk(tree) if isinstance(n, (ast.FunctionDef, ast.AsyncFunctionDef))]
+    for scope in [tree, *scopes]:
+        local = {t.id: n.value for n in ast.walk(scope) if isinstance(n, ast.Assign)
+                 for t in n.targets if isinstance(t, ast.Name)}
+        for node in ast.walk(scope):
+            keys: list[tuple[str | None, ast.expr]] = []
+            if isinstance(node, ast.Subscript):
+                keys.append((getattr(node.value, "id", None), node.slice))
+            elif isinstance(node, ast.Compare) and any(
+                    isinstance(op, (ast.In, ast.NotIn)) for op in node.ops):
+                keys += [(getattr(c, "id", None), node.left) for c in node.comparators]
+            elif (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute)
+                  and node.func.attr in ("get", "setdefault", "pop", "add") and node.args):
+                keys.append((getattr(node.func.value, "id", None), node.args[0]))
+            elif isinstance(node, ast.DictComp):
+                keys.append((None, node.key))
+            elif isinstance(node, ast.Dict):
+                keys += [(None, k) for k in node.keys if k is not None]
+            for owner, key in keys:
+                if owner in dicts and _holds_metric_or_id(key, local):
+                    found.add(f"{label}:{owner}")
+                elif any(isinstance(n, ast.Call) and ast.unparse(n.func) == "id"
+                         for n in ast.walk(key)):
+                    found.add(f"{label}:{getattr(key, 'lineno', '?')}")
+    return sorted(found)
+
+
+def test_the_wider_scan_finds_keys_holding_a_metric_or_an_id() -> None:
+    src = ("_SUITES: dict[Any, Suite] = {}\n"
+           "_RUNS = {}\n"
+           "_NAMES: dict[str, int] = {}\n"
+           "def f(self, m, oracle, seed):\n"
+           "    key = (type(self).__qualname__, m, oracle, seed)\n"
+           "    if key not in _SUITES:\n"
+           "        _SUITES[key] = 1\n"
+           "    _NAMES[m.name] = 2\n"  # keyed by the metric's name: not the metric
+           "    return _RUNS.get((id(oracle), seed))\n"
+           "def g(items):\n"
+           "    seen = set()\n"
+           "    seen.add(id(items))\n"
+           "    return {id(x): x for x in items}\n"
+           "def h(metric):\n"
+           "    return metric.derived('x', dict)[('a', 1)]\n")
+    assert keyed_by_metric_or_id(src, "x") == ["x:12", "x:13", "x:_RUNS", "x:_SUITES"]
+
+
+def test_no_container_is_keyed_by_a_metric_or_an_id() -> None:
+    """Caches keyed by a metric live on the metric (``Metric.derived``), never in a module
+    dict whose key holds a metric (issue 49: the widened guard); nothing is keyed by
+    ``id()`` (an id is reused once its object dies)."""
+    files = [p for pkg in ("finsler", "solvers", "learn", "validation")
+             for p in sorted((ROOT / pkg).rglob("*.py"))]
+    found = {hit for p in files
+             for hit in keyed_by_metric_or_id(p.read_text(), str(p.relative_to(ROOT)))}
+    assert found == set()
+
+
 def test_the_scan_finds_a_cache_keyed_by_a_metric() -> None:
     src = ("import functools\n"
            "@functools.lru_cache(maxsize=8)\ndef a(metric, n): ...\n"
