@@ -328,7 +328,7 @@ def certify_nd(metric: Metric | str, start: Any, goal: Any, mesh: NDSpec | str |
             if lower > best["lower"]:
                 best = result
             cc, cw, _ = ver["cuts"]
-            if ((upper - best["lower"]) <= spec.target_gap * upper or not cc.size
+            if (_reached(upper, best["lower"], spec.target_gap) or not cc.size
                     or ver["R"] <= r_lp * (1 + 2 * spec.verify_tol)):
                 break
             # cuts: the directions the verification could not close become rows
@@ -350,7 +350,7 @@ def certify_nd(metric: Metric | str, start: Any, goal: Any, mesh: NDSpec | str |
                        "verify_open": result["ver"]["open"], "lower": result["lower"],
                        "gap": (upper - result["lower"]) / upper,
                        "seconds": time.perf_counter() - t_start})
-        if (upper - best["lower"]) <= spec.target_gap * upper:
+        if _reached(upper, best["lower"], spec.target_gap):
             stopped_by, status = "target_gap", CertifyStatus.CERTIFIED
             break
         marked = _mark(cells, rel, result, f_fn, spec.mark_fraction)
@@ -360,6 +360,10 @@ def certify_nd(metric: Metric | str, start: Any, goal: Any, mesh: NDSpec | str |
             break
         points = np.concatenate([cells.points, new])
     lower = float(best["lower"])
+    if not math.isfinite(upper):
+        message = ("the path's length has no finite proven bound (path_length_bounds: its "
+                   "second derivative along the path is not enclosed, e.g. at kinks of a "
+                   "non-smooth F); length +- length_error is the quadrature estimate")
     times["total"] = time.perf_counter() - t_start
     return NDResult(
         metric=m.name, start=s, goal=g, lower=lower, upper=upper, length=float(est.value),
@@ -370,6 +374,11 @@ def certify_nd(metric: Metric | str, start: Any, goal: Any, mesh: NDSpec | str |
         solver_status=solver_status, rigour=dict(RIGOUR),
         mesh={**asdict(spec), "element": "P1 (Delaunay)"}, times=times, rounds=rounds,
         path=pts, stopped_by=stopped_by, status=status, message=message)
+
+
+def _reached(upper: float, lower: float, target: float) -> bool:
+    """The target gap is reached (never with an infinite upper bound)."""
+    return bool(math.isfinite(upper) and upper - lower <= target * upper)
 
 
 def _box_distance(p: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
