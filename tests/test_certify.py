@@ -166,7 +166,10 @@ def test_same_input_same_result() -> None:
 @pytest.mark.parametrize(
     ("args", "kwargs", "message"),
     [
-        (("panda-pole", np.zeros(7), np.ones(7) * 0.1), {}, "2-D"),
+        # 7-D is accepted (conformal lower bounds): its input is checked the same way
+        (("panda-pole", np.zeros(7), np.ones(7) * 0.1), {}, "outside the domain"),
+        (("panda-pole", [0.0, 0.0, 0.0, -1.5, 0.0, 1.8, 0.0],
+          [0.0, 0.0, 0.0, -1.5, 0.0, 1.8, 0.0]), {}, "start equals goal"),
         (("matsumoto", [1.2, 0.0], [0.0, 0.0]), {}, "outside the domain"),
         (("matsumoto", [0.1, 0.0], [0.1, 0.0]), {}, "start equals goal"),
         (("matsumoto", [0.1, 0.0], [0.0, 0.0]), {"mesh": "huge"}, "unknown mesh preset"),
