@@ -42,7 +42,7 @@ import numpy as np
 from results_file import ResultsFile, markdown_table
 
 import finsler
-from finsler.files import atomic_write_text
+from finsler.infra.files import atomic_write_text
 from solvers import MeshSpec, certify
 
 

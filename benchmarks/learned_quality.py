@@ -45,7 +45,7 @@ import torch
 import finsler
 import learn
 import solvers
-from finsler.files import atomic_write_text
+from finsler.infra.files import atomic_write_text
 from learn.runs import load_any_policy
 
 EPS = {"panda-pole": (20.0, 10.0, 5.0)}

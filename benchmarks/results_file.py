@@ -126,7 +126,7 @@ class ResultsFile:
 
     def write(self) -> Path:
         """Write the file atomically and return its path (also printed)."""
-        from finsler.files import atomic_write_text
+        from finsler.infra.files import atomic_write_text
 
         self.directory.mkdir(parents=True, exist_ok=True)
         p = self.path()

@@ -8,13 +8,21 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from finsler.lazy import lazy_exports
+from finsler.infra import moved as _moved
+from finsler.infra.lazy import lazy_exports
+
+_moved.install()  # finsler.pool, finsler.files, ... (moved into finsler.infra) still import
 
 if TYPE_CHECKING:
     from finsler.domains import Box, Disk, Domain, JointBox, Product
     from finsler.errors import DomainError, InputError, UnknownMetricError
-    from finsler.files import OutputError, atomic_write_bytes, atomic_write_text, check_output_path
     from finsler.hooks import HOOKS, MetricHooks
+    from finsler.infra.files import (
+        OutputError,
+        atomic_write_bytes,
+        atomic_write_text,
+        check_output_path,
+    )
     from finsler.metric import LengthBounds, LengthEstimate, Metric, Task
     from finsler.metrics import (
         MATSUMOTO_CONVEX_RADIUS,
@@ -63,7 +71,7 @@ _LAZY = {
     "MetricHooks": "finsler.hooks",
     "MetricSpec": "finsler.spec",
     "Minkowski": "finsler.metrics",
-    "OutputError": "finsler.files",
+    "OutputError": "finsler.infra.files",
     "PandaPole": "finsler.metrics",
     "Poincare": "finsler.metrics",
     "PoincareSlab": "finsler.metrics",
@@ -73,9 +81,9 @@ _LAZY = {
     "Task": "finsler.metric",
     "UnknownMetricError": "finsler.errors",
     "VALIDATION_SEED": "finsler.pairs",
-    "atomic_write_bytes": "finsler.files",
-    "atomic_write_text": "finsler.files",
-    "check_output_path": "finsler.files",
+    "atomic_write_bytes": "finsler.infra.files",
+    "atomic_write_text": "finsler.infra.files",
+    "check_output_path": "finsler.infra.files",
     "default_pairs": "finsler.pairs",
     "get_metric": "finsler.registry",
     "list_metrics": "finsler.registry",

@@ -41,7 +41,7 @@ import numpy as np
 from finsler.domains import Domain, _as_batch, is_torch
 from finsler.errors import InputError
 from finsler.hooks import MetricHooks
-from finsler.limits import check_memory, rows_that_fit
+from finsler.infra.limits import check_memory, rows_that_fit
 from finsler.lowering import LoweredFunction, lower
 
 __all__ = ["LengthBounds", "LengthEstimate", "Metric", "Task"]

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from finsler.errors import InputError, short
-from finsler.files import read_npy
+from finsler.infra.files import read_npy
 from finsler.metric import Metric
 
 __all__ = [

@@ -28,8 +28,8 @@ from typing import Any
 
 from finsler import registry
 from finsler.errors import InputError
+from finsler.infra.modules import import_user_module
 from finsler.metric import Metric
-from finsler.modules import import_user_module
 
 __all__ = ["MetricSpec", "class_path", "ensure_registered", "metric_spec"]
 

@@ -30,7 +30,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
 from finsler.errors import InputError
-from finsler.modules import import_user_module
+from finsler.infra.modules import import_user_module
 
 if TYPE_CHECKING:
     import numpy as np

@@ -37,7 +37,7 @@ from typing import Any, ClassVar, TypeVar
 
 import finsler
 from finsler.errors import InputError
-from finsler.limits import check_memory
+from finsler.infra.limits import check_memory
 from finsler.spec import MetricSpec, class_path, ensure_registered
 
 __all__ = [
@@ -68,7 +68,7 @@ def check_choice(name: str, value: str, allowed: tuple[str, ...]) -> None:
 def check_hidden(hidden: tuple[int, ...], dim: int = 8, name: str = "hidden") -> None:
     """Raise :class:`InputError` unless ``hidden`` (the config field ``name``) are positive
     layer widths whose MLPs (inputs ~ ``2 * dim`` + a few) fit in memory
-    (:func:`finsler.limits.check_memory`, before any network is built)."""
+    (:func:`finsler.infra.limits.check_memory`, before any network is built)."""
     if not hidden or any(h < 1 for h in hidden):
         raise InputError(f"{name} sizes must be positive, got {hidden!r}")
     widths = [2 * dim + 4, *hidden, 2 * dim]

@@ -12,8 +12,8 @@ from typing import Any
 
 import torch
 
-from finsler import files
 from finsler.errors import InputError
+from finsler.infra import files
 
 __all__ = [
     "BEST_FILE",
@@ -68,7 +68,7 @@ def check_run_dir(run_dir: Path, resume: bool) -> Path:
 
 def atomic_write_bytes(path: Path, data: bytes) -> None:
     """Write ``data`` to ``path`` so that readers see either the old or the new file
-    (:func:`finsler.files.atomic_write_bytes`: symlinks written through, special files
+    (:func:`finsler.infra.files.atomic_write_bytes`: symlinks written through, special files
     refused, failed writes leave the old file)."""
     files.atomic_write_bytes(path, data)
 

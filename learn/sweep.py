@@ -40,8 +40,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from finsler.cluster import connect_ray
 from finsler.errors import InputError
+from finsler.infra.cluster import connect_ray
 from finsler.status import RunAction, RunStatus
 from learn.registry import find_variant, get_method
 from learn.runs import VARIANTS, load_run_config, make_config, run_one, run_status
@@ -474,13 +474,13 @@ def _run_local_job(job: tuple) -> tuple[int, dict[str, Any]]:
 
 def _sweep_local(plan: SweepPlan, root: Path, todo: list[RunOutcome], workers: int,
                  done: Callable[[RunOutcome, dict[str, Any]], None]) -> None:
-    from finsler.pool import ProcessPool
+    from finsler.infra.pool import ProcessPool
 
     jobs = [(k, o.spec, str(o.spec.path(root)), plan.timesteps, plan.minutes,
              dict(plan.overrides.get(o.spec.variant, {})), plan.modules)
             for k, o in enumerate(todo)]
     # SIGINT / SIGTERM: every worker gets SIGTERM, saves a resumable checkpoint and exits;
-    # finsler.pool.PoolInterrupted is raised once they are gone
+    # finsler.infra.pool.PoolInterrupted is raised once they are gone
     # a run whose process dies (OOM killer, segfault) is reported failed; the others go on
     with ProcessPool(workers, initializer=_set_threads, graceful=True,
                      on_death=_died) as pool:

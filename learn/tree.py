@@ -12,7 +12,7 @@ from collections.abc import Callable
 
 import torch
 
-from finsler.limits import check_memory
+from finsler.infra.limits import check_memory
 
 __all__ = [
     "build_tree",

@@ -24,7 +24,7 @@ import sys
 import types
 from typing import TYPE_CHECKING, Any
 
-from finsler.lazy import lazy_exports
+from finsler.infra.lazy import lazy_exports
 
 if TYPE_CHECKING:
     from solvers.certify import CertifyResult, MeshSpec, certify

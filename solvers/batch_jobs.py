@@ -21,9 +21,9 @@ from typing import Any
 import numpy as np
 
 from finsler.errors import InputError
-from finsler.files import OutputError, atomic_write_bytes
+from finsler.infra.files import OutputError, atomic_write_bytes
+from finsler.infra.pool import ProcessPool
 from finsler.metric import Metric
-from finsler.pool import ProcessPool
 from finsler.spec import MetricSpec
 from solvers.backends import backend_for
 from solvers.inputs import as_metric, check_pairs, check_segments
@@ -288,7 +288,7 @@ def check_batch(metric: Metric | str, pairs: Any, segments: int | None = None, *
     if chunk_size is not None:
         _positive_int(chunk_size, "chunk_size")
     if ray_address is not None:
-        from finsler.cluster import probe_address, require_ray
+        from finsler.infra.cluster import probe_address, require_ray
 
         require_ray()  # before any file is made
         probe_address(ray_address)  # a wrong address fails in seconds

@@ -68,8 +68,8 @@ import casadi as ca
 import numpy as np
 
 from finsler.errors import InputError
+from finsler.infra.limits import check_memory
 from finsler.intervals import Interval, enclose, isqrt
-from finsler.limits import check_memory
 from finsler.lowering import LoweredFunction, lower
 from finsler.metric import Metric
 from finsler.status import Result

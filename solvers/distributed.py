@@ -17,8 +17,8 @@ import math
 from collections.abc import Callable, Iterator
 from typing import Any
 
-from finsler.cluster import RAY_MISSING, connect_ray, require_ray
 from finsler.errors import InputError
+from finsler.infra.cluster import RAY_MISSING, connect_ray, require_ray
 
 __all__ = ["RAY_MISSING", "connect_ray", "require_ray", "solve_chunks_ray"]
 

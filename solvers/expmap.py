@@ -30,7 +30,7 @@ from scipy.integrate import solve_ivp
 
 from finsler.errors import InputError, short
 from finsler.geometry import Spray, spray
-from finsler.limits import check_memory
+from finsler.infra.limits import check_memory
 from finsler.metric import Metric
 from finsler.status import Result, json_ready
 from solvers.chebyshev import differentiation_matrix

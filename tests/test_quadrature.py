@@ -95,7 +95,7 @@ def test_many_segments_are_evaluated_in_parts_that_fit_memory() -> None:
 
 
 def test_rows_that_fit_the_memory_limit() -> None:
-    from finsler.limits import rows_that_fit
+    from finsler.infra.limits import rows_that_fit
     # 7-D quadrature rows: 1024 subintervals x 15 nodes x 7 coordinates, float64, 2 copies
     # = 1,720,320 bytes; 4 GiB holds 2496 of them
     assert rows_that_fit((1024, 15, 7), "q", copies=2) == 2496

@@ -34,7 +34,7 @@ import finsler
 import solvers
 from finsler import Metric, load_pairs
 from finsler.errors import InputError
-from finsler.files import made_folders
+from finsler.infra.files import made_folders
 from validation.comparison import Comparison, compare, midpoint_error, ratio_stats
 from validation.jsonout import jsonable
 

@@ -19,7 +19,7 @@ folder without write permission is refused, also for root). :func:`check_output_
 the same for an output folder (``report``, ``sweep``, ``train``), without creating it.
 
 Reading: :func:`read_npy` checks a ``.npy`` file's header (dtype, shape, and the memory the
-array needs, :func:`finsler.limits.check_memory`) before it allocates anything, so a file
+array needs, :func:`finsler.infra.limits.check_memory`) before it allocates anything, so a file
 whose header claims 10**12 rows is a clear error, not a machine out of memory;
 :func:`read_text` reads a text file of bounded size. Both raise :class:`InputError` naming
 the file and the problem (missing, a folder, unreadable, too large, not the format).
@@ -36,7 +36,7 @@ from pathlib import Path
 from typing import Any
 
 from finsler.errors import InputError, short
-from finsler.limits import check_memory
+from finsler.infra.limits import check_memory
 
 __all__ = [
     "NAME_MAX",
@@ -287,8 +287,8 @@ def read_text(path: str | os.PathLike[str], what: str = "input file",
 
 def read_npy(path: str | os.PathLike[str], what: str = "array file") -> Any:
     """The array of a ``.npy`` file, its header checked before any allocation: numeric
-    dtype (no pickled objects), a shape whose array fits :data:`~finsler.limits.MAX_BYTES`
-    (:func:`finsler.limits.check_memory`) and a file long enough to hold it. Raises
+    dtype (no pickled objects), a shape whose array fits :data:`~finsler.infra.limits.MAX_BYTES`
+    (:func:`finsler.infra.limits.check_memory`) and a file long enough to hold it. Raises
     :class:`InputError` naming the file and the problem."""
     import numpy as np
 

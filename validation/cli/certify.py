@@ -32,7 +32,7 @@ from typing import TYPE_CHECKING, Annotated, Any
 import typer
 
 from finsler.errors import InputError
-from finsler.files import atomic_write_text, check_output_path
+from finsler.infra.files import atomic_write_text, check_output_path
 from validation.cli.common import (
     MetricModuleOption,
     MetricParamOption,

@@ -11,7 +11,7 @@ import typer
 
 import finsler
 from finsler.errors import InputError, short
-from finsler.modules import import_user_module
+from finsler.infra.modules import import_user_module
 
 if TYPE_CHECKING:  # numpy is imported where used: --help stays light (issue 47)
     import numpy as np
@@ -173,7 +173,7 @@ def parse_metric_params(items: list[str] | None) -> dict[str, Any] | None:
 
 
 def import_metric_modules(items: list[str] | None) -> None:
-    """Import every ``--metric-module`` (:func:`finsler.modules.import_user_module`: a
+    """Import every ``--metric-module`` (:func:`finsler.infra.modules.import_user_module`: a
     dotted module name or a ``.py`` file; any failure is a one-line InputError)."""
     for item in items or []:
         import_user_module(item, "--metric-module")

@@ -17,7 +17,7 @@ import typer
 
 import solvers
 from finsler.errors import InputError
-from finsler.limits import check_memory
+from finsler.infra.limits import check_memory
 from validation.cli.common import (
     MetricModuleOption,
     MetricParamOption,

@@ -15,7 +15,7 @@ import typer
 
 import finsler
 from finsler.errors import InputError
-from finsler.files import check_input_dir, check_output_dir
+from finsler.infra.files import check_input_dir, check_output_dir
 from validation.cli.common import (
     MethodModuleOption,
     MetricModuleOption,

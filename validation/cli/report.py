@@ -9,7 +9,7 @@ from typing import Annotated
 import typer
 
 from finsler.errors import InputError
-from finsler.files import check_input_dir, check_output_dir
+from finsler.infra.files import check_input_dir, check_output_dir
 from validation.cli.common import (
     MethodModuleOption,
     MetricModuleOption,

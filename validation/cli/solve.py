@@ -41,7 +41,7 @@ import typer
 import finsler
 import solvers
 from finsler.errors import InputError
-from finsler.pool import PoolInterrupted
+from finsler.infra.pool import PoolInterrupted
 from validation.cli.common import (
     MethodModuleOption,
     MetricModuleOption,

@@ -9,8 +9,8 @@ from typing import Annotated, Any
 import typer
 
 from finsler.errors import InputError
-from finsler.files import check_output_dir
-from finsler.pool import PoolInterrupted
+from finsler.infra.files import check_output_dir
+from finsler.infra.pool import PoolInterrupted
 from validation.cli.common import (
     MethodModuleOption,
     MetricModuleOption,
