@@ -245,6 +245,10 @@ def certify_nd(metric: Metric | str, start: Any, goal: Any, mesh: NDSpec | str |
     est = m.path_length_error(pts)
     upper = float(m.path_length_bounds(pts).upper)
     t_solve = time.perf_counter() - t0
+    # the LP's box on potential values (any finite size keeps the bound sound: the
+    # verification, not the box, proves it); the quadrature estimate where the length has
+    # no finite proven bound (an infinite box made the LP fail: lower stayed 0)
+    cap = upper if math.isfinite(upper) else float(est.value) + abs(float(est.error))
 
     f_fn, fg_fn = lowered_f_grad(m)
     t0 = time.perf_counter()
@@ -295,7 +299,7 @@ def certify_nd(metric: Metric | str, start: Any, goal: Any, mesh: NDSpec | str |
             t0 = time.perf_counter()
             try:
                 phi, duals, lp_status = solve_lp(cells, rel, rows_c, rows_w, rows_b, s_w, g_w,
-                                                 10.0 * upper)
+                                                 10.0 * cap)
             except LPFailure as err:
                 failure = str(err)
                 break

@@ -131,7 +131,7 @@ def test_default_plan_follows_capabilities_not_names() -> None:
     assert SeedPlan.default(mats) != SeedPlan.default(poin)
     assert SeedPlan.default(HookedPoincare()) == SeedPlan(bulges=(0.2,), random=7, coarse=8)
     car, panda = finsler.get_metric("carlike"), finsler.get_metric("panda-pole")
-    assert not car.smooth and len(SeedPlan.default(car).bulges) == 4
+    assert not car.smooth and len(SeedPlan.default(car).bulges) == 5
     assert panda.dim > 3 and SeedPlan.default(panda).coarse == 32
     # one geodesic between any two points: the straight line alone; without that
     # declaration the same F gets the convex-smooth plan (a bulge each side)

@@ -136,6 +136,29 @@ def certify_command(
         fail(f"certify {res.status.label}: {res.message}", code=1)
 
 
+def _run_and_write(m: Any, start: str, goal: str, out: Path | None, as_json: bool,
+                   run: Any) -> tuple[Any, Any, Any] | None:
+    """Parse and check the pair, ``run(s, g)``, write ``--out`` and print ``--json``: the
+    steps every certificate beyond the plane shares. None after a clean one-line error."""
+    s = parse_point(start, m.dim, "--start")
+    g = parse_point(goal, m.dim, "--goal")
+    try:
+        m.domain.check(s, "--start")
+        m.domain.check(g, "--goal")
+        if out is not None:
+            check_output_path(out, "--out")
+        res = run(s, g)
+        doc = res.to_dict()
+        if out is not None:
+            atomic_write_text(out, json_text(doc), "certify result")
+    except InputError as err:
+        fail(str(err))
+        return None
+    if as_json:
+        typer.echo(json_text(doc))
+    return s, g, res
+
+
 def _certify_conformal(m: Any, start: str, goal: str, target_gap: float | None,
                        max_boxes: int | None, out: Path | None, as_json: bool) -> None:
     """``geodesics certify`` on a conformal metric of dimension > 3: a proven lower bound
@@ -145,29 +168,20 @@ def _certify_conformal(m: Any, start: str, goal: str, target_gap: float | None,
     from solvers.certify_conformal import ConformalSpec, certify_conformal
     from solvers.status import CertifyStatus
 
-    s = parse_point(start, m.dim, "--start")
-    g = parse_point(goal, m.dim, "--goal")
-    try:
-        m.domain.check(s, "--start")
-        m.domain.check(g, "--goal")
+    def spec() -> Any:
         changes: dict[str, Any] = {}
         if target_gap is not None:
             changes["target_gap"] = target_gap
         if max_boxes is not None:
             changes["max_boxes"] = max_boxes
-        spec = dataclasses.replace(ConformalSpec(), **changes)
-        if out is not None:
-            check_output_path(out, "--out")
-        res = certify_conformal(m, s, g, spec)
-        doc = res.to_dict()
-        if out is not None:
-            atomic_write_text(out, json_text(doc), "certify result")
-    except InputError as err:
-        fail(str(err))
+        return dataclasses.replace(ConformalSpec(), **changes)
+
+    done = _run_and_write(m, start, goal, out, as_json,
+                          lambda s, g: certify_conformal(m, s, g, spec()))
+    if done is None:
         return
-    if as_json:
-        typer.echo(json_text(doc))
-    else:
+    s, g, res = done
+    if not as_json:
         typer.echo(f"metric {m.name}: start {tuple(s.tolist())} goal {tuple(g.tolist())}")
         typer.echo(f"status = {res.status.label}   (stopped by {res.stopped_by})")
         typer.echo(f"lower  = {res.lower:.10g}   ({res.method})")
@@ -189,34 +203,24 @@ def _certify_nd(m: Any, start: str, goal: str, mesh: str, h: float | None,
     from solvers.certify_nd import NDSpec, certify_nd
     from solvers.status import CertifyStatus
 
-    s = parse_point(start, m.dim, "--start")
-    g = parse_point(goal, m.dim, "--goal")
-    try:
-        m.domain.check(s, "--start")
-        m.domain.check(g, "--goal")
-        spec = NDSpec.preset(mesh)
+    def spec() -> Any:
+        chosen = NDSpec.preset(mesh)
         changes: dict[str, Any] = {}
         if h is not None:
             changes["h_path"] = h
-            changes["h_far"] = max(spec.h_far, h)
+            changes["h_far"] = max(chosen.h_far, h)
         if target_gap is not None:
             if not (math.isfinite(target_gap) and 0 < target_gap < 1):
                 raise InputError(f"--target-gap must be in (0, 1), got {target_gap!r}")
             changes["target_gap"] = target_gap
-        if changes:
-            spec = dataclasses.replace(spec, **changes)
-        if out is not None:
-            check_output_path(out, "--out")
-        res = certify_nd(m, s, g, spec)
-        doc = res.to_dict()
-        if out is not None:
-            atomic_write_text(out, json_text(doc), "certify result")
-    except InputError as err:
-        fail(str(err))
+        return dataclasses.replace(chosen, **changes) if changes else chosen
+
+    done = _run_and_write(m, start, goal, out, as_json,
+                          lambda s, g: certify_nd(m, s, g, spec()))
+    if done is None:
         return
-    if as_json:
-        typer.echo(json_text(doc))
-    else:
+    s, g, res = done
+    if not as_json:
         typer.echo(f"metric {m.name}: start {tuple(s.tolist())} goal {tuple(g.tolist())}")
         typer.echo(f"status = {res.status.label}   (stopped by {res.stopped_by})")
         typer.echo(f"lower  = {res.lower:.10g}   (verified P1 potential on {res.cells} cells, "
