@@ -311,3 +311,213 @@ def test_carried_keeps_one_row_per_optimum_within_the_band() -> None:
     assert list(_carried(rows, 3, 2, 0.2, 1e-6)) == [0, 1, 4, 5]
     assert list(_carried(rows, 3, 3, 0.6, 1e-6)) == [0, 1, 3, 4, 5]  # row 3 in the band
     assert list(_carried(rows, 3, 1, 0.2, 1e-6)) == [0, 5]
+
+
+# ----------------------------------------------------------------------------------------
+# the iteration, step by step, against a dense reference written from the docstring
+# ----------------------------------------------------------------------------------------
+class _DenseNewton:
+    """One problem of :class:`NewtonState` redone with dense linear algebra, from the
+    class docstring: the Hessian (assembled densely from :func:`energy_terms`, itself
+    checked against CasADi's Hessian of the whole energy in test_newton.py) shifted by
+    ``delta * mean diagonal`` (whole-Hessian mode: the smallest of ``last / 3`` or 0, then
+    ``delta0``, x8, that Cholesky accepts), the full step first after a full step, else
+    the longest acceptable of ``2**-k``; Armijo on energies from ``metric.F`` alone; the
+    shift raised x8 (at least ``delta0``) without progress, divided by 3 after progress
+    (local mode). Domains that are not boxes (trial points outside are refused)."""
+
+    def __init__(self, m, path, opt, local, scale):
+        self.m, self.p, self.opt, self.local, self.scale = m, path.copy(), opt, local, scale
+        self.delta, self.full, self.hits, self.it = 0.0, True, 0, 0
+        self.status = NewtonStatus.RUNNING
+        self.g, self.h = self._derivatives(self.p)
+        self.e = self.energy(self.p)
+        if self.residual() <= opt.gtol:
+            self.status = NewtonStatus.CONVERGED
+
+    def energy(self, p):
+        return float(np.sum(np.asarray(self.m.F(p[:-1], p[1:] - p[:-1])) ** 2))
+
+    def _derivatives(self, p):
+        from solvers.newton import _NUMPY_OPS, _to_field, energy_terms
+
+        t = energy_terms(self.m, _NUMPY_OPS, _to_field(_NUMPY_OPS, p[None]))
+        d, k = p.shape[1], p.shape[0] - 2
+        h = np.zeros((k * d, k * d))
+        for j in range(k):
+            for a in range(d):
+                for b in range(d):
+                    h[j * d + a, j * d + b] = t.diag[a][b][0, j]
+                    if j < k - 1:
+                        h[j * d + a, (j + 1) * d + b] = t.off[a][b][0, j]
+                        h[(j + 1) * d + b, j * d + a] = t.off[a][b][0, j]
+        return np.stack(t.grad, -1)[0].reshape(-1), h
+
+    def residual(self):
+        return np.max(np.abs(self.g)) * self.scale / self.e
+
+    @staticmethod
+    def definite(a):
+        try:
+            np.linalg.cholesky(a)
+            return True
+        except np.linalg.LinAlgError:
+            return False
+
+    def step(self):
+        opt, n = self.opt, self.g.size
+        dsc = float(np.mean(np.abs(np.diag(self.h))))
+        if self.local:
+            shifted = self.h + self.delta * dsc * np.eye(n)
+            assert self.definite(shifted), "the reference covers definite local solves only"
+            factored = True
+        else:
+            delta = self.delta / 3.0 if self.delta > 0 else 0.0
+            factored = False
+            for _ in range(40):
+                shifted = self.h + delta * dsc * np.eye(n)
+                if self.definite(shifted):
+                    factored = True
+                    break
+                delta = opt.delta0 if delta == 0 else delta * 8.0
+                if delta > opt.delta_max:
+                    break
+            if factored:
+                self.delta = delta
+        moved, alpha, left = False, 0.0, False
+        if factored:
+            s = np.linalg.solve(shifted, -self.g)
+            slope = float(self.g @ s)
+
+            def at(a):
+                q = self.p.copy()
+                q[1:-1] += a * s.reshape(-1, self.p.shape[1])
+                return q
+
+            def inside(q):
+                return bool(np.all(self.m.domain.contains(q, tol=1e-12 * self.scale)))
+
+            if self.full:
+                q = at(1.0)
+                if not inside(q):
+                    left = True
+                else:
+                    e1 = self.energy(q)
+                    if (slope < 0 and e1 <= self.e + opt.armijo * slope) or abs(
+                            e1 - self.e) <= 1e-15 * abs(self.e):
+                        moved, alpha = True, 1.0
+            if not moved and slope < 0:
+                left |= not inside(at(1.0))
+                for j in range(opt.line_steps):
+                    q = at(2.0 ** -j)
+                    if inside(q) and self.energy(q) <= self.e + opt.armijo * 2.0 ** -j * slope:
+                        moved, alpha = True, 2.0 ** -j
+                        break
+            if moved:
+                self.p = at(alpha)
+                self.g, self.h = self._derivatives(self.p)
+                self.e = self.energy(self.p)
+        self.it += 1
+        self.full = moved and alpha == 1.0
+        if factored and not moved:
+            self.delta = max(self.delta * 8.0, opt.delta0)
+        elif moved and self.local:
+            self.delta /= 3.0
+        if self.delta < 1e-12:
+            self.delta = 0.0
+        self.hits = 0 if moved else self.hits + int(left)
+        if not factored or self.delta > opt.delta_max:
+            self.status = NewtonStatus.STALLED
+        elif self.hits >= opt.boundary_hits:
+            self.status = NewtonStatus.BOUNDARY
+        elif self.it >= opt.max_iter and self.residual() > opt.gtol:
+            self.status = NewtonStatus.MAX_ITERATIONS
+        elif self.residual() <= opt.gtol:
+            self.status = NewtonStatus.CONVERGED
+        return moved, alpha
+
+
+def _follow(m, paths, opt, local, scale):
+    """Step a NewtonState and the dense reference side by side; every iteration the
+    points, shift, status, iteration count, energy and residual of every problem agree.
+    Returns the (moved, step) history of every problem."""
+    from solvers.backends import backend_for
+    from solvers.newton import NewtonState
+
+    st = NewtonState(m, paths, opt, backend_for(None), scale, local)
+    refs = [_DenseNewton(m, p, opt, local, scale) for p in paths]
+    history: list[list[tuple[bool, float]]] = [[] for _ in refs]
+    for _ in range(opt.max_iter + 1):
+        for b, r in enumerate(refs):
+            assert st.status[b] == r.status, (b, st.status[b], r.status, history[b])
+            assert st.iterations[b] == r.it
+            np.testing.assert_allclose(st.paths()[b], r.p, rtol=0, atol=1e-10)
+            assert st.delta[b] == pytest.approx(r.delta, rel=1e-9, abs=0)
+            assert st.energy[b] == pytest.approx(r.e, rel=1e-10)
+            assert st.residual[b] == pytest.approx(r.residual(), rel=1e-6)
+        if not st.running:
+            break
+        st.step()
+        for b, r in enumerate(refs):
+            if r.status == NewtonStatus.RUNNING:
+                history[b].append(r.step())
+    assert not st.running
+    return history
+
+
+def _bent(m, count, amp, seed, n=8):
+    rng = np.random.default_rng(seed)
+    line = np.linspace([-0.3, -0.2], [0.35, 0.25], n + 1)
+    bump = np.sin(np.pi * np.linspace(0, 1, n + 1))[None, :, None]
+    return line[None] + amp * bump * rng.normal(size=(count, 1, 2)) + np.r_[
+        0, [1] * (n - 1), 0][None, :, None] * rng.normal(scale=amp / 4, size=(count, n + 1, 2))
+
+
+def test_line_search_and_shifts_follow_a_dense_reference_with_a_strict_armijo() -> None:
+    """Sphere paths (a disk domain), Armijo 0.45 and three step lengths: full Newton steps
+    are refused on the strongly bent paths, shorter steps taken or none (the shift grows
+    x8 from delta0, then shrinks /3 after progress); every iteration equals the dense
+    reference, and the history shows each kind of step happened."""
+    from solvers.newton import NewtonOptions
+
+    m = finsler.get_metric("sphere")
+    paths = _bent(m, 5, 0.35, 7)
+    opt = NewtonOptions(armijo=0.45, line_steps=3, max_iter=12, gtol=1e-9)
+    hist = _follow(m, paths, opt, True, 1.6)
+    kinds = {(mv, a) for h in hist for mv, a in h}
+    assert (True, 1.0) in kinds and (False, 0.0) in kinds
+    assert any(mv and a < 1.0 for mv, a in kinds)
+
+
+def test_whole_hessian_shift_follows_a_dense_reference_on_indefinite_hessians() -> None:
+    """Matsumoto paths whose Hessians are not definite, ``local=False``: the smallest
+    shift of the ladder 0, delta0, x8 ... (from last / 3 after a factorisation) that
+    makes the dense Hessian positive definite, and every iteration as the reference."""
+    from solvers.newton import NewtonOptions
+
+    m = finsler.get_metric("matsumoto")
+    paths = _bent(m, 4, 0.15, 4)
+    opt = NewtonOptions(armijo=0.3, line_steps=3, max_iter=10, gtol=1e-9)
+    refs = [_DenseNewton(m, p, opt, False, 2.0) for p in paths]
+    assert sum(not r.definite(r.h) for r in refs) >= 1  # the shift is needed
+    hist = _follow(m, paths, opt, False, 2.0)
+    assert any(h for h in hist)
+
+
+@pytest.mark.parametrize("local", [True, False])
+@pytest.mark.parametrize("delta_max", [1.0, 1e10])
+def test_refused_steps_raise_the_shift_until_progress_or_stall(local, delta_max) -> None:
+    """Armijo 0.85 with steps 1 and 1/2: on a nearly quadratic energy Newton steps are
+    refused (a quadratic accepts only steps <= 2 (1 - 0.85) = 0.3), so the shift climbs
+    x8 until the shifted direction passes (then /3 after progress, local mode), or beyond
+    ``delta_max`` = 1, where the problem stops as STALLED; each iteration as the dense
+    reference."""
+    from solvers.newton import NewtonOptions
+
+    m = finsler.get_metric("sphere")
+    opt = NewtonOptions(armijo=0.85, line_steps=2, max_iter=14, gtol=1e-9,
+                        delta_max=delta_max)
+    hist = _follow(m, _bent(m, 3, 0.1, 5), opt, local, 1.6)
+    moved = [[mv for mv, _ in h] for h in hist]
+    assert all(not h[0] for h in moved)  # the first Newton step is refused everywhere
+    assert any(any(h) for h in moved) == (delta_max > 1.0)
