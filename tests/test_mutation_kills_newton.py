@@ -7,8 +7,11 @@ worked out by hand on a made-up state."""
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from types import SimpleNamespace
+from typing import ClassVar
 
+import casadi as ca
 import numpy as np
 import pytest
 
@@ -521,3 +524,103 @@ def test_refused_steps_raise_the_shift_until_progress_or_stall(local, delta_max)
     moved = [[mv for mv, _ in h] for h in hist]
     assert all(not h[0] for h in moved)  # the first Newton step is refused everywhere
     assert any(any(h) for h in moved) == (delta_max > 1.0)
+
+
+@dataclass(frozen=True)
+class _Tilt(finsler.Metric):
+    """``F = exp(c x_0) |v|`` on ``[-1, 1]**2``: with ``c > 0`` travel is cheaper to the
+    left (the energy pushes points at the left side outwards), ``c < 0`` to the right."""
+
+    c: float = 3.0
+    name: ClassVar[str] = "test-tilt"
+    task: ClassVar[finsler.Task] = finsler.Task(depth=4, eps=0.5)
+    reversible: ClassVar[bool] = True
+    domain = property(lambda self: finsler.Box((-1.0, -1.0), (1.0, 1.0)))
+
+    def F_sx(self, x: ca.SX, v: ca.SX) -> ca.SX:
+        return ca.exp(self.c * x[0]) * ca.sqrt(ca.dot(v, v))
+
+
+@pytest.mark.parametrize(("c", "side", "held"), [(3.0, -1, True), (-1.0, 1, True),
+                                                 (0.0, 1, False), (1.0, 1, False)])
+def test_a_coordinate_within_bound_eps_of_a_side_pushed_out_is_held(c, side, held) -> None:
+    """Projected Newton on a box: the middle point half of ``bound_eps`` (1e-9 * scale)
+    inside the side ``x_0 = side``; the energy's gradient there is small (|g| < 1 in the
+    first two cases: the sign decides, not the size). Pushed outwards (g > 0 at the left
+    side, g < 0 at the right) the coordinate is held: its gradient entry leaves the
+    residual and one Newton step leaves it where it is; pulled inwards it is free."""
+    from solvers.backends import backend_for
+    from solvers.newton import _NUMPY_OPS, NewtonOptions, NewtonState, _to_field, energy_terms
+
+    m, scale = _Tilt(c), 2.0
+    eps = 1e-9 * scale
+    x0 = side * (1.0 - 0.5 * eps)
+    p = np.array([[[side * 0.97, -0.3], [x0, 0.0], [side * 0.97, 0.3]]])
+    t = energy_terms(m, _NUMPY_OPS, _to_field(_NUMPY_OPS, p), hessian=False)
+    g = np.stack(t.grad, -1)[0, 0]
+    outwards = g[0] * side < 0
+    assert outwards == held and (abs(g[0]) < 1.0 or not held)
+    keep = np.array([not held, True])
+    want = np.max(np.abs(g[keep])) * scale / t.energy[0]
+    st = NewtonState(m, p, NewtonOptions(max_iter=1), backend_for(None), scale)
+    assert st.residual[0] == pytest.approx(want, rel=1e-12)
+    st.step()
+    after = st.paths()[0, 1, 0]
+    assert (after == x0) == held
+
+
+def test_evaluations_count_every_segment_evaluated() -> None:
+    """Three Euclidean paths of 5 segments. Default options: 15 segments with derivatives
+    at the start, 15 more for the full Newton step (exact on a quadratic), no value
+    evaluation. Armijo 0.9 with steps 1, 1/2, 1/4 refuses every step (a quadratic accepts
+    only steps <= 0.2): the first iteration evaluates the full steps' derivatives (15) and
+    3 x 15 values, the second only the 45 values (no full step after a refused one)."""
+    from solvers.backends import backend_for
+    from solvers.newton import NewtonOptions, NewtonState
+
+    m = finsler.get_metric("euclidean")
+    st = NewtonState(m, _bent_paths(), NewtonOptions(), backend_for(None), 2.0)
+    assert (st.evaluations, st.value_evaluations) == (15, 0)
+    st.step()
+    assert (st.evaluations, st.value_evaluations) == (30, 0)
+    assert list(st.status) == [NewtonStatus.CONVERGED] * 3
+    res = st.result()
+    assert (res.evaluations, res.value_evaluations) == (30, 0)
+    assert res.status.dtype == np.int64 and res.iterations.dtype == np.int64
+    strict = NewtonState(m, _bent_paths(), NewtonOptions(armijo=0.9, line_steps=3),
+                         backend_for(None), 2.0)
+    strict.step()
+    assert (strict.evaluations, strict.value_evaluations) == (30, 45)
+    strict.step()
+    assert (strict.evaluations, strict.value_evaluations) == (30, 90)
+    assert strict.result().value_evaluations == 90
+    np.testing.assert_array_equal(strict.paths(), _bent_paths())
+
+
+def test_newton_energy_hands_its_device_to_the_backend(monkeypatch) -> None:
+    """``device="cpu"`` runs on the torch backend (the numpy and torch runs agree, see
+    test_newton.py, so only the backend asked for tells them apart)."""
+    import solvers.newton as newton
+
+    seen: list = []
+    real = newton.backend_for
+
+    def spy(device):
+        seen.append(device)
+        return real(device)
+
+    monkeypatch.setattr(newton, "backend_for", spy)
+    m = finsler.get_metric("euclidean")
+    res = newton.newton_energy(m, _bent_paths(), device="cpu")
+    assert seen == ["cpu"] and real("cpu").name == "torch"
+    assert list(res.status) == [NewtonStatus.CONVERGED] * 3
+
+
+def test_dropping_nothing_changes_nothing() -> None:
+    from solvers.backends import backend_for
+    from solvers.newton import NewtonOptions, NewtonState
+
+    st = NewtonState(finsler.get_metric("euclidean"), _bent_paths(), NewtonOptions(),
+                     backend_for(None), 2.0)
+    st.drop([])
+    assert list(st.active) == [0, 1, 2] and st.running
