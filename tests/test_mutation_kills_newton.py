@@ -332,6 +332,8 @@ class _DenseNewton:
     def __init__(self, m, path, opt, local, scale):
         self.m, self.p, self.opt, self.local, self.scale = m, path.copy(), opt, local, scale
         self.delta, self.full, self.hits, self.it = 0.0, True, 0, 0
+        self.n = path.shape[0] - 1
+        self.evals, self.values = self.n, 0  # segments with derivatives / values only
         self.status = NewtonStatus.RUNNING
         self.g, self.h = self._derivatives(self.p)
         self.e = self.energy(self.p)
@@ -405,16 +407,19 @@ class _DenseNewton:
                 if not inside(q):
                     left = True
                 else:
+                    self.evals += self.n
                     e1 = self.energy(q)
                     if (slope < 0 and e1 <= self.e + opt.armijo * slope) or abs(
                             e1 - self.e) <= 1e-15 * abs(self.e):
                         moved, alpha = True, 1.0
             if not moved and slope < 0:
                 left |= not inside(at(1.0))
+                self.values += self.n * sum(inside(at(2.0 ** -j)) for j in range(opt.line_steps))
                 for j in range(opt.line_steps):
                     q = at(2.0 ** -j)
                     if inside(q) and self.energy(q) <= self.e + opt.armijo * 2.0 ** -j * slope:
                         moved, alpha = True, 2.0 ** -j
+                        self.evals += self.n
                         break
             if moved:
                 self.p = at(alpha)
@@ -437,19 +442,23 @@ class _DenseNewton:
             self.status = NewtonStatus.MAX_ITERATIONS
         elif self.residual() <= opt.gtol:
             self.status = NewtonStatus.CONVERGED
-        return moved, alpha
+        return moved, alpha, left
 
 
-def _follow(m, paths, opt, local, scale):
+def _follow(m, paths, opt, local, scale, delta=0.0):
     """Step a NewtonState and the dense reference side by side; every iteration the
     points, shift, status, iteration count, energy and residual of every problem agree.
-    Returns the (moved, step) history of every problem."""
+    ``delta``: the shift every problem starts with. Returns the (moved, step, left the
+    domain) history of every problem."""
     from solvers.backends import backend_for
     from solvers.newton import NewtonState
 
     st = NewtonState(m, paths, opt, backend_for(None), scale, local)
     refs = [_DenseNewton(m, p, opt, local, scale) for p in paths]
-    history: list[list[tuple[bool, float]]] = [[] for _ in refs]
+    st.delta[:] = delta
+    for r in refs:
+        r.delta = delta
+    history: list[list[tuple[bool, float, bool]]] = [[] for _ in refs]
     for _ in range(opt.max_iter + 1):
         for b, r in enumerate(refs):
             assert st.status[b] == r.status, (b, st.status[b], r.status, history[b])
@@ -458,6 +467,9 @@ def _follow(m, paths, opt, local, scale):
             assert st.delta[b] == pytest.approx(r.delta, rel=1e-9, abs=0)
             assert st.energy[b] == pytest.approx(r.e, rel=1e-10)
             assert st.residual[b] == pytest.approx(r.residual(), rel=1e-6)
+            assert st.hits[b] == r.hits
+        assert st.evaluations == sum(r.evals for r in refs)
+        assert st.value_evaluations == sum(r.values for r in refs)
         if not st.running:
             break
         st.step()
@@ -487,7 +499,7 @@ def test_line_search_and_shifts_follow_a_dense_reference_with_a_strict_armijo() 
     paths = _bent(m, 5, 0.35, 7)
     opt = NewtonOptions(armijo=0.45, line_steps=3, max_iter=12, gtol=1e-9)
     hist = _follow(m, paths, opt, True, 1.6)
-    kinds = {(mv, a) for h in hist for mv, a in h}
+    kinds = {(mv, a) for h in hist for mv, a, _ in h}
     assert (True, 1.0) in kinds and (False, 0.0) in kinds
     assert any(mv and a < 1.0 for mv, a in kinds)
 
@@ -521,7 +533,7 @@ def test_refused_steps_raise_the_shift_until_progress_or_stall(local, delta_max)
     opt = NewtonOptions(armijo=0.85, line_steps=2, max_iter=14, gtol=1e-9,
                         delta_max=delta_max)
     hist = _follow(m, _bent(m, 3, 0.1, 5), opt, local, 1.6)
-    moved = [[mv for mv, _ in h] for h in hist]
+    moved = [[mv for mv, _, _ in h] for h in hist]
     assert all(not h[0] for h in moved)  # the first Newton step is refused everywhere
     assert any(any(h) for h in moved) == (delta_max > 1.0)
 
@@ -624,3 +636,95 @@ def test_dropping_nothing_changes_nothing() -> None:
                      backend_for(None), 2.0)
     st.drop([])
     assert list(st.active) == [0, 1, 2] and st.running
+
+
+def test_a_full_step_that_leaves_the_disk_then_a_shorter_one_resets_the_hits() -> None:
+    """A sphere path near the rim of its disk (radius 0.8), default options: its full
+    Newton step leaves the disk, a shorter one is taken (the boundary
+    hits start again from 0), as the dense reference does, iteration by iteration."""
+    from solvers.newton import NewtonOptions
+
+    m = finsler.get_metric("sphere")
+    paths = _bent(m, 3, 0.2, 15)[:1] * 1.7
+    assert np.max(np.linalg.norm(paths, axis=-1)) < 0.79
+    hist = _follow(m, paths, NewtonOptions(max_iter=12, gtol=1e-9), True, 1.6)
+    assert any(mv and left and a < 1.0 for mv, a, left in hist[0])
+
+
+@pytest.mark.parametrize(("delta0", "delta_max"), [(1e-4, 1e-3), (2e-36, 1e10)])
+def test_hessians_the_shift_ladder_cannot_fix_stall(delta0, delta_max) -> None:
+    """Whole-Hessian shift on Matsumoto paths, two of them indefinite (they need a shift
+    of about 0.12 of the mean diagonal): past ``delta_max`` = 1e-3, or beyond the 40
+    shifts tried per iteration (from delta0 = 2e-36 the 40th is 2e-36 * 8**38 = 0.04),
+    they stop as STALLED at the first iteration with their shift unchanged; the definite
+    ones run on, each as the dense reference."""
+    from solvers.newton import NewtonOptions
+
+    m = finsler.get_metric("matsumoto")
+    opt = NewtonOptions(armijo=0.3, line_steps=3, max_iter=10, gtol=1e-9, delta0=delta0,
+                        delta_max=delta_max)
+    hist = _follow(m, _bent(m, 4, 0.15, 4), opt, False, 2.0)
+    assert [len(h) for h in hist][1:3] == [1, 1] and len(hist[0]) > 1
+
+
+@pytest.mark.parametrize("local", [True, False])
+def test_the_block_solves_get_each_problems_mean_diagonal_as_scale(monkeypatch, local) -> None:
+    """The Hessian's scale handed to the block solve (the size of the local shifts and
+    of the pivot tests) is, per problem, the mean of |diagonal entries| of its Hessian
+    (Matsumoto paths, two of them indefinite: the whole-Hessian ladder solves again for
+    those only, with their own scales)."""
+    import solvers.newton as newton
+    from solvers.backends import backend_for
+
+    calls: list[np.ndarray] = []
+    real = newton.block_tridiagonal_solve
+
+    def spy(ops, diag, off, rhs, scale=None, **kw):
+        calls.append(np.asarray(scale, dtype=float).reshape(-1))
+        return real(ops, diag, off, rhs, scale, **kw)
+
+    m = finsler.get_metric("matsumoto")
+    paths = _bent(m, 4, 0.15, 4)
+    st = newton.NewtonState(m, paths, newton.NewtonOptions(), backend_for(None), 2.0, local)
+    want = np.array([np.mean(np.abs(np.diag(_DenseNewton(m, p, st.opt, local, 2.0).h)))
+                     for p in paths])
+    monkeypatch.setattr(newton, "block_tridiagonal_solve", spy)
+    st.step()
+    np.testing.assert_allclose(calls[0], want, rtol=1e-12)
+    if local:
+        assert len(calls) == 1
+    else:  # the indefinite problems 1 and 2 are solved again, shifted
+        assert len(calls) > 1
+        np.testing.assert_allclose(calls[1], want[[1, 2]], rtol=1e-12)
+
+
+@pytest.mark.parametrize("local", [True, False])
+def test_a_shift_below_1e_12_of_the_diagonal_is_dropped(local) -> None:
+    """Problems starting with a shift of 2.5e-12: after a step it is 2.5e-12 / 3 < 1e-12
+    (divided after progress, or before the factorisation in whole-Hessian mode), and a
+    shift that small is set to 0, as in the reference."""
+    from solvers.newton import NewtonOptions
+
+    m = finsler.get_metric("sphere")
+    hist = _follow(m, _bent(m, 3, 0.1, 5), NewtonOptions(max_iter=2, gtol=1e-9), local,
+                   1.6, delta=2.5e-12)
+    assert all(h[0][0] for h in hist)  # every problem made progress
+
+
+def test_a_geodesic_pressed_against_the_left_side_stays_in_the_box() -> None:
+    """``exp(3 x_0) |v|`` is cheaper to the left: between two points near the side
+    ``x_0 = -1`` the geodesic presses against it. Projected Newton from the chord clamps
+    trial points at the LOWER bound too: every point stays in the box, several lie on the
+    side, and the energy is IPOPT's (the same discrete problem, another method)."""
+    import solvers
+    from solvers.newton import newton_energy
+
+    m = _Tilt(3.0)
+    s, g = np.array([-0.9, -0.8]), np.array([-0.9, 0.8])
+    ref = solvers.solve_geodesic(m, s, g, 16, method="ipopt")
+    assert np.min(ref.points[:, 0]) < -1 + 1e-6  # the side is active
+    t = np.linspace(0.0, 1.0, 17)[:, None]
+    res = newton_energy(m, (s + t * (g - s))[None], scale=2.0)
+    assert res.status[0] == NewtonStatus.CONVERGED
+    assert np.min(res.points[0, :, 0]) >= -1.0 and np.sum(res.points[0, :, 0] == -1.0) >= 3
+    assert res.energy[0] == pytest.approx(ref.energy, rel=1e-8)
