@@ -728,3 +728,120 @@ def test_a_geodesic_pressed_against_the_left_side_stays_in_the_box() -> None:
     assert res.status[0] == NewtonStatus.CONVERGED
     assert np.min(res.points[0, :, 0]) >= -1.0 and np.sum(res.points[0, :, 0] == -1.0) >= 3
     assert res.energy[0] == pytest.approx(ref.energy, rel=1e-8)
+
+
+class _CountingRuns:
+    """Wraps a lowered program: records the rows of every evaluation."""
+
+    def __init__(self, real):
+        self.real, self.rows = real, []
+
+    def run(self, lowering, args):
+        self.rows.append(int(args[0][0].shape[0]))
+        return self.real.run(lowering, args)
+
+
+def _counting_metric(c: float) -> tuple[_Tilt, _CountingRuns]:
+    m = _Tilt(c)
+    spy = _CountingRuns(m.segment_derivatives)
+    m.__dict__["segment_derivatives"] = spy  # the cached property's slot
+    return m, spy
+
+
+@pytest.mark.parametrize("device", [None, "cpu"])
+def test_energy_terms_in_chunks_equal_one_evaluation(device) -> None:
+    """Five paths of 4 segments with ``chunk=8``: numpy evaluates 8 // 4 = 2 paths at a
+    time (2, 2, 1), torch all five at once; the terms equal those of one evaluation of
+    everything (the default chunk) to the last bit on numpy."""
+    from solvers.newton import _to_field, backend_for, energy_terms
+
+    ops = backend_for(device)
+    rng = np.random.default_rng(5)
+    paths = np.linspace([-0.5, 0.1], [0.4, -0.2], 5)[None] + 0.05 * rng.normal(size=(5, 5, 2))
+    m, spy = _counting_metric(0.7)
+    whole = energy_terms(m, ops, _to_field(ops, paths))
+    assert spy.rows == [5]
+    spy.rows.clear()
+    parts = energy_terms(m, ops, _to_field(ops, paths), chunk=8)
+    assert spy.rows == ([5] if device else [2, 2, 1])
+    flat = lambda t: np.concatenate([np.asarray(ops.to_numpy(a)).reshape(-1) for a in (  # noqa: E731
+        t.energy, *t.grad, *(x for r in t.diag for x in r), *(x for r in t.off for x in r))])
+    np.testing.assert_array_equal(flat(parts), flat(whole))
+    lean = energy_terms(m, ops, _to_field(ops, paths), hessian=False)
+    assert lean.diag is None and lean.off is None
+    one = lean.take(ops, np.array([3]))
+    assert one.diag is None and one.off is None
+    np.testing.assert_array_equal(ops.to_numpy(one.energy), ops.to_numpy(whole.energy)[[3]])
+
+
+def test_newton_state_evaluates_in_chunks_of_its_option() -> None:
+    from solvers.backends import backend_for
+    from solvers.newton import NewtonOptions, NewtonState
+
+    m, spy = _counting_metric(0.7)
+    paths = np.linspace([-0.5, 0.1], [0.4, -0.2], 5)[None] + np.zeros((3, 5, 2))
+    paths[:, 1:-1] += 0.03
+    NewtonState(m, paths, NewtonOptions(chunk=8), backend_for(None), 2.0)
+    assert spy.rows == [2, 1]
+
+
+def test_newton_options_refuse_wrong_types_with_a_clear_error() -> None:
+    from finsler.errors import InputError
+    from solvers.newton import NewtonOptions
+
+    for bad in ({"gtol": "1e-10"}, {"armijo": None}):
+        with pytest.raises(InputError, match=f"{next(iter(bad))} must be positive and finite"):
+            NewtonOptions(**bad)
+    for bad in ({"max_iter": 2.5}, {"max_iter": True}, {"line_steps": 10.0}):
+        with pytest.raises(InputError, match=f"{next(iter(bad))} must be a positive integer"):
+            NewtonOptions(**bad)
+    assert NewtonOptions(max_iter=np.int64(3)).max_iter == 3
+
+
+def test_the_newton_state_shifts_locally_by_default_and_shows_chosen_paths() -> None:
+    """A NewtonState made without ``local`` steps as the local one (Matsumoto paths with
+    indefinite Hessians, where the whole-Hessian shift steps elsewhere); ``paths(which)``
+    gives the problems asked for, in that order."""
+    from solvers.backends import backend_for
+    from solvers.newton import NewtonOptions, NewtonState
+
+    m = finsler.get_metric("matsumoto")
+    paths = _bent(m, 4, 0.15, 4)
+    states = [NewtonState(m, paths, NewtonOptions(), backend_for(None), 2.0, *extra)
+              for extra in ((), (True,), (False,))]
+    for st in states:
+        st.step()
+    default, local, whole = (st.paths() for st in states)
+    np.testing.assert_array_equal(default, local)
+    assert np.abs(default - whole).max() > 1e-6
+    np.testing.assert_array_equal(states[0].paths([2, 0]), default[[2, 0]])
+
+
+@dataclass(frozen=True)
+class _Kink(finsler.Metric):
+    """``F = (1 + sqrt|x_0|) |v|``: finite everywhere, its derivative in ``x_0`` is
+    infinite at ``x_0 = 0``."""
+
+    name: ClassVar[str] = "test-kink"
+    task: ClassVar[finsler.Task] = finsler.Task(depth=4, eps=0.5)
+    reversible: ClassVar[bool] = True
+    domain = property(lambda self: finsler.Box((-1.0, -1.0), (1.0, 1.0)))
+
+    def F_sx(self, x: ca.SX, v: ca.SX) -> ca.SX:
+        return (1 + ca.sqrt(ca.fabs(x[0]))) * ca.sqrt(ca.dot(v, v))
+
+
+def test_a_start_with_finite_energy_but_nan_derivatives_is_not_finite() -> None:
+    """The second path has an interior point at ``x_0 = 0`` (infinite derivatives, finite
+    energy): NOT_FINITE at once, no iteration; the first path (no point at x_0 = 0) runs."""
+    from solvers.newton import _NUMPY_OPS, _to_field, energy_terms, newton_energy
+
+    m = _Kink()
+    a = np.array([[-0.6, 0.1], [-0.3, 0.3], [-0.2, 0.5], [-0.1, 0.2]])
+    b = np.array([[-0.6, 0.1], [0.0, 0.3], [0.3, 0.5], [0.5, 0.2]])
+    with np.errstate(all="ignore"):
+        t = energy_terms(m, _NUMPY_OPS, _to_field(_NUMPY_OPS, b[None]))
+    assert np.isfinite(t.energy[0]) and not np.all(np.isfinite(np.stack(t.grad)))
+    res = newton_energy(m, np.stack([a, b]), scale=2.0)
+    assert res.status[1] == NewtonStatus.NOT_FINITE and res.iterations[1] == 0
+    assert res.status[0] != NewtonStatus.NOT_FINITE and res.iterations[0] > 0
