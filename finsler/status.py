@@ -37,7 +37,9 @@ __all__ = [
     "CertifyStatus",
     "CertifyStop",
     "DistanceStatus",
+    "EvalStatus",
     "ExpStatus",
+    "LPStatus",
     "LogStatus",
     "NewtonStatus",
     "Outcome",
@@ -46,8 +48,10 @@ __all__ = [
     "RunAction",
     "RunStatus",
     "RunStop",
+    "SearchStatus",
     "SolverError",
     "Status",
+    "SweepStatus",
     "families",
     "json_ready",
 ]
@@ -99,6 +103,9 @@ class Status(Outcome):
     INTERNAL_ERROR = "Internal_Error"
     TRIVIAL = "Trivial_Start_Equals_Goal"
     SHORT = "Short_Pair_Straight_Segment"
+    GIVEN = "Given_Path"
+    """No solve: the caller gave the path (``CertifyResult.solver_status`` of a certificate
+    of a given path); the path is taken as it is, so it counts as converged."""
     UNKNOWN = "Unknown"
 
     @classmethod
@@ -109,10 +116,22 @@ class Status(Outcome):
                 return s
         return cls.UNKNOWN
 
+    @classmethod
+    def from_label(cls, label: str | Status) -> Status:
+        """The member whose :attr:`label` is ``label`` (``"success"`` -> ``SUCCESS``; a
+        member is returned as it is; ``UNKNOWN`` if unrecognised)."""
+        if isinstance(label, Status):
+            return label
+        for s in cls:
+            if s.label == label:
+                return s
+        return cls.UNKNOWN
+
     @property
     def converged(self) -> bool:
-        """Only a full IPOPT success, or a trivial / short pair, counts as converged."""
-        return self in (Status.SUCCESS, Status.TRIVIAL, Status.SHORT)
+        """Only a full IPOPT success, a trivial / short pair, or a path given by the caller
+        counts as converged."""
+        return self in (Status.SUCCESS, Status.TRIVIAL, Status.SHORT, Status.GIVEN)
 
 
 
@@ -229,7 +248,15 @@ class CertifyStop(str, Outcome):
     MAX_TRIANGLES = "max_triangles"
     """The ``max_triangles`` budget of :class:`solvers.MeshSpec`."""
     NO_REFINEMENT = "no_refinement"
-    """No triangle left to refine."""
+    """No triangle (cell, box) left to refine."""
+    LP_ROUNDS = "lp_rounds"
+    """:func:`solvers.certify_nd`: the LP rounds of the last mesh found no verified bound."""
+    MAX_CELLS = "max_cells"
+    """:func:`solvers.certify_nd`: the ``max_cells`` budget of its mesh."""
+    MAX_BOXES = "max_boxes"
+    """The conformal certificate's ``max_boxes`` budget."""
+    MAX_LIVE = "max_live"
+    """The conformal certificate's ``max_live`` budget (boxes kept at once)."""
     TIME_LIMIT = "time_limit"
     """The caller's wall-clock limit."""
     CORRECTIONS_TOO_LARGE = "corrections_too_large"
@@ -337,10 +364,98 @@ class RunAction(str, Outcome):
         return self in (RunAction.STARTED, RunAction.RESUMED)
 
 
+class LPStatus(str, Outcome):
+    """Status of the last linear (or cone) program of a certificate
+    (``CertifyResult.lp_status``): cvxpy's words, as a ``str`` enum so
+    ``lp_status == "optimal"`` keeps working. ``converged``: the solver returned a
+    potential (``optimal``, or ``optimal_inaccurate``: the certificate rescales the
+    potential by its largest row ratio, so its bound is proven either way)."""
+
+    OPTIMAL = "optimal"
+    OPTIMAL_INACCURATE = "optimal_inaccurate"
+    INFEASIBLE = "infeasible"
+    INFEASIBLE_INACCURATE = "infeasible_inaccurate"
+    UNBOUNDED = "unbounded"
+    UNBOUNDED_INACCURATE = "unbounded_inaccurate"
+    INFEASIBLE_OR_UNBOUNDED = "infeasible_or_unbounded"
+    USER_LIMIT = "user_limit"
+    SOLVER_ERROR = "solver_error"
+    NOT_SOLVED = "not_solved"
+    """No LP was solved (the refinement ended before its first LP, or every LP failed)."""
+    UNKNOWN = "unknown"
+    """A word of the LP solver this enum does not know."""
+
+    __hash__ = str.__hash__
+
+    @classmethod
+    def from_solver(cls, text: str) -> LPStatus:
+        """Map the LP solver's status word to the enum (``UNKNOWN`` if unrecognised)."""
+        try:
+            return cls(str(text))
+        except ValueError:
+            return cls.UNKNOWN
+
+    @property
+    def converged(self) -> bool:
+        return self in (LPStatus.OPTIMAL, LPStatus.OPTIMAL_INACCURATE)
+
+
+class EvalStatus(str, Outcome):
+    """Outcome of evaluating paths on a pair set (``EvalResult.status`` of
+    :func:`learn.policy.evaluate_paths`). ``converged``: every path met the test."""
+
+    SUCCESS = "success"
+    """Every pair's path has every segment cost ``<= eps``."""
+    PARTIAL = "partial"
+    """Some paths have a segment above ``eps`` (``success_rate`` says how many held)."""
+    NOT_FINITE = "not_finite"
+    """Some path's length is not finite (a point outside the domain, a NaN)."""
+
+    __hash__ = str.__hash__
+
+    @property
+    def converged(self) -> bool:
+        return self is EvalStatus.SUCCESS
+
+
+class SearchStatus(str, Outcome):
+    """Outcome of the midpoint search (``SearchResult.status`` of :mod:`learn.search`)."""
+
+    COMPLETED = "completed"
+    """Every path was built to its depth with finite points."""
+    NOT_FINITE = "not_finite"
+    """Some path holds a non-finite point."""
+
+    __hash__ = str.__hash__
+
+    @property
+    def converged(self) -> bool:
+        return self is SearchStatus.COMPLETED
+
+
+class SweepStatus(str, Outcome):
+    """Outcome of a sweep of learning runs (``SweepResult.status`` of
+    :func:`learn.sweep.run_sweep`), from its runs' :class:`RunAction`."""
+
+    COMPLETED = "completed"
+    """Every run is finished (trained here, resumed, or finished before)."""
+    FAILED = "failed"
+    """Some run failed (its error is recorded beside it)."""
+    INTERRUPTED = "interrupted"
+    """Some run was not reached (the sweep was interrupted) and none failed."""
+
+    __hash__ = str.__hash__
+
+    @property
+    def converged(self) -> bool:
+        return self is SweepStatus.COMPLETED
+
+
 def families() -> tuple[type[Outcome], ...]:
     """Every status enum of the toolkit."""
     return (Status, DistanceStatus, ExpStatus, LogStatus, CertifyStatus, NewtonStatus,
-            CertifyStop, PropertyOutcome, RunStop, RunStatus, RunAction)
+            CertifyStop, PropertyOutcome, RunStop, RunStatus, RunAction, LPStatus, EvalStatus,
+            SearchStatus, SweepStatus)
 
 
 # ----------------------------------------------------------------------------------------

@@ -8,6 +8,7 @@ generates paths by ``D`` batched actor calls.
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from importlib import resources
@@ -19,6 +20,7 @@ import torch
 
 import finsler
 from finsler.errors import InputError
+from finsler.status import EvalStatus, Result, json_ready
 from learn.base import LoadedPolicy
 from learn.config import METHODS, TrainConfig
 from learn.loop import load_run, load_weights, read_config_section
@@ -85,8 +87,10 @@ def generate_paths(
 
 
 @dataclass
-class EvalResult:
-    """Section 5.1 evaluation of paths on a pair set."""
+class EvalResult(Result):
+    """Section 5.1 evaluation of paths on a pair set (a :class:`finsler.status.Result`:
+    ``status`` is an :class:`finsler.status.EvalStatus`, ``success`` when every path
+    passed, so ``strict()`` raises unless the success rate is 1)."""
 
     success_rate: float
     """Fraction of pairs whose every segment cost C(p_i, p_{i+1}) <= eps."""
@@ -102,11 +106,22 @@ class EvalResult:
     """(K,) float64."""
     max_segment_cost: np.ndarray = field(repr=False)
     """(K,) float64."""
+    wall_time: float = field(default=0.0, kw_only=True)
+    """Seconds the evaluation took."""
+
+    @property
+    def status(self) -> EvalStatus:  # type: ignore[override]
+        """``not_finite`` if a path's length is not finite, else ``success`` if every path
+        passed, else ``partial``."""
+        if not np.all(np.isfinite(np.asarray(self.length, dtype=np.float64))):
+            return EvalStatus.NOT_FINITE
+        return EvalStatus.SUCCESS if bool(np.all(self.success)) else EvalStatus.PARTIAL
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dict with keys success_rate, mean_length, mean_max_segment_cost,
-        eps, depth and per_pair (list of success, length, max_segment_cost)."""
-        return {
+        eps, depth, status, converged, wall_time and per_pair (list of success, length,
+        max_segment_cost); non-finite numbers are ``None``."""
+        return json_ready({
             "success_rate": float(self.success_rate),
             "mean_length": float(self.mean_length),
             "mean_max_segment_cost": float(self.mean_max_segment_cost),
@@ -116,7 +131,10 @@ class EvalResult:
                 {"success": bool(s), "length": float(length), "max_segment_cost": float(c)}
                 for s, length, c in zip(self.success, self.length, self.max_segment_cost)
             ],
-        }
+            "status": self.status.label,
+            "converged": self.converged,
+            "wall_time": float(self.wall_time),
+        })
 
 
 def evaluate_paths(metric: finsler.Metric, paths: np.ndarray, eps: float) -> EvalResult:
@@ -124,6 +142,7 @@ def evaluate_paths(metric: finsler.Metric, paths: np.ndarray, eps: float) -> Eva
     ``(K, n + 1, dim)``, all in float64."""
     if not (np.isfinite(eps) and eps > 0):
         raise InputError(f"eps must be positive and finite, got {eps!r}")
+    t0 = time.perf_counter()
     paths = np.asarray(paths, dtype=np.float64)
     costs = metric.path_costs(paths)
     mx = costs.max(axis=1)
@@ -139,6 +158,7 @@ def evaluate_paths(metric: finsler.Metric, paths: np.ndarray, eps: float) -> Eva
         success=ok,
         length=length,
         max_segment_cost=mx,
+        wall_time=time.perf_counter() - t0,
     )
 
 

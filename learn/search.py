@@ -44,8 +44,9 @@ counts the evaluations of C per path.
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Callable
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from typing import Any
 
 import numpy as np
@@ -53,6 +54,7 @@ import torch
 
 import finsler
 from finsler.errors import InputError
+from finsler.status import Result, SearchStatus, json_ready
 from learn.tree import build_tree
 
 __all__ = ["SearchResult", "SearchSpec", "equalize_paths", "search_paths"]
@@ -120,12 +122,30 @@ class SearchSpec:
 
 
 @dataclass
-class SearchResult:
-    """Paths ``(K, 2**D + 1, dim)`` float64 and the evaluations of C the search made."""
+class SearchResult(Result):
+    """Paths ``(K, 2**D + 1, dim)`` float64 and the evaluations of C the search made (a
+    :class:`finsler.status.Result`: ``status`` is a :class:`finsler.status.SearchStatus`,
+    ``completed`` when every point is finite)."""
 
     paths: np.ndarray
     evaluations: int
     """Evaluations of C (values only) over all pairs."""
+    wall_time: float = field(default=0.0, kw_only=True)
+    """Seconds the search took."""
+
+    @property
+    def status(self) -> SearchStatus:  # type: ignore[override]
+        """``completed``, or ``not_finite`` if a path holds a non-finite point."""
+        finite = bool(np.all(np.isfinite(np.asarray(self.paths, dtype=np.float64))))
+        return SearchStatus.COMPLETED if finite else SearchStatus.NOT_FINITE
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready dict: paths (lists; non-finite points ``None``), evaluations,
+        evaluations_per_path, status, converged, wall_time."""
+        return json_ready({"paths": self.paths, "evaluations": int(self.evaluations),
+                           "evaluations_per_path": self.evaluations_per_path,
+                           "status": self.status.label, "converged": self.converged,
+                           "wall_time": float(self.wall_time)})
 
     @property
     def evaluations_per_path(self) -> float:
@@ -363,6 +383,7 @@ def search_paths(metric: finsler.Metric, predict: Predict, starts: torch.Tensor,
     per_pair = 3 * spec.candidates * (2**depth + 2 ** min(spec.levels, depth) + 1) * dim
     chunk = max(1, CHUNK_FLOATS // max(per_pair, 1))
     out, evals = [], 0
+    t0 = time.perf_counter()
     with torch.no_grad():
         for i in range(0, k, chunk):
             p, e = _search_chunk(metric, predict, starts[i:i + chunk].to(torch.float64),
@@ -370,4 +391,5 @@ def search_paths(metric: finsler.Metric, predict: Predict, starts: torch.Tensor,
                                  spec)
             out.append(p)
             evals += e
-    return SearchResult(torch.cat(out).cpu().numpy(), evals)
+    return SearchResult(torch.cat(out).cpu().numpy(), evals,
+                        wall_time=time.perf_counter() - t0)

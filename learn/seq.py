@@ -29,6 +29,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import random
+import time
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -340,6 +341,7 @@ def evaluate_seq(act: Any, metric: finsler.Metric, pairs: np.ndarray, eps: float
         raise InputError(f"depth must be a non-negative integer, got {depth!r}")
     if not (np.isfinite(eps) and eps > 0):
         raise InputError(f"eps must be positive and finite, got {eps!r}")
+    t0 = time.perf_counter()
     n = 2 ** int(depth)
     pts, reached_at = rollout(act, metric, pairs[:, 0], pairs[:, 1], float(eps), n)
     paths = _paths_from_rollout(pts, reached_at, pairs[:, 1], n)
@@ -361,6 +363,7 @@ def evaluate_seq(act: Any, metric: finsler.Metric, pairs: np.ndarray, eps: float
         reached=reached_at >= 0,
         steps=steps,
         strict_success=mx <= eps,
+        wall_time=time.perf_counter() - t0,
     )
     return res, paths
 

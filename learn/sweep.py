@@ -42,7 +42,7 @@ from typing import Any
 
 from finsler.errors import InputError
 from finsler.infra.cluster import connect_ray
-from finsler.status import RunAction, RunStatus
+from finsler.status import Result, RunAction, RunStatus, SweepStatus, json_ready
 from learn.registry import find_variant, get_method
 from learn.runs import VARIANTS, load_run_config, make_config, run_one, run_status
 from learn.storage import (
@@ -260,8 +260,10 @@ class RunOutcome:
 
 
 @dataclass
-class SweepResult:
-    """All outcomes of :func:`run_sweep`, in the plan's order."""
+class SweepResult(Result):
+    """All outcomes of :func:`run_sweep`, in the plan's order (a
+    :class:`finsler.status.Result`: ``status`` is a :class:`finsler.status.SweepStatus`
+    from the runs' actions, ``wall_time`` is ``seconds``)."""
 
     plan: SweepPlan
     out: Path
@@ -273,8 +275,30 @@ class SweepResult:
     def failed(self) -> list[RunOutcome]:
         return [o for o in self.outcomes if o.action is RunAction.FAILED]
 
+    @property
+    def status(self) -> SweepStatus:  # type: ignore[override]
+        """``failed`` if a run failed, else ``interrupted`` if a run was not reached, else
+        ``completed``."""
+        if self.failed:
+            return SweepStatus.FAILED
+        if any(o.action is RunAction.PENDING for o in self.outcomes):
+            return SweepStatus.INTERRUPTED
+        return SweepStatus.COMPLETED
+
+    @property
+    def wall_time(self) -> float:
+        """Seconds of the whole sweep (``seconds``)."""
+        return float(self.seconds)
+
     def rows(self) -> list[dict[str, Any]]:
         return [o.row() for o in self.outcomes]
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready dict: out, backend, status, converged, wall_time and one row per run
+        (:meth:`RunOutcome.row`)."""
+        return json_ready({"out": str(self.out), "backend": self.backend,
+                           "status": self.status.label, "converged": self.converged,
+                           "wall_time": self.wall_time, "runs": self.rows()})
 
 
 def _write_sweep_json(out: Path, plan: SweepPlan, backend: dict[str, Any],

@@ -72,7 +72,7 @@ from finsler.infra.limits import check_memory
 from finsler.intervals import Interval, enclose, isqrt
 from finsler.lowering import LoweredFunction, lower
 from finsler.metric import Metric
-from finsler.status import Result
+from finsler.status import LPStatus, Result, Status, json_ready
 from solvers.certify_lp import INITIAL_DIRECTIONS as INITIAL_DIRECTIONS
 from solvers.certify_lp import LP_SOLVER, LPFailure, _initial_modes, _solve_lp
 from solvers.certify_lp import TIGHT_DUAL as TIGHT_DUAL
@@ -200,7 +200,9 @@ class CertifyResult(Result):
     says the same in the toolkit's one family of statuses: a failure of the refinement (an
     LP solver failure, corrections that do not shrink) is a status with the best interval
     proven so far (lower bound 0 if none) and ``message``, never an exception.
-    ``solver_status`` is the label of the upper-bound solve's status (or ``given``).
+    ``solver_status`` is the upper-bound solve's :class:`solvers.Status` (``Status.GIVEN``
+    for a given path; its label, e.g. ``"success"``, in JSON) and ``lp_status`` the last
+    LP's :class:`finsler.status.LPStatus` (a ``str`` enum of cvxpy's words).
     """
 
     metric: str
@@ -220,12 +222,12 @@ class CertifyResult(Result):
     directions: int
     lp_rows: int
     lp_rows_total: int
-    lp_status: str
+    lp_status: LPStatus
     lp_solver: str
     max_row_ratio: float
     convexity: str
     convexity_note: str
-    solver_status: str
+    solver_status: Status
     mesh: dict[str, Any]
     times: dict[str, float]
     rounds: list[dict[str, Any]] = field(default_factory=list)
@@ -235,7 +237,10 @@ class CertifyResult(Result):
     message: str = ""
 
     def __post_init__(self) -> None:
-        self.stopped_by = CertifyStop(self.stopped_by)  # a member of the status family
+        # members of the status family (words, as before, are accepted and converted)
+        self.stopped_by = CertifyStop(self.stopped_by)
+        self.lp_status = LPStatus.from_solver(self.lp_status)
+        self.solver_status = Status.from_label(self.solver_status)
 
     @property
     def wall_time(self) -> float:
@@ -261,9 +266,7 @@ class CertifyResult(Result):
             val = getattr(self, f.name)
             if f.name == "path" and not with_path:
                 continue
-            if isinstance(val, np.ndarray):
-                val = val.tolist()
-            out[f.name] = val.label if isinstance(val, (CertifyStatus, CertifyStop)) else val
+            out[f.name] = json_ready(val)  # labels, lists, non-finite floats as None
         return out
 
 
@@ -607,7 +610,7 @@ def certify(
         n = spec.segments if spec.segments is not None else 4 * m.task.segments
         sol = solve_geodesic(m, s, g, n)
         pts = np.asarray(sol.points, float)
-        solver_status = sol.status.label
+        solver_status = sol.status
     else:
         pts = np.array(path, dtype=np.float64)
         if pts.ndim != 2 or pts.shape[1] != 2 or pts.shape[0] < 2:
@@ -616,7 +619,7 @@ def certify(
                 and np.allclose(pts[-1], g, rtol=0, atol=1e-12)):
             raise InputError("path must run from start to goal")
         m.domain.check(pts, "path")
-        solver_status = "given"
+        solver_status = Status.GIVEN
     est = m.path_length_error(pts)
     solver_upper = m.path_length_bounds(pts).upper
     upper, upper_source, upper_path = solver_upper, "path", pts

@@ -71,7 +71,7 @@ from finsler.errors import InputError
 from finsler.intervals import Interval, enclose
 from finsler.lowering import LoweredFunction, lower
 from finsler.metric import Metric
-from finsler.status import Result
+from finsler.status import CertifyStop, LPStatus, Result, Status
 from solvers.inputs import as_metric
 from solvers.status import CertifyStatus
 
@@ -176,9 +176,9 @@ class ConformalCertifyResult(Result):
     momentum: float
     cone_programs: int
     scale: float
-    lp_status: str
-    solver_status: str
-    stopped_by: str
+    lp_status: LPStatus
+    solver_status: Status
+    stopped_by: CertifyStop
     status: CertifyStatus
     message: str
     method: str
@@ -186,6 +186,12 @@ class ConformalCertifyResult(Result):
     times: dict[str, float]
     wall_time: float
     path: np.ndarray = field(repr=False)
+
+    def __post_init__(self) -> None:
+        # members of the status family (the words, as before, are accepted and converted)
+        self.stopped_by = CertifyStop(self.stopped_by)
+        self.lp_status = LPStatus.from_solver(self.lp_status)
+        self.solver_status = Status.from_label(self.solver_status)
 
     def to_dict(self, with_path: bool = False) -> dict[str, Any]:
         out = super().to_dict()

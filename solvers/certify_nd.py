@@ -46,7 +46,7 @@ import numpy as np
 
 from finsler.errors import InputError
 from finsler.metric import Metric
-from finsler.status import Result
+from finsler.status import CertifyStop, LPStatus, Result, Status, json_ready
 from solvers.certify_nd_parts import (
     LP_SOLVER,
     Cells,
@@ -147,19 +147,30 @@ class NDResult(Result):
     vertices: int
     directions: int
     lp_rows: int
-    lp_status: str
+    lp_status: LPStatus
     lp_solver: str
     verified_ratio: float
     scale_bound: float
-    solver_status: str
+    solver_status: Status
     rigour: dict[str, str]
     mesh: dict[str, Any]
     times: dict[str, float]
     rounds: list[dict[str, Any]] = field(default_factory=list)
     path: np.ndarray | None = None
-    stopped_by: str = "target_gap"
+    stopped_by: CertifyStop = CertifyStop.TARGET_GAP
     status: CertifyStatus = CertifyStatus.CERTIFIED
     message: str = ""
+
+    def __post_init__(self) -> None:
+        # members of the status family (the words, as before, are accepted and converted)
+        self.stopped_by = CertifyStop(self.stopped_by)
+        self.lp_status = LPStatus.from_solver(self.lp_status)
+        self.solver_status = Status.from_label(self.solver_status)
+
+    @property
+    def wall_time(self) -> float:
+        """Seconds of the whole certificate (``times["total"]``)."""
+        return float(self.times.get("total", 0.0))
 
     @property
     def converged(self) -> bool:
@@ -176,9 +187,7 @@ class NDResult(Result):
             val = getattr(self, f.name)
             if f.name == "path" and not with_path:
                 continue
-            if isinstance(val, np.ndarray):
-                val = val.tolist()
-            out[f.name] = val.label if isinstance(val, CertifyStatus) else val
+            out[f.name] = json_ready(val)  # labels, lists, non-finite floats as None
         return out
 
 

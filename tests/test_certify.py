@@ -18,7 +18,7 @@ from typer.testing import CliRunner
 
 import finsler
 from finsler.errors import InputError
-from solvers import CertifyResult, CertifyStatus, MeshSpec, certify
+from solvers import CertifyResult, CertifyStatus, MeshSpec, Status, certify
 from validation.cli import app
 
 runner = CliRunner()
@@ -73,7 +73,7 @@ def test_solver_path_upper_bound_and_default_gap_poincare() -> None:
     r = certify(m, s, g, MeshSpec(h_path=0.1, directions=64, target_gap=1e-2))
     assert r.lower <= exact <= r.upper
     assert r.gap <= 1e-2
-    assert r.solver_status == "success"
+    assert r.solver_status is Status.SUCCESS and r.to_dict()["solver_status"] == "success"
     assert r.status is CertifyStatus.CERTIFIED and r.converged
     assert r.convexity == "convex"
     assert r.upper - exact < 1e-4 * exact  # the solver's path is near the geodesic

@@ -156,3 +156,143 @@ def test_strict_in_solve_batch(results: dict[str, Any], monkeypatch: pytest.Monk
     with pytest.raises(SolverError, match="1 of 1 pairs did not converge") as err:
         solvers.solve_batch(m, pairs, 8, progress=False, strict=True)
     assert err.value.result == [bad]
+
+
+# ----------------------------------------------------------------------------------------
+# every public *Result / *Report class of the packages, found by walking their modules
+# ----------------------------------------------------------------------------------------
+PACKAGES = ("finsler", "solvers", "learn", "validation")
+
+
+def _public_result_classes(packages: tuple[str, ...] = PACKAGES) -> dict[str, type]:
+    """``module.Class`` -> class for every public class named ``*Result`` / ``*Report``
+    defined in a module of ``packages`` (private modules and names skipped)."""
+    import importlib
+    import pkgutil
+    import warnings
+
+    found: dict[str, type] = {}
+    for pkg_name in packages:
+        pkg = importlib.import_module(pkg_name)
+        for info in pkgutil.walk_packages(pkg.__path__, prefix=f"{pkg_name}."):
+            if any(part.startswith("_") for part in info.name.split(".")):
+                continue
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", DeprecationWarning)  # moved-module aliases
+                mod = importlib.import_module(info.name)
+            for name, obj in vars(mod).items():
+                if (isinstance(obj, type) and not name.startswith("_")
+                        and name.endswith(("Result", "Report"))
+                        and obj.__module__ == mod.__name__ and obj is not Result):
+                    found[f"{obj.__module__}.{name}"] = obj
+    return found
+
+
+def _not_on_the_base(classes: dict[str, type]) -> list[str]:
+    return sorted(k for k, c in classes.items() if not issubclass(c, Result))
+
+
+def test_every_public_result_class_derives_from_the_base() -> None:
+    classes = _public_result_classes()
+    # the walk finds the types of every package (not an empty scan that passes)
+    for name in ("solvers.certify.CertifyResult", "learn.policy.EvalResult",
+                 "learn.sweep.SweepResult", "validation.testing.engine.CheckReport",
+                 "validation.propositions.Lemma1Report"):
+        assert name in classes, name
+    assert _not_on_the_base(classes) == []
+    for name, cls in classes.items():
+        for attr in ("status", "converged", "wall_time", "to_dict", "strict"):
+            assert hasattr(cls, attr) or attr in getattr(cls, "__dataclass_fields__", {}), (
+                name, attr)
+
+
+def test_the_walk_catches_a_result_off_the_base(tmp_path: Any,
+                                                monkeypatch: pytest.MonkeyPatch) -> None:
+    # a package with one result type that does not derive from the base is reported
+    pkg = tmp_path / "offbase_pkg"
+    pkg.mkdir()
+    (pkg / "__init__.py").write_text("")
+    (pkg / "mod.py").write_text("class LooseResult:\n    status = 'passed'\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    assert _not_on_the_base(_public_result_classes(("offbase_pkg",))) == [
+        "offbase_pkg.mod.LooseResult"]
+
+
+def _learn_and_validation_results() -> dict[str, Any]:
+    """One result of each learn / validation type, built directly (cheap)."""
+    from learn.policy import EvalResult
+    from learn.search import SearchResult
+    from validation.propositions import Prop1Result
+    from validation.testing.engine import CheckReport, PropertyResult
+
+    ok = np.array([True, True])
+    ev = EvalResult(1.0, 2.0, 0.1, 0.2, 3, ok, np.array([1.0, 3.0]), np.array([0.1, 0.1]),
+                    wall_time=0.5)
+    prop = PropertyResult("p", "claim", "passed", tried=4, passed=4, seconds=0.25)
+    return {
+        "EvalResult": ev,
+        "SearchResult": SearchResult(np.zeros((2, 3, 2)), 12, wall_time=0.1),
+        "PropertyResult": prop,
+        "CheckReport": CheckReport("m", {}, 0, 4, [prop], seconds=0.3),
+        "Prop1Result": Prop1Result("m", np.zeros(2), np.ones(2), np.array([0.1, 0.01]),
+                                   np.array([1.1, 1.01]), np.array([0.1, 0.01]), 1.0, 1.0),
+    }
+
+
+def test_learn_and_validation_results_share_the_shape() -> None:
+    from finsler.status import EvalStatus, SearchStatus
+
+    res = _learn_and_validation_results()
+    for kind, r in res.items():
+        assert isinstance(r, Result) and r.converged, kind
+        assert r.strict() is r
+        d = r.to_dict()
+        assert json.loads(json.dumps(d, allow_nan=False)) == d, kind
+        assert d["status"] == r.status.label and d["converged"] is True, kind
+    assert res["EvalResult"].status is EvalStatus.SUCCESS
+    assert res["SearchResult"].status is SearchStatus.COMPLETED
+    assert res["CheckReport"].wall_time == 0.3 and res["PropertyResult"].wall_time == 0.25
+
+
+def test_learn_and_validation_results_raise_when_not_converged() -> None:
+    from finsler.status import EvalStatus, SearchStatus
+
+    res = _learn_and_validation_results()
+    ev = dataclasses.replace(res["EvalResult"], success=np.array([True, False]),
+                             length=np.array([1.0, np.inf]))
+    assert ev.status is EvalStatus.NOT_FINITE
+    d = ev.to_dict()
+    assert d["per_pair"][1]["length"] is None  # standard JSON: no Infinity
+    json.dumps(d, allow_nan=False)
+    partial = dataclasses.replace(res["EvalResult"], success=np.array([True, False]))
+    assert partial.status is EvalStatus.PARTIAL
+    paths = np.zeros((2, 3, 2))
+    paths[1, 1, 0] = np.nan
+    bad_search = dataclasses.replace(res["SearchResult"], paths=paths)
+    assert bad_search.status is SearchStatus.NOT_FINITE
+    json.dumps(bad_search.to_dict(), allow_nan=False)
+    failed = dataclasses.replace(res["PropertyResult"], status="failed")
+    report = dataclasses.replace(res["CheckReport"], results=[failed])
+    assert report.status is PropertyOutcome.FAILED
+    inconclusive = dataclasses.replace(res["PropertyResult"], status="inconclusive")
+    assert dataclasses.replace(res["CheckReport"], results=[inconclusive]).status \
+        is PropertyOutcome.INCONCLUSIVE
+    farther = dataclasses.replace(res["Prop1Result"], ratio=np.array([1.01, 1.1]))
+    assert farther.status is PropertyOutcome.FAILED
+    for bad in (ev, partial, bad_search, failed, report, farther):
+        with pytest.raises(SolverError, match=bad.status.label):
+            bad.strict()
+
+
+def test_certify_statuses_are_members(results: dict[str, Any]) -> None:
+    from finsler.status import LPStatus
+
+    res = results["CertifyResult"]
+    assert res.solver_status is Status.SUCCESS
+    assert res.lp_status is LPStatus.OPTIMAL and res.lp_status == "optimal"
+    d = res.to_dict()
+    assert d["solver_status"] == "success" and d["lp_status"] == "optimal"
+    m = finsler.get_metric("poincare")
+    s, g = PAIR
+    given = solvers.certify(m, s, g, LOOSE, path=np.linspace(s, g, 9))
+    assert given.solver_status is Status.GIVEN and given.to_dict()["solver_status"] == "given"

@@ -60,11 +60,12 @@ def test_shared_names_mean_the_same() -> None:
 def test_public_api_exports_the_family() -> None:
     for family in families():
         assert getattr(finsler.status, family.__name__) is family  # the ground layer
-        if family.__name__ not in ("NewtonStatus", "CertifyStop", "PropertyOutcome",
-                                   "RunStop", "RunStatus", "RunAction"):
-            # NewtonStatus is internal to the batched solver; CertifyStop comes with a
-            # CertifyResult, PropertyOutcome with the property suite, the Run* families
-            # with learn's runs (exported by learn)
+        if family.__name__ not in ("NewtonStatus", "CertifyStop", "LPStatus",
+                                   "PropertyOutcome", "RunStop", "RunStatus", "RunAction",
+                                   "EvalStatus", "SearchStatus", "SweepStatus"):
+            # NewtonStatus is internal to the batched solver; CertifyStop and LPStatus come
+            # with a CertifyResult, PropertyOutcome with the property suite, the Run*,
+            # Eval, Search and Sweep families with learn's results
             assert getattr(solvers, family.__name__) is family
     assert solvers.Status.from_ipopt("Solve_Succeeded") is solvers.Status.SUCCESS
     assert solvers.Status.SUCCESS.label == "success"

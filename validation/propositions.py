@@ -19,6 +19,7 @@ holds with the grid's best approximate midpoint in place of the true one (see
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
@@ -29,11 +30,13 @@ from scipy.spatial import ConvexHull
 
 from finsler import Metric
 from finsler.errors import InputError
+from finsler.status import PropertyOutcome, Result
 
 __all__ = [
     "GridDP",
     "Lemma1Report",
     "Prop1Result",
+    "Remark3Result",
     "check_lemma1",
     "convexified_F",
     "format_table",
@@ -280,8 +283,10 @@ def proposition2_table(
 # Lemma 1 items 3 and 4 on a grid
 # ----------------------------------------------------------------------------------------
 @dataclass
-class Lemma1Report:
+class Lemma1Report(Result):
     """Worst slack of Lemma 1's bounds over all iterations and thresholds (<= 0: holds).
+    A :class:`finsler.status.Result`: ``status`` is ``passed`` if :attr:`holds`, else
+    ``failed`` (:class:`finsler.status.PropertyOutcome`).
 
     ``item3[i][k]``: ``max_{V_i < delta_k} (d/V_i - 1) - eps_0(delta_k)``, where
     ``eps_0(delta) = max_{V_0 < delta} (d/V_0 - 1)`` (eq. 34 -> 35).
@@ -298,6 +303,12 @@ class Lemma1Report:
     item4: list[list[float]]
     eps: list[list[float]]
     grid_defect: list[float]
+    wall_time: float = field(default=0.0, kw_only=True)
+    """Seconds the check took."""
+
+    @property
+    def status(self) -> PropertyOutcome:  # type: ignore[override]
+        return PropertyOutcome.PASSED if self.holds else PropertyOutcome.FAILED
 
     @property
     def holds(self) -> bool:
@@ -320,6 +331,7 @@ def _dtilde(d: np.ndarray, delta: float, chunk_bytes: float = 64e6) -> np.ndarra
 def check_lemma1(dp: GridDP, d: np.ndarray, deltas: list[float]) -> Lemma1Report:
     """Check Lemma 1 items 3 and 4 at every iteration of ``dp`` on its grid, for each
     threshold ``delta``, against the exact grid distances ``d (G, G)``."""
+    t0 = time.perf_counter()
     off = ~np.eye(d.shape[0], dtype=bool)
     item3, item4, eps_all = [], [], []
     dts = [_dtilde(d, dl) for dl in deltas]
@@ -345,7 +357,8 @@ def check_lemma1(dp: GridDP, d: np.ndarray, deltas: list[float]) -> Lemma1Report
         if r4:
             item4.append(r4)
         eps_all.append(re)
-    return Lemma1Report(list(map(float, deltas)), item3, item4, eps_all, defect)
+    return Lemma1Report(list(map(float, deltas)), item3, item4, eps_all, defect,
+                        wall_time=time.perf_counter() - t0)
 
 
 # ----------------------------------------------------------------------------------------
@@ -357,8 +370,9 @@ def remark3_f(h: np.ndarray) -> np.ndarray:
 
 
 @dataclass
-class Remark3Result:
-    """Remark 3 on a grid with ``C = f o d``.
+class Remark3Result(Result):
+    """Remark 3 on a grid with ``C = f o d`` (a :class:`finsler.status.Result`: ``status``
+    is ``passed`` if the remark's claim ``stays`` holds, else ``failed``).
 
     ``sum_rule``: the eq.-(13) DP; ``stays``: ``V_i == C`` and ``pi_i(x, y) == x`` for all
     pairs and iterations; ``x_in_argmin_gap``: the largest amount by which ``z = x``
@@ -372,11 +386,18 @@ class Remark3Result:
     x_in_argmin_gap: float
     gap_to_d: float
     squared_rule_err: list[float] = field(default_factory=list)
+    wall_time: float = field(default=0.0, kw_only=True)
+    """Seconds the two DPs took."""
+
+    @property
+    def status(self) -> PropertyOutcome:  # type: ignore[override]
+        return PropertyOutcome.PASSED if self.stays else PropertyOutcome.FAILED
 
 
 def remark3(metric: Metric, n: int = 15, iterations: int = 4) -> Remark3Result:
     """Run Remark 3's counterexample (eq. 13 with ``C = f o d``) and, for contrast, the
     eq.-(10) DP from the same ``V_0``."""
+    t0 = time.perf_counter()
     pts = grid_points(metric, n)
     d = grid_distance(metric, pts)
     c = remark3_f(d)
@@ -393,7 +414,7 @@ def remark3(metric: Metric, n: int = 15, iterations: int = 4) -> Remark3Result:
     sq = run_grid_dp(None, iterations=iterations, rule="squared", points=pts, cost=c)
     mask = d >= d.max() / 3
     errs = [float((np.abs(v - d)[mask] / d[mask]).max()) for v in sq.V]
-    return Remark3Result(dp, stays, gap, gap_to_d, errs)
+    return Remark3Result(dp, stays, gap, gap_to_d, errs, wall_time=time.perf_counter() - t0)
 
 
 # ----------------------------------------------------------------------------------------
@@ -455,8 +476,11 @@ def two_segment_distance(
 # Proposition 1: C/d -> 1, its rate, and its failure without convexity
 # ----------------------------------------------------------------------------------------
 @dataclass
-class Prop1Result:
-    """``C(x, x + t u) / d(x, x + t u)`` for shrinking ``t``.
+class Prop1Result(Result):
+    """``C(x, x + t u) / d(x, x + t u)`` for shrinking ``t`` (a
+    :class:`finsler.status.Result`: ``status`` is ``passed`` if every ratio is finite and
+    the ratio at the smallest ``t`` is no farther from ``limit`` than at the largest,
+    ``failed`` if it is farther, ``inconclusive`` if a ratio is not finite).
 
     ``t (K,)``, ``ratio (K,)``, ``err = |ratio - 1|``; ``rate``: least-squares slope of
     ``log err`` against ``log t`` (``nan`` where ``err`` is at rounding level: ``C = d``);
@@ -471,6 +495,19 @@ class Prop1Result:
     err: np.ndarray
     rate: float
     limit: float
+    wall_time: float = field(default=0.0, kw_only=True)
+    """Seconds the measurement took."""
+
+    @property
+    def status(self) -> PropertyOutcome:  # type: ignore[override]
+        ratio = np.asarray(self.ratio, dtype=np.float64)
+        if ratio.size == 0 or not np.all(np.isfinite(ratio)):
+            return PropertyOutcome.INCONCLUSIVE
+        t = np.asarray(self.t, dtype=np.float64)
+        small_t = abs(ratio[int(np.argmin(t))] - self.limit)
+        large_t = abs(ratio[int(np.argmax(t))] - self.limit)
+        ok = small_t <= large_t + 1e-12 * abs(self.limit)  # rounding level: C = d
+        return PropertyOutcome.PASSED if ok else PropertyOutcome.FAILED
 
 
 def _slope(t: np.ndarray, e: np.ndarray) -> float:
@@ -489,6 +526,7 @@ def proposition1_rate(
 ) -> Prop1Result:
     """Measure ``C(x, y)/d(x, y) -> 1`` along ``y = x + t u``. ``d`` is the closed form if the
     metric has one, else ``distance(x, y)`` (default: :func:`polygon_distance`)."""
+    t0 = time.perf_counter()
     x = np.asarray(x, float).reshape(-1)
     u = np.asarray(u, float).reshape(-1)
     ts = np.asarray(ts, float)
@@ -502,7 +540,8 @@ def proposition1_rate(
         d = np.array([fn(x, y) for y in ys])
     ratio = c / d
     err = np.abs(ratio - 1.0)
-    return Prop1Result(metric.name, x, u, ts, ratio, err, _slope(ts, err), 1.0)
+    return Prop1Result(metric.name, x, u, ts, ratio, err, _slope(ts, err), 1.0,
+                       wall_time=time.perf_counter() - t0)
 
 
 def convexified_F(metric: Metric, x: np.ndarray, v: np.ndarray, n_angles: int = 4096) -> np.ndarray:
@@ -541,6 +580,7 @@ def proposition1_nonconvex(metric: Metric, x: np.ndarray, ts: np.ndarray) -> Pro
     exceeds its convexification most, ``C/d`` does not tend to 1 but to ``F/F** > 1``. ``d`` is
     bounded above by the best two-segment zig-zag (:func:`two_segment_distance`), so the
     reported ``ratio`` is a lower bound of ``C/d``; ``limit`` is the predicted ``F/F**``."""
+    t0 = time.perf_counter()
     u, lim = nonconvex_direction(metric, x)
     x = np.asarray(x, float).reshape(2)
     ts = np.asarray(ts, float)
@@ -550,7 +590,8 @@ def proposition1_nonconvex(metric: Metric, x: np.ndarray, ts: np.ndarray) -> Pro
     d_up = np.array([two_segment_distance(metric, x, y) for y in ys])
     ratio = c / d_up
     err = np.abs(ratio - 1.0)
-    return Prop1Result(metric.name, x, u, ts, ratio, err, _slope(ts, np.abs(ratio - lim)), lim)
+    return Prop1Result(metric.name, x, u, ts, ratio, err, _slope(ts, np.abs(ratio - lim)), lim,
+                       wall_time=time.perf_counter() - t0)
 
 
 def _fmt(x: float) -> str:

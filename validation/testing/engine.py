@@ -30,7 +30,7 @@ from hypothesis.errors import NoSuchExample, Unsatisfiable
 from hypothesis.strategies import SearchStrategy
 
 from finsler.errors import InputError
-from finsler.status import PropertyOutcome
+from finsler.status import PropertyOutcome, Result
 from validation.jsonout import jsonable as _jsonable
 from validation.text import text_table
 
@@ -105,8 +105,10 @@ class Verdict:
 
 
 @dataclass
-class PropertyResult:
-    """What one property found.
+class PropertyResult(Result):
+    """What one property found (a :class:`finsler.status.Result`: ``converged`` when the
+    property holds where it applies, ``passed`` or ``mapped``; ``wall_time`` is
+    ``seconds``).
 
     ``status``: ``passed`` (no counterexample among ``tried`` examples), ``failed`` (a
     counterexample, shrunk), ``inconclusive`` (no counterexample, but ``inconclusive`` of
@@ -148,6 +150,11 @@ class PropertyResult:
         except ValueError:
             raise InputError(f"unknown property status {self.status!r}; choose one of "
                              f"{', '.join(o.value for o in PropertyOutcome)}") from None
+
+    @property
+    def wall_time(self) -> float:
+        """Seconds spent checking the property (``seconds``)."""
+        return float(self.seconds)
 
     @property
     def ok(self) -> bool:
@@ -211,14 +218,18 @@ class PropertyResult:
                 "inconclusive": self.inconclusive, "needs": list(self.needs),
                 "warnings": list(self.warnings),
                 "shrink_evaluations": self.shrink_evaluations,
-                "shrink_limited": self.shrink_limited, "seconds": round(self.seconds, 3)}
+                "shrink_limited": self.shrink_limited, "seconds": round(self.seconds, 3),
+                "converged": self.converged}  # the wall time is "seconds"
 
 
 @dataclass
-class CheckReport:
+class CheckReport(Result):
     """Every property checked on one metric (and policy): :meth:`table` for people,
     :meth:`to_dict` for JSON; ``ok`` is False if any property failed (inconclusive
-    results are not failures: :meth:`exit_code` with ``strict`` counts them)."""
+    results are not failures: :meth:`exit_code` with ``strict`` counts them).
+    ``status`` (a :class:`finsler.status.PropertyOutcome`): ``failed`` if a property
+    failed, else ``inconclusive`` if one was, else ``passed``; ``converged`` is then
+    ``exit_code(strict=True) == 0``, and ``wall_time`` is ``seconds``."""
 
     metric: str
     params: dict[str, Any]
@@ -231,6 +242,18 @@ class CheckReport:
     @property
     def ok(self) -> bool:
         return all(r.ok for r in self.results)
+
+    @property
+    def status(self) -> PropertyOutcome:  # type: ignore[override]
+        """``failed``, ``inconclusive`` or ``passed``: the report as one outcome."""
+        if not self.ok:
+            return FAILED
+        return INCONCLUSIVE if self.inconclusive else PASSED
+
+    @property
+    def wall_time(self) -> float:
+        """Seconds spent on the whole report (``seconds``)."""
+        return float(self.seconds)
 
     @property
     def failed(self) -> list[PropertyResult]:
@@ -303,6 +326,7 @@ class CheckReport:
                 "inconclusive": [r.name for r in self.inconclusive],
                 "not_run": [r.name for r in self.not_run],
                 "summary": self.summary(), "seconds": round(self.seconds, 3),
+                "status": self.status.label, "converged": self.converged,
                 "properties": [r.to_dict() for r in self.results]}
 
 
