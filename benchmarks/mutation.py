@@ -48,6 +48,13 @@ GROUPS: dict[str, tuple[list[str], list[str]]] = {
     "testing": (["validation/testing/"], ["tests/test_metric_properties.py",
                                           "tests/test_check.py"]),
 }
+#: the property suite one module at a time, each against its own fast kill tests
+#: (``testing_engine``, ``testing_metric``, ...): small runs that can be spread; the score
+#: of validation/testing/ is the sum over these groups
+TESTING_MODULES = ["engine", "metric", "distance", "regions", "policy", "suite", "cases"]
+GROUPS.update({f"testing_{m}": ([f"validation/testing/{m}.py"],
+                                [f"tests/test_mutation_kills_testing_{m}.py"])
+               for m in TESTING_MODULES})
 #: extra pytest arguments of a group's selection: test_newton.py's dense block solves
 #: (two minutes, and tests/test_block_tridiagonal.py's job) call nothing of these modules
 SELECT = {"newton": ["-k", "not block_tridiagonal_solve_matches_dense"],
