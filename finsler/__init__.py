@@ -23,7 +23,7 @@ if TYPE_CHECKING:
         atomic_write_text,
         check_output_path,
     )
-    from finsler.metric import LengthBounds, LengthEstimate, Metric, Task
+    from finsler.metric import LengthBounds, LengthEstimate, Metric, Task, TrainingSettings
     from finsler.metrics import (
         MATSUMOTO_CONVEX_RADIUS,
         CarLike,
@@ -79,6 +79,7 @@ _LAZY = {
     "Randers": "finsler.metrics",
     "Sphere": "finsler.metrics",
     "Task": "finsler.metric",
+    "TrainingSettings": "finsler.metric",
     "UnknownMetricError": "finsler.errors",
     "VALIDATION_SEED": "finsler.pairs",
     "atomic_write_bytes": "finsler.infra.files",
@@ -124,6 +125,7 @@ __all__ = [
     "Randers",
     "Sphere",
     "Task",
+    "TrainingSettings",
     "UnknownMetricError",
     "atomic_write_bytes",
     "atomic_write_text",

@@ -31,8 +31,9 @@ from __future__ import annotations
 import dataclasses
 import functools
 from abc import ABC, abstractmethod
-from collections.abc import Callable
-from dataclasses import dataclass
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from types import MappingProxyType
 from typing import Any, ClassVar
 
 import casadi as ca
@@ -44,7 +45,7 @@ from finsler.hooks import MetricHooks
 from finsler.infra.limits import check_memory, rows_that_fit
 from finsler.lowering import LoweredFunction, lower
 
-__all__ = ["LengthBounds", "LengthEstimate", "Metric", "Task"]
+__all__ = ["LengthBounds", "LengthEstimate", "Metric", "Task", "TrainingSettings"]
 
 #: Largest number of halvings of a segment in :meth:`Metric.path_length_bounds`.
 MAX_LENGTH_HALVINGS = 14
@@ -67,6 +68,26 @@ class Task:
     @property
     def segments(self) -> int:
         return 2**self.depth
+
+
+@dataclass(frozen=True)
+class TrainingSettings:
+    """Data for :mod:`learn` about a metric's task (``Metric.training``; finsler only holds
+    it): the paper's settings (appendix B: ``paper_lr``, the learning rate, and
+    ``paper_timesteps``, the budget, used by the paper's configuration and by Seq), the
+    toolkit's measured training ``defaults`` (fields of ``learn.TrainConfig`` over its
+    common defaults) and the ``model_free`` overrides Algorithm 1 alone (values of C only)
+    was measured best with. A metric that declares nothing gets the Matsumoto settings of
+    the paper and the common defaults with a 2e7 budget. The mappings are read-only."""
+
+    paper_lr: float = 3e-5
+    paper_timesteps: int = 20_000_000
+    defaults: Mapping[str, Any] = field(default_factory=lambda: {"timesteps": 20_000_000})
+    model_free: Mapping[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        for name in ("defaults", "model_free"):
+            object.__setattr__(self, name, MappingProxyType(dict(getattr(self, name))))
 
 
 #: Tolerance of the domain check of the numeric API (solver paths satisfy the domain
@@ -183,6 +204,8 @@ class Metric(MetricHooks, ABC):
     * ``convex_everywhere``: ``F(x, .)`` is convex at every point of the domain
       (for ``smooth`` metrics: strongly convex, i.e. Finsler);
     * ``convexity_note``: a sentence for docs and the CLI;
+    * ``training``: :class:`TrainingSettings`, data for :mod:`learn` (the paper's learning
+      rate and budget for the task, the toolkit's measured training defaults);
     * ``unique_geodesics``: every two points of the domain are joined by exactly one
       geodesic, which is the shortest curve (e.g. a constant norm, a Hadamard manifold, a
       cap smaller than a hemisphere): solvers then need no global seeding (the straight
@@ -196,6 +219,7 @@ class Metric(MetricHooks, ABC):
     convex_everywhere: ClassVar[bool] = True
     convexity_note: ClassVar[str] = "Finsler (strongly convex) on the whole domain"
     unique_geodesics: ClassVar[bool] = False
+    training: ClassVar[TrainingSettings] = TrainingSettings()
 
     # -- to implement -------------------------------------------------------------------
     @property

@@ -41,6 +41,7 @@ import torch
 import finsler
 from finsler.errors import InputError
 from learn.base import LoadedPolicy, TrainResult
+from learn.config import training_settings
 from learn.env import (
     TIME_LIMITS,
     ZERO_ACTION_REWARD,
@@ -83,7 +84,6 @@ SEGMENT_RTOL = 1e-9
 # ----------------------------------------------------------------------------------------
 # Configuration
 # ----------------------------------------------------------------------------------------
-_PAPER_T = {"matsumoto": 20_000_000, "carlike": 80_000_000, "panda-pole": 20_000_000}
 #: Measured on this 2-core machine (shared with other jobs, 1 torch thread), PPO with the
 #: paper's settings on Matsumoto: 0.9-1.0k steps/s with SB3's single environment
 #: (DummyVecEnv over GeodesicEnv, n_steps 2048), 3.6-3.8k with 16 batched copies, no
@@ -187,7 +187,9 @@ def default_seq_config(env: str, **overrides: Any) -> SeqConfig:
     this toolkit's batched environments (``n_envs`` x ``n_steps`` = SB3's 2048-step
     rollout); ``overrides`` replace fields (unknown ones raise :class:`InputError`)."""
     ensure_registered(env, overrides.get("metric_class"))
-    settings: dict[str, Any] = {"env": env, "timesteps": _PAPER_T.get(env, 20_000_000)}
+    # the paper's budget for the metric's task (Metric.training.paper_timesteps)
+    settings: dict[str, Any] = {"env": env,
+                                "timesteps": training_settings(env).paper_timesteps}
     if "n_envs" in overrides and "n_steps" not in overrides:
         n = overrides["n_envs"]
         if isinstance(n, int) and not isinstance(n, bool) and n >= 1:
