@@ -1,0 +1,567 @@
+"""Fast focused tests of validation/testing/metric.py (issue 48 item 6: mutation testing of
+the property suite). Each property runs on closed-form metrics (no solve, few examples)
+and on metrics built here that are wrong in exactly one way; verdicts, counterexamples and
+notes are checked against independent references (Matsumoto's analytic convex radius,
+the broken metric's own definition)."""
+
+from __future__ import annotations
+
+import math
+import re
+
+import casadi as ca
+import numpy as np
+import pytest
+
+from finsler import Box, Disk, Metric, Product, Task
+from finsler.domains import Domain
+from finsler.errors import InputError
+from finsler.metrics import Euclidean, Matsumoto, Randers
+from validation.testing import metric as VM
+from validation.testing.engine import FAILED, MAPPED, PASSED, SKIPPED
+
+RC = 1.0 / (2.0 * math.sqrt(3.0))  # Matsumoto's convex radius at height 1 (its docs)
+
+
+class _Square(Domain):
+    """A domain kind without a centre and scale known to the suite (the unit square)."""
+
+    dim = 2
+
+    def contains(self, x, tol=1e-12):
+        return np.all(np.abs(np.asarray(x, float)) <= 1.0 + tol, axis=-1)
+
+    def sample(self, n, rng):
+        return rng.uniform(-1.0, 1.0, size=(n, 2))
+
+    def project(self, x):
+        return np.clip(np.asarray(x, float), -1.0, 1.0)
+
+    def bounds(self):
+        return -np.ones(2), np.ones(2)
+
+    def constraints_sx(self, x):
+        return [(x[0], -1.0, 1.0), (x[1], -1.0, 1.0)]
+
+    def describe(self):
+        return "a square"
+
+
+class _Base(Metric):
+    task = Task(depth=3, eps=0.5)
+    reversible = True
+    domain = property(lambda self: Box((-1.0, -1.0), (1.0, 1.0)))
+
+    def F_sx(self, x: ca.SX, v: ca.SX) -> ca.SX:
+        return ca.sqrt(ca.dot(v, v))
+
+
+class NanOutside(_Base):
+    """F = |v| on the unit disk, NaN for |x| > 0.9."""
+
+    name = "nan-outside-test"
+    domain = property(lambda self: Disk(radius=1.0))
+
+    def F_sx(self, x, v):
+        return ca.if_else(ca.dot(x, x) > 0.81, float("nan"), ca.sqrt(ca.dot(v, v)))
+
+
+class NegativeCone(_Base):
+    """F = -|v| in a thin cone of directions around (cos 1, sin 1), |v| elsewhere."""
+
+    name = "negative-cone-test"
+    smooth = False
+
+    def F_sx(self, x, v):
+        n = ca.sqrt(ca.dot(v, v))
+        c = (math.cos(1.0) * v[0] + math.sin(1.0) * v[1]) / n
+        return ca.if_else(c > 0.99, -n, n)
+
+
+class Offset(_Base):
+    """F(x, 0) = 1e-3."""
+
+    name = "offset-test"
+
+    def F_sx(self, x, v):
+        return ca.sqrt(ca.dot(v, v)) + 1e-3
+
+
+class Squared(_Base):
+    name = "squared-test"
+
+    def F_sx(self, x, v):
+        return ca.dot(v, v)
+
+
+class Root(_Base):
+    """F = sqrt|v|: subadditive (concave) but the midpoint form fails."""
+
+    name = "root-test"
+
+    def F_sx(self, x, v):
+        return ca.dot(v, v) ** 0.25
+
+
+class ConvexClaimed(Matsumoto):
+    """Matsumoto declared convex everywhere (it is not beyond |x| = RC)."""
+
+    name = "convex-claimed-test"
+    convex_everywhere = True
+
+
+class Kinked(_Base):
+    """F = |v| (1 + 0.3 |x0|) declared smooth."""
+
+    name = "kinked-test"
+
+    def F_sx(self, x, v):
+        return ca.sqrt(ca.dot(v, v)) * (1.0 + 0.3 * ca.fabs(x[0]))
+
+
+class RandersClaimedReversible(Randers):
+    name = "randers-reversible-test"
+    reversible = True
+
+
+class EuclidClaimedIrreversible(_Base):
+    name = "euclid-irreversible-test"
+    reversible = False
+
+
+# ----------------------------------------------------------------------------------------
+# domain scales, the convexity map, the convex region
+# ----------------------------------------------------------------------------------------
+def test_domain_scale_of():
+    box = Box((-1.0, -2.0), (3.0, 2.0))
+    got = VM.domain_scale_of(box, np.array([[1.0, 0.0], [3.0, 0.0], [1.0, -2.0],
+                                             [2.0, 1.0], [0.0, 0.5]]))
+    np.testing.assert_allclose(got, [0.0, 1.0, 1.0, 0.5, 0.5], rtol=0, atol=1e-15)
+    disk = Disk(radius=2.0, center=(1.0, 0.0))
+    np.testing.assert_allclose(VM.domain_scale_of(disk, [[2.0, 0.0], [1.0, -2.0]]),
+                               [0.5, 1.0], rtol=0, atol=1e-15)
+    prod = Product((Box((0.0,), (2.0,)), Disk(radius=2.0)))
+    np.testing.assert_allclose(VM.domain_scale_of(prod, [[1.5, 1.0, 0.0], [2.0, 0.0, 0.0],
+                                                         [1.0, 0.0, 1.0]]),
+                               [0.5, 1.0, 0.5], rtol=0, atol=1e-15)
+    other = _Square()
+    assert VM.domain_scale_of(other, [[0.0, 0.0]]) is None
+    assert VM.domain_scale_of(Product((Box((0.0,), (1.0,)), other)), [[0.0, 0.0, 0.0]]) is None
+    assert VM.domain_scale_of(Product((other, Box((0.0,), (1.0,)))), [[0.0, 0.0, 0.0]]) is None
+
+
+def test_convexity_map_describe():
+    full = VM.ConvexityMap(100, 0.0, 0.5, None, None, 1.0)
+    assert full.describe() == ("F(x, .) is strongly convex at all 100 sampled points of "
+                               "the domain")
+    part = VM.ConvexityMap(200, 0.125, -0.0123456, (0.1, 0.2), 0.3, 0.3, (0.5, 0.5))
+    assert part.describe() == (
+        "F(x, .) is not convex on 12.5% of 200 sampled points (smallest eigenvalue of the "
+        "fundamental tensor -0.0123); the non-convex sample nearest the domain's centre is "
+        "(0.1, 0.2), at 0.3000 of the domain's size")
+    nowhere = VM.ConvexityMap(200, 0.125, -1.0, None, None, None)
+    assert nowhere.describe().endswith("tensor -1)")
+    assert full.worst is None
+
+
+def test_convexity_map_against_matsumoto_radius():
+    m = Matsumoto()
+    cmap = VM.convexity_map(m, samples=2048, seed=3)
+    assert cmap is VM.convexity_map(m, samples=2048, seed=3)  # cached
+    assert cmap.samples == 2048
+    assert abs(cmap.fraction - (1.0 - RC**2)) < 0.03
+    assert RC <= cmap.nearest_scale < RC + 0.03
+    assert cmap.core == cmap.nearest_scale
+    assert math.isclose(float(np.linalg.norm(cmap.nearest)), cmap.nearest_scale, rel_tol=1e-12)
+    assert cmap.min_eigenvalue < 0 and np.linalg.norm(cmap.worst) > RC
+    lam = m.convexity(np.asarray(cmap.worst)[None], n_directions=32)[0]
+    assert lam == cmap.min_eigenvalue
+    other = VM.convexity_map(m, samples=2048, seed=4)
+    assert other.nearest != cmap.nearest
+    e = VM.convexity_map(Euclidean(), samples=256)
+    assert (e.fraction, e.core, e.nearest, e.nearest_scale, e.worst) == (
+        0.0, 1.0, None, None, None)
+    assert e.min_eigenvalue > 0
+
+
+def test_convex_region_and_solve_region():
+    m = Matsumoto()
+    assert VM.convex_region(m, 0.25) == (
+        0.25, "the declared convex region (the domain scaled by 0.25)")
+    assert VM.convex_region(m, 1) == (1.0, "the declared convex region (the domain scaled by 1)")
+    for bad in (0.0, -0.1, 1.5):
+        with pytest.raises(InputError, match=rf"convex_shrink must be in \(0, 1\], got "
+                                             rf"{bad!r}"):
+            VM.convex_region(m, bad)
+    core = VM.convexity_map(m).core
+    s, text = VM.convex_region(m, None)
+    assert s == VM.CORE_MARGIN * core and 0.9 * RC < s < RC
+    assert text == f"the convex core found by the map (the domain scaled by {s:.4g})"
+    assert VM.solve_region(m) == s and VM.solve_region(m, 0.2) == 0.2
+    assert VM.solve_region(Euclidean(), 0.2) == 1.0
+
+
+# ----------------------------------------------------------------------------------------
+# domain
+# ----------------------------------------------------------------------------------------
+def test_domain_passes_on_a_valid_metric():
+    r = VM.check_domain(Euclidean(), examples=10)
+    assert r.status is PASSED and r.tried == r.passed and r.tried > 10
+    assert r.note.startswith("F finite and > 0 at all ") and not r.note.endswith(" ")
+    assert "signed coordinate directions" in r.note
+
+
+def test_domain_names_where_f_stops():
+    r = VM.check_domain(NanOutside(), examples=10)
+    assert r.status is FAILED and r.relation == ">" and r.rhs == ("0", 0.0)
+    assert r.lhs[0] == "F(x, v)" and math.isnan(r.lhs[1])
+    x = np.asarray(r.counterexample["x"])
+    assert 0.9 < np.linalg.norm(x) <= 1.0 + 1e-12
+    assert np.linalg.norm(r.counterexample["v"]) > 0
+    assert r.passed < r.tried and r.note.endswith("Fix F there, or declare a smaller domain.")
+    assert "the counterexample is the invalid sample nearest the domain's centre" in r.note
+    # the nearest invalid sample: no valid-looking sample between the centre and it
+    from validation.testing.regions import scan_domain
+    scan = scan_domain(NanOutside(), 0)
+    radii = np.linalg.norm(scan.points[scan.bad], axis=1)
+    assert math.isclose(np.linalg.norm(x), radii.min(), rel_tol=1e-12)
+
+
+class _OutsideBox(Box):
+    def project(self, p):
+        return np.asarray(p, float) + 5.0
+
+
+class _HalvingBox(Box):
+    def project(self, p):
+        return 0.5 * np.clip(np.asarray(p, float), -1.0, 1.0)
+
+
+class _ZeroBox(Box):
+    def project(self, p):
+        return np.zeros_like(np.asarray(p, float))
+
+
+@pytest.mark.parametrize("box, note", [
+    (_OutsideBox, "the projection lies outside the domain"),
+    (_HalvingBox, "projection not idempotent"),
+    (_ZeroBox, "a point of the domain is moved by the projection")])
+def test_domain_projection_failures(box, note):
+    class M(_Base):
+        name = "projection-test"
+        domain = property(lambda self: box((-1.0, -1.0), (1.0, 1.0)))
+
+    r = VM.check_domain(M(), examples=30)
+    assert r.status is FAILED and r.note.endswith(f". {note}")
+    p = np.asarray(r.counterexample["p"])
+    assert np.all(np.abs(p) <= 1.2 + 1e-12)
+    if box is _ZeroBox:  # shrunk towards a point of the domain that moves
+        assert np.any(p != 0) and np.all(np.abs(p) <= 1.0)
+        assert r.lhs == ("project(p)", [0.0, 0.0]) and r.relation == "=="
+    if box is _OutsideBox:
+        assert r.relation == "in" and r.lhs[0] == "project(p)"
+        assert r.rhs == ("in the domain", M().domain.describe())
+
+
+# ----------------------------------------------------------------------------------------
+# finite-positive, homogeneity, subadditivity
+# ----------------------------------------------------------------------------------------
+def test_finite_positive():
+    ok = VM.check_finite_positive(Euclidean(), examples=10)
+    assert ok.status is PASSED and ok.tried == ok.passed == 10
+    nan = VM.check_finite_positive(NanOutside(), examples=60)
+    assert nan.status is FAILED and nan.lhs[0] == "F(x, v)" and math.isnan(nan.lhs[1])
+    assert nan.note.startswith("F is not finite. F is not finite and > 0 for ")
+    assert np.linalg.norm(nan.counterexample["x"]) > 0.9
+
+
+def test_finite_positive_sweep_finds_a_thin_cone():
+    r = VM.check_finite_positive(NegativeCone(), examples=5)
+    assert r.status is FAILED and r.relation == ">" and r.rhs == ("0", 0.0)
+    v = np.asarray(r.counterexample["v"])
+    assert math.isclose(np.linalg.norm(v), 1.0, rel_tol=1e-12)
+    assert v @ [math.cos(1.0), math.sin(1.0)] > 0.99
+    assert math.isclose(r.lhs[1], -1.0, rel_tol=1e-12)  # the smallest value: -|v|
+    x, dirs, f = VM.directions_scan(NegativeCone(), 0)
+    bad = ~(f > 0)
+    assert r.tried == 5 + bad.size and r.passed == 5 + int((~bad).sum())
+    assert r.note.startswith(f"F is not finite and > 0 for {100 * float(bad.mean()):.1f}% of "
+                             f"{bad.size} (point, direction) samples ({len(x)} uniform points "
+                             f"x {len(dirs)} unit directions); the counterexample is the "
+                             "smallest value")
+
+
+def test_homogeneity():
+    ok = VM.check_homogeneity(Randers(), examples=10)
+    assert ok.status is PASSED and ok.tried == ok.passed == 10
+    sq = VM.check_homogeneity(Squared(), examples=30)
+    assert sq.status is FAILED and sq.lhs[0] == "F(x, lam v)" and sq.rhs[0] == "lam F(x, v)"
+    lam, v = sq.counterexample["lam"], np.asarray(sq.counterexample["v"])
+    assert math.isclose(sq.lhs[1], lam**2 * (v @ v), rel_tol=1e-12)
+    assert math.isclose(sq.rhs[1], lam * (v @ v), rel_tol=1e-12)
+    rel = abs(sq.lhs[1] - sq.rhs[1]) / abs(sq.rhs[1])
+    assert sq.note == f"relative difference {rel:.3g} (tolerance 1e-12)"
+    off = VM.check_homogeneity(Offset(), examples=10)
+    assert off.status is FAILED and off.lhs == ("F(x, 0)", 1e-3) and off.rhs == ("0", 0.0)
+    # a tolerance the defect fits in passes
+    assert VM.check_homogeneity(Squared(), examples=5, rtol=1e9).status is PASSED
+
+
+def test_subadditivity():
+    assert VM.check_subadditivity(Randers(), examples=10).status is PASSED
+    sq = VM.check_subadditivity(Squared(), examples=30, seed=1)
+    assert sq.status is FAILED and sq.relation == "<="
+    v, w = (np.asarray(sq.counterexample[k]) for k in "vw")
+    assert math.isclose(sq.lhs[1], (v + w) @ (v + w), rel_tol=1e-12)
+    assert math.isclose(sq.rhs[1], v @ v + w @ w, rel_tol=1e-12)
+    assert sq.note == f"excess {sq.lhs[1] - sq.rhs[1]:.3g}"
+    root = VM.check_subadditivity(Root(), examples=30, seed=1)
+    assert root.status is FAILED and root.lhs[0] == "F(x, (v + w)/2)"
+    v, w = (np.asarray(root.counterexample[k]) for k in "vw")
+    fv, fw = (np.linalg.norm(a) ** 0.5 for a in (v, w))
+    assert math.isclose(root.rhs[1], 0.5 * (fv + fw), rel_tol=1e-12)
+    assert root.lhs[1] > root.rhs[1]
+
+
+def test_subadditivity_mapped_and_declared_region():
+    m = Matsumoto()
+    r = VM.check_subadditivity(m, examples=15, seed=2)
+    s, which = VM.convex_region(m, None, seed=2)
+    assert which.endswith(f"(the domain scaled by {s:.4g})")
+    assert r.status is MAPPED and r.mapped >= 1
+    assert r.note.startswith(f"Holds on {which} (")
+    assert ("On the whole domain it fails (the counterexample): mapped, not an error, since "
+            f"{m.name} documents it ({m.convexity_note}). "
+            f"{VM.convexity_map(m, seed=2).describe()}.") in r.note
+    assert np.linalg.norm(r.counterexample["x"]) > RC
+    bad = VM.check_subadditivity(m, examples=30, seed=2, convex_shrink=1.0)
+    assert bad.status is FAILED
+    assert bad.note.startswith("FAILS on the declared convex region (the domain scaled by 1), "
+                               "where it must hold.")
+    inside = VM.check_subadditivity(m, examples=15, seed=2, convex_shrink=0.2)
+    assert inside.status is MAPPED
+    assert re.match(r"Holds on the declared convex region \(the domain scaled by 0\.2\) "
+                    r"\(1[0-5] examples\)\. On the whole domain it fails", inside.note)
+
+
+# ----------------------------------------------------------------------------------------
+# strong convexity
+# ----------------------------------------------------------------------------------------
+def test_strong_convexity():
+    ok = VM.check_strong_convexity(Randers(), examples=10)
+    assert ok.status is PASSED and ok.tried == ok.passed == 10 and ok.note == ""
+    sk = VM.check_strong_convexity(NegativeCone(), examples=10)
+    assert sk.status is SKIPPED and sk.note == (
+        f"{NegativeCone.name} is declared not smooth ({NegativeCone.convexity_note}): its "
+        "fundamental tensor is not defined everywhere; convexity is checked by subadditivity")
+    mapped = VM.check_strong_convexity(Matsumoto(), examples=10)
+    assert mapped.status is MAPPED and mapped.note.startswith("Holds on the convex core")
+
+
+def test_strong_convexity_failure_says_where():
+    m = ConvexClaimed()
+    r = VM.check_strong_convexity(m, examples=10, directions=16)
+    assert r.status is FAILED and r.relation == ">" and r.rhs == ("0", 0.0)
+    assert r.lhs[0] == "smallest eigenvalue over 16 directions" and r.lhs[1] < 0
+    x = np.asarray(r.counterexample["x"])
+    assert np.linalg.norm(x) > RC
+    v, w = np.asarray(r.counterexample["v"]), np.asarray(r.counterexample["w"])
+    assert math.isclose(np.linalg.norm(v), 1.0, rel_tol=1e-9)
+    cmap = VM.convexity_map(m)
+    vv, lam, ww = VM.weakest_direction(m, x, 16)
+    assert r.note.startswith(
+        f"F(x, .) is not convex at x = {VM.fmt(list(x), 4)}: at the unit direction v = "
+        f"{VM.fmt(list(vv), 4)} the fundamental tensor has eigenvalue {lam:.3g} along w = "
+        f"{VM.fmt(list(ww), 4)} (the unit ball bends inwards there). F is not convex on "
+        f"{100 * cmap.fraction:.1f}% of {cmap.samples} points sampled uniformly over the "
+        f"domain; the non-convex sample nearest the domain's centre is "
+        f"{VM.fmt(cmap.nearest, 4)}, at {cmap.nearest_scale:.3f} of the domain's size. Fix F")
+    assert abs(cmap.fraction - (1 - RC**2)) < 0.03
+    np.testing.assert_array_equal(v, vv)
+    np.testing.assert_array_equal(w, ww)
+
+
+class _HiddenConvexity(ConvexClaimed):
+    """The 7-direction test (the search's) sees a convex F; the map's 32 see the real one."""
+
+    name = "hidden-convexity-test"
+
+    def convexity(self, x, n_directions=64, seed=0):
+        lam = super().convexity(x, n_directions=n_directions, seed=seed)
+        return np.abs(lam) + 1e-3 if n_directions == 7 else lam
+
+
+def test_strong_convexity_map_finds_what_the_search_missed():
+    m = _HiddenConvexity()
+    r = VM.check_strong_convexity(m, examples=5, directions=7)
+    cmap = VM.convexity_map(m)
+    assert r.status is FAILED
+    assert r.counterexample["x"] == list(cmap.worst)
+    assert r.tried == 5 + cmap.samples
+    assert r.passed == 5 + round(cmap.samples * (1 - cmap.fraction))
+    assert r.lhs[1] > 0  # what the 7-direction test says there
+
+
+# ----------------------------------------------------------------------------------------
+# reversibility, lowered forms, smoothness
+# ----------------------------------------------------------------------------------------
+def test_reversibility():
+    ok = VM.check_reversibility(Euclidean(), examples=10)
+    assert ok.status is PASSED and ok.tried == ok.passed == 10
+    assert ok.claim == "F(x, -v) = F(x, v) (declared reversible)"
+    bad = VM.check_reversibility(RandersClaimedReversible(), examples=20)
+    assert bad.status is FAILED and bad.note == "the metric is declared reversible"
+    x, v = (np.asarray(bad.counterexample[k]) for k in "xv")
+    m = Randers()
+    assert bad.lhs == ("F(x, -v)", float(m.F(x, -v))) and bad.rhs == ("F(x, v)",
+                                                                      float(m.F(x, v)))
+    sk = VM.check_reversibility(Randers(), examples=20)
+    assert sk.status is SKIPPED
+    assert sk.claim == "F(x, -v) != F(x, v) somewhere (declared not reversible)"
+    assert sk.note.startswith("not applicable: randers is declared not reversible "
+                              "(asymmetry confirmed at x=")
+    assert ": F(x, -v) = " in sk.note and sk.note.endswith(")")
+    sym = VM.check_reversibility(EuclidClaimedIrreversible(), examples=12)
+    assert sym.status is FAILED and sym.passed == 0 and sym.tried == 12
+    assert sym.note == ("F(x, -v) = F(x, v) within 0.001 relative on all 12 examples: the "
+                        "metric looks reversible; declare reversible = True (symmetric "
+                        "distances, checked by distance-symmetry)")
+
+
+def test_reversibility_thresholds():
+    class Slight(_Base):  # asymmetric by 1e-4 relative: below ASYMMETRY_MIN, above rtol
+        name = "slight-test"
+
+        def F_sx(self, x, v):
+            return ca.sqrt(ca.dot(v, v)) + 1e-4 * v[0]
+
+    s = Slight()
+    assert VM.check_reversibility(s, examples=20).status is FAILED
+    type(s).reversible = False
+    try:
+        assert VM.check_reversibility(s, examples=20).status is FAILED  # looks reversible
+    finally:
+        type(s).reversible = True
+
+
+class _OffNumpy(Randers):
+    name = "off-numpy-test"
+
+    def F(self, x, v, check=None):
+        out = super().F(x, v, check=check)
+        return out * (1 + 1e-9) if isinstance(out, (np.ndarray, float)) else out
+
+
+class _OffTorch(Randers):
+    name = "off-torch-test"
+
+    def F(self, x, v, check=None):
+        out = super().F(x, v, check=check)
+        return out if isinstance(out, (np.ndarray, float)) else out * (1 + 1e-9)
+
+
+class _OffHessian(Randers):
+    name = "off-hessian-test"
+
+    def lowered_hessian(self, x, v):
+        (h,) = super().lowered_hessian(x, v)
+        h = np.array(h, float)
+        h.reshape(-1)[1] += 1e-6
+        return (h,)
+
+
+def test_lowered_forms():
+    ok = VM.check_lowered_forms(Randers(), examples=8)
+    assert ok.status is PASSED and ok.tried == ok.passed == 8
+    for cls, label in ((_OffNumpy, "numpy"), (_OffTorch, "torch")):
+        r = VM.check_lowered_forms(cls(), examples=8)
+        assert r.status is FAILED and r.lhs[0] == f"F lowered to {label}"
+        assert r.rhs[0] == "F symbolic (CasADi)" and r.relation == "=="
+        x, v = (np.asarray(r.counterexample[k]) for k in "xv")
+        assert r.rhs[1] == float(Randers().F(x, v))
+        assert r.note == f"difference {r.lhs[1] - r.rhs[1]:.3g} (tolerance 1e-12 max(1, |F|))"
+    assert VM.check_lowered_forms(_OffNumpy(), examples=5, rtol=1e-6).status is PASSED
+    r2 = VM.check_lowered_forms(_OffHessian(), examples=8)
+    assert r2.status is FAILED
+    assert r2.lhs[0] in ("fundamental tensor lowered [1,0]", "fundamental tensor lowered [0,1]")
+    assert r2.rhs[0] == "symbolic (CasADi)" and abs(r2.lhs[1] - r2.rhs[1]) > 5e-7
+    assert VM.check_lowered_forms(_OffHessian(), examples=5,
+                                  hessian_rtol=1e-4).status is PASSED
+
+
+def test_smoothness():
+    ok = VM.check_smoothness(Randers(), examples=6)
+    assert ok.status is PASSED and ok.tried == ok.passed == 6 + VM.SMOOTH_SWEEP
+    sk = VM.check_smoothness(NegativeCone(), examples=6)
+    assert sk.status is SKIPPED and sk.note.endswith(
+        "exp/log refuse it and the solver uses its smooth reformulation")
+    k = VM.check_smoothness(Kinked(), examples=6)
+    assert k.status is FAILED and k.relation == "=="
+    assert k.rhs[0] == "u' Hess(F^2/2) u (symbolic)"
+    assert k.note.startswith("error ") and "not converging" in k.note
+    assert abs(k.counterexample["x"][0]) < 0.05  # the kink is at x0 = 0
+
+
+def test_smoothness_sweep_finds_a_thin_kink(monkeypatch):
+    m = Kinked()
+    # the hypothesis search sees no kink: every search example passes
+    monkeypatch.setattr(VM, "search", lambda *a, **kw: VM.PropertyResult(
+        a[0], a[1], PASSED, tried=3, passed=3))
+    r = VM.check_smoothness(m, examples=3)
+    assert r.status is FAILED and r.tried == 3 + VM.SMOOTH_SWEEP
+    n_bad = 3 + VM.SMOOTH_SWEEP - r.passed
+    assert 0 < n_bad < VM.SMOOTH_SWEEP // 4
+    assert r.lhs[0] == "second difference of F^2/2 (h = 0.005)"
+    x = r.counterexample["x"]
+    assert abs(x[0]) < 1e-2 and max(abs(a) for a in x) <= 0.9 + 1e-12
+    assert math.isclose(np.linalg.norm(r.counterexample["v"]), 1.0, rel_tol=1e-12)
+    assert math.isclose(np.linalg.norm(r.counterexample["u"]), 1.0, rel_tol=1e-12)
+    assert (f"not converging, F^2 has a kink within 0.01 of x along u; {n_bad} of "
+            f"{VM.SMOOTH_SWEEP} swept points fail. Declare smooth = False") in r.note
+    assert VM._smoothness_sweep(Randers(), Randers().derived(
+        "testing.joint_second_derivative", lambda: VM._build_second_derivative(Randers())),
+        np.array([2.0, 2.0]), 0) is None
+
+
+def test_centre_and_metric_properties():
+    np.testing.assert_array_equal(VM._centre_of(Matsumoto()), [0.0, 0.0])
+
+    class Off(_Base):
+        name = "off-test"
+        domain = property(lambda self: Disk(radius=1.0, center=(2.0, -1.0)))
+
+    np.testing.assert_array_equal(VM._centre_of(Off()), [2.0, -1.0])
+
+    class Shifted(_Base):
+        name = "shifted-test"
+        domain = property(lambda self: Box((0.0, 2.0), (2.0, 6.0)))
+
+    np.testing.assert_array_equal(VM._centre_of(Shifted()), [1.0, 4.0])
+    names = [r.name for r in VM.metric_properties(Euclidean(), examples=3)]
+    assert names == ["domain", "finite-positive", "homogeneity", "subadditivity",
+                     "strong-convexity", "reversibility", "lowered-forms", "smoothness"]
+
+
+def test_vectors_strategy():
+    from hypothesis import given, settings
+
+    seen = []
+
+    @settings(max_examples=30, database=None, derandomize=True)
+    @given(VM.vectors(3, low=0.5, scale=2.0))
+    def draw(v):
+        seen.append(v)
+
+    draw()
+    assert all(v.shape == (3,) and v.dtype == float for v in seen)
+    assert all(np.linalg.norm(v) >= 0.5 and np.all(np.abs(v) <= 2.0) for v in seen)
+    assert any(np.abs(v).max() > 1.0 for v in seen)
+    class Odd(_Base):
+        name = "odd-domain-test"
+        domain = property(lambda self: _Square())
+
+    with pytest.raises(InputError, match=re.escape(
+            "a convex region (the domain scaled by 0.5) needs a box, disk or product domain; "
+            "odd-domain-test has a square")):
+        VM._points(Odd(), 0.5)
+    VM._points(Odd(), 1.0)  # the whole domain needs no scale
