@@ -576,9 +576,18 @@ def test_a_coordinate_within_bound_eps_of_a_side_pushed_out_is_held(c, side, hel
     want = np.max(np.abs(g[keep])) * scale / t.energy[0]
     st = NewtonState(m, p, NewtonOptions(max_iter=1), backend_for(None), scale)
     assert st.residual[0] == pytest.approx(want, rel=1e-12)
+    # the reduced Newton step: held coordinate fixed, the free ones -H_ff^-1 g_f
+    h = np.array([[st.terms.diag[i][k][0, 0] for k in range(2)] for i in range(2)])
+    step = np.zeros(2)
+    step[keep] = -np.linalg.solve(h[np.ix_(keep, keep)], g[keep])
+    assert np.all(np.linalg.eigvalsh(h[np.ix_(keep, keep)]) > 0)
     st.step()
-    after = st.paths()[0, 1, 0]
-    assert (after == x0) == held
+    moved = st.paths()[0, 1] - p[0, 1]
+    assert (moved[0] == 0.0) == held
+    j = int(np.argmax(np.abs(step)))
+    alpha = moved[j] / step[j]
+    assert min(abs(alpha - 2.0 ** -k) for k in range(4)) < 1e-9
+    np.testing.assert_allclose(moved, alpha * step, rtol=1e-9, atol=1e-15)
 
 
 def test_evaluations_count_every_segment_evaluated() -> None:
