@@ -435,3 +435,45 @@ def test_combine():
     assert combine("n", "c", [r]).status is NOT_RUN
     assert E.ORDER == {FAILED: 0, INCONCLUSIVE: 1, MAPPED: 2, PASSED: 3, SKIPPED: 4,
                        NOT_RUN: 5}
+
+
+# ----------------------------------------------------------------------------------------
+# after the first mutation run (survivors of testing_engine)
+# ----------------------------------------------------------------------------------------
+def test_search_has_no_deadline():
+    import time
+
+    r = _search(lambda x: time.sleep(0.3) or Verdict(True), examples=1)
+    assert r.status is PASSED and r.tried == 1 and 0.3 <= r.seconds < 60
+
+
+def test_search_uses_its_random_source():
+    def drawn(seed):
+        seen = []
+        _search(lambda x: seen.append(x) or Verdict(True), strategy=st.integers(0, 10**9),
+                examples=10, seed=seed)
+        return seen
+
+    assert drawn(3) == drawn(3) and drawn(3) != drawn(4)
+
+
+def test_search_counts_twice_seen_notes_and_one_example():
+    r = _search(lambda x: Verdict.unjudged("two") if x < 2 else Verdict(True),
+                strategy=st.integers(0, 2), examples=50)
+    assert r.tried == 3 and r.inconclusive == 2 and r.passed == 1
+    assert r.note.endswith("among the others: 2 x two")
+    one = _search(lambda x: Verdict(True), examples=1)
+    assert one.status is PASSED and one.tried == one.passed == 1 and one.note == ""
+    assert 0 <= one.seconds < 60
+
+
+def test_check_report_lists_joined():
+    rep = _report(FAILED, FAILED, FAILED, SKIPPED, SKIPPED)
+    assert rep.summary() == "FAILED: p0, p1, p2"
+    rep.results[0].warnings = ["a", "b"]
+    rep.results[3].warnings = ["c (2x)", "d"]
+    text = rep.table()
+    assert "skipped:\n  p3, p4: why" in text
+    assert text.endswith("warnings caught while checking (not printed as they came):\n"
+                         "  p3: c (2x); d")
+    assert "warnings while checking: a; b" in text
