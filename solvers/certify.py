@@ -61,7 +61,7 @@ from __future__ import annotations
 import logging
 import math
 import time
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict, dataclass
 from typing import Any
 
 import casadi as ca
@@ -72,7 +72,7 @@ from finsler.infra.limits import check_memory
 from finsler.intervals import Interval, enclose, isqrt
 from finsler.lowering import LoweredFunction, lower
 from finsler.metric import Metric
-from finsler.status import LPStatus, Result, Status, json_ready
+from finsler.status import Status
 from solvers.certify_lp import INITIAL_DIRECTIONS as INITIAL_DIRECTIONS
 from solvers.certify_lp import LP_SOLVER, LPFailure, _initial_modes, _solve_lp
 from solvers.certify_lp import TIGHT_DUAL as TIGHT_DUAL
@@ -84,8 +84,9 @@ from solvers.certify_mesh import _hex_lattice as _hex_lattice
 from solvers.certify_mesh import _initial_points, _Mesh, _outline, _zigzag
 from solvers.certify_mesh import _inside_polygon as _inside_polygon
 from solvers.certify_mesh import _spacing as _spacing
-from solvers.inputs import SHORT_PAIR, as_metric, domain_scale, is_short_pair
-from solvers.status import CertifyStatus, CertifyStop
+from solvers.inputs import SHORT_PAIR, as_metric, check_segments, domain_scale, is_short_pair
+from solvers.result import CertifyResult as CertifyResult  # defined there, exported here
+from solvers.status import CertifyStatus
 
 __all__ = ["CertifyResult", "MeshSpec", "certify"]
 
@@ -167,107 +168,6 @@ class MeshSpec:
             raise InputError(f"unknown mesh preset {name!r}; choose one of "
                              f"{', '.join(presets)}")
         return presets[name]
-
-
-@dataclass
-class CertifyResult(Result):
-    """A certified interval ``lower <= d(start, goal) <= upper``.
-
-    ``gap = (upper - lower) / upper``. ``upper`` is a proven upper bound of the length of
-    ``path`` ``(n+1, 2)`` (:meth:`finsler.Metric.path_length_bounds`; ``length`` and
-    ``length_error`` are the adaptive-quadrature estimate of it): the solver's (or the
-    given) path
-    (``upper_source == "path"``) or, where ``F(z, .)`` is not convex, the same path with
-    every segment replaced by a zigzag along the two directions of the convexification
-    when that is shorter (``"zigzag"``: switchbacks, the curves whose lengths approach the
-    infimum there). ``path_upper`` / ``path_gap`` are the bound and gap of the solver's
-    path itself: a small ``path_gap`` certifies that path near-globally optimal.
-    ``convexity`` is ``"convex"``
-    (``F(z, .)`` convex on the whole domain) or ``"convexified"`` (not convex somewhere:
-    the dual condition equals that of the convexification, see the module docstring);
-    ``convexity_note`` says it in words. ``rounds`` lists, per LP solve, the triangles,
-    rows used, lower bound and gap. ``times`` in seconds: ``solve`` (upper bound), ``mesh``,
-    ``bounds`` (F and its Hessians), ``lp`` and ``total``. ``lp_status`` is cvxpy's status
-    of the last LP; ``max_row_ratio`` the largest ``grad phi . v / bound`` over every row
-    of the last potential before the final check (``<= 1`` up to the LP solver's
-    feasibility tolerance; the potential is divided by it when above 1). ``lp_rows`` counts
-    the rows of the last LP (edges of the inner polygons), ``lp_rows_total`` the sampled
-    rows they imply (3 x triangles x directions). ``stopped_by`` says what ended the
-    refinement: ``target_gap`` (reached), ``max_rounds`` or ``max_triangles`` (the work
-    budgets of :class:`MeshSpec`), ``no_refinement`` (no triangle left to refine), or
-    ``time_limit`` (the caller's wall-clock limit: only then can the result depend on the
-    machine's speed), or the failure's label. ``status`` (:class:`solvers.CertifyStatus`)
-    says the same in the toolkit's one family of statuses: a failure of the refinement (an
-    LP solver failure, corrections that do not shrink) is a status with the best interval
-    proven so far (lower bound 0 if none) and ``message``, never an exception.
-    ``solver_status`` is the upper-bound solve's :class:`solvers.Status` (``Status.GIVEN``
-    for a given path; its label, e.g. ``"success"``, in JSON) and ``lp_status`` the last
-    LP's :class:`finsler.status.LPStatus` (a ``str`` enum of cvxpy's words).
-    """
-
-    metric: str
-    start: np.ndarray
-    goal: np.ndarray
-    lower: float
-    upper: float
-    length: float
-    length_error: float
-    gap: float
-    upper_source: str
-    path_upper: float
-    path_gap: float
-    triangles: int
-    vertices: int
-    unknowns: int
-    directions: int
-    lp_rows: int
-    lp_rows_total: int
-    lp_status: LPStatus
-    lp_solver: str
-    max_row_ratio: float
-    convexity: str
-    convexity_note: str
-    solver_status: Status
-    mesh: dict[str, Any]
-    times: dict[str, float]
-    rounds: list[dict[str, Any]] = field(default_factory=list)
-    path: np.ndarray | None = None
-    stopped_by: CertifyStop = CertifyStop.TARGET_GAP
-    status: CertifyStatus = CertifyStatus.CERTIFIED
-    message: str = ""
-
-    def __post_init__(self) -> None:
-        # members of the status family (words, as before, are accepted and converted)
-        self.stopped_by = CertifyStop(self.stopped_by)
-        self.lp_status = LPStatus.from_solver(self.lp_status)
-        self.solver_status = Status.from_label(self.solver_status)
-
-    @property
-    def wall_time(self) -> float:
-        """Seconds of the whole certificate (``times["total"]``)."""
-        return float(self.times.get("total", 0.0))
-
-    @property
-    def converged(self) -> bool:
-        """True if the refinement reached its target gap (``status`` is ``CERTIFIED``)."""
-        return self.status.converged
-
-    @property
-    def certified(self) -> bool:
-        """True if both bounds are finite and ``lower <= upper``."""
-        return bool(np.isfinite(self.lower) and np.isfinite(self.upper)
-                    and self.lower <= self.upper)
-
-    def to_dict(self, with_path: bool = False) -> dict[str, Any]:
-        """JSON-ready dict (keys ``lower``, ``upper``, ``gap`` first; ``path`` only if
-        ``with_path``)."""
-        out: dict[str, Any] = {}
-        for f in fields(self):
-            val = getattr(self, f.name)
-            if f.name == "path" and not with_path:
-                continue
-            out[f.name] = json_ready(val)  # labels, lists, non-finite floats as None
-        return out
 
 
 # ----------------------------------------------------------------------------------------
@@ -566,6 +466,10 @@ def certify(
     not 2-D (or whose domain is not a box or a disk), points outside the domain, or bad
     options. ``strict=True`` raises :class:`SolverError` unless the status is
     ``CERTIFIED`` (the interval is proven either way).
+
+    The input is checked here, once (:func:`_check_request`); the steps below trust it:
+    :func:`_upper_bound` (the solve, or the given path), :func:`_lower_bound` (the
+    refinement rounds), :func:`_outcome` (status and message) and :func:`_result`.
     """
     t_start = time.perf_counter()
     m = as_metric(metric)
@@ -580,6 +484,19 @@ def certify(
 
         res = certify_nd(m, start, goal, mesh, path=path)  # type: ignore[arg-type]
         return res.strict() if strict else res  # type: ignore[return-value]
+    spec, poly, s, g = _check_request(m, start, goal, mesh, time_limit)
+    up = _upper_bound(m, s, g, spec, path)
+    low = _lower_bound(m, poly, up, s, g, spec, time_limit, t_start)
+    res = _result(m, s, g, spec, poly, up, low, t_start)
+    return res.strict() if strict else res
+
+
+def _check_request(m: Metric, start: Any, goal: Any, mesh: MeshSpec | str | None,
+                   time_limit: float | None
+                   ) -> tuple[MeshSpec, np.ndarray, np.ndarray, np.ndarray]:
+    """The one check of a 2-D certify request: the mesh spec, the time limit, the domain's
+    outline, start and goal (in the domain, distinct, not a short pair) and the mesh
+    sizes against the domain's size -> ``(spec, outline, start, goal)``."""
     spec = MeshSpec.preset(mesh) if isinstance(mesh, str) else (mesh or MeshSpec())
     if not isinstance(spec, MeshSpec):
         raise InputError(f"mesh must be a MeshSpec or a preset name, got {type(mesh).__name__}")
@@ -601,14 +518,37 @@ def certify(
         if getattr(spec, name) > scale:
             raise InputError(f"mesh {name} = {getattr(spec, name):g} is larger than the "
                              f"domain (size {scale:g}); give at most {scale:g}")
+    return spec, poly, s, g
 
-    # upper bound: a curve's length with its quadrature error
+
+@dataclass
+class _Upper:
+    """The upper bound: the solver's (or the given) path ``pts``, its status, the proven
+    bound of its length ``path_upper``, and the bound used (``upper``, of ``path`` with
+    the length estimate ``est``: the same path, or a zigzag where that is shorter)."""
+
+    pts: np.ndarray
+    solver_status: Status
+    path_upper: float
+    upper: float
+    source: str
+    path: np.ndarray
+    est: Any
+    seconds: float
+
+
+def _upper_bound(m: Metric, s: np.ndarray, g: np.ndarray, spec: MeshSpec,
+                 path: Any) -> _Upper:
+    """A curve's length with its quadrature error: the solve at ``spec.segments`` segments
+    from the checked pair (no second check), or the given ``path`` (checked here: its
+    shape, its ends, the domain)."""
     t0 = time.perf_counter()
     if path is None:
-        from solvers.geodesic import solve_geodesic
+        from solvers.pairs import resolve_method, solve_pair
 
-        n = spec.segments if spec.segments is not None else 4 * m.task.segments
-        sol = solve_geodesic(m, s, g, n)
+        n = check_segments(m, spec.segments if spec.segments is not None
+                           else 4 * m.task.segments)
+        sol = solve_pair(m, s, g, n, method=resolve_method(m, "auto"))
         pts = np.asarray(sol.points, float)
         solver_status = sol.status
     else:
@@ -630,119 +570,171 @@ def certify(
             if zig_upper < upper:
                 est, upper_path = m.path_length_error(zig), zig
                 upper, upper_source = zig_upper, "zigzag"
-    t_solve = time.perf_counter() - t0
+    return _Upper(pts, solver_status, solver_upper, upper, upper_source, upper_path, est,
+                  time.perf_counter() - t0)
 
-    # lower bound: dual LP on meshes refined where the corrections cost most
+
+@dataclass
+class _Lower:
+    """What the refinement rounds found: the best LP (``best``, with its mesh; None if the
+    first round failed), the last mesh, the rounds, what stopped them, a failure (status,
+    message) and the seconds of meshing and LPs, and the point data (its seconds count
+    as ``bounds``)."""
+
+    best: dict[str, Any] | None
+    last_mesh: _Mesh | None
+    rounds: list[dict[str, Any]]
+    stopped_by: str
+    failure: tuple[CertifyStatus, str] | None
+    t_mesh: float
+    t_lp: float
+    data: _PointData
+
+
+def _pre_refine(msh: _Mesh, data: _PointData, spec: MeshSpec
+                ) -> tuple[_Mesh, np.ndarray, np.ndarray, tuple[CertifyStatus, str] | None,
+                           float]:
+    """Row bounds of ``msh``; triangles whose corrections eat half of F somewhere are
+    refined before any LP (at most :data:`MAX_PRE_REFINE` times) -> the mesh, its bounds
+    and corrections, a failure if the corrections do not shrink, the meshing seconds."""
+    t_mesh = 0.0
+    failure: tuple[CertifyStatus, str] | None = None
+    b, corr = _row_bounds(msh, data)
+    for _ in range(MAX_PRE_REFINE):
+        bad = np.min(b / data.F[data.rows(msh.points)][msh.tri], axis=(1, 2)) < 0.5
+        if not np.any(bad):
+            break
+        if msh.n_tri + 3 * int(bad.sum()) > spec.max_triangles:
+            # the corrections do not shrink with the triangles: the chord term (fixed
+            # by the number of directions) or a singularity of F; stop, do not grow
+            failure = (CertifyStatus.CORRECTIONS_TOO_LARGE,
+                       f"{int(bad.sum())} triangles keep second-order corrections above "
+                       f"half of F, and refining them would exceed max_triangles "
+                       f"({spec.max_triangles}); use more directions (e.g. the default "
+                       "or fine mesh preset) or a smaller h_path / h_far")
+            break
+        t0 = time.perf_counter()
+        msh = _Mesh(msh.refine(np.flatnonzero(bad)))
+        t_mesh += time.perf_counter() - t0
+        b, corr = _row_bounds(msh, data)
+    if failure is None and np.min(b) <= 0.0:
+        failure = (CertifyStatus.CORRECTIONS_TOO_LARGE,
+                   f"{int(np.sum(np.min(b, axis=(1, 2)) <= 0))} triangles keep "
+                   f"second-order corrections above F after {MAX_PRE_REFINE} "
+                   "refinements; use a smaller h_path / h_far")
+    return msh, b, corr, failure, t_mesh
+
+
+def _marked(lp: dict[str, Any], corr: np.ndarray, n_tri: int,
+            mark_fraction: float) -> np.ndarray | None:
+    """Doerfler marking by the dual-weighted corrections ``sum_r y_r c_r`` per triangle:
+    the triangles to refine (their weight reaching ``mark_fraction`` of the total), or
+    None if no triangle carries weight."""
+    rows, y = lp["rows"], np.maximum(lp["duals"], 0.0)
+    weight = np.bincount(rows[:, 0], weights=y * corr[rows[:, 0], rows[:, 2]],
+                         minlength=n_tri)
+    order = np.argsort(-weight)
+    cum = np.cumsum(weight[order])
+    if cum[-1] <= 0:
+        return None
+    n_mark = int(np.searchsorted(cum, mark_fraction * cum[-1]) + 1)
+    return order[:n_mark]
+
+
+def _lower_bound(m: Metric, poly: np.ndarray, up: _Upper, s: np.ndarray, g: np.ndarray,
+                 spec: MeshSpec, time_limit: float | None, t_start: float) -> _Lower:
+    """The dual LP on meshes refined where the corrections cost most, round after round,
+    until the target gap, a budget of ``spec``, the time limit or a failure."""
     t0 = time.perf_counter()
-    points = _initial_points(poly, pts, s, g, spec)
+    points = _initial_points(poly, up.pts, s, g, spec)
     t_mesh = time.perf_counter() - t0
     data = _PointData(m, spec.directions)
-    t_lp = 0.0
-    best: dict[str, Any] | None = None
-    rounds: list[dict[str, Any]] = []
+    out = _Lower(None, None, [], "max_rounds", None, t_mesh, 0.0, data)
     previous = None
-    stopped_by = "max_rounds"
-    failure: tuple[CertifyStatus, str] | None = None
-    last_mesh: _Mesh | None = None
     for _ in range(spec.max_rounds):
         t0 = time.perf_counter()
         msh = _Mesh(points)
-        t_mesh += time.perf_counter() - t0
-        b, corr = _row_bounds(msh, data)
-        # triangles whose corrections eat half of F somewhere are refined before any LP
-        for _ in range(MAX_PRE_REFINE):
-            bad = np.min(b / data.F[data.rows(msh.points)][msh.tri], axis=(1, 2)) < 0.5
-            if not np.any(bad):
-                break
-            if msh.n_tri + 3 * int(bad.sum()) > spec.max_triangles:
-                # the corrections do not shrink with the triangles: the chord term (fixed
-                # by the number of directions) or a singularity of F; stop, do not grow
-                failure = (CertifyStatus.CORRECTIONS_TOO_LARGE,
-                           f"{int(bad.sum())} triangles keep second-order corrections above "
-                           f"half of F, and refining them would exceed max_triangles "
-                           f"({spec.max_triangles}); use more directions (e.g. the default "
-                           "or fine mesh preset) or a smaller h_path / h_far")
-                break
-            t0 = time.perf_counter()
-            msh = _Mesh(msh.refine(np.flatnonzero(bad)))
-            t_mesh += time.perf_counter() - t0
-            b, corr = _row_bounds(msh, data)
-        if failure is None and np.min(b) <= 0.0:
-            failure = (CertifyStatus.CORRECTIONS_TOO_LARGE,
-                       f"{int(np.sum(np.min(b, axis=(1, 2)) <= 0))} triangles keep "
-                       f"second-order corrections above F after {MAX_PRE_REFINE} "
-                       "refinements; use a smaller h_path / h_far")
-        if failure is not None:
-            last_mesh = msh
+        out.t_mesh += time.perf_counter() - t0
+        msh, b, corr, out.failure, t_pre = _pre_refine(msh, data, spec)
+        out.t_mesh += t_pre
+        if out.failure is not None:
+            out.last_mesh = msh
             break
         t0 = time.perf_counter()
         try:
-            lp = _solve_lp(msh, b, data.dirs, 0, 1, upper, spec.target_gap,
-                           start=_initial_modes(msh, spec.directions, previous, pts,
+            lp = _solve_lp(msh, b, data.dirs, 0, 1, up.upper, spec.target_gap,
+                           start=_initial_modes(msh, spec.directions, previous, up.pts,
                                                 2.0 * spec.h_path))
         except LPFailure as err:
-            failure, last_mesh = (CertifyStatus.LP_FAILED, str(err)), msh
+            out.failure, out.last_mesh = (CertifyStatus.LP_FAILED, str(err)), msh
             break
         previous = (msh, lp)
-        t_lp += time.perf_counter() - t0
-        gap = (upper - lp["lower"]) / upper
-        rounds.append({"triangles": msh.n_tri, "unknowns": msh.n_dofs, "rows": lp["n_rows"],
-                       "row_rounds": lp["iterations"], "lower": lp["lower"], "gap": gap,
-                       "seconds": time.perf_counter() - t_start})
-        if best is None or lp["lower"] > best["lower"]:
-            best = {**lp, "mesh": msh}
+        out.t_lp += time.perf_counter() - t0
+        gap = (up.upper - lp["lower"]) / up.upper
+        out.rounds.append({"triangles": msh.n_tri, "unknowns": msh.n_dofs,
+                           "rows": lp["n_rows"], "row_rounds": lp["iterations"],
+                           "lower": lp["lower"], "gap": gap,
+                           "seconds": time.perf_counter() - t_start})
+        if out.best is None or lp["lower"] > out.best["lower"]:
+            out.best = {**lp, "mesh": msh}
         if gap <= spec.target_gap:
-            stopped_by = "target_gap"
+            out.stopped_by = "target_gap"
             break
         if time_limit is not None and time.perf_counter() - t_start > time_limit:
-            stopped_by = "time_limit"
+            out.stopped_by = "time_limit"
             break
-        # Doerfler marking by the dual-weighted corrections sum_r y_r c_r per triangle
-        rows, y = lp["rows"], np.maximum(lp["duals"], 0.0)
-        weight = np.bincount(rows[:, 0], weights=y * corr[rows[:, 0], rows[:, 2]],
-                             minlength=msh.n_tri)
-        order = np.argsort(-weight)
-        cum = np.cumsum(weight[order])
-        if cum[-1] <= 0:
-            stopped_by = "no_refinement"
+        marked = _marked(lp, corr, msh.n_tri, spec.mark_fraction)
+        if marked is None:
+            out.stopped_by = "no_refinement"
             break
-        n_mark = int(np.searchsorted(cum, spec.mark_fraction * cum[-1]) + 1)
-        if msh.n_tri + 3 * n_mark > spec.max_triangles:
-            stopped_by = "max_triangles"
+        if msh.n_tri + 3 * len(marked) > spec.max_triangles:
+            out.stopped_by = "max_triangles"
             break
         t0 = time.perf_counter()
-        points = msh.refine(order[:n_mark])
-        t_mesh += time.perf_counter() - t0
-    if failure is not None:
-        stopped_by = failure[0].label
-        status, message = failure
-    else:
-        status = {"target_gap": CertifyStatus.CERTIFIED,
-                  "time_limit": CertifyStatus.TIME_LIMIT}.get(stopped_by,
-                                                             CertifyStatus.BUDGET_REACHED)
-        message = ""
+        points = msh.refine(marked)
+        out.t_mesh += time.perf_counter() - t0
+    return out
+
+
+def _outcome(low: _Lower) -> tuple[str, CertifyStatus, str]:
+    """``(stopped_by, status, message)`` of the refinement: a failure's label and message,
+    else the status the stop means."""
+    if low.failure is not None:
+        status, message = low.failure
+        return status.label, status, message
+    status = {"target_gap": CertifyStatus.CERTIFIED,
+              "time_limit": CertifyStatus.TIME_LIMIT}.get(low.stopped_by,
+                                                         CertifyStatus.BUDGET_REACHED)
+    return low.stopped_by, status, ""
+
+
+def _result(m: Metric, s: np.ndarray, g: np.ndarray, spec: MeshSpec, poly: np.ndarray,
+            up: _Upper, low: _Lower, t_start: float) -> CertifyResult:
+    """The :class:`CertifyResult` of the bounds found (the trivial lower bound 0 if the
+    first round failed)."""
+    stopped_by, status, message = _outcome(low)
+    best = low.best
     if best is None:  # failed in the first round: the trivial bound d >= 0 holds
-        assert last_mesh is not None
-        best = {"lower": 0.0, "mesh": last_mesh, "n_rows": 0, "status": "not_solved",
+        assert low.last_mesh is not None
+        best = {"lower": 0.0, "mesh": low.last_mesh, "n_rows": 0, "status": "not_solved",
                 "solver": LP_SOLVER, "ratio": float("nan")}
     final: _Mesh = best["mesh"]
     lower = best["lower"]
     kind, note = _convexity(m, final.points)
-    total = time.perf_counter() - t_start
-    res = CertifyResult(
-        metric=m.name, start=s, goal=g, lower=lower, upper=upper, length=float(est.value),
-        length_error=float(est.error), gap=(upper - lower) / upper,
-        upper_source=upper_source, path_upper=solver_upper,
-        path_gap=(solver_upper - lower) / solver_upper, triangles=final.n_tri,
+    upper, total = up.upper, time.perf_counter() - t_start
+    return CertifyResult(
+        metric=m.name, start=s, goal=g, lower=lower, upper=upper, length=float(up.est.value),
+        length_error=float(up.est.error), gap=(upper - lower) / upper,
+        upper_source=up.source, path_upper=up.path_upper,
+        path_gap=(up.path_upper - lower) / up.path_upper, triangles=final.n_tri,
         vertices=int(final.points.shape[0]), unknowns=final.n_dofs,
         directions=spec.directions, lp_rows=best["n_rows"],
         lp_rows_total=int(3 * final.n_tri * spec.directions), lp_status=best["status"],
         lp_solver=best["solver"], max_row_ratio=best["ratio"], convexity=kind,
-        convexity_note=note, solver_status=solver_status,
+        convexity_note=note, solver_status=up.solver_status,
         mesh={**asdict(spec), "element": "P2", "domain_polygon_vertices": int(poly.shape[0])},
-        times={"solve": t_solve, "mesh": t_mesh, "bounds": data.seconds,
-               "lp": t_lp, "total": total},
-        rounds=rounds, path=upper_path, stopped_by=stopped_by, status=status,
+        times={"solve": up.seconds, "mesh": low.t_mesh, "bounds": low.data.seconds,
+               "lp": low.t_lp, "total": total},
+        rounds=low.rounds, path=up.path, stopped_by=stopped_by, status=status,
         message=message,
     )
-    return res.strict() if strict else res

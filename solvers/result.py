@@ -8,16 +8,26 @@ result derives from :class:`finsler.status.Result` (``status``, ``converged``, `
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from typing import Any
 
 import numpy as np
 
 from finsler.errors import InputError
-from finsler.status import DistanceStatus, Result, SolverError, Status, json_ready
+from finsler.status import (
+    CertifyStatus,
+    CertifyStop,
+    DistanceStatus,
+    LPStatus,
+    Result,
+    SolverError,
+    Status,
+    json_ready,
+)
 from solvers.chebyshev import interpolation_matrix
 
 __all__ = [
+    "CertifyResult",
     "DistanceResult",
     "DistanceStatus",
     "GeodesicResult",
@@ -265,3 +275,104 @@ class DistanceResult(Result):
             raise InputError("curve parameters t must be finite and lie in [0, 1]")
         n = self.nodes.shape[0] - 1
         return interpolation_matrix(n, 2.0 * t - 1.0) @ self.nodes
+
+
+@dataclass
+class CertifyResult(Result):
+    """A certified interval ``lower <= d(start, goal) <= upper``.
+
+    ``gap = (upper - lower) / upper``. ``upper`` is a proven upper bound of the length of
+    ``path`` ``(n+1, 2)`` (:meth:`finsler.Metric.path_length_bounds`; ``length`` and
+    ``length_error`` are the adaptive-quadrature estimate of it): the solver's (or the
+    given) path
+    (``upper_source == "path"``) or, where ``F(z, .)`` is not convex, the same path with
+    every segment replaced by a zigzag along the two directions of the convexification
+    when that is shorter (``"zigzag"``: switchbacks, the curves whose lengths approach the
+    infimum there). ``path_upper`` / ``path_gap`` are the bound and gap of the solver's
+    path itself: a small ``path_gap`` certifies that path near-globally optimal.
+    ``convexity`` is ``"convex"``
+    (``F(z, .)`` convex on the whole domain) or ``"convexified"`` (not convex somewhere:
+    the dual condition equals that of the convexification, see the module docstring);
+    ``convexity_note`` says it in words. ``rounds`` lists, per LP solve, the triangles,
+    rows used, lower bound and gap. ``times`` in seconds: ``solve`` (upper bound), ``mesh``,
+    ``bounds`` (F and its Hessians), ``lp`` and ``total``. ``lp_status`` is cvxpy's status
+    of the last LP; ``max_row_ratio`` the largest ``grad phi . v / bound`` over every row
+    of the last potential before the final check (``<= 1`` up to the LP solver's
+    feasibility tolerance; the potential is divided by it when above 1). ``lp_rows`` counts
+    the rows of the last LP (edges of the inner polygons), ``lp_rows_total`` the sampled
+    rows they imply (3 x triangles x directions). ``stopped_by`` says what ended the
+    refinement: ``target_gap`` (reached), ``max_rounds`` or ``max_triangles`` (the work
+    budgets of :class:`MeshSpec`), ``no_refinement`` (no triangle left to refine), or
+    ``time_limit`` (the caller's wall-clock limit: only then can the result depend on the
+    machine's speed), or the failure's label. ``status`` (:class:`solvers.CertifyStatus`)
+    says the same in the toolkit's one family of statuses: a failure of the refinement (an
+    LP solver failure, corrections that do not shrink) is a status with the best interval
+    proven so far (lower bound 0 if none) and ``message``, never an exception.
+    ``solver_status`` is the upper-bound solve's :class:`solvers.Status` (``Status.GIVEN``
+    for a given path; its label, e.g. ``"success"``, in JSON) and ``lp_status`` the last
+    LP's :class:`finsler.status.LPStatus` (a ``str`` enum of cvxpy's words).
+    """
+
+    metric: str
+    start: np.ndarray
+    goal: np.ndarray
+    lower: float
+    upper: float
+    length: float
+    length_error: float
+    gap: float
+    upper_source: str
+    path_upper: float
+    path_gap: float
+    triangles: int
+    vertices: int
+    unknowns: int
+    directions: int
+    lp_rows: int
+    lp_rows_total: int
+    lp_status: LPStatus
+    lp_solver: str
+    max_row_ratio: float
+    convexity: str
+    convexity_note: str
+    solver_status: Status
+    mesh: dict[str, Any]
+    times: dict[str, float]
+    rounds: list[dict[str, Any]] = field(default_factory=list)
+    path: np.ndarray | None = None
+    stopped_by: CertifyStop = CertifyStop.TARGET_GAP
+    status: CertifyStatus = CertifyStatus.CERTIFIED
+    message: str = ""
+
+    def __post_init__(self) -> None:
+        # members of the status family (words, as before, are accepted and converted)
+        self.stopped_by = CertifyStop(self.stopped_by)
+        self.lp_status = LPStatus.from_solver(self.lp_status)
+        self.solver_status = Status.from_label(self.solver_status)
+
+    @property
+    def wall_time(self) -> float:
+        """Seconds of the whole certificate (``times["total"]``)."""
+        return float(self.times.get("total", 0.0))
+
+    @property
+    def converged(self) -> bool:
+        """True if the refinement reached its target gap (``status`` is ``CERTIFIED``)."""
+        return self.status.converged
+
+    @property
+    def certified(self) -> bool:
+        """True if both bounds are finite and ``lower <= upper``."""
+        return bool(np.isfinite(self.lower) and np.isfinite(self.upper)
+                    and self.lower <= self.upper)
+
+    def to_dict(self, with_path: bool = False) -> dict[str, Any]:
+        """JSON-ready dict (keys ``lower``, ``upper``, ``gap`` first; ``path`` only if
+        ``with_path``)."""
+        out: dict[str, Any] = {}
+        for f in fields(self):
+            val = getattr(self, f.name)
+            if f.name == "path" and not with_path:
+                continue
+            out[f.name] = json_ready(val)  # labels, lists, non-finite floats as None
+        return out

@@ -84,3 +84,28 @@ def test_checks_still_fail_at_the_boundary() -> None:
     res = CliRunner().invoke(app, ["solve", "--metric", "poincare", "--start", "0.1,0.2",
                                    "--goal", "2,0"])
     assert res.exit_code == 2 and "--goal" in res.output
+
+
+@pytest.mark.parametrize("given_path", [False, True])
+def test_certify_checks_each_input_once(given_path: bool) -> None:
+    # before: the pair entered the checks 6 times (certify's two domain checks, then
+    # solve_geodesic's check_point twice, each with its own domain check)
+    m = finsler.get_metric("poincare")
+    s, g = np.array([0.1, 0.2]), np.array([0.4, -0.3])
+    path = np.linspace(s, g, 9) if given_path else None
+    with counting() as counts:
+        r = solvers.certify(m, s, g, solvers.MeshSpec(h_path=0.2, directions=16,
+                                                      target_gap=0.5), path=path)
+    assert r.converged and r.lower <= float(m.distance(s, g)[0]) <= r.upper
+    assert counts["as_metric"] == 1 and counts["check_point"] == 0, counts
+    # start and goal, plus the given path's own check
+    assert counts["domain.check"] == (3 if given_path else 2), counts
+    assert counts["check_segments"] == (0 if given_path else 1), counts  # the solve's size
+
+
+def test_certify_still_refuses_bad_input_at_the_boundary() -> None:
+    m = finsler.get_metric("poincare")
+    with pytest.raises(finsler.DomainError, match="goal"):
+        solvers.certify(m, [0.1, 0.2], [2.0, 0.0])
+    with pytest.raises(finsler.InputError, match="segments"):
+        solvers.certify(m, [0.1, 0.2], [0.4, -0.3], solvers.MeshSpec(segments=1 << 17))

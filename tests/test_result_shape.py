@@ -195,7 +195,7 @@ def _not_on_the_base(classes: dict[str, type]) -> list[str]:
 def test_every_public_result_class_derives_from_the_base() -> None:
     classes = _public_result_classes()
     # the walk finds the types of every package (not an empty scan that passes)
-    for name in ("solvers.certify.CertifyResult", "learn.policy.EvalResult",
+    for name in ("solvers.result.CertifyResult", "learn.policy.EvalResult",
                  "learn.sweep.SweepResult", "validation.testing.engine.CheckReport",
                  "validation.propositions.Lemma1Report"):
         assert name in classes, name
