@@ -854,3 +854,25 @@ def test_a_start_with_finite_energy_but_nan_derivatives_is_not_finite() -> None:
     res = newton_energy(m, np.stack([a, b]), scale=2.0)
     assert res.status[1] == NewtonStatus.NOT_FINITE and res.iterations[1] == 0
     assert res.status[0] != NewtonStatus.NOT_FINITE and res.iterations[0] > 0
+
+
+def test_constant_terms_of_chunked_evaluations_fill_their_chunk() -> None:
+    """Euclidean segments have constant second derivatives (2 and -2: the lowered program
+    returns plain numbers, expanded to each chunk's rows): five paths in chunks of 2, 2,
+    1 give the closed-form Hessian blocks (4 I on the diagonal, -2 I coupling) and energy
+    sum |p_{j+1} - p_j|**2 for every path."""
+    from solvers.newton import _NUMPY_OPS, _to_field, energy_terms
+
+    m = finsler.get_metric("euclidean")
+    rng = np.random.default_rng(9)
+    paths = np.linspace([-0.5, 0.1], [0.4, -0.2], 5)[None] + 0.05 * rng.normal(size=(5, 5, 2))
+    t = energy_terms(m, _NUMPY_OPS, _to_field(_NUMPY_OPS, paths), chunk=8)
+    np.testing.assert_allclose(t.energy, np.sum(np.diff(paths, axis=1) ** 2, axis=(1, 2)),
+                               rtol=1e-14)
+    eye = np.eye(2)
+    for i in range(2):
+        for k in range(2):
+            np.testing.assert_array_equal(t.diag[i][k], np.full((5, 3), 4.0 * eye[i, k]))
+            want = np.full((5, 3), -2.0 * eye[i, k])
+            want[:, -1] = 0.0  # the last column couples nothing
+            np.testing.assert_array_equal(t.off[i][k], want)
