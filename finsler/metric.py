@@ -49,6 +49,8 @@ __all__ = ["LengthBounds", "LengthEstimate", "Metric", "Task", "TrainingSettings
 
 #: Largest number of halvings of a segment in :meth:`Metric.path_length_bounds`.
 MAX_LENGTH_HALVINGS = 14
+#: :meth:`Metric.path_length_bounds` halves no further once this many pieces are pending.
+MAX_LENGTH_PIECES = 1 << 18
 
 
 @dataclass(frozen=True)
@@ -503,10 +505,14 @@ class Metric(MetricHooks, ABC):
         [f''(box)]`` where the brackets are interval enclosures (:mod:`finsler.intervals`,
         outward rounding) at the piece's midpoint and over its bounding box. Pieces whose
         enclosure is wider than ``rtol`` of their length are halved, up to
-        ``MAX_LENGTH_HALVINGS`` times; the pieces are summed with ``math.fsum`` (correctly
-        rounded) and widened by a unit in the last place. Sound where F is twice
-        differentiable in ``x`` along the path (an infinite enclosure gives an infinite
-        bound, never a wrong one).
+        ``MAX_LENGTH_HALVINGS`` times (and no further once ``MAX_LENGTH_PIECES`` are
+        pending: the bound then holds, ``converged`` is False); the pieces are summed with
+        ``math.fsum`` (correctly rounded) and widened by a unit in the last place. Sound
+        where F is twice differentiable in ``x`` along the path. Where the enclosure of
+        ``f''`` is infinite (a kink of a C^0 metric such as car-like's ``max``), the piece
+        takes the zeroth-order enclosure ``tau [F(box, d)]`` instead (the integrand lies in
+        it on the whole piece, for any F), whose width shrinks linearly under halving; an
+        infinite enclosure of F gives an infinite bound, never a wrong one.
         """
         import math
 
@@ -534,11 +540,17 @@ class Metric(MetricHooks, ABC):
             box = [Interval(np.minimum(u.lo, w.lo), np.maximum(u.hi, w.hi))
                    for u, w in zip(at[0], at[1], strict=True)]
             (f_c, _) = enclose(fn, at[2], vel)
-            (_, q_box) = enclose(fn, box, vel)
+            (f_box, q_box) = enclose(fn, box, vel)
             t = Interval(tau)
             piece = t * f_c[0] + (t * t * t) * (Interval(1.0) / Interval(24.0)) * q_box[0]
+            kink = ~(np.isfinite(piece.lo) & np.isfinite(piece.hi))
+            if np.any(kink):  # zeroth order: int F(x(t), d) dt in tau [F(box, d)]
+                zero = t * f_box[0]
+                piece = Interval(np.where(kink, zero.lo, piece.lo),
+                                 np.where(kink, zero.hi, piece.hi))
             loose = ~(piece.hi - piece.lo <= rtol * np.maximum(piece.lo, 0.0))
-            done = np.ones(len(t0), bool) if level == MAX_LENGTH_HALVINGS else ~loose
+            last = level == MAX_LENGTH_HALVINGS or 2 * np.count_nonzero(loose) > MAX_LENGTH_PIECES
+            done = np.ones(len(t0), bool) if last else ~loose
             los.append(piece.lo[done])
             his.append(piece.hi[done])
             if done.all():

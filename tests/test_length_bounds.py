@@ -1,6 +1,7 @@
 """``Metric.path_length_bounds`` (issue 22, mutation testing): the proven interval contains
 the closed-form or adaptive-quadrature length, is as narrow as ``rtol`` says, halves only
-where needed, and is infinite (never wrong) where the second derivative is unbounded. Fast:
+where needed, falls back to the zeroth-order enclosure ``tau [F(box, d)]`` where the second
+derivative is unbounded (a kink), and is infinite (never wrong) where F itself is. Fast:
 every test is well under a second, so that mutation runs can afford them."""
 
 from __future__ import annotations
@@ -114,12 +115,18 @@ def test_bounds_of_a_segment_split_by_hand_agree() -> None:
     assert abs(whole.lower - split.lower) < 1e-8 * ref
 
 
-def test_unbounded_second_derivative_gives_an_infinite_not_a_wrong_bound() -> None:
+def test_unbounded_second_derivative_falls_back_to_the_enclosure_of_f() -> None:
+    """Through the cone's apex f'' is unbounded: the pieces there take ``tau [F(box, d)]``
+    (issue 46: a finite bound at kinks), so the bound is finite and contains the closed form
+    ``int_{-0.5}^{0.5} (1 + |t|) dt = 1.25``; rtol 1e-9 is out of reach of the zeroth-order
+    pieces within the halvings, so it is not converged."""
     m = Cone()
     pts = np.array([[-0.5, 0.0], [0.5, 0.0]])  # through the origin
     bd = m.path_length_bounds(pts)
-    assert bd.lower == 0.0 and bd.upper == math.inf
+    assert bd.lower <= 1.25 <= bd.upper and bd.upper - bd.lower <= 2e-8
     assert not bd.converged
+    coarse = m.path_length_bounds(pts, rtol=0.9)  # one piece: tau [F(box)] = [1, 1.5]
+    assert coarse.pieces == 1 and coarse.lower <= 1.0 + 1e-12 and coarse.upper >= 1.5 - 1e-12
     # away from the origin it is finite: int_{-0.5}^{0.5} (1 + sqrt(t**2 + 0.01)) dt
     off = m.path_length_bounds(np.array([[-0.5, 0.1], [0.5, 0.1]]), rtol=1e-8)
     ref = 1.0 + 2 * quad(lambda t: math.sqrt(t * t + 0.01), 0.0, 0.5, epsrel=1e-13)[0]
@@ -183,3 +190,23 @@ def test_non_finite_enclosures_of_either_sign_give_zero_and_inf(monkeypatch) -> 
                     [0.9, 0.0]])
     bd = m.path_length_bounds(pts)
     assert bd.lower == 0.0 and bd.upper == math.inf and not bd.converged
+
+
+def test_carlike_segment_across_its_kink_has_a_finite_bound_holding_the_length() -> None:
+    """Car-like's ``max(r_min |v_th| - u, 0)`` switches along this segment (at
+    ``cos(theta) = 0.6``), where the enclosure of f'' is infinite on every box around the
+    switch (checked here, so the fallback is what is tested); the bound is finite, narrow
+    and contains the adaptive quadrature of the integrand."""
+    from finsler.intervals import Interval, enclose
+
+    m = finsler.get_metric("carlike")
+    a, b = np.array([0.0, 0.0, 0.6]), np.array([0.5, 0.0, 1.2])
+    d = b - a
+    t_kink = (math.acos(0.6) - 0.6) / 0.6
+    lo, hi = a + (t_kink - 1e-6) * d, a + (t_kink + 1e-6) * d
+    box = [Interval(np.array([min(u, w)]), np.array([max(u, w)])) for u, w in zip(lo, hi)]
+    _, q = enclose(m._length_enclosure, box, [Interval(np.array([x])) for x in d])
+    assert not np.isfinite(q[0].hi[0])
+    bd = m.path_length_bounds(np.stack([a, b]))
+    ref = _quad_length(m, np.stack([a, b]))
+    assert bd.lower <= ref <= bd.upper and bd.upper - bd.lower <= 1e-8 * ref
