@@ -565,3 +565,230 @@ def test_vectors_strategy():
             "odd-domain-test has a square")):
         VM._points(Odd(), 0.5)
     VM._points(Odd(), 1.0)  # the whole domain needs no scale
+
+
+# ----------------------------------------------------------------------------------------
+# after the first testing_metric run (its survivors)
+# ----------------------------------------------------------------------------------------
+class ZeroCone(NegativeCone):
+    """F = 0 in a thin cone of directions, |v| elsewhere (zero, not negative)."""
+
+    name = "zero-cone-test"
+
+    def F_sx(self, x, v):
+        n = ca.sqrt(ca.dot(v, v))
+        c = (math.cos(1.0) * v[0] + math.sin(1.0) * v[1]) / n
+        return ca.if_else(c > 0.99, 0.0 * n, n)
+
+
+class NanAndNegativeCones(NegativeCone):
+    """F NaN in one thin cone, -|v| in the opposite one: the NaN is the worse."""
+
+    name = "nan-negative-cones-test"
+
+    def F_sx(self, x, v):
+        n = ca.sqrt(ca.dot(v, v))
+        c = (math.cos(1.0) * v[0] + math.sin(1.0) * v[1]) / n
+        return ca.if_else(c > 0.99, float("nan"), ca.if_else(c < -0.99, -n, n))
+
+
+class HalfZero(_Base):
+    """F = |v| for x0 >= 0, 0 for x0 < 0 (finite, not positive)."""
+
+    name = "half-zero-test"
+    smooth = False
+
+    def F_sx(self, x, v):
+        return ca.if_else(x[0] < 0, 0.0, ca.sqrt(ca.dot(v, v)))
+
+
+class Zero(_Base):
+    name = "zero-test"
+
+    def F_sx(self, x, v):
+        return 0.0 * ca.sqrt(ca.dot(v, v))
+
+
+class SlightlySquared(_Base):
+    """F = |v| + 1e-6 |v|^2: homogeneity off by 1e-6 relative (absolute far below 1)."""
+
+    name = "slightly-squared-test"
+
+    def F_sx(self, x, v):
+        return ca.sqrt(ca.dot(v, v)) + 1e-6 * ca.dot(v, v)
+
+
+def test_finite_positive_verdicts_in_full():
+    r = VM.check_finite_positive(HalfZero(), examples=30)
+    assert r.name == "finite-positive" and r.status is FAILED
+    assert r.claim == "F(x, v) is finite and > 0 for v != 0 on the domain"
+    assert r.lhs == ("F(x, v)", 0.0) and r.relation == ">" and r.rhs == ("0", 0.0)
+    assert set(r.counterexample) == {"x", "v"} and r.counterexample["x"][0] < 0
+    assert r.note.startswith("F is not finite and > 0 for ") and r.note.endswith(".")
+    nan = VM.check_finite_positive(NanOutside(), examples=60)
+    x, v = (np.asarray(nan.counterexample[k]) for k in "xv")
+    assert np.linalg.norm(x) <= 1.0 + 1e-12 and np.linalg.norm(v) >= 1e-3
+    assert nan.relation == ">" and nan.rhs == ("0", 0.0)
+    assert isinstance(nan.seconds, float) and nan.seconds > 0
+
+
+def test_finite_positive_sweep_zero_and_nan():
+    z = VM.check_finite_positive(ZeroCone(), examples=5, seed=3)
+    assert z.status is FAILED and z.lhs == ("F(x, v)", 0.0)
+    assert z.name == "finite-positive" and z.claim.startswith("F(x, v) is finite")
+    assert isinstance(z.seconds, float) and z.seconds > 0
+    _, _, f = VM.directions_scan(ZeroCone(), 3)  # the seed's own sweep
+    assert z.tried == 5 + f.size and z.passed == 5 + int((f > 0).sum())
+    n = VM.check_finite_positive(NanAndNegativeCones(), examples=5)
+    assert n.status is FAILED and math.isnan(n.lhs[1])
+
+
+def test_searches_use_their_named_streams(monkeypatch):
+    streams, rngs = [], []
+    real_seeded, real_search = VM.seeded, VM.search
+
+    def seeded(seed, stream):
+        streams.append((seed, stream))
+        rng = real_seeded(seed, stream)
+        rngs.append(rng)
+        return rng
+
+    def search(*a, **kw):
+        assert kw["rng"] is rngs[-1]
+        return real_search(*a, **kw)
+
+    monkeypatch.setattr(VM, "seeded", seeded)
+    monkeypatch.setattr(VM, "search", search)
+    m = Randers()
+    for fn, stream in ((VM.check_finite_positive, "finite-positive"),
+                       (VM.check_homogeneity, "homogeneity"),
+                       (VM.check_domain, "domain"), (VM.check_subadditivity, "subadditivity"),
+                       (VM.check_strong_convexity, "strong-convexity"),
+                       (VM.check_reversibility, "reversibility"),
+                       (VM.check_lowered_forms, "lowered-forms"),
+                       (VM.check_smoothness, "smoothness")):
+        streams.clear()
+        fn(m, examples=2, seed=7)
+        assert streams == [(7, stream)], fn.__name__
+
+
+def test_seeds_reach_the_sweeps(monkeypatch):
+    seen = []
+    real = VM.directions_scan
+    monkeypatch.setattr(VM, "directions_scan", lambda m, seed: seen.append(seed) or real(m, seed))
+    VM.check_finite_positive(Euclidean(), examples=2, seed=5)
+    assert seen == [5]
+    maps = []
+    real_map = VM.convexity_map
+    monkeypatch.setattr(VM, "convexity_map", lambda m, samples=VM.MAP_SAMPLES, seed=0: (
+        maps.append(seed) or real_map(m, samples, seed)))
+    VM.check_strong_convexity(Euclidean(), examples=2, seed=6)
+    assert maps == [6]
+    maps.clear()
+    VM.convex_region(Matsumoto(), None, seed=2)
+    VM.solve_region(Matsumoto(), None, seed=4)
+    assert maps == [2, 4]
+
+
+def test_homogeneity_verdicts_in_full():
+    off = VM.check_homogeneity(Offset(), examples=10)
+    assert off.relation == "=="
+    assert off.claim == "F(x, lam v) = lam F(x, v) for lam > 0, F(x, 0) = 0"
+    sq = VM.check_homogeneity(Squared(), examples=30)
+    assert sq.relation == "==" and sq.name == "homogeneity"
+    assert VM.check_homogeneity(Zero(), examples=10).status is PASSED  # 0 = lam 0
+    small = VM.check_homogeneity(SlightlySquared(), examples=30)
+    assert small.status is FAILED
+    a, b = small.lhs[1], small.rhs[1]
+    assert abs(a - b) < 1e-3
+    assert small.note == f"relative difference {abs(a - b) / abs(b):.3g} (tolerance 1e-12)"
+    tiny = VM.check_homogeneity(SlightlySquared(), examples=30, seed=1)
+    lam, v = tiny.counterexample["lam"], np.linalg.norm(tiny.counterexample["v"])
+    f = v + 1e-6 * v * v
+    assert tiny.rhs[1] == pytest.approx(lam * f, rel=1e-12)
+
+
+def test_convex_region_without_a_core(monkeypatch):
+    monkeypatch.setattr(VM, "convexity_map", lambda m, samples=0, seed=0: VM.ConvexityMap(
+        8, 1.0, -1.0, None, None, None))
+    assert VM.convex_region(Matsumoto(), None) == (
+        None, "no convex core around the domain's centre")
+    assert VM.solve_region(Matsumoto()) == 1.0
+    r = VM.check_subadditivity(Matsumoto(), examples=30)
+    assert r.status in (MAPPED, PASSED) and not r.note.startswith("Holds on")
+    assert r.tried <= 30  # the whole domain only, no search of a convex part
+
+
+def test_describe_rounds_the_nearest_point():
+    part = VM.ConvexityMap(200, 0.125, -1.0, (0.123456, 0.2), 0.3, 0.3)
+    assert "is (0.1235, 0.2), at 0.3000 of" in part.describe()
+
+
+def test_strong_convexity_map_found_note_in_full():
+    m = _HiddenConvexity()
+    r = VM.check_strong_convexity(m, examples=5, directions=7)
+    cmap = VM.convexity_map(m)
+    assert r.name == "strong-convexity" and r.relation == ">" and r.rhs == ("0", 0.0)
+    assert r.claim == "the fundamental tensor Hess_v F^2/2 is positive definite"
+    assert r.lhs[0] == "smallest eigenvalue over 7 directions"
+    assert isinstance(r.seconds, float) and r.seconds > 0
+    x = np.asarray(cmap.worst)
+    vv, lam, ww = VM.weakest_direction(m, x, 7)
+    assert r.counterexample == {"x": list(x), "v": list(vv), "w": list(ww)}
+    assert r.note == (
+        f"F(x, .) is not convex at x = {VM.fmt(list(x), 4)}: at the unit direction v = "
+        f"{VM.fmt(list(vv), 4)} the fundamental tensor has eigenvalue {lam:.3g} along w = "
+        f"{VM.fmt(list(ww), 4)} (the unit ball bends inwards there). F is not convex on "
+        f"{100 * cmap.fraction:.1f}% of {cmap.samples} points sampled uniformly over the "
+        f"domain; the non-convex sample nearest the domain's centre is "
+        f"{VM.fmt(cmap.nearest, 4)}, at {cmap.nearest_scale:.3f} of the domain's size. Fix F "
+        "there, or declare convex_everywhere = False with a convexity_note and the region is "
+        "mapped instead.")
+    assert len(VM.fmt(list(x), 4)) < len(VM.fmt(list(x), 6))
+
+
+def test_strong_convexity_sizes_of_a_region_the_map_misses(monkeypatch):
+    m = ConvexClaimed()
+    real = VM.convexity_map
+    monkeypatch.setattr(VM, "convexity_map", lambda mm, samples=VM.MAP_SAMPLES, seed=0: (
+        VM.ConvexityMap(64, 0.0, 0.5, None, None, 1.0)))
+    r = VM.check_strong_convexity(m, examples=10, directions=16)
+    assert r.status is FAILED
+    assert ("F is convex at all 64 points of the convexity map (the bad region is smaller "
+            "than 1/64 of the domain). Fix F") in r.note
+    assert real is not None
+
+
+def test_strong_convexity_eigenvalue_zero_fails():
+    class Degenerate(_Base):  # F = |v0|-like along a direction: a zero eigenvalue
+        name = "degenerate-test"
+
+        def F_sx(self, x, v):
+            return ca.sqrt(v[0] ** 2 + 1e-30 * v[1] ** 2 + 0.0 * ca.dot(x, x))
+
+    r = VM.check_strong_convexity(Degenerate(), examples=5, directions=8)
+    assert r.status is FAILED and r.lhs[1] <= 1e-20
+
+
+def test_not_smooth_names_and_claims():
+    sk = VM.check_strong_convexity(NegativeCone(), examples=3)
+    assert sk.name == "strong-convexity"
+    assert sk.claim == "the fundamental tensor Hess_v F^2/2 is positive definite"
+    sm = VM.check_smoothness(NegativeCone(), examples=3)
+    assert sm.name == "smoothness" and sm.claim.startswith("F^2 is C^2 in (x, v)")
+
+
+def test_metric_properties_pass_their_options(monkeypatch):
+    got = {}
+    for name in ("check_domain", "check_finite_positive", "check_homogeneity",
+                 "check_subadditivity", "check_strong_convexity", "check_reversibility",
+                 "check_lowered_forms", "check_smoothness"):
+        monkeypatch.setattr(VM, name, lambda m, _n=name, **kw: got.__setitem__(_n, kw))
+    VM.metric_properties(Euclidean(), examples=4, seed=9, convex_shrink=0.5)
+    base = {"examples": 4, "seed": 9}
+    assert got == {"check_domain": base, "check_finite_positive": base,
+                   "check_homogeneity": base,
+                   "check_subadditivity": {**base, "convex_shrink": 0.5},
+                   "check_strong_convexity": {**base, "convex_shrink": 0.5},
+                   "check_reversibility": base, "check_lowered_forms": base,
+                   "check_smoothness": base}
