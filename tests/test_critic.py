@@ -56,7 +56,7 @@ def test_load_critic_returns_the_trained_critic(tmp_path) -> None:
     cfg = learn.default_config("euclidean", timesteps=60_000, collection_size=1024,
                                minibatch_size=256, epochs=2, eval_every=5, depth=3)
     run = tmp_path / "run"
-    learn.train(cfg, run, progress=False)
+    learn.train_run(cfg, run, progress=False)
     for ck, name in (("best", BEST_FILE), ("latest", LATEST_FILE)):
         critic = learn.load_critic(run, checkpoint=ck)
         saved = load_checkpoint(run / name)["critic"]

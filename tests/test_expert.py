@@ -123,10 +123,10 @@ _EXPERT = {"expert_weight": 1.0, "expert_pairs": 8, "expert_every": 2, "expert_k
 def test_expert_run_counts_the_search_and_stays_model_free(tmp_path) -> None:
     """The same run with and without the term: the all-inclusive count grows by the
     term's evaluations, the paper's count does not, no derivative of C is taken."""
-    plain = learn.train(_small(timesteps=3000, epochs=1, eval_every=1), tmp_path / "p",
-                        progress=False)
+    plain = learn.train_run(_small(timesteps=3000, epochs=1, eval_every=1), tmp_path / "p",
+                            progress=False)
     cfg = _small(timesteps=3000, epochs=1, eval_every=1, **_EXPERT)
-    res = learn.train(cfg, tmp_path / "e", progress=False)
+    res = learn.train_run(cfg, tmp_path / "e", progress=False)
     doc = learn.storage.read_json(tmp_path / "e" / "config.json")
     assert doc["config"]["expert_weight"] == 1.0 and doc["model_free"] is True
     assert doc["uses_derivative_of_C"] == [] and "search_imitation" in str(doc["actor_terms"])

@@ -394,7 +394,7 @@ def test_a_damaged_metrics_log_loses_no_rows_on_resume(tmp_path, monkeypatch, da
 
     cfg = learn.make_config("euclidean", "midpoint", timesteps=30_000, collection_size=1024,
                             minibatch_size=256, eval_every=2, eval_pairs=10, depth=3)
-    full = learn.train(cfg, tmp_path / "full", progress=False)
+    full = learn.train_run(cfg, tmp_path / "full", progress=False)
     real, calls = Trainer.update, [0]
 
     def update(self, *a):
@@ -405,7 +405,7 @@ def test_a_damaged_metrics_log_loses_no_rows_on_resume(tmp_path, monkeypatch, da
 
     monkeypatch.setattr(Trainer, "update", update)
     with pytest.raises(learn.base.TrainingInterrupted):
-        learn.train(cfg, tmp_path / "cut", progress=False)
+        learn.train_run(cfg, tmp_path / "cut", progress=False)
     monkeypatch.undo()
     log = tmp_path / "cut" / "metrics.csv"
     if damage == "truncate":
@@ -414,7 +414,7 @@ def test_a_damaged_metrics_log_loses_no_rows_on_resume(tmp_path, monkeypatch, da
         log.write_bytes(os.urandom(300))
     else:
         log.unlink()
-    learn.train(cfg, tmp_path / "cut", resume=True, progress=False)
+    learn.train_run(cfg, tmp_path / "cut", resume=True, progress=False)
     keys = ("iteration", "timesteps", "success_rate", "mean_length")
     want = [{k: r[k] for k in keys} for r in full.history]
     got = [{k: r[k] for k in keys} for r in read_metrics(log)]

@@ -142,7 +142,7 @@ def test_old_configs_without_the_field_load_with_the_defaults(tmp_path: Path) ->
 # ----------------------------------------------------------------------------------------
 def test_tiny_run_on_a_nondefault_parameter(tmp_path: Path, monkeypatch) -> None:
     cfg = _tiny()
-    full = learn.train(cfg, tmp_path / "full", progress=False)
+    full = learn.train_run(cfg, tmp_path / "full", progress=False)
     doc = read_json(tmp_path / "full" / CONFIG_FILE)
     assert doc["config"]["metric_params"] == {"a": 0.2}
     assert doc["config"]["metric_class"] == THIS_CLASS
@@ -177,14 +177,14 @@ def test_tiny_run_on_a_nondefault_parameter(tmp_path: Path, monkeypatch) -> None
 
     monkeypatch.setattr(Trainer, "update", crashing_update)
     with pytest.raises(RuntimeError, match="simulated crash"):
-        learn.train(cfg, tmp_path / "crash", progress=False)
+        learn.train_run(cfg, tmp_path / "crash", progress=False)
     monkeypatch.setattr(Trainer, "update", real_update)
     assert not (tmp_path / "crash" / RESULT_FILE).exists()
     with pytest.raises(InputError, match=r"metric_params \(\{'a': 0.2\} in the run, "
                                          r"\{'a': 0.3\} given\)"):
-        learn.train(_tiny(metric_params={"a": 0.3}), tmp_path / "crash", resume=True,
-                    progress=False)
-    resumed = learn.train(cfg, tmp_path / "crash", resume=True, progress=False)
+        learn.train_run(_tiny(metric_params={"a": 0.3}), tmp_path / "crash", resume=True,
+                        progress=False)
+    resumed = learn.train_run(cfg, tmp_path / "crash", resume=True, progress=False)
     assert resumed.timesteps == full.timesteps
     a = learn.storage.load_checkpoint(tmp_path / "full" / LATEST_FILE)
     b = learn.storage.load_checkpoint(tmp_path / "crash" / LATEST_FILE)
@@ -194,7 +194,7 @@ def test_tiny_run_on_a_nondefault_parameter(tmp_path: Path, monkeypatch) -> None
 
 
 def test_run_reloads_in_a_fresh_process_by_importing_the_class(tmp_path: Path) -> None:
-    learn.train(_tiny(timesteps=1_500), tmp_path / "r", progress=False)
+    learn.train_run(_tiny(timesteps=1_500), tmp_path / "r", progress=False)
     code = ("import sys, numpy as np, finsler, learn\n"
             "assert 'wavy' not in finsler.list_metrics()\n"
             f"p = learn.load_policy({str(tmp_path / 'r')!r})\n"

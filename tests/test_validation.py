@@ -286,7 +286,7 @@ def matsumoto_policy(tmp_path_factory) -> list[str]:
         return ["--env", "matsumoto"]
     run = tmp_path_factory.mktemp("run")
     cfg = learn.default_config("matsumoto", timesteps=200_000, minutes=0.2, eval_every=2)
-    learn.train(cfg, run, progress=False)
+    learn.train_run(cfg, run, progress=False)
     return ["--run", str(run)]
 
 
@@ -391,8 +391,8 @@ def test_the_learning_curve_names_the_pairs_it_was_evaluated_on(report_dir: Path
         assert "the validation pairs (finsler.validation_pairs)" in md
         assert "DEFAULT evaluation pairs" not in md
     run = tmp_path / "run"
-    learn.train(learn.default_config("euclidean", timesteps=5000, eval_every=1), run,
-                progress=False)
+    learn.train_run(learn.default_config("euclidean", timesteps=5000, eval_every=1), run,
+                    progress=False)
     assert curve_set(run) == "validation"
     assert curve_set(Path(learn.load_policy("matsumoto").source)) == "validation"
     old = Path(__file__).resolve().parents[1] / "benchmarks" / "previous_policies"

@@ -149,7 +149,7 @@ def test_bad_warm_start_is_refused_clearly(tmp_path: Path) -> None:
     cfg = learn.default_config("matsumoto", metric_params={"height": 1.5}, timesteps=1_500,
                                depth=2, hidden=(8,), collection_size=128, minibatch_size=64,
                                epochs=1, eval_every=1, eval_pairs=4, path_energy_weight=0.0)
-    learn.train(cfg, tmp_path / "run", progress=False)
+    learn.train_run(cfg, tmp_path / "run", progress=False)
     res = r.invoke(app, [*base, "--warm-start", str(tmp_path / "run")])
     assert res.exit_code == 2 and "height=1.5 (solve: 1.0)" in res.output, res.output
     with pytest.raises(InputError, match=r"height=1\.5"):
