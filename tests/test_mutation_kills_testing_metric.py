@@ -792,3 +792,51 @@ def test_metric_properties_pass_their_options(monkeypatch):
                    "check_strong_convexity": {**base, "convex_shrink": 0.5},
                    "check_reversibility": base, "check_lowered_forms": base,
                    "check_smoothness": base}
+
+
+class Drift(_Base):
+    """F = |v| + 0.1 x0 v0 declared reversible: asymmetric wherever x0 v0 != 0."""
+
+    name = "drift-test"
+
+    def F_sx(self, x, v):
+        return ca.sqrt(ca.dot(v, v)) + 0.1 * x[0] * v[0]
+
+
+class TinyAsymmetric(_Base):
+    """F = 1e-3 (|v| + 1e-12 v0): relatively asymmetric by ~2e-12 > 1e-13, absolutely by
+    ~1e-15 (so a tolerance rtol / F would pass it)."""
+
+    name = "tiny-asymmetric-test"
+
+    def F_sx(self, x, v):
+        return 1e-3 * (ca.sqrt(ca.dot(v, v)) + 1e-12 * v[0])
+
+
+def test_reversibility_verdicts_in_full():
+    r = VM.check_reversibility(Drift(), examples=30)
+    assert r.status is FAILED and r.name == "reversibility" and r.relation == "=="
+    x, v = (np.asarray(r.counterexample[k]) for k in "xv")
+    f = Drift().F
+    assert r.lhs == ("F(x, -v)", float(f(x, -v))) and r.rhs == ("F(x, v)", float(f(x, v)))
+    assert isinstance(r.seconds, float) and r.seconds > 0
+    assert VM.check_reversibility(Zero(), examples=5).status is PASSED  # 0 = 0
+    assert VM.check_reversibility(TinyAsymmetric(), examples=10).status is FAILED
+    sk = VM.check_reversibility(Randers(), examples=20)
+    assert sk.name == "reversibility" and isinstance(sk.seconds, float) and sk.seconds > 0
+    assert re.fullmatch(r"not applicable: randers is declared not reversible \(asymmetry "
+                        r"confirmed at x=\(.*\) v=\(.*\): F\(x, -v\) = \S+   !=   F\(x, v\) "
+                        r"= \S+\)", sk.note)
+    sym = VM.check_reversibility(EuclidClaimedIrreversible(), examples=12)
+    assert sym.name == "reversibility" and sym.claim.startswith("F(x, -v) != F(x, v)")
+    assert isinstance(sym.seconds, float) and sym.seconds > 0
+
+
+def test_reversible_search_uses_its_stream(monkeypatch):
+    streams = []
+    real = VM.seeded
+    monkeypatch.setattr(VM, "seeded", lambda seed, s: streams.append((seed, s)) or real(seed, s))
+    a = VM.check_reversibility(Drift(), examples=10, seed=3)
+    assert streams == [(3, "reversibility")]
+    b = VM.check_reversibility(Drift(), examples=10, seed=3)
+    assert a.counterexample == b.counterexample

@@ -492,9 +492,7 @@ def check_reversibility(metric: Metric, *, examples: int = 100, seed: int = 0,
                    rng=seeded(seed, name))
     claim = "F(x, -v) != F(x, v) somewhere (declared not reversible)"
     if found.status == FAILED:  # an asymmetric example: the declaration holds
-        seen = (f" (asymmetry confirmed at {found.short_example(200)}: F(x, -v) = "
-                f"{found.lhs[1]:.6g}, F(x, v) = {found.rhs[1]:.6g})"
-                if found.lhs and found.rhs else "")
+        seen = f" (asymmetry confirmed at {found.short_example(200)}: {found.sides()})"
         return PropertyResult(name, claim, SKIPPED, seconds=found.seconds,
                               note=f"not applicable: {m.name} is declared not reversible"
                                    + seen)
