@@ -840,3 +840,26 @@ def test_reversible_search_uses_its_stream(monkeypatch):
     assert streams == [(3, "reversibility")]
     b = VM.check_reversibility(Drift(), examples=10, seed=3)
     assert a.counterexample == b.counterexample
+
+
+class KinkedV(_Base):
+    """F = |v| + 0.2 |v0| declared smooth: a kink at v0 = 0, where hypothesis looks first."""
+
+    name = "kinked-v-test"
+
+    def F_sx(self, x, v):
+        return ca.sqrt(ca.dot(v, v)) + 0.2 * ca.fabs(v[0])
+
+
+def test_smoothness_search_finds_the_kink_itself():
+    k = VM.check_smoothness(KinkedV(), examples=20)
+    assert k.status is FAILED and k.name == "smoothness"
+    assert k.claim == "F^2 is C^2 in (x, v) for v != 0 (symbolic Hessian = second differences)"
+    assert k.lhs[0] == "second difference of F^2/2 (h = 0.001)"  # the search's, not the sweep's
+    assert re.fullmatch(r"error \S+ at h = 0\.002, \S+ at h/2: not converging, F\^2 has a "
+                        r"kink here", k.note)
+    x, v, u = (np.asarray(k.counterexample[a]) for a in "xvu")
+    assert math.isclose(np.linalg.norm(u), 1.0, rel_tol=1e-12)
+    assert np.all(np.abs(x) <= 0.9 + 1e-12) and np.linalg.norm(v) >= 0.1
+    # a smooth metric passes with a tolerance far below the kink's error
+    assert VM.check_smoothness(Randers(), examples=4, rtol=1e-9).status is PASSED
