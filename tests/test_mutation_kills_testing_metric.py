@@ -863,3 +863,90 @@ def test_smoothness_search_finds_the_kink_itself():
     assert np.all(np.abs(x) <= 0.9 + 1e-12) and np.linalg.norm(v) >= 0.1
     # a smooth metric passes with a tolerance far below the kink's error
     assert VM.check_smoothness(Randers(), examples=4, rtol=1e-9).status is PASSED
+
+
+class NanOutsideOff(_Base):
+    """F = |v| on the disk of radius 1 about (2, -1), NaN beyond 0.9 from its centre."""
+
+    name = "nan-outside-off-test"
+    domain = property(lambda self: Disk(radius=1.0, center=(2.0, -1.0)))
+
+    def F_sx(self, x, v):
+        d = x - ca.DM([2.0, -1.0])
+        return ca.if_else(ca.dot(d, d) > 0.81, float("nan"), ca.sqrt(ca.dot(v, v)))
+
+
+def test_domain_verdicts_in_full():
+    m = NanOutsideOff()
+    r = VM.check_domain(m, examples=5)
+    assert r.name == "domain" and r.claim == (
+        "F is finite and > 0 on the whole declared domain (boundary included); "
+        "project(p) is in the domain, idempotent, the identity inside")
+    x = np.asarray(r.counterexample["x"])
+    from validation.testing.regions import describe_region, scan_domain
+    scan = scan_domain(m, 0)
+    radii = np.linalg.norm(scan.points[scan.bad] - [2.0, -1.0], axis=1)
+    assert math.isclose(np.linalg.norm(x - [2.0, -1.0]), radii.min(), rel_tol=1e-12)
+    assert r.tried == len(scan.points) and r.passed == int((~scan.bad).sum())
+    j = int(np.flatnonzero(np.all(scan.points == x, axis=1))[0])
+    i = int(np.flatnonzero(scan.bad_values[j])[0])
+    assert r.counterexample["v"] == list(scan.directions[i])
+    n = len(scan.points)
+    assert r.note.startswith(describe_region(m, scan.points, scan.bad, scan.what()) + ". ")
+    assert (f"Sampled {n} points ({scan.inside} uniform, {n - scan.inside} on the boundary, "
+            "the centre) along the 4 signed coordinate directions;") in r.note
+    assert isinstance(r.seconds, float) and 0 < r.seconds < 60
+    ok = VM.check_domain(Euclidean(), examples=3)
+    assert ok.name == "domain" and 0 < ok.seconds < 60
+
+
+@pytest.mark.parametrize("box, note", [
+    (_HalvingBox, "projection not idempotent"),
+    (_ZeroBox, "a point of the domain is moved by the projection")])
+def test_domain_projection_sides(box, note):
+    class M(_Base):
+        name = "projection-sides-test"
+        domain = property(lambda self: box((-1.0, -1.0), (1.0, 1.0)))
+
+    r = VM.check_domain(M(), examples=30)
+    assert r.relation == "=="
+    p = np.asarray(r.counterexample["p"])
+    q = M().domain.project(p[None])[0]
+    if box is _HalvingBox:
+        assert r.lhs == ("project(project(p))", list(M().domain.project(q[None])[0]))
+        assert r.rhs == ("project(p)", list(q))
+    else:
+        assert r.lhs == ("project(p)", [0.0, 0.0]) and r.rhs == ("p", list(p))
+
+
+class _ShiftedZeroBox(Box):
+    """A box [2, 4] x [10, 11] whose projection sends every point to its centre."""
+
+    def project(self, p):
+        return np.broadcast_to(np.array([3.0, 10.5]), np.asarray(p, float).shape).copy()
+
+
+def test_domain_draws_around_a_shifted_box():
+    seen = []
+
+    class M(_Base):
+        name = "shifted-box-test"
+        domain = property(lambda self: _ShiftedZeroBox((2.0, 10.0), (4.0, 11.0)))
+
+    real = VM.search
+
+    def spy(name, claim, strategy, check, describe, **kw):
+        def judged(p):
+            seen.append(np.array(p))
+            return check(p)
+        return real(name, claim, strategy, judged, describe, **kw)
+
+    import unittest.mock as um
+    with um.patch.object(VM, "search", spy):
+        r = VM.check_domain(M(), examples=40)
+    pts = np.array(seen)
+    assert np.all(pts[:, 0] >= 2.0 - 0.4) and np.all(pts[:, 0] <= 4.0 + 0.4)
+    assert np.all(pts[:, 1] >= 10.0 - 0.2) and np.all(pts[:, 1] <= 11.0 + 0.2)
+    assert pts[:, 0].min() < 2.0 or pts[:, 0].max() > 4.0  # beyond the box too
+    assert r.status is FAILED and r.note.endswith(
+        ". a point of the domain is moved by the projection")
