@@ -876,3 +876,28 @@ def test_constant_terms_of_chunked_evaluations_fill_their_chunk() -> None:
             want = np.full((5, 3), -2.0 * eye[i, k])
             want[:, -1] = 0.0  # the last column couples nothing
             np.testing.assert_array_equal(t.off[i][k], want)
+
+
+def test_armijo_on_a_box_measures_the_decrease_along_the_clipped_step() -> None:
+    """``exp(0.5 x_0) |v|`` from (-0.98, -0.6) to (-0.98, 0.6), two segments: the Newton
+    step of the middle point crosses the side x_0 = -1 and is clipped. Its energy change
+    is 0.77 of the model along the clipped displacement (g . (q - p)) but only 0.17 of
+    ``slope`` (g . s, the unclipped step): with Armijo 0.5 the projected step is taken
+    whole, as the model along the projection arc says."""
+    from solvers.backends import backend_for
+    from solvers.newton import NewtonOptions, NewtonState
+
+    m = _Tilt(0.5)
+    p = np.array([[-0.98, -0.6], [-0.98, 0.0], [-0.98, 0.6]])
+    opt = NewtonOptions(armijo=0.5)
+    r = _DenseNewton(m, p, opt, True, 2.0)
+    assert np.all(np.linalg.eigvalsh(r.h) > 0)
+    s = np.linalg.solve(r.h, -r.g)
+    q = p.copy()
+    q[1] = np.clip(p[1] + s, -1.0, 1.0)
+    assert q[1, 0] == -1.0 and p[1, 0] + s[0] < -1.0  # clipped
+    change = r.energy(q) - r.e
+    assert change / (r.g @ (q[1] - p[1])) > 0.5 > change / (r.g @ s)
+    st = NewtonState(m, p[None], opt, backend_for(None), 2.0)
+    st.step()
+    np.testing.assert_allclose(st.paths()[0], q, rtol=0, atol=1e-14)
