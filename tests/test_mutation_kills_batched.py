@@ -6,6 +6,8 @@ cannot converge."""
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 import pytest
 
@@ -159,7 +161,11 @@ def test_euclidean_ladder_restarts_polish():
     m, n = Euclidean(2), 8
     plan = SeedPlan(bulges=(0.3,), random=1, graph=False, coarse=4, factor=2, refine_top=2,
                     restarts=2, polish=2, seed=3)
+    t0 = time.perf_counter()
     s = solve_pairs_batched(m, PAIRS, n, plan)
+    elapsed = time.perf_counter() - t0
+    assert sum(d["wall_time"] for d in s.stats["levels"]) <= elapsed
+    assert s.stats["value_evaluations"] >= 0     # reported (its count is newton.py's)
     S = 1 + 2 * len(plan.bulges) + plan.random          # straight, two bulges, random
     assert s.seeds_tried.tolist() == [S, S]
     # every seed and restart reaches the one straight line: all agree
@@ -231,6 +237,13 @@ def test_poincare_distance_and_given_rows():
     assert s.final.pair[s.final.names.index("yours")] == 1
     assert s.levels[-1]["segments"] == n
     assert [lv["segments"] for lv in s.levels] == [4, 8, 16]
+    # carried rows name the size they were seeded at once (not "@4@8"); given rows
+    # join at the final size only, once each
+    carried = [nm for nm in s.final.names if "@" in nm]
+    assert carried and all(nm.count("@") == 1 and nm.endswith("@4") for nm in carried)
+    assert sorted(nm for nm in s.final.names if "@" not in nm) == ["mine", "mine2", "yours"]
+    assert len(s.final) == s.levels[-1]["solved"].sum() == s.stats["levels"][-1]["rows"]
+    assert s.levels[1]["solved"].sum() == s.stats["levels"][1]["rows"] == len(carried)
     # the given rows are solved at the last level only (3 of pair 0's are given + carried)
     assert s.levels[-1]["solved"][0] >= 2 and s.levels[-1]["solved"][1] >= 1
     # given paths alone (no seeds): tried = given count, one level, agreement counted
@@ -286,6 +299,11 @@ def test_graph_seeds_are_counted():
                  if p == k) for k in range(2)]
     assert min(graph) >= 1
     assert s.seeds_tried.tolist() == [1 + g for g in graph]
+    # every row (graph ones included) runs from the pair's start to its goal
+    np.testing.assert_array_equal(s.final.points[:, 0], PAIRS[s.final.pair, 0])
+    np.testing.assert_array_equal(s.final.points[:, -1], PAIRS[s.final.pair, 1])
+    np.testing.assert_allclose(s.final.energy, _energy_line(m, PAIRS, n)[s.final.pair],
+                               rtol=1e-9)
 
 
 @pytest.mark.parametrize("k", [0, 1])
