@@ -314,3 +314,81 @@ def test_pairs_independent(k):
     one = solve_pairs_batched(m, PAIRS[k:k + 1], n, plan)
     np.testing.assert_allclose(both.final.energy[both.best[k]], one.final.energy[one.best[0]],
                                rtol=1e-12)
+
+
+# ---------------------------------------------------------------- second iteration
+def test_exact_ties_and_empty_takes():
+    # 1e-6 * 1e6 == 1.0 exactly: a row exactly AGREE_RTOL above the best agrees
+    r = _rows([0, 0], [1e6, 1e6 + 1.0], [C, C])
+    assert AGREE_RTOL * 1e6 == 1.0 and _agreeing(r, 1).tolist() == [2]
+    assert len(r.take([])) == 0 and len(r.take([]).energy) == 0
+    empty = Rows.cat([])
+    assert empty.pair.shape == (0,)
+
+
+def test_carried_pairs_do_not_share_their_kept_lists():
+    base = _line([0, 0], [1, 0])
+    off = [base + np.array([0, 0.1 * j]) for j in range(4)]
+    # pair 0: best, alt 0.1, a copy of the alt (within tol of it, not of the best), alt
+    # 0.3; pair 1: best, alt 0.2; row 6 at exactly the band's edge (1 * 1.5), row 7
+    # exactly tol (0.5 in y) from pair 1's best
+    pts = [off[0], off[1], off[1] + 1e-6, off[3], off[0], off[2], off[3] + 2.0, off[0] + 0.5]
+    e = [1.0, 1.1, 1.1 + 1e-9, 1.2, 1.0, 1.1, 1.5, 1.2]
+    r = _rows([0, 0, 0, 0, 1, 1, 1, 1], e, [C] * 8, points=pts)
+    assert _carried(r, 2, 3, 0.5, 0.05).tolist() == [0, 1, 3, 4, 5, 7]
+    assert _carried(r, 2, 5, 0.5, 0.05).tolist() == [0, 1, 3, 4, 5, 6, 7]
+    assert _carried(r, 2, 2, 0.5, 0.05).tolist() == [0, 1, 4, 5]
+    # tol 0.5: everything within 0.5 of a kept path (row 7 exactly) is the same optimum
+    assert _carried(r, 2, 5, 0.5, 0.5).tolist() == [0, 4, 6]
+
+
+class _FakeState:
+    def __init__(self, status, energy, active):
+        self.status = np.asarray(status, dtype=np.int64)
+        self.energy = np.asarray(energy, float)
+        self.active = np.asarray(active, dtype=np.int64)
+        self.dropped: list[int] = []
+
+    def drop(self, idx):
+        self.dropped.extend(int(i) for i in idx)
+
+
+def test_drop_losers_rule_by_hand():
+    from solvers.batched import _Runner
+    R = int(NewtonStatus.RUNNING)
+    # pair 0 best converged 1.0: running 2.0 (= 2 x best: kept), 2.5 (dropped); pair 1
+    # has none converged: its running rows stay; a running row's low energy sets no best
+    st = _FakeState([C, R, R, R, R, C], [1.0, 2.0, 2.5, 9.0, 0.1, 3.0], [1, 2, 3, 4])
+    _Runner._drop_losers(st, np.array([0, 0, 0, 1, 1, 2]), 2.0)
+    assert st.dropped == [2]
+    one = _FakeState([C, R], [1.0, 3.0], [1])
+    _Runner._drop_losers(one, np.array([0, 0]), 2.0)
+    assert one.dropped == [1]
+    none = _FakeState([R, R], [1.0, 3.0], [0, 1])
+    _Runner._drop_losers(none, np.array([0, 0]), 2.0)
+    assert none.dropped == []
+
+
+def test_nonsmooth_rows_go_to_the_interior_point():
+    from solvers.inputs import domain_scale
+    from solvers.interior import InteriorOptions, interior_energy
+    from solvers.seeding import seed_batch
+
+    car, n = CarLike(), 8
+    pairs = np.array([[[-0.4, -0.3, 0.0], [0.4, 0.2, 0.3]],
+                      [[0.2, -0.5, 0.5], [-0.3, 0.4, -0.2]]])
+    plan = SeedPlan(bulges=(0.3,), random=0, graph=False, coarse=None, own=False)
+    iopt = InteriorOptions(max_iter=4)
+    s = solve_pairs_batched(car, pairs, n, plan, BatchOptions(interior=iopt))
+    names, curves = seed_batch(car, pairs[:, 0], pairs[:, 1], n, plan)
+    ref = interior_energy(car, curves.reshape(-1, n + 1, 3), iopt, scale=domain_scale(car))
+    assert s.final.names == names * 2 and s.final.pair.tolist() == [0] * 3 + [1] * 3
+    np.testing.assert_array_equal(s.final.points, ref.points)
+    np.testing.assert_array_equal(s.final.energy, ref.energy)
+    np.testing.assert_array_equal(s.final.status, ref.status)
+    np.testing.assert_array_equal(s.final.iterations, ref.iterations)
+    assert np.isnan(s.final.residual).all()      # left for the KKT residual of the points
+    assert s.iterations.dtype == np.int64
+    assert s.iterations.tolist() == [int(ref.iterations[:3].sum()), int(ref.iterations[3:].sum())]
+    assert s.stats["evaluations"] == ref.evaluations > 0
+    assert s.stats["value_evaluations"] == ref.value_evaluations
