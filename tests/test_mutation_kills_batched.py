@@ -180,6 +180,7 @@ def test_euclidean_ladder_restarts_polish():
     assert s.levels[1]["solved"].tolist() == [1, 1]     # one optimum carried
     assert s.levels[2]["solved"].tolist() == [plan.polish] * 2
     assert [d["rows"] for d in s.stats["levels"]] == [2 * (S + plan.restarts), 2, 4]
+    assert [d["segments"] for d in s.stats["levels"]] == [4, 8, 8]
     assert s.stats["levels"][2]["polish"] is True and s.stats["evaluations"] > 0
     assert all(d["wall_time"] >= 0 for d in s.stats["levels"])
     assert s.iterations.tolist() == sum(lv["iterations"] for lv in s.levels).tolist()
@@ -392,3 +393,22 @@ def test_nonsmooth_rows_go_to_the_interior_point():
     assert s.iterations.tolist() == [int(ref.iterations[:3].sum()), int(ref.iterations[3:].sum())]
     assert s.stats["evaluations"] == ref.evaluations > 0
     assert s.stats["value_evaluations"] == ref.value_evaluations
+
+
+def test_unconverged_pairs_get_no_restarts_nor_polish():
+    m, n = Poincare(), 16
+    pairs = np.array([[[-0.6, 0.1], [0.5, 0.2]]])
+    plan = SeedPlan(bulges=(0.4,), graph=False, coarse=None, restarts=2, polish=1)
+    s = solve_pairs_batched(m, pairs, n, plan, BatchOptions(newton=NewtonOptions(max_iter=1)))
+    assert not any("~" in nm for nm in s.final.names) and len(s.final) == len(s.first) == 3
+    assert s.levels[-1]["polish"] and s.levels[-1]["solved"].tolist() == [0]
+    assert s.stats["levels"][-1]["rows"] == 0 and s.stats["levels"][-1]["segments"] == n
+
+
+def test_given_only_with_a_pair_without_rows():
+    m, n = Euclidean(2), 8
+    given = [[("g", _line(*PAIRS[0], n + 1))], []]
+    a = solve_pairs_batched(m, PAIRS, n, SeedPlan(), given=given, global_seeds=False)
+    assert a.seeds_tried.tolist() == [1, 0] and a.best.tolist() == [0, -1]
+    assert a.levels[0]["segments"] == n and a.levels[0]["solved"].tolist() == [1, 0]
+    assert a.seeds_agreeing.tolist() == [1, 0]
