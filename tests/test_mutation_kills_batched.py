@@ -388,7 +388,7 @@ def test_nonsmooth_rows_go_to_the_interior_point():
     np.testing.assert_array_equal(s.final.energy, ref.energy)
     np.testing.assert_array_equal(s.final.status, ref.status)
     np.testing.assert_array_equal(s.final.iterations, ref.iterations)
-    assert np.isnan(s.final.residual).all()      # left for the KKT residual of the points
+    assert s.final.residual.shape == (6,) and np.isnan(s.final.residual).all()  # for the KKT
     assert s.iterations.dtype == np.int64
     assert s.iterations.tolist() == [int(ref.iterations[:3].sum()), int(ref.iterations[3:].sum())]
     assert s.stats["evaluations"] == ref.evaluations > 0
