@@ -108,18 +108,14 @@ def _functions(metric: Metric) -> _Fns:
 
 def _build(metric: Metric) -> _Fns:
     from finsler.lowering import lower
-    from solvers.transcription import _segment_functions
+    from solvers.transcription import _segment_functions, domain_rows, nonnegative_rows
 
-    seg, wval, dom, (lbw, ubw), (lbgs, ubgs), (lbgd, ubgd), _ = _segment_functions(metric)
+    seg, wval, _, (lbw, ubw), (lbgs, ubgs), _, _ = _segment_functions(metric)
     d, k = metric.dim, int(seg.nnz_in(2))
     x, y, w = ca.SX.sym("x", d), ca.SX.sym("y", d), ca.SX.sym("w", k)
     zw = ca.vertcat(x, y, w)
     f2, g = seg(x, y, w)
-    cons = []
-    for b, sign, e in ((lbw, 1, w), (ubw, -1, w), (lbgs, 1, g), (ubgs, -1, g)):
-        for i, bi in enumerate(b):
-            if np.isfinite(bi):
-                cons.append(sign * (e[i] - bi))
+    cons = nonnegative_rows([(lbw, 1, w), (ubw, -1, w), (lbgs, 1, g), (ubgs, -1, g)])
     cv = ca.vertcat(*cons)
     m = len(cons)
     lam = ca.SX.sym("lam", m)
@@ -130,18 +126,7 @@ def _build(metric: Metric) -> _Fns:
                         dens(ca.vec(ca.jacobian(cv, zw))), dens(ca.vec(ca.hessian(lag, zw)[0]))])
     segv = ca.Function("ip_seg_val", [x, y, w], [dens(f2), dens(cv)])
     p = ca.SX.sym("p", d)
-    c = dom(p)
-    lo, hi = metric.domain.bounds()
-    dc = []
-    for b, sign in ((lbgd, 1), (ubgd, -1)):
-        for i, bi in enumerate(b):
-            if np.isfinite(bi):
-                dc.append(sign * (c[i] - bi))
-    for i in range(d):
-        if np.isfinite(lo[i]):
-            dc.append(p[i] - float(lo[i]))
-        if np.isfinite(hi[i]):
-            dc.append(float(hi[i]) - p[i])
+    dc = domain_rows(metric, p)
     md = len(dc)
     domf = domv = None
     if md:

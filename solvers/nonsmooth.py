@@ -65,20 +65,16 @@ def _functions(metric: Metric) -> _Functions:
 
 def _build(metric: Metric) -> _Functions:
     from finsler.lowering import lower
-    from solvers.transcription import _segment_functions
+    from solvers.transcription import _segment_functions, domain_rows, nonnegative_rows
 
-    seg, wval, dom, (lbw, ubw), (lbgs, ubgs), (lbgd, ubgd), _ = _segment_functions(metric)
+    seg, wval, _, (lbw, ubw), (lbgs, ubgs), _, _ = _segment_functions(metric)
     d, k = metric.dim, int(seg.nnz_in(2))
     x, y = ca.SX.sym("x", d), ca.SX.sym("y", d)
     w = ca.SX.sym("w", k)
     z = ca.vertcat(x, y)
     f2, g = seg(x, y, w)
     # every constraint as ``c >= 0``: bounds of the slacks, then the slack constraints
-    cons = []
-    for b, sign, e in ((lbw, 1, w), (ubw, -1, w), (lbgs, 1, g), (ubgs, -1, g)):
-        for i, bi in enumerate(b):
-            if np.isfinite(bi):
-                cons.append(sign * (e[i] - bi))
+    cons = nonnegative_rows([(lbw, 1, w), (ubw, -1, w), (lbgs, 1, g), (ubgs, -1, g)])
     cv = ca.vertcat(*cons) if cons else ca.SX(0, 1)
     part = ca.Function("ns_part", [x, y, w],
                        [f2, ca.gradient(f2, z), ca.gradient(f2, w), cv, ca.jacobian(cv, z),
@@ -87,18 +83,7 @@ def _build(metric: Metric) -> _Functions:
     dens = ca.densify
     kkt = ca.Function("ns_kkt", [x, y], [dens(ca.vec(o)) for o in outs])
     p = ca.SX.sym("p", d)
-    c = dom(p)
-    lo, hi = metric.domain.bounds()
-    dc = []
-    for b, sign in ((lbgd, 1), (ubgd, -1)):
-        for i, bi in enumerate(b):
-            if np.isfinite(bi):
-                dc.append(sign * (c[i] - bi))
-    for i in range(d):
-        if np.isfinite(lo[i]):
-            dc.append(p[i] - float(lo[i]))
-        if np.isfinite(hi[i]):
-            dc.append(float(hi[i]) - p[i])
+    dc = domain_rows(metric, p)
     dv = ca.vertcat(*dc) if dc else ca.SX(0, 1)
     domf = ca.Function("ns_dom", [p], [dens(dv), dens(ca.vec(ca.jacobian(dv, p)))])
     return _Functions(lower(ca.Function("ns_wval", [x, y], [dens(wval(x, y))])), lower(kkt),

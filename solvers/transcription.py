@@ -18,6 +18,7 @@ the formula lives only in the metric.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import casadi as ca
 import numpy as np
@@ -161,6 +162,34 @@ def _build_segment_functions(metric: Metric) -> tuple[ca.Function, ca.Function, 
     dom = ca.Function("dom", [x], [ca.vertcat(*d.g) if d.g else ca.SX(0, 1)])
     return (seg, wval, dom, (tuple(c.lbw), tuple(c.ubw)), (tuple(c.lbg), tuple(c.ubg)),
             (tuple(d.lbg), tuple(d.ubg)), ())
+
+
+def nonnegative_rows(bounded: list[tuple[tuple, int, Any]]) -> list:
+    """Every finite bound as one row ``row >= 0``, in the order given: ``(bounds, +1, e)``
+    for lower bounds ``e[i] >= b[i]``, ``(bounds, -1, e)`` for upper ones; the constraint
+    list the interior point and the non-smooth KKT residual both build from
+    ``_segment_functions``."""
+    rows = []
+    for b, sign, e in bounded:
+        for i, bi in enumerate(b):
+            if np.isfinite(bi):
+                rows.append(sign * (e[i] - bi))
+    return rows
+
+
+def domain_rows(metric: Metric, p: ca.SX) -> list:
+    """One point's domain as rows ``row >= 0``: the domain's constraints ``dom(p)`` within
+    their bounds, then the box sides of every coordinate (lower, upper)."""
+    _, _, dom, _, _, (lbgd, ubgd), _ = _segment_functions(metric)
+    c = dom(p)
+    rows = nonnegative_rows([(lbgd, 1, c), (ubgd, -1, c)])
+    lo, hi = metric.domain.bounds()
+    for i in range(metric.dim):
+        if np.isfinite(lo[i]):
+            rows.append(p[i] - float(lo[i]))
+        if np.isfinite(hi[i]):
+            rows.append(float(hi[i]) - p[i])
+    return rows
 
 
 def _build_path(metric: Metric, n: int) -> _Path:
