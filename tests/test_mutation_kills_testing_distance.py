@@ -17,6 +17,7 @@ import pytest
 from finsler import Box, Metric, Task
 from finsler.errors import InputError
 from finsler.metrics import Euclidean, Randers
+from finsler.status import DistanceStatus, Status
 from validation.testing import distance as VD
 from validation.testing.engine import FAILED, INCONCLUSIVE, MAPPED, PASSED, SKIPPED
 
@@ -163,7 +164,7 @@ def test_discrete_oracle_on_euclidean():
     x, y = np.array([0.1, 0.2]), np.array([-0.5, 0.3])
     s = VD.DiscreteDistance().solve(Euclidean(), x, y)
     d = math.hypot(0.6, 0.1)
-    assert s.usable and s.ok and s.status == "success" and not s.mapped
+    assert s.usable and s.ok and s.status is Status.SUCCESS and not s.mapped
     assert abs(s.value - d) <= s.error and s.error >= 1e-8 * d
     assert math.isclose(s.error, 1e-8 * s.value, rel_tol=1e-12)  # the floor: exact solve
     assert s.extra["segments"] >= 8 and math.isclose(s.extra["polyline_length"], d,
@@ -184,7 +185,7 @@ def test_continuum_oracle_on_randers():
     m = Randers()
     s = VD.ContinuumDistance().solve(m, x, y)
     d = float(m.distance(x[None], y[None])[0])
-    assert s.ok and s.status == "converged" and abs(s.value - d) <= s.error + 1e-12
+    assert s.ok and s.status is DistanceStatus.CONVERGED and abs(s.value - d) <= s.error + 1e-12
     assert s.path.shape == (65, 2) and np.array_equal(s.midpoint, s.path[32])
     assert math.isclose(s.midpoint_slack, s.error + 1e-10 * s.value, rel_tol=1e-12)
     assert s.curve_slack == 1e-6 and "degrees" in s.extra

@@ -27,6 +27,7 @@ from hypothesis import strategies as st
 
 from finsler import Metric
 from finsler.errors import InputError
+from finsler.status import Outcome
 from validation import strategies as vs
 from validation.testing.engine import SKIPPED, PropertyResult, Verdict, search, seeded
 
@@ -67,7 +68,8 @@ CLOSED_FORM_HINT = ("The solver's value passed the other distance properties: ch
 @dataclass
 class Solved:
     """One solved distance ``d(x, y)``: ``value`` with the solver's stated ``error``
-    (absolute), its ``status``; ``usable``: a value with a stated error (a converged
+    (absolute), its ``status`` (the solver's member of the status family; an oracle of
+    one's own may give a word); ``usable``: a value with a stated error (a converged
     solve); ``mapped``: the solve crossed a region where ``F(x, .)`` is not convex and the
     oracle does not resolve it. ``path`` ``(n+1, dim)`` is the solved curve, ``curve(t)``
     its points ``(T, dim)`` at fractions ``t`` of its length (to ``curve_slack`` of the
@@ -76,7 +78,7 @@ class Solved:
 
     value: float
     error: float
-    status: str
+    status: Outcome | str
     usable: bool
     mapped: bool = False
     path: np.ndarray | None = None
@@ -164,7 +166,7 @@ class DiscreteDistance:
         def curve(t: np.ndarray) -> np.ndarray:
             return _along(pts, cum, t)
 
-        return Solved(value, err, r.status.label, bool(r.converged), mapped, pts,
+        return Solved(value, err, r.status, bool(r.converged), mapped, pts,
                       pts[k].copy(), excess + abs(cum[k] - 0.5 * length), curve,
                       1e-6 + excess / max(value, 1e-300),
                       {"segments": r.segments, "tol_reached": r.tol_reached,
@@ -190,7 +192,7 @@ class ContinuumDistance:
 
         r = solvers.distance(metric, x, y, rtol=self.rtol)
         path = r.curve(np.linspace(0.0, 1.0, 65))
-        return Solved(float(r.distance), float(r.error_estimate), r.status.label,
+        return Solved(float(r.distance), float(r.error_estimate), r.status,
                       bool(r.converged), r.status is DistanceStatus.NOT_CONVEX, path,
                       path[32].copy(), float(r.error_estimate) + 1e-10 * float(r.distance),
                       r.curve, 1e-6, {"degrees": r.degrees})
