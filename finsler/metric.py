@@ -79,13 +79,16 @@ class TrainingSettings:
     ``paper_timesteps``, the budget, used by the paper's configuration and by Seq), the
     toolkit's measured training ``defaults`` (fields of ``learn.TrainConfig`` over its
     common defaults) and the ``model_free`` overrides Algorithm 1 alone (values of C only)
-    was measured best with. A metric that declares nothing gets the Matsumoto settings of
-    the paper and the common defaults with a 2e7 budget. The mappings are read-only."""
+    was measured best with, and ``pg_cycles``, the PG baseline's schedule (cycles of
+    pi_1, cycles of every other pi_D; appendix B.3). A metric that declares nothing gets
+    the Matsumoto settings of the paper and the common defaults with a 2e7 budget. The
+    mappings are read-only."""
 
     paper_lr: float = 3e-5
     paper_timesteps: int = 20_000_000
     defaults: Mapping[str, Any] = field(default_factory=lambda: {"timesteps": 20_000_000})
     model_free: Mapping[str, Any] = field(default_factory=dict)
+    pg_cycles: tuple[int, int] = (1000, 538)
 
     def __post_init__(self) -> None:
         for name in ("defaults", "model_free"):

@@ -344,6 +344,7 @@ class PandaPole(Metric):
         defaults=dict(timesteps=20_000_000, hidden=(256, 256, 256), critic_hidden=(128, 128),
                       symmetric_critic=True, eval_every=25, actor_loss_power=8.0,
                       select_eps=10.0, polish_steps=3000),
+        pg_cycles=(1077, 1077),
     )
     task: ClassVar[Task] = Task(depth=5, eps=20.0)
     reversible: ClassVar[bool] = True

@@ -16,7 +16,6 @@ from typing import Any, ClassVar
 
 import finsler
 from finsler.errors import InputError
-from finsler.metric import TrainingSettings
 from learn.methods import actor_loss_of, derivative_terms, describe
 from learn.run_config import (
     RunConfig,
@@ -30,6 +29,7 @@ from learn.run_config import (
     package_versions,
     resolve_metric,
     run_header,
+    training_settings,
 )
 
 __all__ = [
@@ -336,15 +336,6 @@ class TrainConfig(RunConfig):
 # ----------------------------------------------------------------------------------------
 # The paper's settings and ours
 # ----------------------------------------------------------------------------------------
-def training_settings(env: str) -> TrainingSettings:
-    """What the metric registered as ``env`` declares for learning (``Metric.training``:
-    the paper's learning rate and budget, the measured defaults, the model-free
-    overrides); an unregistered name gets the base's (the paper's Matsumoto settings)."""
-    if env in finsler.list_metrics():
-        return finsler.metric_class(env).training
-    return TrainingSettings()
-
-
 def paper_config(env: str, **overrides: Any) -> TrainConfig:
     """The settings of appendix B.1 for ``env`` (the metric's ``training.paper_lr`` and
     ``paper_timesteps``; metrics that declare none: the Matsumoto ones)."""

@@ -62,7 +62,13 @@ from learn.loop import RunLoop, best_record, eval_columns, load_run, load_weight
 from learn.networks import mlp, resolve_device
 from learn.policy import EvalResult, check_pairs, evaluate_paths
 from learn.registry import Method, deprecated_entry, register_method
-from learn.run_config import RunConfig, check_choice, check_hidden, ensure_registered
+from learn.run_config import (
+    RunConfig,
+    check_choice,
+    check_hidden,
+    ensure_registered,
+    training_settings,
+)
 from learn.tree import build_tree
 
 __all__ = [
@@ -84,9 +90,6 @@ __all__ = [
     "train_pg",
 ]
 
-#: (cycles of pi_1, cycles of every other pi_D) per environment (appendix B.3).
-_CYCLES: dict[str, tuple[int, int]] = {"panda-pole": (1077, 1077)}
-_DEFAULT_CYCLES = (1000, 538)
 _OBJECTIVES = ("halves-squared", "sum")
 _SURROGATES = ("ppo", "sgt-pg-code")
 _ACTIVATIONS = ("tanh", "relu")
@@ -152,7 +155,7 @@ class PGConfig(RunConfig):
     authors' code does; questionable for non-reversible metrics)."""
     def complete(self) -> None:
         """The schedule's defaults for the environment, and its total as the budget."""
-        first, other = _CYCLES.get(self.env, _DEFAULT_CYCLES)
+        first, other = training_settings(self.env).pg_cycles
         if self.cycles_first is None:
             self.cycles_first = first
         if self.cycles_other is None:
@@ -217,7 +220,7 @@ def cycle_depth(cfg: PGConfig, cycle: int) -> int:
 def schedule_total(cfg: PGConfig) -> int:
     """Evaluations of C of the whole schedule (the paper's total, appendix B.3):
     ``P * K * (2 * cycles_first + sum_{D=2..Dmax} 2**D * cycles_other)``."""
-    first, other = _CYCLES.get(cfg.env, _DEFAULT_CYCLES)
+    first, other = training_settings(cfg.env).pg_cycles
     cf = cfg.cycles_first if cfg.cycles_first is not None else first
     co = cfg.cycles_other if cfg.cycles_other is not None else other
     per = cfg.pairs_per_cycle * cfg.samples_per_pair

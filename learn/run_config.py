@@ -38,6 +38,7 @@ from typing import Any, ClassVar, TypeVar
 import finsler
 from finsler.errors import InputError
 from finsler.infra.limits import check_memory
+from finsler.metric import TrainingSettings
 from finsler.spec import MetricSpec, class_path, ensure_registered
 
 __all__ = [
@@ -53,6 +54,7 @@ __all__ = [
     "package_versions",
     "resolve_metric",
     "run_header",
+    "training_settings",
 ]
 
 _C = TypeVar("_C", bound="RunConfig")
@@ -362,3 +364,12 @@ def run_header(cfg: Any) -> dict[str, Any]:
     return {"config": cfg.to_dict(), "metric": metric_info(cfg),
             "task": {"depth": cfg.max_depth, "eps": cfg.eval_eps,
                      "segments": 2**cfg.max_depth}}
+
+
+def training_settings(env: str) -> TrainingSettings:
+    """What the metric registered as ``env`` declares for learning (``Metric.training``:
+    the paper's learning rate and budget, the measured defaults, the model-free
+    overrides); an unregistered name gets the base's (the paper's Matsumoto settings)."""
+    if env in finsler.list_metrics():
+        return finsler.metric_class(env).training
+    return TrainingSettings()
