@@ -39,14 +39,14 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict, dataclass, field
 from typing import Any
 
 import numpy as np
 
 from finsler.errors import InputError
 from finsler.metric import Metric
-from finsler.status import CertifyStop, LPStatus, Result, Status, json_ready
+from finsler.status import CertifyStop, LPStatus, Status
 from solvers.certify_nd_parts import (
     LP_SOLVER,
     Cells,
@@ -60,6 +60,7 @@ from solvers.certify_nd_parts import (
     verify,
 )
 from solvers.inputs import SHORT_PAIR, as_metric, is_short_pair
+from solvers.result import MeshCertificate
 from solvers.status import CertifyStatus
 
 __all__ = ["NDResult", "NDSpec", "certify_nd"]
@@ -127,7 +128,7 @@ class NDSpec:
 
 
 @dataclass
-class NDResult(Result):
+class NDResult(MeshCertificate):
     """A certified interval from :func:`certify_nd`. ``gap = (upper - lower) / upper``.
     ``rigour`` says what each part rests on; ``rounds`` lists per mesh the cells, LP rows,
     the LP's value, the verified ``R`` and the bound; ``status`` is in the toolkit's family
@@ -160,35 +161,6 @@ class NDResult(Result):
     stopped_by: CertifyStop = CertifyStop.TARGET_GAP
     status: CertifyStatus = CertifyStatus.CERTIFIED
     message: str = ""
-
-    def __post_init__(self) -> None:
-        # members of the status family (the words, as before, are accepted and converted)
-        self.stopped_by = CertifyStop(self.stopped_by)
-        self.lp_status = LPStatus.from_solver(self.lp_status)
-        self.solver_status = Status.from_label(self.solver_status)
-
-    @property
-    def wall_time(self) -> float:
-        """Seconds of the whole certificate (``times["total"]``)."""
-        return float(self.times.get("total", 0.0))
-
-    @property
-    def converged(self) -> bool:
-        return self.status.converged
-
-    @property
-    def certified(self) -> bool:
-        return bool(np.isfinite(self.lower) and np.isfinite(self.upper)
-                    and self.lower <= self.upper)
-
-    def to_dict(self, with_path: bool = False) -> dict[str, Any]:
-        out: dict[str, Any] = {}
-        for f in fields(self):
-            val = getattr(self, f.name)
-            if f.name == "path" and not with_path:
-                continue
-            out[f.name] = json_ready(val)  # labels, lists, non-finite floats as None
-        return out
 
 
 RIGOUR = {

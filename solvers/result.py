@@ -277,8 +277,44 @@ class DistanceResult(Result):
         return interpolation_matrix(n, 2.0 * t - 1.0) @ self.nodes
 
 
+class MeshCertificate(Result):
+    """What the mesh certificates share (:class:`CertifyResult` in 2-D,
+    ``solvers.certify_nd.NDResult`` beyond): the outcome fields as members of the status
+    family (words are accepted and converted), ``wall_time`` from ``times["total"]``,
+    ``certified`` and a field-by-field ``to_dict``. Subclasses are dataclasses with
+    ``lower``, ``upper``, ``times``, ``path``, ``stopped_by``, ``lp_status``,
+    ``solver_status`` and ``status`` fields."""
+
+    def __post_init__(self) -> None:
+        self.stopped_by = CertifyStop(self.stopped_by)
+        self.lp_status = LPStatus.from_solver(self.lp_status)
+        self.solver_status = Status.from_label(self.solver_status)
+
+    @property
+    def wall_time(self) -> float:
+        """Seconds of the whole certificate (``times["total"]``)."""
+        return float(self.times.get("total", 0.0))
+
+    @property
+    def converged(self) -> bool:
+        """True if the refinement reached its target gap (``status`` is ``CERTIFIED``)."""
+        return self.status.converged
+
+    @property
+    def certified(self) -> bool:
+        """True if both bounds are finite and ``lower <= upper``."""
+        return bool(np.isfinite(self.lower) and np.isfinite(self.upper)
+                    and self.lower <= self.upper)
+
+    def to_dict(self, with_path: bool = False) -> dict[str, Any]:
+        """JSON-ready dict in field order (``path`` only if ``with_path``; labels, lists,
+        non-finite floats as None)."""
+        return {f.name: json_ready(getattr(self, f.name)) for f in fields(self)
+                if with_path or f.name != "path"}
+
+
 @dataclass
-class CertifyResult(Result):
+class CertifyResult(MeshCertificate):
     """A certified interval ``lower <= d(start, goal) <= upper``.
 
     ``gap = (upper - lower) / upper``. ``upper`` is a proven upper bound of the length of
@@ -344,35 +380,3 @@ class CertifyResult(Result):
     status: CertifyStatus = CertifyStatus.CERTIFIED
     message: str = ""
 
-    def __post_init__(self) -> None:
-        # members of the status family (words, as before, are accepted and converted)
-        self.stopped_by = CertifyStop(self.stopped_by)
-        self.lp_status = LPStatus.from_solver(self.lp_status)
-        self.solver_status = Status.from_label(self.solver_status)
-
-    @property
-    def wall_time(self) -> float:
-        """Seconds of the whole certificate (``times["total"]``)."""
-        return float(self.times.get("total", 0.0))
-
-    @property
-    def converged(self) -> bool:
-        """True if the refinement reached its target gap (``status`` is ``CERTIFIED``)."""
-        return self.status.converged
-
-    @property
-    def certified(self) -> bool:
-        """True if both bounds are finite and ``lower <= upper``."""
-        return bool(np.isfinite(self.lower) and np.isfinite(self.upper)
-                    and self.lower <= self.upper)
-
-    def to_dict(self, with_path: bool = False) -> dict[str, Any]:
-        """JSON-ready dict (keys ``lower``, ``upper``, ``gap`` first; ``path`` only if
-        ``with_path``)."""
-        out: dict[str, Any] = {}
-        for f in fields(self):
-            val = getattr(self, f.name)
-            if f.name == "path" and not with_path:
-                continue
-            out[f.name] = json_ready(val)  # labels, lists, non-finite floats as None
-        return out
