@@ -488,3 +488,452 @@ def test_distance_properties_order_and_shared_solves():
         assert got["cert"] == 7 and got["z"] == 3 and got["m"] == 2
         VD.distance_properties(Euclidean(), examples=1)
         assert got["cert"] == 2 and got["m"] == 2
+
+
+# ----------------------------------------------------------------------------------------
+# second pass over the survivors of the first run (mutation-2026-11-28-19): names and
+# claims, defaults, every tolerance at its edge (each check called on chosen points with
+# an oracle whose values and errors are set), the unusable and degenerate branches
+# ----------------------------------------------------------------------------------------
+CLAIMS = {
+    "distance-zero": "d(x, x) = 0",
+    "distance-positive": "d(x, y) >= 0, and > 0 for x != y",
+    "triangle-inequality": "d(x, z) <= d(x, y) + d(y, z) (within the stated errors)",
+    "segment-bound": "d(x, y) <= the length of the straight segment x -> y",
+    "distance-symmetry": "d(x, y) = d(y, x) for a reversible metric",
+    "closed-form-distance": "the supplied closed-form distance equals the solved one",
+    "certificate": "certify's interval [lower, upper] contains the solved distance",
+    "midpoint-halves": "the midpoint m of a solved geodesic has d(x, m) = d(m, y) = d(x, y)/2",
+}
+_CHECKS = {"distance-zero": VD.check_distance_zero,
+           "distance-positive": VD.check_distance_positive,
+           "triangle-inequality": VD.check_triangle_inequality,
+           "segment-bound": VD.check_segment_bound,
+           "distance-symmetry": VD.check_distance_symmetry,
+           "closed-form-distance": VD.check_closed_form,
+           "certificate": VD.check_certificate,
+           "midpoint-halves": VD.check_midpoint_halves}
+DEFAULT_EXAMPLES = {"distance-zero": 20, "distance-positive": 3, "triangle-inequality": 3,
+                    "segment-bound": 3, "distance-symmetry": 3, "closed-form-distance": 3,
+                    "certificate": 2, "midpoint-halves": 2}
+
+
+@pytest.fixture
+def fake_certify(monkeypatch):
+    import solvers
+
+    seen = []
+
+    def certify(m, x, y, mesh, path=None):
+        d = float(np.linalg.norm(y - x))
+        seen.append((m, np.array(x), np.array(y)))
+        return _FakeCert(d - 1e-3, d + 1e-3)
+
+    monkeypatch.setattr(solvers, "certify", certify)
+    return seen
+
+
+@pytest.mark.parametrize("name", list(CLAIMS))
+def test_names_claims_and_default_examples(name, fake_certify):
+    r = _CHECKS[name](_suite(), examples=3)
+    assert (r.name, r.claim) == (name, CLAIMS[name])
+    suite, got = _suite(), {}
+    suite.run = lambda n, c, check, examples, **kw: got.update(n=n, c=c, e=examples) or \
+        VD.PropertyResult(n, c, PASSED)
+    _CHECKS[name](suite)
+    assert (got["n"], got["c"], got["e"]) == (name, CLAIMS[name], DEFAULT_EXAMPLES[name])
+
+
+def test_skipped_names_and_claims():
+    class Rough(Flat):
+        name = "rough-test"
+        smooth = False
+
+    for r, name in ((VD.check_certificate(_suite(metric=Euclidean(n=3)), 2), "certificate"),
+                    (VD.check_certificate(_suite(metric=Rough()), 2), "certificate"),
+                    (VD.check_closed_form(_suite(metric=Flat()), 2), "closed-form-distance"),
+                    (VD.check_distance_symmetry(_suite(metric=Randers()), 2),
+                     "distance-symmetry")):
+        assert r.status is SKIPPED and (r.name, r.claim) == (name, CLAIMS[name])
+    assert VD.check_certificate(_suite(metric=Rough()), 2).note == (
+        "rough-test is declared not smooth: certify's bounds are proven where F is twice "
+        "differentiable (Metric.path_length_bounds and the dual bound's corrections "
+        "enclose second derivatives), so its interval would prove nothing here")
+
+
+def test_defaults_of_distance_checks_and_properties():
+    got = {}
+
+    def spy(name):
+        def f(suite, n, *a, **k):
+            got[name] = (n, *a)
+            got["suite"] = suite
+            return VD.PropertyResult(name, "c", PASSED)
+        return f
+
+    import unittest.mock as um
+    with um.patch.multiple(VD, check_distance_zero=spy("z"), check_distance_positive=spy("p"),
+                           check_triangle_inequality=spy("t"), check_segment_bound=spy("s"),
+                           check_distance_symmetry=spy("y"), check_closed_form=spy("c"),
+                           check_certificate=spy("cert"), check_midpoint_halves=spy("m")):
+        for _, fn in VD.distance_checks(_suite()):
+            fn()
+        assert {k: v[0] for k, v in got.items() if k != "suite"} == {
+            "z": 20, "p": 3, "t": 3, "s": 3, "y": 3, "c": 3, "cert": 2, "m": 2}
+        def dist(a, b):
+            return np.linalg.norm(b - a, axis=-1)
+
+        def geo(a, b, t):
+            return a[:, None] + np.asarray(t)[None, :, None] * (b - a)[:, None]
+        for _, fn in VD.distance_checks(_suite(), closed_form=dist, closed_form_geodesic=geo):
+            fn()
+        assert got["c"] == (3, dist, geo)
+        e = Euclidean()
+        VD.distance_properties(e, oracle=Exact(), closed_form=dist, closed_form_geodesic=geo)
+        assert got["c"] == (3, dist, geo) and got["p"] == (3,)
+        assert got["suite"].metric is e and got["suite"].solved.metric is e
+    s = VD.DistanceSuite.make(e, Exact())
+    assert (s.seed, s.shrink, s.shrink_limit) == (0, 1.0, 6) and s.solved.metric is e
+
+
+@dataclass
+class Table:
+    """d(x, y) = |x - y| + extra(x, y), stated error err(x, y); midpoint, its slack and
+    the curve settable."""
+
+    extra: object = None
+    err: object = None
+    midpoint: object = None
+    mid_slack: float = 0.0
+    curve: object = None
+    name: str = "table oracle"
+    usable: object = None
+
+    def solve(self, metric, x, y):
+        d = float(np.linalg.norm(y - x)) + (self.extra(x, y) if self.extra else 0.0)
+        e = self.err(x, y) if self.err else 0.0
+        mid = self.midpoint(x, y) if self.midpoint else 0.5 * (x + y)
+        ok = self.usable(x, y) if self.usable else True
+
+        def straight(t):
+            t = np.asarray(t, float).reshape(-1, 1)
+            return x + t * (y - x)
+
+        curve = (lambda t: self.curve(x, y, t)) if self.curve else straight
+        return VD.Solved(d, e, "converged" if ok else "max_iterations", ok, False,
+                         np.stack([x, 0.5 * (x + y), y]), mid, self.mid_slack, curve, 1e-9)
+
+
+def _checker(fn, oracle, metric=None, **kw):
+    """The check function of property ``fn`` on a suite of ``oracle`` (``suite.run`` spied)."""
+    suite = VD.DistanceSuite.make(metric or Euclidean(), oracle)
+    got = {}
+    suite.run = lambda n, c, check, examples, **k: got.update(check=check, **k) or \
+        VD.PropertyResult(n, c, PASSED)
+    fn(suite, 1, **kw)
+    return got["check"]
+
+
+P0, P1, PM = np.array([0.0, 0.0]), np.array([1.0, 0.0]), np.array([0.5, 0.0])
+FAR0, FAR1 = np.array([-1.0, -1.0]), np.array([1.0, 1.0])  # d = 2 sqrt 2
+
+
+def _on(xs, ys):
+    return lambda x, y: np.array_equal(x, xs) and np.array_equal(y, ys)
+
+
+def test_triangle_slack_at_its_edges():
+    xz = _on(P0, P1)
+    # errors 1e-6 each: excess 2.5e-6 passes (3e-6), 3.5e-6 fails
+    for v, ok in ((2.5e-6, True), (3.5e-6, False)):
+        chk = _checker(VD.check_triangle_inequality, Table(
+            extra=lambda x, y, v=v: v if xz(x, y) else 0.0, err=lambda x, y: 1e-6))
+        assert chk((P0, PM, P1)).ok is ok
+    # no stated errors: the slack 1e-12 (1 + d(x, z)) with d(x, z) = 2 sqrt 2
+    far = _on(FAR0, FAR1)
+    for v, ok in ((3.0e-12, True), (4.3e-12, False)):
+        chk = _checker(VD.check_triangle_inequality, Table(
+            extra=lambda x, y, v=v: v if far(x, y) else 0.0))
+        assert chk((FAR0, np.zeros(2), FAR1)).ok is ok
+
+
+def test_symmetry_slack_at_its_edges():
+    fwd = _on(P0, PM)
+    for v, ok in ((1.5e-6, True), (2.5e-6, False)):  # errors 1e-6 each
+        chk = _checker(VD.check_distance_symmetry, Table(
+            extra=lambda x, y, v=v: v if fwd(x, y) else 0.0, err=lambda x, y: 1e-6))
+        assert chk((P0, PM, P1)).ok is ok
+    far = _on(FAR0, FAR1)  # no errors: 1e-10 max(d, 1), d = 2 sqrt 2
+    for v, ok in ((2.0e-10, True), (3.2e-10, False)):
+        chk = _checker(VD.check_distance_symmetry, Table(
+            extra=lambda x, y, v=v: v if far(x, y) else 0.0))
+        assert chk((FAR0, FAR1, P1)).ok is ok
+    for v, ok in ((0.9e-10, True), (1.5e-10, False)):  # d = 0.5: 1e-10
+        chk = _checker(VD.check_distance_symmetry, Table(
+            extra=lambda x, y, v=v: v if fwd(x, y) else 0.0))
+        assert chk((P0, PM, P1)).ok is ok
+    # y is the second point of the triple (an asymmetric pair x -> z is not looked at)
+    chk = _checker(VD.check_distance_symmetry, Table(extra=lambda x, y: 1e-3 if _on(P0, P1)(
+        x, y) else 0.0))
+    assert chk((P0, PM, P1)).ok and not chk((P0, P1, PM)).ok
+
+
+def test_midpoint_slack_at_its_edges():
+    half = _on(FAR0, np.zeros(2))
+    for v, ok in ((1.2e-6, True), (2.0e-6, False)):  # errors 1e-6: slack 1e-6 + 0.5e-6
+        chk = _checker(VD.check_midpoint_halves, Table(
+            extra=lambda x, y, v=v: v if half(x, y) else 0.0, err=lambda x, y: 1e-6))
+        assert chk((FAR0, FAR1, P1)).ok is ok
+    for v, ok in ((3.0e-12, True), (4.3e-12, False)):  # no errors: 1e-12 (1 + 2 sqrt 2)
+        chk = _checker(VD.check_midpoint_halves, Table(
+            extra=lambda x, y, v=v: v if half(x, y) else 0.0))
+        assert chk((FAR0, FAR1, P1)).ok is ok
+    # the oracle's own midpoint slack counts in full
+    chk = _checker(VD.check_midpoint_halves, Table(
+        extra=lambda x, y: 1e-4 if half(x, y) else 0.0, mid_slack=1.1e-4))
+    assert chk((FAR0, FAR1, P1)).ok
+    # d = 1 exactly is judged; a solve without a midpoint is not
+    bad = _checker(VD.check_midpoint_halves, Table(midpoint=lambda x, y: x + 0.3 * (y - x)))
+    assert not bad((P0, P1, P1)).ok
+    none = _checker(VD.check_midpoint_halves, Table(midpoint=lambda x, y: None))
+    assert none((P0, P1, P1)) == VD.Verdict(True)
+    # the halves' solves unusable: inconclusive, not a failure
+    sentinel = np.array([0.123, 0.456])
+    un = _checker(VD.check_midpoint_halves, Table(
+        midpoint=lambda x, y: sentinel,
+        usable=lambda x, y: not (np.array_equal(x, sentinel) or np.array_equal(y, sentinel))))
+    v = un((P0, P1, P1))
+    assert v.inconclusive and v.ok
+
+
+def test_segment_bound_and_closed_form_slack_at_their_edges():
+    seg = _on(P0, PM)
+    for v, ok in ((0.5e-6, True), (1.5e-6, False)):  # the solve's error 1e-6
+        chk = _checker(VD.check_segment_bound, Table(
+            extra=lambda x, y, v=v: v if seg(x, y) else 0.0, err=lambda x, y: 1e-6))
+        assert chk((P0, PM, P1)).ok is ok
+    far = _on(FAR0, FAR1)
+    for fn in (VD.check_segment_bound, VD.check_closed_form):  # 1e-12 (1 + 2 sqrt 2)
+        for v, ok in ((3.0e-12, True), (4.3e-12, False)):
+            chk = _checker(fn, Table(extra=lambda x, y, v=v: v if far(x, y) else 0.0))
+            assert chk((FAR0, FAR1, P1)).ok is ok, (fn.__name__, v)
+
+
+def test_closed_form_directions_times_and_tolerance():
+    back = _on(PM, P0)  # wrong only from y back to x
+    wrong_back = Table(extra=lambda x, y: 1e-3 if back(x, y) else 0.0)
+    assert _checker(VD.check_closed_form, wrong_back)((P0, PM, P1)).ok  # reversible: one way
+
+    class Way(Flat):
+        name = "flat-not-reversible-test"
+        reversible = False
+
+    e = Euclidean()
+    chk = _checker(VD.check_closed_form, wrong_back, metric=Way(), distance=e.distance,
+                   geodesic=e.geodesic)
+    v = chk((P0, PM, P1))
+    assert not v.ok and v.lhs[0] == "d(y, x) solved"
+    # the curve is compared at t = 1/4, 1/2 and 3/4, each: a bump at one of them fails
+    for t0 in (0.25, 0.5, 0.75):
+        def bump(x, y, t, t0=t0):
+            t = np.asarray(t, float).reshape(-1, 1)
+            return x + t * (y - x) + np.array([0.0, 0.1]) * np.exp(-((t - t0) / 0.01) ** 2)
+
+        v = _checker(VD.check_closed_form, Table(curve=bump))((P0, P1, P1))  # d = 1
+        assert not v.ok and v.relation == "==", t0
+    # tolerance 2 (1e-9 + sqrt(error / d)): d = 0.25, error 1e-6 -> about 4e-3
+    q = np.array([0.25, 0.0])
+
+    def off(x, y, t):
+        t = np.asarray(t, float).reshape(-1, 1)
+        return x + t * (y - x) + np.array([0.0, 3e-3])
+
+    v = _checker(VD.check_closed_form, Table(curve=off, err=lambda x, y: 1e-6))((P0, q, q))
+    assert v.ok
+
+
+def test_relations_and_sides_of_failures(fake_certify):
+    z = VD.check_distance_zero(_suite("zero"), examples=5)
+    assert z.relation == "=="
+    nil = VD.check_distance_positive(_suite("nil"), examples=6)
+    assert nil.rhs == ("0", 0.0)
+    off = VD.check_closed_form(_suite("offset"), examples=5)
+    assert off.relation == "==" and set(off.counterexample) == {"x", "y"}
+    bent = VD.check_closed_form(_suite("bent"), examples=5)
+    assert bent.relation == "=="
+    mid = VD.check_midpoint_halves(_suite("midpoint"), examples=4)
+    assert mid.relation == "==" and set(mid.counterexample) == {"x", "y"}
+    sym = VD.check_distance_symmetry(_suite("asymmetric"), examples=10)
+    assert set(sym.counterexample) == {"x", "y"}
+    pos = _checker(VD.check_distance_positive, Table())
+    assert pos((P0, PM, P1)).ok  # d = 0.5 > 0
+
+
+def test_certificate_edges_and_pairs(monkeypatch):
+    import solvers
+
+    def fake(lower, upper):
+        def certify(m, x, y, mesh, path=None):
+            d = float(np.linalg.norm(y - x))
+            return _FakeCert(lower(d), upper(d))
+        return certify
+
+    chk = _checker(VD.check_certificate, Exact())
+    pair = (P0, PM, P1)
+    # the solve's error is 1e-12: lower = d + error and upper = d - error both hold
+    monkeypatch.setattr(solvers, "certify", fake(lambda d: d + 1e-12, lambda d: d + 1.0))
+    assert chk(pair).ok
+    monkeypatch.setattr(solvers, "certify", fake(lambda d: d - 1.0, lambda d: d - 1e-12))
+    assert chk(pair).ok
+    monkeypatch.setattr(solvers, "certify", fake(lambda d: d, lambda d: d))
+    assert chk(pair).ok
+    monkeypatch.setattr(solvers, "certify", fake(lambda d: d - 1.0, lambda d: d - 1e-3))
+    v = chk(pair)
+    assert not v.ok and v.lhs == ("d(x, y) - error", 0.5 - 1e-12) and v.relation == "<="
+    monkeypatch.setattr(solvers, "certify", fake(lambda d: d + 1e-3, lambda d: d + 1.0))
+    v = chk(pair)
+    assert not v.ok and v.rhs == ("d(x, y) + error", 0.5 + 1e-12)
+
+
+def test_certificate_pairs_are_apart_in_the_region(fake_certify):
+    r = VD.check_certificate(_suite(shrink=0.5), 4)
+    assert r.status is PASSED and len(fake_certify) == r.tried  # no degenerate pair
+    for m, x, y in fake_certify:
+        assert isinstance(m, Euclidean)
+        assert np.all(np.abs(x) <= 0.5 + 1e-12) and np.all(np.abs(y) <= 0.5 + 1e-12)
+        assert not np.array_equal(x, y)
+
+
+def test_certificate_unusable_and_convexity_threshold(fake_certify):
+    u = VD.check_certificate(_suite("unconverged"), 3)
+    assert u.status is INCONCLUSIVE
+
+    class Half(Flat):  # F = |v| / 2: fundamental tensor I / 4, convex, eigenvalue 0.25
+        name = "half-test"
+        convex_everywhere = False
+
+        def F_sx(self, x, v):
+            return 0.5 * ca.sqrt(ca.dot(v, v))
+
+    r = VD.check_certificate(VD.DistanceSuite.make(Half(), Exact()), 3)
+    assert r.status is PASSED and len(fake_certify) == r.tried
+
+
+class AllUnconverged(Exact):
+    def solve(self, metric, x, y):
+        s = super().solve(metric, x, y)
+        s.usable = False
+        s.status = "max_iterations"
+        return s
+
+
+@pytest.mark.parametrize("name", ["distance-zero", "distance-positive", "triangle-inequality",
+                                  "segment-bound", "distance-symmetry",
+                                  "closed-form-distance", "midpoint-halves"])
+def test_unusable_solves_are_inconclusive(name):
+    suite = VD.DistanceSuite.make(Euclidean(), AllUnconverged())
+    r = _CHECKS[name](suite, examples=3)
+    assert r.status is INCONCLUSIVE and "a solve did not converge (status max_iterations)" \
+        in r.note
+
+
+def test_run_passes_its_stream_and_shrink_limit(monkeypatch):
+    seen, streams = [], []
+    real_search, real_seeded = VD.search, VD.seeded
+    monkeypatch.setattr(VD, "seeded", lambda seed, s: streams.append((seed, s)) or
+                        real_seeded(seed, s))
+
+    def search(*a, **kw):
+        seen.append(kw)
+        return real_search(*a, **kw)
+
+    monkeypatch.setattr(VD, "search", search)
+    suite = VD.DistanceSuite.make(Euclidean(), Exact(), seed=5, shrink_limit=2)
+    VD.check_distance_positive(suite, 2)
+    assert streams == [(5, "distances")] and seen[0]["shrink_limit"] == 2
+    assert seen[0]["rng"] is not None
+
+
+def test_triples_in_the_shrunk_region():
+    pts = []
+    suite = _suite(shrink=0.25)
+    suite.run("p", "c", lambda t: pts.extend(t) or VD.Verdict(True), 20)
+    assert pts and all(np.all(np.abs(p) <= 0.25 + 1e-12) for p in pts)
+
+
+def test_cache_keys_and_what_the_oracle_gets():
+    got = []
+
+    class Rec(Exact):
+        def solve(self, metric, x, y):
+            got.append((metric, x.dtype, y.dtype))
+            return super().solve(metric, x, y)
+
+    e = Euclidean()
+    cache = VD.SolvedDistances(e, Rec())
+    a = cache(np.array([0, 1]), np.array([1, 0]))  # integers: the same pair as floats
+    assert cache(np.array([0.0, 1.0]), np.array([1.0, 0.0])) is a and cache.solves == 1
+    assert got == [(e, np.dtype(float), np.dtype(float))]
+
+
+def test_sizes_of_an_unbounded_domain():
+    class Strip(Flat):
+        name = "strip-test"
+        domain = property(lambda self: Box((-np.inf, -0.25), (np.inf, 0.25)))
+
+    s = VD.DistanceSuite.make(Strip(), Exact())
+    assert s.size() == 1.0  # 1 where unbounded (the finite side is 0.5)
+    path = np.array([[0.0, 0.0], [5.0, 0.1]])
+    pts = VD._region_samples(Strip(), path, path[0], path[-1])
+    dev = np.min(np.abs(pts[2:, None, 0] - path[None, :, 0]), axis=1)
+    assert 0.04 < dev.max() <= 0.05 + 1e-12  # 5% of the size 1 along the unbounded side
+
+
+def test_region_samples_spread():
+    m = Euclidean()
+    path = np.array([[-0.9, -0.9], [0.0, 0.0], [0.9, 0.9]])
+    pts = VD._region_samples(m, path, path[0], path[-1])
+    again = VD._region_samples(m, path, path[0], path[-1])
+    np.testing.assert_array_equal(pts, again)  # seeded
+    near = pts[3:]
+    d = np.linalg.norm(near[:, None] - path[None], axis=2)
+    owner = np.argmin(d, axis=1)
+    assert set(owner) == {0, 1, 2}  # around every vertex
+    off = near - path[owner]
+    assert np.abs(off).max() > 0.08  # up to 5% of the size 2 in each coordinate
+    assert (off[:, 0] > 0).any() and (off[:, 0] < 0).any()
+    assert np.std(off[:, 0] - off[:, 1]) > 0.01  # the coordinates drawn independently
+
+
+def test_along_edges():
+    path = np.array([[0.0, 0.0], [0.0, 0.0], [1.0, 0.0]])
+    np.testing.assert_allclose(VD._along(path, np.array([0.0, 0.0, 1.0]), [0.5]), [[0.5, 0.0]])
+    short = np.array([[0.0, 0.0], [0.1, 0.0], [0.5, 0.0]])
+    np.testing.assert_allclose(VD._along(short, np.array([0.0, 0.1, 0.5]), [0.5]),
+                               [[0.25, 0.0]])
+    assert VD._along(short, np.array([0.0, 0.1, 0.5]), 0.5).shape == (1, 2)
+
+
+def test_discrete_oracle_sizes_and_mapping():
+    x, y = np.array([0.1, 0.2]), np.array([-0.5, 0.3])
+    capped = VD.DiscreteDistance(1e-14, 4, 8).solve(Randers(), x, y)
+    assert capped.extra["segments"] == 8 and not capped.extra["tol_reached"]
+    loose = VD.DiscreteDistance(1e-2, 4, 64).solve(Randers(), x, y)
+    assert loose.extra["segments"] == 16 and loose.extra["tol_reached"]  # 4, 8, 16
+    from finsler.metrics import Matsumoto
+    m = Matsumoto()  # convex near its centre only
+    inside = VD.DiscreteDistance().solve(m, np.array([0.05, 0.0]), np.array([-0.05, 0.02]))
+    assert inside.mapped is False and inside.ok
+    out = VD.DiscreteDistance().solve(m, np.array([0.8, 0.0]), np.array([0.0, 0.8]))
+    assert out.mapped and not out.ok
+
+
+def test_continuum_oracle_path_runs_from_x_to_y():
+    x, y = np.array([0.1, 0.2]), np.array([-0.5, 0.3])
+    m = Randers()
+    s = VD.ContinuumDistance().solve(m, x, y)
+    np.testing.assert_allclose(s.path[0], x, atol=1e-9)
+    np.testing.assert_allclose(s.path[-1], y, atol=1e-9)
+    want = np.asarray(m.geodesic(x[None], y[None], np.array([0.5]))).reshape(2)
+    np.testing.assert_allclose(s.midpoint, want, atol=1e-6)
+    assert s.mapped is False
