@@ -1272,6 +1272,9 @@ def test_smoothness_sweep_counterexample_recomputes():
     hess[0, 2:] = hess[2:, 0] = 2.0 * g * gp * v
     hess[2:, 2:] = g * g * np.eye(2)
     assert r.rhs[1] == pytest.approx(float(u @ hess @ u), rel=1e-9)
+    errs = [abs((energy(z + hh * u) - 2 * energy(z) + energy(z - hh * u)) / hh ** 2
+                - float(u @ hess @ u)) for hh in (1e-2, 5e-3)]
+    assert _numbers(r.note) == pytest.approx(errs, rel=6e-3)  # 3 digits
     again = VM.check_smoothness(m, examples=10)
     assert again.counterexample == r.counterexample  # seeded
 
@@ -1409,3 +1412,55 @@ def test_vectors_default_scale_3():
     draw()
     top = max(float(np.abs(v).max()) for v in seen)
     assert 2.5 < top <= 3.0
+
+
+def _numbers(note):
+    return [float(a) for a in re.findall(r"error (\S+) at h = \S+, (\S+) at h/2", note)[0]]
+
+
+def test_smoothness_notes_give_both_errors(monkeypatch):
+    # the search's (KinkedV, v fixed at (0, 2)): errors at h = 0.002 and 0.001 recomputed
+    _fixed_vectors(monkeypatch, [0.0, 2.0])
+    k = VM.check_smoothness(KinkedV(), examples=20)
+    assert k.status is FAILED and k.lhs[0] == "second difference of F^2/2 (h = 0.001)"
+    x, v, c = (np.asarray(k.counterexample[a]) for a in "xvu")
+    np.testing.assert_array_equal(v, [0.0, 2.0])
+    u = np.concatenate([c[:2] * 2.0, c[2:] * 2.0])
+    z = np.concatenate([x, v])
+    sym = float(u[2:] @ u[2:])  # Hess E = I in v at v0 = 0 (module test above)
+    errs = [abs((_energy_kinked_v(z + h * u) - 2 * _energy_kinked_v(z)
+                 + _energy_kinked_v(z - h * u)) / h ** 2 - sym) for h in (2e-3, 1e-3)]
+    assert k.rhs[1] == pytest.approx(sym, rel=1e-9)
+    assert _numbers(k.note) == pytest.approx(errs, rel=6e-3)  # 3 digits
+
+
+def test_smoothness_search_steps_x_by_the_domain_width(monkeypatch):
+    from hypothesis import strategies as hst
+    m = Kinked()  # |v| (1 + 0.3 |x0|), x drawn at x0 = 0: the search's own counterexample
+    monkeypatch.setattr(VM, "_points", lambda mm, shrink=1.0: hst.just(np.array([0.0, 0.3])))
+    k = VM.check_smoothness(m, examples=30)
+    assert k.status is FAILED and k.lhs[0] == "second difference of F^2/2 (h = 0.001)"
+    x, v, c = (np.asarray(k.counterexample[a]) for a in "xvu")
+    u = np.concatenate([c[:2] * 2.0, c[2:] * np.linalg.norm(v)])
+
+    def energy(z):
+        return 0.5 * (np.linalg.norm(z[2:]) * (1.0 + 0.3 * abs(z[0]))) ** 2
+
+    z, h = np.concatenate([x, v]), 1e-3
+    d2 = (energy(z + h * u) - 2 * energy(z) + energy(z - h * u)) / h ** 2
+    assert k.lhs[1] == pytest.approx(d2, rel=1e-6, abs=1e-6)
+
+
+def test_labels_and_notes_of_failures(monkeypatch):
+    r = VM.check_subadditivity(RootX(), examples=30)
+    assert r.rhs[0] == "(F(x, v) + F(x, w))/2"
+    f = VM.check_finite_positive(NegativeCone(), examples=5)
+    assert f.status is FAILED and set(f.counterexample) == {"x", "v"}
+    _fixed_vectors(monkeypatch, [1.0, 0.0])
+    small = VM.check_homogeneity(SmallScaleOff(), examples=30)
+    a, b = small.lhs[1], small.rhs[1]
+    assert abs(b) < 1 and small.note == (
+        f"relative difference {abs(a - b) / abs(b):.3g} (tolerance 1e-12)")
+    _fixed_vectors(monkeypatch, [0.1, 0.0])
+    s = VM.check_subadditivity(ShortBy(1.3e-12), examples=3)
+    assert s.rhs[0] == "F(x, v) + F(x, w)"
