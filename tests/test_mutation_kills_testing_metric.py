@@ -1464,3 +1464,40 @@ def test_labels_and_notes_of_failures(monkeypatch):
     _fixed_vectors(monkeypatch, [0.1, 0.0])
     s = VM.check_subadditivity(ShortBy(1.3e-12), examples=3)
     assert s.rhs[0] == "F(x, v) + F(x, w)"
+
+
+class _OffNumpyShaped(_Shaped):
+    """(1 + x0^2 + 2 x1^2) |v|, its numpy form off by 1e-9 relative (torch exact)."""
+
+    name = "off-numpy-shaped-test"
+
+    def F_sx(self, x, v):
+        return self.factor(x) * ca.sqrt(ca.dot(v, v))
+
+    def F(self, x, v, check=None):
+        out = super().F(x, v, check=check)
+        return out * (1 + 1e-9) if isinstance(out, (np.ndarray, float)) else out
+
+
+class DiagonalKink(_Base):
+    """|v| (1 + 0.3 |x0 - x1|) declared smooth: a kink along the diagonal, invisible to a
+    step whose x part moves both coordinates alike."""
+
+    name = "diagonal-kink-test"
+
+    def F_sx(self, x, v):
+        return ca.sqrt(ca.dot(v, v)) * (1.0 + 0.3 * ca.fabs(x[0] - x[1]))
+
+
+def test_more_counterexamples_and_directions(monkeypatch):
+    m = _OffNumpyShaped()
+    o = VM.check_lowered_forms(m, examples=8)
+    x, v = (np.asarray(o.counterexample[k]) for k in "xv")
+    assert o.status is FAILED and o.lhs[1] == pytest.approx(_fnp(m, x, v), rel=1e-15)
+    f = VM.check_finite_positive(NegativeCone(), examples=5)
+    assert f.note.endswith("; the counterexample is the smallest value (not shrunk: the "
+                           "search drew no such direction).")
+    from hypothesis import strategies as hst
+    monkeypatch.setattr(VM, "_points", lambda mm, shrink=1.0: hst.just(np.array([0.2, 0.2])))
+    k = VM.check_smoothness(DiagonalKink(), examples=30)  # directions of every sign
+    assert k.status is FAILED and k.lhs[0] == "second difference of F^2/2 (h = 0.001)"
