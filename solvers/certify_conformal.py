@@ -89,6 +89,8 @@ CONE_SOLVERS = ("CLARABEL", "SCS")
 #: Momenta tried for the free coordinates, as fractions of the smallest factor ``m``.
 MOMENTA = (0.0, 0.3, 0.5, 0.65, 0.8, 0.9, 0.97)
 _U = 2.0**-53
+#: Grid points per projected coordinate for the values at box centres (``_Projected``).
+PROJECT_GRID = 5
 #: Fewest boxes split per round (the enclosures are vectorised: small rounds are slow).
 MIN_SPLIT = 2000
 
@@ -200,25 +202,75 @@ class ConformalCertifyResult(Result):
         return out
 
 
-def _factor_function(metric: Metric, reduce: bool) -> tuple[LoweredFunction, np.ndarray]:
+def _factor_function(metric: Metric, reduce: bool, factor: Any = None, key: str = "",
+                     project: tuple[int, ...] = ()) -> tuple[LoweredFunction, np.ndarray]:
     """The lowered conformal factor ``q_A -> f`` and the mask of its coordinates ``A``:
-    with ``reduce``, only those ``f`` depends on (cached on the metric)."""
+    with ``reduce``, only those ``f`` depends on (cached on the metric). ``factor``: a
+    callable ``q (SX) -> SX`` used instead of the metric's hook (a part of it, cached
+    under ``key``). ``project``: coordinates left out of ``A`` although ``f`` depends on
+    them; the program then takes ``q_(A + project)`` (in coordinate order) and the caller
+    encloses it with those coordinates over their whole range."""
+    factor_sx = factor if factor is not None else metric.conformal_factor_sx
+
     def build() -> tuple[LoweredFunction, np.ndarray]:
         q = ca.SX.sym("q", metric.dim)
-        f = ca.SX(metric.conformal_factor_sx(q))
+        f = ca.SX(factor_sx(q))
         if f.numel() != 1:
             raise InputError(f"{metric.name}: conformal_factor_sx must return a scalar, got "
                              f"shape {f.shape}")
-        active = np.array([not reduce or bool(ca.depends_on(f, q[i]))
-                           for i in range(metric.dim)])
+        active = np.array([(not reduce or bool(ca.depends_on(f, q[i])))
+                           and i not in project for i in range(metric.dim)])
         if not active.any():
             active[0] = True
-        qa = ca.SX.sym("qa", int(active.sum()))
-        full = ca.vertcat(*[qa[int(active[:i].sum())] if active[i] else ca.SX(0.0)
+        inputs = active.copy()
+        inputs[list(project)] = True
+        qa = ca.SX.sym("qa", int(inputs.sum()))
+        full = ca.vertcat(*[qa[int(inputs[:i].sum())] if inputs[i] else ca.SX(0.0)
                             for i in range(metric.dim)])
         fa = ca.substitute(f, q, full)
         return lower(ca.Function(f"conformal_factor_{metric._ident}", [qa], [fa])), active
-    return metric.derived(f"certify.conformal_factor.{reduce}", build)
+    return metric.derived(f"certify.conformal_factor.{reduce}{key}.{project}", build)
+
+
+class _Projected:
+    """Enclosures and values of ``f`` over boxes in the active coordinates, the projected
+    ones spanning their whole range: enclosures over the product box, values the smallest
+    over a grid of ``PROJECT_GRID`` points per projected coordinate (an upper bound of the
+    minimum: all the refinement needs, and never below a sound enclosure)."""
+
+    def __init__(self, fn: LoweredFunction, active: np.ndarray, project: tuple[int, ...],
+                 dom_lo: np.ndarray, dom_hi: np.ndarray) -> None:
+        self.fn = fn
+        inputs = active.copy()
+        inputs[list(project)] = True
+        idx = np.flatnonzero(inputs)
+        self.a_pos = np.flatnonzero(active[idx])
+        self.p_pos = np.flatnonzero(~active[idx])
+        self.n_in = idx.size
+        self.p_lo, self.p_hi = dom_lo[idx[self.p_pos]], dom_hi[idx[self.p_pos]]
+        axes = [np.linspace(a, b, PROJECT_GRID) for a, b in zip(self.p_lo, self.p_hi,
+                                                                  strict=True)]
+        self.p_grid = (np.stack([g.reshape(-1) for g in np.meshgrid(*axes)], axis=1)
+                       if axes else np.zeros((1, 0)))
+
+    def enclose(self, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+        if self.p_pos.size == 0:
+            return _enclose_factor(self.fn, lo, hi)
+        flo, fhi = np.empty((lo.shape[0], self.n_in)), np.empty((lo.shape[0], self.n_in))
+        flo[:, self.a_pos], fhi[:, self.a_pos] = lo, hi
+        flo[:, self.p_pos], fhi[:, self.p_pos] = self.p_lo, self.p_hi
+        return _enclose_factor(self.fn, flo, fhi)
+
+    def value(self, pts: np.ndarray) -> np.ndarray:
+        with np.errstate(all="ignore"):
+            if self.p_pos.size == 0:
+                return np.asarray(self.fn(pts)[0], float).reshape(-1)
+            k = self.p_grid.shape[0]
+            full = np.empty((pts.shape[0] * k, self.n_in))
+            full[:, self.a_pos] = np.repeat(pts, k, axis=0)
+            full[:, self.p_pos] = np.tile(self.p_grid, (pts.shape[0], 1))
+            val = np.asarray(self.fn(full)[0], float).reshape(pts.shape[0], k)
+            return np.min(np.where(np.isfinite(val), val, np.inf), axis=1)
 
 
 def _constraint_function(metric: Metric, active: np.ndarray
@@ -476,14 +528,22 @@ def _best_potential(grid: _Grid, g: np.ndarray, m_low: float, free_dist: float
 
 
 def certify_conformal(metric: Metric | str, start: Any, goal: Any,
-                      spec: ConformalSpec | None = None, *, path: Any = None
+                      spec: ConformalSpec | None = None, *, path: Any = None,
+                      part: tuple[Any, str, float, tuple[int, ...]] | None = None
                       ) -> ConformalCertifyResult:
     """Proven interval ``lower <= d(start, goal) <= upper`` on a conformal metric of any
     dimension (one providing the hook ``conformal_factor_sx``); see the module docstring
     for the method. ``path`` ``(n+1, dim)``: a curve from start to goal for the upper
     bound (default: :func:`solvers.solve_geodesic` at ``spec.segments`` segments).
     Raises :class:`InputError` for a metric without the hook, points outside the domain,
-    start == goal, or a domain that is unbounded."""
+    start == goal, or a domain that is unbounded.
+
+    ``part`` ``(factor, key, euclid, project)``, for :mod:`solvers.certify_conformal_split`: bound
+    the length ``int a(q) |q'|`` of the part ``a = factor(q) <= f`` (a callable ``SX ->
+    SX``, cached under ``key``) over the paths whose full Euclidean length is at most
+    ``euclid`` (those of ``F``-length at most ``upper``: the region is that ellipsoid);
+    ``trivial`` is then ``min a |y - x|``; the coordinates ``project`` are bounded over
+    their whole range (``a`` replaced by its minimum over them: fewer dimensions)."""
     t_start = time.perf_counter()
     m = as_metric(metric)
     spec = spec or ConformalSpec()
@@ -525,9 +585,11 @@ def certify_conformal(metric: Metric | str, start: Any, goal: Any,
 
     # boxes: branch and bound on the reachable region
     t0 = time.perf_counter()
-    fn, active = _factor_function(m, True)
+    factor, key, euclid, project = part if part is not None else (None, "", math.inf, ())
+    fn, active = _factor_function(m, True, factor, key, project)
     if float(np.linalg.norm((y - x)[active])) <= 1e-9 * dist:  # only free coordinates move
-        fn, active = _factor_function(m, False)
+        fn, active = _factor_function(m, False, factor, key)
+        project = ()
     cons = _constraint_function(m, active)
     free_dist = float(np.linalg.norm((y - x)[~active]))
     full_dist, x_full, y_full = dist, x, y
@@ -535,9 +597,9 @@ def certify_conformal(metric: Metric | str, start: Any, goal: Any,
     dist = float(np.linalg.norm(y - x))
     u = (y - x) / dist
     lo, hi = dom_lo[None, active].copy(), dom_hi[None, active].copy()
-    f_lo = _enclose_factor(fn, lo, hi)
-    with np.errstate(all="ignore"):
-        f_c = np.asarray(fn(0.5 * (lo + hi))[0], float).reshape(-1)
+    proj = _Projected(fn, active, project, dom_lo, dom_hi)
+    f_lo = proj.enclose(lo, hi)
+    f_c = proj.value(0.5 * (lo + hi))
     f_c = np.where(np.isfinite(f_c), f_c, np.inf)
     work, rounds = 1, 0
     stopped_by = "max_rounds"
@@ -552,10 +614,14 @@ def certify_conformal(metric: Metric | str, start: Any, goal: Any,
         """``U_A / m``: the largest Euclidean length, in the active coordinates, of a path
         shorter than ``U`` on which ``f >= m`` (Minkowski: ``U**2 >= L_A**2 + (m
         |free move|)**2``)."""
+        cap = math.inf
+        if math.isfinite(euclid):  # a part: the full path's Euclidean length is known
+            cap = math.sqrt(max(euclid * euclid - (free_dist * (1.0 - _SLACK)) ** 2, 0.0))
+            cap *= 1.0 + _SLACK
         if m_low <= 0:
-            return math.inf
+            return cap
         ua = math.sqrt(max(upper * upper - (m_low * free_dist * (1.0 - _SLACK)) ** 2, 0.0))
-        return ua / m_low * (1.0 + _SLACK)
+        return min(ua / m_low * (1.0 + _SLACK), cap)
 
     while True:
         # the region: drop boxes outside the domain or the ellipse of the current m
@@ -627,10 +693,8 @@ def certify_conformal(metric: Metric | str, start: Any, goal: Any,
         hi_a[np.arange(split.size), ax] = mid
         lo_b[np.arange(split.size), ax] = mid
         new_lo, new_hi = np.concatenate([lo_a, lo_b]), np.concatenate([hi_a, hi_b])
-        new_f = _enclose_factor(fn, new_lo, new_hi)
-        with np.errstate(all="ignore"):
-            (fc_val,) = fn(0.5 * (new_lo + new_hi))
-        new_c = np.asarray(fc_val, float).reshape(-1)
+        new_f = proj.enclose(new_lo, new_hi)
+        new_c = proj.value(0.5 * (new_lo + new_hi))
         if CHECK_VALUES and np.any(new_f > new_c + 1e-9 * np.abs(new_c)):
             raise RuntimeError(f"{m.name}: an enclosure of the conformal factor lies above its "
                                "value at the box's centre: the enclosure is wrong (a bug)")

@@ -1,0 +1,108 @@
+"""The split lower bound (issue 46, item 3): a conformal factor bounded part by part.
+
+The parts sum to the factor; the bound never exceeds an exact distance (scaled Euclidean:
+every part constant) nor, part by part, the part's length of the solver's own path (a
+path of ``F``-length at most the upper bound: each part's bound must lie below its length
+along it); double counting a part is caught by that check."""
+
+from __future__ import annotations
+
+import importlib
+import itertools
+from typing import ClassVar
+
+import casadi as ca
+import numpy as np
+import pytest
+
+import finsler
+from finsler.domains import Box
+from finsler.metric import Metric
+from solvers.certify_conformal import ConformalSpec
+from solvers.certify_conformal_split import certify_conformal_split, factor_parts
+
+split_mod = importlib.import_module("solvers.certify_conformal_split")
+QUICK = ConformalSpec(max_boxes=6000, s_cells=8, r_cells=4)
+
+
+class _ScaledEuclidean(Metric):
+    """``F = (1.5 + 2) |v|`` on a 4-D box, written as a sum of two constants."""
+
+    name: ClassVar[str] = "test-scaled-euclidean"
+
+    @property
+    def domain(self) -> Box:
+        return Box((-1.0,) * 4, (1.0,) * 4)
+
+    def F_sx(self, x: ca.SX, v: ca.SX) -> ca.SX:
+        return self.conformal_factor_sx(x) * ca.norm_2(v)
+
+    def conformal_factor_sx(self, x: ca.SX) -> ca.SX:
+        return ca.SX(1.5) + ca.SX(2.0) + 0.0 * x[0]
+
+
+def _part_lengths(m: Metric, pts: np.ndarray) -> tuple[float, list[float]]:
+    """The constant and each part's length along the polyline (fine midpoint rule)."""
+    const, parts = factor_parts(m)
+    t = (np.arange(200) + 0.5) / 200
+    out = [0.0] * len(parts)
+    for a, b in itertools.pairwise(pts):
+        q = a + t[:, None] * (b - a)
+        for k, (_, fn) in enumerate(parts):
+            out[k] += float(np.sum(np.asarray(fn(q.T)).reshape(-1))) / 200 * float(
+                np.linalg.norm(b - a))
+    return const, out
+
+
+def test_parts_sum_to_the_factor() -> None:
+    m = finsler.get_metric("panda-pole")
+    const, parts = factor_parts(m)
+    assert const == pytest.approx(8.5) and len(parts) == 4
+    assert [len(dep) for dep, _ in parts] == [2, 3, 4, 6]
+    q = m.domain.sample(50, np.random.default_rng(2))
+    total = const + sum(np.asarray(fn(q.T)).reshape(-1) for _, fn in parts)
+    np.testing.assert_allclose(total * np.linalg.norm(np.ones(7)), m.F(q, np.ones((50, 7))),
+                               rtol=1e-12)
+
+
+def test_constant_parts_give_the_exact_distance() -> None:
+    m = _ScaledEuclidean()
+    x, y = np.array([-0.5, 0.2, 0.1, -0.3]), np.array([0.4, -0.6, 0.3, 0.5])
+    d = 3.5 * float(np.linalg.norm(y - x))
+    r = certify_conformal_split(m, x, y, QUICK, path=np.stack([x, y]))
+    assert r.constant == 3.5 and r.parts == []
+    assert d * (1 - 1e-8) <= r.lower <= d <= r.upper * (1 + 1e-12)
+
+
+@pytest.fixture(scope="module")
+def panda_split() -> tuple[Metric, np.ndarray, np.ndarray, object]:
+    m = finsler.get_metric("panda-pole")
+    x, y = finsler.sample_pairs(m, 2, 20261150)[1]
+    spec = ConformalSpec(max_boxes=20000, s_cells=12, r_cells=6)
+    return m, x, y, certify_conformal_split(m, x, y, spec)
+
+
+def test_panda_parts_below_the_solver_path(panda_split: tuple) -> None:
+    m, x, y, r = panda_split
+    const, lengths = _part_lengths(m, r.full.path)
+    assert len(r.parts) == len(lengths) == 4
+    for part, length in zip(r.parts, lengths, strict=True):
+        assert 0.0 < part.lower <= length * (1 + 1e-6)
+    assert r.split_lower <= const * np.linalg.norm(y - x) + sum(lengths) + 1e-9
+    assert r.lower <= r.upper and r.lower >= r.full.lower
+    assert r.ratio == pytest.approx(r.lower / r.upper)
+
+
+def test_double_counted_part_is_caught(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A part counted twice (a wrong grouping): its bound exceeds its length along the
+    solver's path, so the check above can fail."""
+    m = finsler.get_metric("panda-pole")
+    x, y = finsler.sample_pairs(m, 2, 20261150)[1]
+    const, parts = factor_parts(m)
+    doubled = (const, [(dep, ca.Function("twice", [q := ca.SX.sym("q", 7)], [2 * fn(q)]))
+                       for dep, fn in parts])
+    monkeypatch.setattr(split_mod, "factor_parts", lambda metric: doubled)
+    r = certify_conformal_split(m, x, y, ConformalSpec(max_boxes=20000, s_cells=12,
+                                                        r_cells=6))
+    _, lengths = _part_lengths(m, r.full.path)
+    assert any(p.lower > ln for p, ln in zip(r.parts, lengths, strict=True))
