@@ -937,3 +937,52 @@ def test_continuum_oracle_path_runs_from_x_to_y():
     want = np.asarray(m.geodesic(x[None], y[None], np.array([0.5]))).reshape(2)
     np.testing.assert_allclose(s.midpoint, want, atol=1e-6)
     assert s.mapped is False
+
+
+def test_midpoint_failure_labels_and_note():
+    third = Table(midpoint=lambda x, y: x + (y - x) / 3.0)
+    v = _checker(VD.check_midpoint_halves, third)((P0, P1, P1))
+    assert not v.ok and v.lhs[0] == "d(x, m)"
+    assert v.note.endswith("(midpoint m = (0.333333, 0.0))")  # 6 decimals
+    late = Table(extra=lambda x, y: 1e-3 if _on(PM, P1)(x, y) else 0.0)  # only d(m, y) off
+    w = _checker(VD.check_midpoint_halves, late)((P0, P1, P1))
+    assert not w.ok and w.lhs == ("d(m, y)", pytest.approx(0.5 + 1e-3, rel=1e-12))
+
+
+def test_certificate_counterexample_names_the_pair(monkeypatch):
+    import solvers
+
+    monkeypatch.setattr(solvers, "certify", lambda m, x, y, mesh, path=None: _FakeCert(
+        float(np.linalg.norm(y - x)) + 1e-3, float(np.linalg.norm(y - x)) + 2e-3))
+    r = VD.check_certificate(_suite(), 3)
+    assert r.status is FAILED and set(r.counterexample) == {"x", "y"}
+
+
+def test_closed_form_curve_tolerance_on_an_unbounded_strip():
+    class Strip(Flat):
+        name = "strip-cf-test"
+        domain = property(lambda self: Box((-np.inf, -0.25), (np.inf, 0.25)))
+
+    e = Euclidean()
+
+    def off(x, y, t, dy=1.5e-3):
+        t = np.asarray(t, float).reshape(-1, 1)
+        return x + t * (y - x) + np.array([0.0, dy])
+
+    # the size of an unbounded domain is 1: tolerance 1e-9 + sqrt(1e-6 / 1) = 1e-3
+    chk = _checker(VD.check_closed_form, Table(curve=off, err=lambda x, y: 1e-6),
+                   metric=Strip(), distance=e.distance, geodesic=e.geodesic)
+    v = chk((P0, P1, P1))
+    assert not v.ok and v.note.startswith("largest deviation 0.0015 (tolerance 0.001)")
+
+
+def test_discrete_oracle_slacks_follow_the_stated_error():
+    """With a floor of 1e-3 relative on an exact (straight) solve, the stated error is
+    1e-3 d and the curve's slack 1e-6 + 1e-3 (relative to d), for short and long pairs."""
+    for x, y in ((np.array([0.1, 0.2]), np.array([-0.3, 0.5])),
+                 (np.array([-0.9, -0.9]), np.array([0.9, 0.95]))):
+        s = VD.DiscreteDistance(error_floor=1e-3).solve(Euclidean(), x, y)
+        d = float(np.linalg.norm(y - x))
+        assert s.error == pytest.approx(1e-3 * d, rel=1e-9)
+        assert s.curve_slack == pytest.approx(1e-6 + 1e-3, rel=1e-6)
+        assert 1e-3 * d <= s.midpoint_slack <= 1e-3 * d + 1e-9

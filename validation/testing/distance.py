@@ -540,7 +540,7 @@ def check_midpoint_halves(suite: DistanceSuite, examples: int = 2) -> PropertyRe
             if abs(h.value - half) > slack:
                 return Verdict.compare((what, h.value), "==", ("d(x, y) / 2", half), False,
                                        f"difference {h.value - half:.3g}, allowed {slack:.3g}"
-                                       f" (midpoint m = {tuple(round(v, 6) for v in mid)})")
+                                       f" (midpoint m = {tuple(round(float(v), 6) for v in mid)})")
         return Verdict(True)
 
     return suite.run("midpoint-halves", "the midpoint m of a solved geodesic has "
