@@ -1,0 +1,346 @@
+"""solvers.certify_lp against independent references, FAST (the mutation-testing selection of
+the module, see docs/guides/mutation-testing.md): the rays' exit points by brute force, the
+LP's optimum in closed form (a uniform Euclidean row set: the best potential rises by
+exactly |goal - start|) and by scipy's HiGHS (``linprog``) on the full row set, strong
+duality and dual feasibility of the returned duals, every row checked on the returned
+potential, the round logic's stopping rules counted by hand, and the first exact vertices
+recomputed from their definition."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy.optimize import linprog
+
+import solvers.certify_lp as lp_mod
+from solvers.certify_lp import (
+    INITIAL_DIRECTIONS,
+    LP_SOLVER,
+    SETTLE,
+    TIGHT_DUAL,
+    WINDOW_FRACTION,
+    LPFailure,
+    _initial_modes,
+    _Rays,
+    _solve_lp,
+    _window,
+)
+from solvers.certify_mesh import _Mesh
+
+K = 32
+ANG = 2 * np.pi * np.arange(K) / K
+DIRS = np.stack([np.cos(ANG), np.sin(ANG)], 1)
+S, G = np.array([0.1, 0.5]), np.array([0.9, 0.5])  # goal - start along DIRS[0]
+
+
+def _mesh() -> _Mesh:
+    rng = np.random.default_rng(0)
+    t = np.linspace(0.0, 1.0, 5)
+    x, y = np.meshgrid(t, t)
+    grid = np.stack([x.ravel(), y.ravel()], 1) + rng.uniform(-0.03, 0.03, (25, 2))
+    return _Mesh(np.concatenate([S[None], G[None], grid]))
+
+
+MESH = _mesh()
+NV = 3 * MESH.n_tri
+
+
+def _weights() -> np.ndarray:
+    """Rows that differ from triangle to triangle (F = w(x) |v| piecewise)."""
+    c = MESH.centroids
+    w = 1.0 + c[:, 0] + 0.5 * c[:, 1]
+    return np.broadcast_to(w[:, None, None], (MESH.n_tri, 3, K)).copy()
+
+
+def _none() -> dict[str, np.ndarray]:
+    return {"exact": np.zeros(NV, bool), "active": np.zeros((NV, K), bool)}
+
+
+def _full_rows() -> np.ndarray:
+    """Dense matrix of every row ``grad phi(vertex) . v_k`` (vertex-major, then k), built
+    from the P2 gradients the mesh gives, independently of the module's sparse assembly."""
+    gc = MESH.grad.reshape(NV, 2, 6)
+    dofs = np.repeat(MESH.dofs, 3, axis=0)
+    a = np.zeros((NV * K, MESH.n_dofs))
+    for v in range(NV):
+        co = DIRS @ gc[v]  # (K, 6)
+        for j in range(6):
+            a[v * K:(v + 1) * K, dofs[v, j]] += co[:, j]
+    return a
+
+
+FULL = _full_rows()
+
+
+def _highs_optimum(b: np.ndarray) -> float:
+    c = np.zeros(MESH.n_dofs)
+    c[1] = -1.0
+    bounds = [(None, None)] * MESH.n_dofs
+    bounds[0] = (0.0, 0.0)
+    res = linprog(c, A_ub=FULL, b_ub=b.reshape(-1), bounds=bounds, method="highs")
+    assert res.status == 0
+    return float(-res.fun)
+
+
+def _max_ratio(phi: np.ndarray, b: np.ndarray) -> float:
+    return float(np.max(FULL @ phi / b.reshape(-1)))
+
+
+# ---- constants and the window ----------------------------------------------------------
+def test_constants_and_the_direction_window() -> None:
+    assert LP_SOLVER == "CLARABEL" and INITIAL_DIRECTIONS == 8 and WINDOW_FRACTION == 1 / 64
+    assert TIGHT_DUAL == 1e-7 and SETTLE == 0.1
+    assert [_window(k) for k in (8, 16, 64, 127, 128, 200, 640)] == [1, 1, 1, 1, 2, 3, 10]
+
+
+# ---- the inner polygons ----------------------------------------------------------------
+def test_rays_are_evenly_spaced_off_the_sampled_angles_and_chained_per_vertex() -> None:
+    r = _Rays(3)
+    assert r.vid.tolist() == [v for v in range(3) for _ in range(8)]
+    np.testing.assert_allclose(r.ang, np.tile(2 * np.pi * np.arange(8) / 8 + 1e-3, 3),
+                               rtol=0, atol=1e-15)
+    assert r.next.dtype == np.int64
+    assert r.next.tolist() == [v * 8 + (i + 1) % 8 for v in range(3) for i in range(8)]
+    r5 = _Rays(2, rays=5)
+    assert r5.vid.tolist() == [0] * 5 + [1] * 5
+    assert r5.next.tolist() == [1, 2, 3, 4, 0, 6, 7, 8, 9, 5]
+
+
+def _brute_facets(rays: _Rays, b_flat: np.ndarray, dirs: np.ndarray) -> tuple:
+    pts = []
+    for v, a in zip(rays.vid, rays.ang):
+        u = np.array([math.cos(a), math.sin(a)])
+        r = min(b_flat[v, k] / (u @ dirs[k]) for k in range(dirs.shape[0])
+                if u @ dirs[k] > 1e-12)
+        pts.append(r * u)
+    return np.array(pts)
+
+
+@pytest.mark.parametrize("n, k", [(4, 32), (2, 5)])
+def test_facets_pass_through_the_exit_points_by_brute_force(n: int, k: int) -> None:
+    rng = np.random.default_rng(k)
+    a = 2 * np.pi * np.arange(k) / k
+    dirs = np.stack([np.cos(a), np.sin(a)], 1)
+    b_flat = rng.uniform(0.5, 2.0, (n, k))
+    rays = _Rays(n)
+    normal, rhs = rays.facets(b_flat, dirs)
+    pts = _brute_facets(rays, b_flat, dirs)
+    assert normal.shape == (8 * n, 2) and rhs.shape == (8 * n,)
+    # the edge from each exit point to the next one's: through both, origin inside
+    np.testing.assert_allclose(np.einsum("ri,ri->r", normal, pts), rhs, rtol=1e-12)
+    np.testing.assert_allclose(np.einsum("ri,ri->r", normal, pts[rays.next]), rhs,
+                               rtol=1e-11, atol=1e-12)
+    e = pts[rays.next] - pts
+    np.testing.assert_allclose(normal, np.stack([e[:, 1], -e[:, 0]], 1), rtol=1e-12,
+                               atol=1e-14)
+    assert np.all(rhs > 0)
+    # every exit point satisfies every row of its vertex, one of them with equality
+    ratio = np.einsum("ri,ki->rk", pts, dirs) / b_flat[rays.vid]
+    assert np.all(ratio <= 1 + 1e-12)
+    np.testing.assert_allclose(ratio.max(axis=1), 1.0, rtol=1e-12)
+
+
+def test_facets_of_more_rays_than_one_chunk() -> None:
+    n = 2600  # 20800 rays: two chunks of 20000
+    a = 2 * np.pi * np.arange(6) / 6
+    dirs = np.stack([np.cos(a), np.sin(a)], 1)
+    b_flat = np.linspace(1.0, 3.0, n)[:, None] * np.ones((1, 6))
+    rays = _Rays(n)
+    normal, rhs = rays.facets(b_flat, dirs)
+    # a regular hexagon of inradius b: the exit radius at angle t is b / cos(t - nearest)
+    u = np.stack([np.cos(rays.ang), np.sin(rays.ang)], 1)
+    dev = (rays.ang + np.pi / 6) % (np.pi / 3) - np.pi / 6
+    pts = (b_flat[rays.vid, 0] / np.cos(dev))[:, None] * u
+    np.testing.assert_allclose(np.einsum("ri,ri->r", normal, pts), rhs, rtol=1e-12)
+    np.testing.assert_allclose(np.einsum("ri,ri->r", normal, pts[rays.next]), rhs,
+                               rtol=1e-11)
+
+
+# ---- the LP ----------------------------------------------------------------------------
+def test_uniform_euclidean_rows_give_exactly_the_straight_distance() -> None:
+    """b = 1 for every direction: the rows hold at every point of each triangle (a P2
+    gradient is linear there), so phi(goal) - phi(start) <= |goal - start| along the
+    segment (goal - start lies along a sampled direction), and phi = x0 attains it."""
+    b = np.ones((MESH.n_tri, 3, K))
+    r = _solve_lp(MESH, b, DIRS, 0, 1, upper=100.0, target=1e-6, start=_none())
+    assert r["lower"] == pytest.approx(0.8, rel=1e-7) and r["lower"] <= 0.8 * (1 + 1e-9)
+    assert r["phi"][0] == 0.0 and r["phi"][1] == pytest.approx(r["lower"], rel=1e-14)
+    assert _max_ratio(r["phi"], b) <= 1.0
+    assert r["status"] == "optimal" and r["solver"] == "CLARABEL" and not r["settled"]
+    assert r["lp_seconds"] > 0 and r["ratio"] == pytest.approx(1.0, abs=1e-5)
+    assert 1 <= r["iterations"] <= 30 and r["exact"].shape == (NV,)
+    assert r["active"].shape == (NV, K) and r["n_rows"] == r["duals"].size
+
+
+def test_rows_that_vary_reach_the_highs_optimum_of_all_rows() -> None:
+    b = _weights()
+    best = _highs_optimum(b)
+    r = _solve_lp(MESH, b, DIRS, 0, 1, upper=100.0, target=1e-6, start=_none())
+    assert best * (1 - 1e-6) <= r["lower"] <= best * (1 + 1e-9)
+    assert _max_ratio(r["phi"], b) <= 1.0
+    assert r["iterations"] >= 2 and r["exact"].any()  # safe vertices were promoted
+    # promoted vertices carry the 16 coarse directions
+    assert np.all(r["active"][r["exact"]][:, :: K // 16])
+    assert not r["active"][~r["exact"]].any()
+
+
+def test_one_round_of_few_rows_is_scaled_into_a_valid_bound() -> None:
+    """All vertices exact with 5 directions each (not enough: the potential violates
+    other rows): the bound is the LP value over its largest row ratio; the duals satisfy
+    strong duality (value = duals . rhs) and dual feasibility (A^T y = e_goal off the start)
+    against the rows rebuilt here."""
+    b = _weights()
+    active = np.zeros((NV, K), bool)
+    active[:, [0, 7, 13, 20, 26]] = True
+    start = {"exact": np.ones(NV, bool), "active": active}
+    r = _solve_lp(MESH, b, DIRS, 0, 1, upper=100.0, target=1e-6, start=start, max_iter=1)
+    assert r["iterations"] == 1
+    ratio = _max_ratio(r["phi"], b)
+    assert ratio <= 1.0 and ratio == pytest.approx(1.0, abs=1e-12)
+    assert r["ratio"] > 1.01  # the unscaled potential broke some unsampled row
+    value = r["lower"] * r["ratio"] * (1 + 1e-12)
+    assert value > _highs_optimum(b)  # fewer rows: a larger LP optimum
+    vid, kk = np.nonzero(active)
+    rows = FULL[vid * K + kk]
+    rhs = b.reshape(NV, K)[vid, kk]
+    assert r["n_rows"] == vid.size
+    np.testing.assert_array_equal(r["rows"], np.stack([vid // 3, vid % 3, kk], 1))
+    y = r["duals"]
+    assert np.all(y >= 0) and y @ rhs == pytest.approx(value, rel=1e-6)
+    aty = rows.T @ y
+    target = np.zeros(MESH.n_dofs)
+    target[1] = 1.0
+    np.testing.assert_allclose(np.delete(aty - target, 0), 0.0, atol=1e-6)
+    # the rows it had hold for the unscaled potential (LP tolerance)
+    assert np.max(rows @ r["phi"] * r["ratio"] / rhs) <= 1 + 1e-6
+
+
+def test_rows_of_safe_vertices_point_along_their_facet_normals() -> None:
+    b = np.ones((MESH.n_tri, 3, K))
+    r = _solve_lp(MESH, b, DIRS, 0, 1, upper=100.0, target=1e-6, start=_none(), max_iter=1)
+    rays = _Rays(NV)
+    assert r["n_rows"] == 8 * NV
+    np.testing.assert_array_equal(r["rows"][:, 0], rays.vid // 3)
+    np.testing.assert_array_equal(r["rows"][:, 1], rays.vid % 3)
+    # the facet between rays at 2 pi i / 8 and 2 pi (i+1) / 8 faces 2 pi (i + 1/2) / 8,
+    # the sampled direction k = 4 i + 2 of 32 (the 1e-3 offset moves it by far less)
+    i = np.tile(np.arange(8), NV)
+    np.testing.assert_array_equal(r["rows"][:, 2], (4 * i + 2) % K)
+
+
+def test_the_rounds_stop_when_the_bound_reaches_the_target() -> None:
+    b = _weights()
+    best = _highs_optimum(b)
+    far = _solve_lp(MESH, b, DIRS, 0, 1, upper=100.0, target=1e-6, start=_none())
+    near = _solve_lp(MESH, b, DIRS, 0, 1, upper=best * 1.02, target=0.1, start=_none())
+    assert near["iterations"] == 1 < far["iterations"]
+    assert best * 1.02 - near["lower"] <= 0.1 * best * 1.02
+    # a target just out of the first round's reach needs a second round
+    first = near["lower"]
+    gap = (best - first) / best
+    assert gap > 1e-4
+    nxt = _solve_lp(MESH, b, DIRS, 0, 1, upper=best, target=0.5 * gap, start=_none())
+    assert nxt["iterations"] >= 2 and nxt["lower"] >= best * (1 - 0.5 * gap)
+
+
+def test_settle_stops_a_mesh_that_cannot_reach_the_target() -> None:
+    b = _weights()
+    best = _highs_optimum(b)
+    # rounds 1 -> 2 gain far less than SETTLE * target * upper: settled after round 2
+    r = _solve_lp(MESH, b, DIRS, 0, 1, upper=2 * best, target=0.1, start=_none(),
+                  settle=True)
+    assert r["settled"] and r["iterations"] == 2
+    full = _solve_lp(MESH, b, DIRS, 0, 1, upper=2 * best, target=0.1, start=_none())
+    assert not full["settled"] and full["iterations"] > 2
+    # a gain larger than SETTLE * target * upper: not settled after two rounds
+    one = _solve_lp(MESH, b, DIRS, 0, 1, upper=2 * best, target=0.1, start=_none(),
+                    max_iter=1)
+    two = _solve_lp(MESH, b, DIRS, 0, 1, upper=2 * best, target=0.1, start=_none(),
+                    max_iter=2)
+    assert two["iterations"] == 2 and one["iterations"] == 1
+    gain = two["lower"] * two["ratio"] - one["lower"] * one["ratio"]
+    assert gain > 0
+    tiny = 0.5 * gain / (SETTLE * 2 * best)  # SETTLE * tiny * upper = gain / 2
+    r2 = _solve_lp(MESH, b, DIRS, 0, 1, upper=2 * best, target=tiny, start=_none(),
+                   settle=True, max_iter=3)
+    assert not r2["settled"] or r2["iterations"] == 3
+    # an LP value already within the target of the upper bound never settles
+    r3 = _solve_lp(MESH, b, DIRS, 0, 1, upper=best * 1.0005, target=1e-4, start=_none(),
+                   settle=True)
+    assert not r3["settled"]
+
+
+def test_a_failing_lp_solver_raises_lp_failure(monkeypatch: pytest.MonkeyPatch) -> None:
+    b = np.ones((MESH.n_tri, 3, K))
+    monkeypatch.setattr(lp_mod, "LP_SOLVER", "NO_SUCH_SOLVER")
+    with pytest.raises(LPFailure, match=r"^the LP solver failed: "):
+        _solve_lp(MESH, b, DIRS, 0, 1, upper=100.0, target=1e-6, start=_none())
+    monkeypatch.undo()
+    import cvxpy as cp
+
+    monkeypatch.setattr(cp.Problem, "solve", lambda self, **kw: None)
+    with pytest.raises(LPFailure, match=r"^the LP ended with status None$"):
+        _solve_lp(MESH, b, DIRS, 0, 1, upper=100.0, target=1e-6, start=_none())
+
+
+# ---- the first exact vertices ----------------------------------------------------------
+def _seg_dist(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
+    d = b - a
+    t = min(1.0, max(0.0, float((p - a) @ d / (d @ d))))
+    return float(np.linalg.norm(p - (a + t * d)))
+
+
+def test_first_mesh_marks_the_triangles_near_the_path_with_its_direction() -> None:
+    path = np.array([[0.1, 0.5], [0.5, 0.5], [0.9, 0.9]])
+    k = 128  # window of 2 directions each side
+    width = 0.15
+    out = _initial_modes(MESH, k, None, path, width)
+    assert out["exact"].shape == (NV,) and out["active"].shape == (NV, k)
+    for t in range(MESH.n_tri):
+        c = MESH.centroids[t]
+        dist = [_seg_dist(c, path[i], path[i + 1]) for i in range(2)]
+        near = min(dist) <= width
+        assert out["exact"][3 * t: 3 * t + 3].tolist() == [near] * 3
+        if not near:
+            assert not out["active"][3 * t: 3 * t + 3].any()
+            continue
+        mids = 0.5 * (path[1:] + path[:-1])
+        seg = int(np.argmin(np.linalg.norm(mids - c, axis=1)))
+        d = path[seg + 1] - path[seg]
+        kc = round(math.atan2(d[1], d[0]) / (2 * math.pi / k))
+        want = np.zeros(k, bool)
+        want[::8] = True
+        want[[(kc + o) % k for o in range(-2, 3)]] = True
+        for m in range(3):
+            np.testing.assert_array_equal(out["active"][3 * t + m], want)
+    assert out["exact"].any() and not out["exact"].all()
+
+
+def test_a_refined_mesh_inherits_exact_triangles_and_their_directions() -> None:
+    k = 16
+    exact = np.zeros(NV, bool)
+    active = np.zeros((NV, k), bool)
+    hot = [0, 5]  # old triangles with one exact vertex each
+    exact[3 * 0 + 1] = True
+    active[3 * 0 + 1, [2, 3]] = True
+    active[3 * 0 + 2, 9] = True  # not exact: its directions are not inherited
+    exact[3 * 5 + 0] = True
+    active[3 * 5 + 0, [7]] = True
+    marked = np.zeros(MESH.n_tri, bool)
+    marked[hot] = True
+    new = _Mesh(MESH.refine(marked))
+    out = _initial_modes(new, k, (MESH, {"exact": exact, "active": active}), S[None], 0.1)
+    host = MESH.delaunay.find_simplex(new.centroids)
+    for t in range(new.n_tri):
+        h = MESH.simplex_row[host[t]] if host[t] >= 0 else -1
+        want = np.zeros(k, bool)
+        if h == 0:
+            want[[2, 3]] = True
+        elif h == 5:
+            want[7] = True
+        assert out["exact"][3 * t: 3 * t + 3].tolist() == [h in hot] * 3
+        for m in range(3):
+            np.testing.assert_array_equal(out["active"][3 * t + m], want)
+    assert out["exact"].sum() >= 3 * 4
