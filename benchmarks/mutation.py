@@ -36,7 +36,8 @@ ROOT = Path(__file__).resolve().parents[1]
 #: group -> (files mutated, fast focused tests run against them). mutmut runs, per
 #: mutant, only the selected tests that called the mutated function.
 GROUPS: dict[str, tuple[list[str], list[str]]] = {
-    "block_tridiagonal": (["solvers/block_tridiagonal.py"], ["tests/test_block_tridiagonal.py"]),
+    "block_tridiagonal": (["solvers/block_tridiagonal.py"], ["tests/test_block_tridiagonal.py",
+                                                             "tests/test_block_tridiagonal_rows.py"]),
     "certify_mesh": (["solvers/certify_mesh.py"], ["tests/test_mutation_kills_certify_mesh.py"]),
     "certify_lp": (["solvers/certify_lp.py"], ["tests/test_mutation_kills_certify_lp.py"]),
     "newton": (["solvers/newton.py"], ["tests/test_newton.py",
