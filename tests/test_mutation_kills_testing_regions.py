@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 import warnings
+from dataclasses import dataclass
 
 import numpy as np
 import pytest
@@ -28,11 +29,25 @@ class Fake:
 
     def F(self, x, v, check=True):
         assert check is False
-        self.calls.append((np.asarray(x).shape, np.asarray(v).shape))
+        x, v = np.asarray(x), np.asarray(v)
+        assert x.shape == v.shape and x.shape[-1] == self.dim, (x.shape, v.shape)
+        self.calls.append((x.shape, v.shape))
         return self._f(np.asarray(x, float), np.asarray(v, float))
 
     def lowered_hessian(self, xs, dirs):
+        # a lowered CasADi function takes float64 points, one per direction
+        assert xs.dtype == np.float64 and xs.shape == dirs.shape, (xs.dtype, xs.shape)
         return (self._h(np.asarray(xs), np.asarray(dirs)),)
+
+
+@dataclass(frozen=True)
+class SloppyDisk(Disk):
+    """A unit disk whose projection lands ``slack`` (relative) outside it."""
+
+    slack: float = 0.0
+
+    def project(self, x):
+        return np.asarray(Disk.project(self, x)) * (1.0 + self.slack)
 
 
 # ----------------------------------------------------------------------------------------
@@ -40,6 +55,8 @@ class Fake:
 # ----------------------------------------------------------------------------------------
 def test_centre_of_disk_and_boxes_with_infinite_sides():
     np.testing.assert_array_equal(R._centre(Fake(Disk(2.0, (1.0, -3.0)))), [1.0, -3.0])
+    c = R._centre(Fake(Disk(2.0, (1, -3))))  # integer centre: float64 all the same
+    assert c.dtype == np.float64 and c.tolist() == [1.0, -3.0]
     np.testing.assert_array_equal(R._centre(Fake(Box((0.0, 2.0), (4.0, 6.0)))), [2.0, 4.0])
     # an infinite side counts as 0 on its own side
     np.testing.assert_array_equal(R._centre(Fake(Box((-math.inf, 0.0), (5.0, 2.0)))),
@@ -73,6 +90,19 @@ def test_boundary_points_of_the_disk(n):
     assert got.shape == (n, 2)
     np.testing.assert_allclose(np.hypot(got[:, 0], got[:, 1]), 1.0, rtol=0, atol=1e-15)
     np.testing.assert_allclose(got, _reference_boundary_disk(n, 5), rtol=0, atol=1e-15)
+
+
+def test_boundary_points_from_exactly_eight_n_draws():
+    """1-D box [0, 1]: draws in [-0.2, 1.2], the first n of those outside [0, 1] clipped;
+    for some seeds none of the 8 n draws is outside (fewer points, not more draws)."""
+    fewer = 0
+    for seed in range(300):
+        got = R.boundary_points(Fake(Box((0.0,), (1.0,))), 1, np.random.default_rng(seed))
+        p = np.random.default_rng(seed).uniform(-0.2, 1.2, size=(8, 1))
+        want = np.clip(p[(p < 0.0) | (p > 1.0)][:1], 0.0, 1.0).reshape(-1, 1)
+        np.testing.assert_array_equal(got, want)
+        fewer += len(want) == 0
+    assert fewer > 0
 
 
 def test_boundary_points_of_a_box_and_none():
@@ -143,6 +173,26 @@ def test_scan_domain_drops_points_outside_and_keeps_the_boundary():
     scan = R.scan_domain(m, seed=1, inside=10, boundary=10)
     assert len(scan.points) == 21
     assert np.all(m.domain.contains(scan.points, tol=0.0))
+
+
+def test_scan_domain_keeps_points_within_1e9_of_the_domain():
+    # projections 1e-10 outside are kept, 1e-6 outside dropped (the inside draws and the
+    # centre are kept either way)
+    near = R.scan_domain(Fake(SloppyDisk(slack=1e-10)), seed=1, inside=30, boundary=10)
+    assert len(near.points) == 41
+    far = R.scan_domain(Fake(SloppyDisk(slack=1e-6)), seed=1, inside=30, boundary=10)
+    assert len(far.points) == 31
+    np.testing.assert_array_equal(far.points[:30], near.points[:30])
+
+
+def test_scan_domain_and_direction_scan_values_are_float64():
+    def ints(x, v):
+        return np.ones(len(x), dtype=np.int64)
+
+    scan = R.scan_domain(Fake(Disk(), ints), inside=5, boundary=2)
+    assert scan.values.dtype == np.float64
+    _, _, f = R.directions_scan(Fake(Disk(), ints), points=5, directions=3)
+    assert f.dtype == np.float64
 
 
 def test_scan_domain_point_by_point_when_the_batch_raises():
@@ -240,6 +290,13 @@ def test_describe_region_everywhere_and_nowhere():
     y = x + 1.0
     assert R.describe_region(c, y, bad, "NaN").endswith("the nearest to the domain's centre "
                                                         "is x = (1.5, 1.5)")
+    # nearest to the centre (1, 1), not to its mirror image
+    z = np.array([[1.0, 1.0], [0.2, 0.4], [0.0, 1.0], [2.0, 1.0], [1.9, 1.0], [1.0, 0.0],
+                  [1.0, 2.0]])
+    bad = np.array([False, True, False, False, True, False, False])
+    assert R.describe_region(c, z, bad, "NaN") == (
+        "F is NaN at 2 of 7 sampled points (28.6%), in no region a threshold on |x| or one "
+        "coordinate describes; the nearest to the domain's centre is x = (1.9, 1)")
 
 
 # ----------------------------------------------------------------------------------------
@@ -264,6 +321,10 @@ def test_directions_scan_values_and_defaults():
     np.testing.assert_allclose(dirs, R.unit_directions(2, 8, 6), rtol=0, atol=0)
     want = (np.abs(dirs[None, :, 0]) + 2.0 * np.abs(dirs[None, :, 1]) * (1.0 + x[:, None, 0]))
     np.testing.assert_allclose(got, want, rtol=1e-15, atol=0)
+    _, d3, _ = R.directions_scan(Fake(Box((0.0, 0.0, 0.0), (1.0, 1.0, 1.0))), seed=5,
+                                 points=4, directions=6)
+    np.testing.assert_allclose(d3, R.unit_directions(3, 6, 5), rtol=0, atol=0)
+    assert not np.allclose(d3, R.unit_directions(3, 6, 0))
     x, dirs, got = R.directions_scan(Fake(Box((0.0, 0.0, 0.0), (1.0, 1.0, 1.0))))
     assert x.shape == (1024, 3) and dirs.shape == (32, 3) and got.shape == (1024, 32)
     np.testing.assert_allclose(dirs, R.unit_directions(3, 32, 0), rtol=0, atol=0)
@@ -295,7 +356,7 @@ def test_weakest_direction():
     # directions at 0, 60, ..., 300 degrees: 180 is among them
     np.testing.assert_allclose(v, [-1.0, 0.0], rtol=0, atol=1e-12)
     assert lam == pytest.approx(0.55, abs=1e-12)
-    v, lam, _ = R.weakest_direction(m, [0.0, 0.0], n_directions=4)
+    v, lam, _ = R.weakest_direction(m, [0, 0], n_directions=4)  # integers: as floats
     assert lam == pytest.approx(0.5, abs=1e-12)
     # the default 64 directions: angle pi is the 33rd
     calls = []
