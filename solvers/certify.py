@@ -51,6 +51,11 @@ solution says the corrections cost most (``sum_rows y_r c_r``, the bound's sensi
 starting from a mesh graded around the solver's path, until the gap reaches
 ``MeshSpec.target_gap`` or a size / round limit.
 
+Region: the rows are needed only on the triangles a curve no longer than the upper bound
+can reach (a proven speed floor ``F >= m |v|`` bounds the region by an ellipse around start
+and goal, :mod:`solvers.certify_reach`); the others are dropped from the mesh, and the bound
+is then ``min(phi(goal) - phi(start), upper)``.
+
 Layout: this module holds the bound code (values of F, enclosures of its second
 derivatives, the corrections and rows) and the refinement loop; the meshes are in
 :mod:`solvers.certify_mesh`, the LPs in :mod:`solvers.certify_lp`.
@@ -61,6 +66,7 @@ from __future__ import annotations
 import logging
 import math
 import time
+from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from typing import Any
 
@@ -84,6 +90,7 @@ from solvers.certify_mesh import _hex_lattice as _hex_lattice
 from solvers.certify_mesh import _initial_points, _Mesh, _outline, _zigzag
 from solvers.certify_mesh import _inside_polygon as _inside_polygon
 from solvers.certify_mesh import _spacing as _spacing
+from solvers.certify_reach import reachable_triangles, speed_floor
 from solvers.inputs import SHORT_PAIR, as_metric, check_segments, domain_scale, is_short_pair
 from solvers.result import CertifyResult as CertifyResult  # defined there, exported here
 from solvers.status import CertifyStatus
@@ -589,9 +596,12 @@ class _Lower:
     t_mesh: float
     t_lp: float
     data: _PointData
+    reach: tuple[float, float] = (0.0, math.inf)
+    """The proven speed floor ``m`` and the reach ``upper / m`` (:mod:`certify_reach`)."""
 
 
-def _pre_refine(msh: _Mesh, data: _PointData, spec: MeshSpec
+def _pre_refine(msh: _Mesh, data: _PointData, spec: MeshSpec,
+                region: Callable[[np.ndarray], np.ndarray] | None = None
                 ) -> tuple[_Mesh, np.ndarray, np.ndarray, tuple[CertifyStatus, str] | None,
                            float]:
     """Row bounds of ``msh``; triangles whose corrections eat half of F somewhere are
@@ -614,7 +624,7 @@ def _pre_refine(msh: _Mesh, data: _PointData, spec: MeshSpec
                        "or fine mesh preset) or a smaller h_path / h_far")
             break
         t0 = time.perf_counter()
-        msh = _Mesh(msh.refine(np.flatnonzero(bad)))
+        msh = _Mesh(msh.refine(np.flatnonzero(bad)), region)
         t_mesh += time.perf_counter() - t0
         b, corr = _row_bounds(msh, data)
     if failure is None and np.min(b) <= 0.0:
@@ -641,6 +651,13 @@ def _marked(lp: dict[str, Any], corr: np.ndarray, n_tri: int,
     return order[:n_mark]
 
 
+def _last_round(lp: dict[str, Any], corr: np.ndarray, msh: _Mesh, spec: MeshSpec) -> bool:
+    """Whether the refinement would stop after this LP (nothing to mark, or too many
+    triangles): then its rounds go on to the end (:func:`_solve_lp` without ``settle``)."""
+    marked = _marked(lp, corr, msh.n_tri, spec.mark_fraction)
+    return marked is None or msh.n_tri + 3 * len(marked) > spec.max_triangles
+
+
 def _lower_bound(m: Metric, poly: np.ndarray, up: _Upper, s: np.ndarray, g: np.ndarray,
                  spec: MeshSpec, time_limit: float | None, t_start: float) -> _Lower:
     """The dual LP on meshes refined where the corrections cost most, round after round,
@@ -650,26 +667,42 @@ def _lower_bound(m: Metric, poly: np.ndarray, up: _Upper, s: np.ndarray, g: np.n
     t_mesh = time.perf_counter() - t0
     data = _PointData(m, spec.directions)
     out = _Lower(None, None, [], "max_rounds", None, t_mesh, 0.0, data)
+    # rows only on the triangles a curve no longer than the upper bound can reach
+    floor = speed_floor(m, poly)
+    reach = up.upper / floor if floor > 0 else math.inf
+    out.reach = (floor, reach)
+
+    def region(corners: np.ndarray) -> np.ndarray:
+        return reachable_triangles(corners, s, g, reach)
+
     previous = None
-    for _ in range(spec.max_rounds):
+    for rnd in range(spec.max_rounds):
         t0 = time.perf_counter()
-        msh = _Mesh(points)
+        msh = _Mesh(points, region)
         out.t_mesh += time.perf_counter() - t0
-        msh, b, corr, out.failure, t_pre = _pre_refine(msh, data, spec)
+        msh, b, corr, out.failure, t_pre = _pre_refine(msh, data, spec, region)
         out.t_mesh += t_pre
         if out.failure is not None:
             out.last_mesh = msh
             break
         t0 = time.perf_counter()
+        start = _initial_modes(msh, spec.directions, previous, up.pts, 2.0 * spec.h_path)
         try:
-            lp = _solve_lp(msh, b, data.dirs, 0, 1, up.upper, spec.target_gap,
-                           start=_initial_modes(msh, spec.directions, previous, up.pts,
-                                                2.0 * spec.h_path))
+            # short of the target, a mesh that will be refined stops its LP rounds early
+            lp = _solve_lp(msh, b, data.dirs, 0, 1, up.upper, spec.target_gap, start=start,
+                           settle=rnd + 1 < spec.max_rounds)
+            if lp["settled"] and _last_round(lp, corr, msh, spec):
+                lp = _solve_lp(msh, b, data.dirs, 0, 1, up.upper, spec.target_gap,
+                               start={"exact": lp["exact"], "active": lp["active"]})
         except LPFailure as err:
             out.failure, out.last_mesh = (CertifyStatus.LP_FAILED, str(err)), msh
             break
         previous = (msh, lp)
         out.t_lp += time.perf_counter() - t0
+        # a curve shorter than the potential's rise stays in the region only if it is no
+        # longer than the upper bound (certify_reach): the bound is min(rise, upper)
+        if math.isfinite(reach):
+            lp["lower"] = min(lp["lower"], up.upper)
         gap = (up.upper - lp["lower"]) / up.upper
         out.rounds.append({"triangles": msh.n_tri, "unknowns": msh.n_dofs,
                            "rows": lp["n_rows"], "row_rounds": lp["iterations"],
@@ -732,7 +765,8 @@ def _result(m: Metric, s: np.ndarray, g: np.ndarray, spec: MeshSpec, poly: np.nd
         lp_rows_total=int(3 * final.n_tri * spec.directions), lp_status=best["status"],
         lp_solver=best["solver"], max_row_ratio=best["ratio"], convexity=kind,
         convexity_note=note, solver_status=up.solver_status,
-        mesh={**asdict(spec), "element": "P2", "domain_polygon_vertices": int(poly.shape[0])},
+        mesh={**asdict(spec), "element": "P2", "domain_polygon_vertices": int(poly.shape[0]),
+              "speed_floor": low.reach[0], "reach": low.reach[1]},
         times={"solve": up.seconds, "mesh": low.t_mesh, "bounds": low.data.seconds,
                "lp": low.t_lp, "total": total},
         rounds=low.rounds, path=up.path, stopped_by=stopped_by, status=status,

@@ -38,6 +38,9 @@ INITIAL_DIRECTIONS = 8
 #: Directions an exact vertex starts with around the path's (or a tight edge's) direction:
 #: this fraction of the K sampled directions on each side (violated ones are added later).
 WINDOW_FRACTION = 1 / 64
+#: ``settle``: the rounds stop once the LP's value rises by less than this fraction of
+#: ``target * upper`` while still short of the target.
+SETTLE = 0.1
 
 
 class LPFailure(RuntimeError):
@@ -88,7 +91,7 @@ class _Rays:
 
 def _solve_lp(mesh: _Mesh, b: np.ndarray, dirs: np.ndarray, s_idx: int, g_idx: int,
               upper: float, target: float, start: dict[str, np.ndarray],
-              max_iter: int = 30) -> dict[str, Any]:
+              max_iter: int = 30, settle: bool = False) -> dict[str, Any]:
     """Maximise ``phi[g] - phi[s]`` under the rows ``(T, 3, K)`` (``g . v_k <= b``) at every
     triangle vertex, in rounds.
 
@@ -101,7 +104,11 @@ def _solve_lp(mesh: _Mesh, b: np.ndarray, dirs: np.ndarray, s_idx: int, g_idx: i
     best one is returned. Stops when no vertex changes mode and no row is violated beyond
     ``0.1 target``, when a potential certifies ``target``, or after ``max_iter`` rounds.
     ``start``: ``exact`` ``(T*3,)`` bool and ``active`` ``(T*3, K)`` bool, the first
-    exact vertices and their directions.
+    exact vertices and their directions. ``settle``: also stop (``"settled": True``) once
+    the LP's value (before scaling) rose by less than ``SETTLE`` times ``target * upper``
+    in a round yet stays below ``(1 - target) upper``: this mesh cannot reach the target,
+    and the rounds that would remove the last violations only serve a bound the refined
+    mesh will beat (the duals already say where to refine).
     """
     import warnings
 
@@ -122,6 +129,8 @@ def _solve_lp(mesh: _Mesh, b: np.ndarray, dirs: np.ndarray, s_idx: int, g_idx: i
     coarse[:: max(1, k // 16)] = True
     best: dict[str, Any] = {"lower": -np.inf}
     n_iter = 0
+    value_before = -np.inf
+    settled = False
     lp_seconds = 0.0
     while n_iter < max_iter:
         n_iter += 1
@@ -166,6 +175,12 @@ def _solve_lp(mesh: _Mesh, b: np.ndarray, dirs: np.ndarray, s_idx: int, g_idx: i
                     "n_rows": int(rhs.size), "ratio": ratio_max}
         if upper - lower <= target * upper:
             break
+        value = float(phi[g_idx] - phi[s_idx])
+        if settle and value < (1.0 - target) * upper and (
+                value - value_before < SETTLE * target * upper):
+            settled = True
+            break
+        value_before = value
         # safe vertices with a tight edge become exact; violated exact rows are added
         thr = TIGHT_DUAL * max(float(duals.max(initial=0.0)), 1e-300)
         tight_safe = np.flatnonzero(duals[: s_vid.size] > thr)
@@ -189,7 +204,7 @@ def _solve_lp(mesh: _Mesh, b: np.ndarray, dirs: np.ndarray, s_idx: int, g_idx: i
         if not promote.any() and not bad.any():
             break
     best.update({"iterations": n_iter, "lp_seconds": lp_seconds, "solver": LP_SOLVER,
-                 "exact": exact, "active": active})
+                 "exact": exact, "active": active, "settled": settled})
     return best
 
 

@@ -20,6 +20,7 @@ them for code that reaches them as ``solvers.certify._Mesh``).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import Protocol
 
 import numpy as np
@@ -134,9 +135,14 @@ def _initial_points(poly: np.ndarray, path: np.ndarray, s: np.ndarray, g: np.nda
 
 
 class _Mesh:
-    """Delaunay triangulation with P2 unknowns: vertices, then one per edge (midpoint)."""
+    """Delaunay triangulation with P2 unknowns: vertices, then one per edge (midpoint).
 
-    def __init__(self, points: np.ndarray) -> None:
+    ``region``: a mask of the triangles to keep, from their corners ``(T, 3, 2)`` (the
+    others are dropped like slivers: no rows, no unknowns on their edges; their vertices
+    keep unknowns that no row involves)."""
+
+    def __init__(self, points: np.ndarray,
+                 region: Callable[[np.ndarray], np.ndarray] | None = None) -> None:
         from scipy.spatial import Delaunay, QhullError
 
         self.points = points
@@ -150,6 +156,8 @@ class _Mesh:
         area2 = ((z[:, 1, 0] - z[:, 0, 0]) * (z[:, 2, 1] - z[:, 0, 1])
                  - (z[:, 1, 1] - z[:, 0, 1]) * (z[:, 2, 0] - z[:, 0, 0]))
         keep = np.abs(area2) > 1e-14 * np.max(np.abs(area2))  # drop slivers of zero area
+        if region is not None:
+            keep &= region(z)
         self.simplex_row = np.cumsum(keep) - 1
         self.simplex_row[~keep] = -1
         tri = tri[keep]

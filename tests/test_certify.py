@@ -106,6 +106,8 @@ def _no_corrections(monkeypatch: pytest.MonkeyPatch) -> None:
         return np.zeros_like(hz)
 
     monkeypatch.setattr(certify_mod, "_corrections", zero)
+    # and no region (certify_reach): its bound min(rise, upper) would hide the overshoot
+    monkeypatch.setattr(certify_mod, "speed_floor", lambda metric, poly: 0.0)
 
 
 def test_sampled_directions_overshoot_rigorous_does_not(monkeypatch) -> None:
