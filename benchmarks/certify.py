@@ -17,7 +17,8 @@ the global optimum: the count of such pairs is printed.
 Usage::
 
     python benchmarks/certify.py [--pairs 20] [--seed 31337] [--fine-time-limit SECONDS]
-                                 [--skip-fine | --skip-default] [--only 4,8,10]
+                                 [--skip-fine | --skip-default] [--skip-soundness]
+                                 [--only 4,8,10]
                                  [--json out.json] [--no-results-file]
 
 The presets' work budgets (refinement rounds, triangles) end each refinement, so the
@@ -27,6 +28,8 @@ pair, default none) may stop the fine refinement earlier: the row then says
 subset of the pairs (their numbers in the set of ``--pairs``), e.g. to share the pairs
 between two processes. One thread. The first pair's CPU time includes building the
 metric's derivative programs (once per process).
+Then (unless ``--skip-soundness``) the default mesh on 10 Poincare and 5 Randers pairs of
+the same seed, whose exact distances are known: every interval must contain it.
 """
 
 from __future__ import annotations
@@ -63,6 +66,28 @@ def run(pairs: np.ndarray, spec: MeshSpec, time_limit: float | None, label: str,
               f"{r.path_gap:9.2e}  {r.triangles:6d}  {r.lp_rows:7d}  {len(r.rounds):3d}  "
               f"{cpu:7.1f}  {wall:7.1f}  {r.stopped_by}", flush=True)
     return rows
+
+
+def soundness(seed: int, counts: dict[str, int]) -> dict:
+    """The default mesh on closed-form metrics: does every interval contain the exact
+    distance (issue 46's soundness bar: 10 Poincare and 5 Randers pairs)?"""
+    out: dict = {"rows": []}
+    for name, k in counts.items():
+        m = finsler.get_metric(name)
+        for i, (s, g) in enumerate(finsler.sample_pairs(m, k, seed)):
+            c0 = time.process_time()
+            r = certify(m, s, g, "default")
+            exact = float(m.distance(s, g)[0])
+            row = {"metric": name, "pair": i, "lower": r.lower, "exact": exact,
+                   "upper": r.upper, "gap": r.gap, "contains": bool(r.lower <= exact <= r.upper),
+                   "cpu": time.process_time() - c0, "stopped_by": str(r.stopped_by)}
+            out["rows"].append(row)
+            print(f"sound   {name:9s} {i:2d}  {r.lower:.7f} <= {exact:.7f} <= {r.upper:.7f}  "
+                  f"{row['contains']}  gap {r.gap:.2e}  cpu {row['cpu']:.1f}", flush=True)
+    out["contained"] = sum(r["contains"] for r in out["rows"])
+    print(f"soundness: the exact distance lies in {out['contained']}/{len(out['rows'])} "
+          "intervals")
+    return out
 
 
 def summary(rows: list[dict], bar: float, label: str) -> dict:
@@ -104,6 +129,8 @@ def main() -> None:
                          "round (default: none; the preset's work budgets decide)")
     ap.add_argument("--skip-fine", action="store_true")
     ap.add_argument("--skip-default", action="store_true")
+    ap.add_argument("--skip-soundness", action="store_true",
+                    help="skip the closed-form check (10 Poincare, 5 Randers pairs)")
     ap.add_argument("--only", default=None, help="comma-separated pair numbers")
     ap.add_argument("--json", default=None, help="write the figures to this JSON file")
     ap.add_argument("--no-results-file", action="store_true",
@@ -133,6 +160,8 @@ def main() -> None:
         own = sum(r["path_gap"] <= 1e-3 for r in doc["fine"]["rows"])
         print(f"fine mesh: the solver's own path is certified within 1e-3 of the global "
               f"optimum (path_gap <= 1e-3) on {own}/{len(only)} pairs")
+    if not args.skip_soundness:
+        doc["soundness"] = soundness(args.seed, {"poincare": 10, "randers": 5})
     if args.json:
         atomic_write_text(args.json, json.dumps(doc, indent=2), "benchmark figures")
     if out is not None:
@@ -144,6 +173,15 @@ def main() -> None:
         for key in ("default", "fine"):
             if key in doc:
                 out.add(section(key, doc[key]))
+        if "soundness" in doc:
+            sd = doc["soundness"]
+            out.add("## Soundness: closed-form metrics, default mesh\n\n" + markdown_table(
+                ["metric", "pair", "lower", "exact", "upper", "gap", "contains", "CPU s"],
+                [[r["metric"], r["pair"], f"{r['lower']:.7f}", f"{r['exact']:.7f}",
+                  f"{r['upper']:.7f}", f"{r['gap']:.2e}", r["contains"], f"{r['cpu']:.1f}"]
+                 for r in sd["rows"]]) + f"\n\nThe exact distance lies in {sd['contained']}/"
+                f"{len(sd['rows'])} intervals (pairs: finsler.sample_pairs(metric, k, "
+                f"{args.seed})).\n")
         out.write()
 
 
