@@ -338,9 +338,18 @@ def _thomas2(ops: Any, a: Mat, off: Mat, r: Vec, scale: Any, local: bool
             inv = 1.0 / det
             i00, i01, i11 = w * inv, -q * inv, p * inv
             ok = good if ok is None else ok
-        else:  # a pivot block that is not definite: shifted (local) or reported
-            (i00, i01), (_, i11) = (res := _inv_sym(ops, [[p, q], [q, w]], sc, local))[0]
-            ok = res[1] if ok is None else ok & res[1]
+        else:  # a pivot block that is not definite: reported, or (local) shifted by
+            # _inv_sym on those blocks alone (where tau = 0 it computes the same as here)
+            inv = 1.0 / ops.where(good, det, 1.0)
+            i00, i01, i11 = w * inv, -q * inv, p * inv
+            if local:
+                k = ops.index(np.flatnonzero(ops.to_numpy(~good)))
+                (b00, b01), (_, b11) = (res := _inv_sym(ops, [[p[k], q[k]], [q[k], w[k]]],
+                                                        sc[k], local))[0]
+                i00[k], i01[k], i11[k] = b00, b01, b11
+                good = good.clone() if hasattr(good, "clone") else good.copy()
+                good[k] = res[1]
+            ok = good if ok is None else ok & good
         zs.append((i00 * y0 + i01 * y1, i01 * y0 + i11 * y1))
         if j == m - 1:
             break
