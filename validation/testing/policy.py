@@ -127,7 +127,7 @@ def check_policy_midpoint(policy: Any, metric: Metric, *, examples: int = 3, see
                                ("d(x, y) / 2", 0.5 * d), err[k] <= rtol,
                                f"midpoint error {err[k]:.3g} (allowed {rtol:g}), exact discrete "
                                f"lengths at {n} segments; predicted m = "
-                               f"{tuple(round(v, 6) for v in mid)}, exact midpoint "
+                               f"{tuple(round(float(v), 6) for v in mid)}, exact midpoint "
                                f"{tuple(round(float(v), 6) for v in exact)}, offset C/d "
                                f"{offset:.3g}")
 
@@ -164,8 +164,8 @@ def check_policy_symmetry(policy: Any, metric: Metric, *, examples: int = 100, s
         return Verdict.compare(("L(pi(x, y), pi(y, x))", gap), "<=", (f"{rtol:g} L(x, y)",
                                                                       rtol * scale),
                                gap <= rtol * scale,
-                               f"pi(x, y) = {tuple(round(v, 6) for v in a[0])}, "
-                               f"pi(y, x) = {tuple(round(v, 6) for v in b[0])}")
+                               f"pi(x, y) = {tuple(round(float(v), 6) for v in a[0])}, "
+                               f"pi(y, x) = {tuple(round(float(v), 6) for v in b[0])}")
 
     return search(name, claim, _pair_strategy(m, 1.0), check,
                   lambda p: {"x": _vec(p[0]), "y": _vec(p[1])}, examples=examples,
