@@ -159,6 +159,12 @@ def test_shared_builds_once_per_entry(metric):
     c = C._shared(metric, "k", (lst,), build("l1"))
     assert C._shared(metric, "k", (lst,), build("l2")) is c
     assert C._shared(metric, "k", ([1],), build("l3")) is not c
+    # equal numbers and strings that are not the same object: found by value
+    v1, v2 = float("0.25"), float("0.25")
+    w1, w2 = "".join(["na", "me"]), "".join(["na", "me"])
+    assert v1 is not v2 and w1 is not w2
+    d = C._shared(metric, "k", (v1, w1), build("v1"))
+    assert C._shared(metric, "k", (v2, w2), build("v2")) is d and "v2" not in built
     # another key, another table
     assert C._shared(metric, "k2", ("Q", obj, 1, 0.5, None), build("z")) == ["z"]
     assert C._shared(finsler.Euclidean(), "k", ("Q", obj, 1, 0.5, None), build("w")) == ["w"]
@@ -209,6 +215,9 @@ def test_distance_suite_default_oracle_region_and_cache(distance_env):
     assert isinstance(s, FakeSuite) and made == [(m, oracle, 4, 0.625)]
     assert regions == [(m, 0.3, 4)]
     assert T().suite() is s and len(made) == 1  # shared by the methods' instances
+    # kept on the metric under the module's key (Metric.derived)
+    (entry,) = m.derived("validation.testing.distance_suites", list)
+    assert entry[0][1:] == (oracle, 4, 0.625) and entry[1] is s
     # a set shrink: no convexity map, its own suite
     T.distance_shrink = 0.5
     s2 = T().suite()
@@ -274,7 +283,7 @@ def test_distance_methods_call_their_property(monkeypatch, distance_env, solved,
         assert got[0][1:] == args and got[1] == {}
     T().test_closed_form_distance()
     (got,) = recs["check_closed_form"].calls
-    assert got[0][1:] == (solved, dist, geo)
+    assert isinstance(got[0][0], FakeSuite) and got[0][1:] == (solved, dist, geo)
     for rec in recs.values():
         rec.result = PropertyResult("p", "c", FAILED)
     for method in DISTANCE_METHODS:
@@ -371,6 +380,8 @@ def test_policy_methods_call_their_properties(monkeypatch, distance_env):
         T().test_policy_length_ratio()
     assert succ.calls == [((pol, m), {"pairs": 6, "seed": 2, "min_success": 0.7,
                                       "max_length_ratio": 1.5})]  # shared by the two
+    (run,) = m.derived("validation.testing.policy_runs", list)
+    assert run[1] is succ.result
     succ.result = [PropertyResult("policy-success", "c", FAILED),
                    PropertyResult("policy-length-ratio", "c", PASSED)]
     T.pairs = 8
