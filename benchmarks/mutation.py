@@ -45,10 +45,6 @@ GROUPS: dict[str, tuple[list[str], list[str]]] = {
     # batched: its own kill tests alone (closed forms, hand counts: 17 tests in ~3 s);
     # test_newton.py's batched solves took ~3 s a mutant for 53 %
     "batched": (["solvers/batched.py"], ["tests/test_mutation_kills_batched.py"]),
-    # the property suite: its tests run whole `geodesics check` runs (minutes), so this
-    # group is not in the default run (see mutation_report.md)
-    "testing": (["validation/testing/"], ["tests/test_metric_properties.py",
-                                          "tests/test_check.py"]),
 }
 #: the property suite one module at a time, each against its own fast kill tests
 #: (``testing_engine``, ``testing_metric``, ...): small runs that can be spread; the score
@@ -57,6 +53,10 @@ TESTING_MODULES = ["engine", "metric", "distance", "regions", "policy", "suite",
 GROUPS.update({f"testing_{m}": ([f"validation/testing/{m}.py"],
                                 [f"tests/test_mutation_kills_testing_{m}.py"])
                for m in TESTING_MODULES})
+#: names that stand for several groups: ``testing`` is every module of validation/testing/
+#: (``__init__.py`` holds only imports: mutmut mutates function bodies, so it has no
+#: mutants); the results file then adds a row summing them (the package's score)
+ALIASES = {"testing": [f"testing_{m}" for m in TESTING_MODULES]}
 #: extra pytest arguments of a group's selection: test_newton.py's dense block solves
 #: (two minutes, and tests/test_block_tridiagonal.py's job) call nothing of these modules
 SELECT = {"newton": ["-k", "not block_tridiagonal_solve_matches_dense"]}
@@ -200,13 +200,17 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--work", type=Path, default=ROOT / "build" / "mutation",
                     help="where the trees are unpacked and mutated")
     args = ap.parse_args(argv)
-    unknown = [g for g in args.groups if g not in GROUPS]
+    unknown = [g for g in args.groups if g not in GROUPS and g not in ALIASES]
     if unknown:
-        ap.error(f"unknown group(s) {unknown}; the groups are {', '.join(GROUPS)}")
-    args.groups = args.groups or list(DEFAULT)
+        ap.error(f"unknown group(s) {unknown}; the groups are {', '.join(GROUPS)} (and "
+                 f"{', '.join(f'{a} = {len(v)} groups' for a, v in ALIASES.items())})")
+    named = [g for a in (args.groups or DEFAULT) for g in ALIASES.get(a, [a])]
+    args.groups = list(dict.fromkeys(named))
     out = ResultsFile("mutation", title="Mutation testing of the solver core and the "
                       "property suite (mutmut)")
     rows, sections = [], []
+    sums = {"total": 0, "unchecked": 0, "killed": 0, "timeout": 0, "survived": 0,
+            "caught": 0, "checked": 0}
     for g in args.groups:
         print(f"{'reading' if args.report_only else 'mutating'} {g} ...", flush=True)
         if args.report_only:
@@ -231,6 +235,11 @@ def main(argv: list[str] | None = None) -> None:
                      len(r["survivors"]), f"{score:.1f} %",
                      "-" if r["cpu"] is None else f"{r['cpu']:.0f}",
                      "-" if r["wall"] is None else f"{r['wall']:.0f}"])
+        for k, v in (("total", total), ("unchecked", unchecked),
+                     ("killed", c.get("killed", 0)), ("timeout", c.get("timeout", 0)),
+                     ("survived", len(r["survivors"])), ("caught", caught),
+                     ("checked", checked)):
+            sums[k] += v
         other = {k: v for k, v in c.items() if k not in ("killed", "timeout", "survived",
                                                           "no tests", "not checked")}
         head, commits = (args.work / f"{g}.commit").read_text().splitlines()
@@ -246,6 +255,10 @@ def main(argv: list[str] | None = None) -> None:
                          r["diffs"][n].strip(), "```", ""]
         sections.append("\n".join(text))
         print(f"{g}: {caught}/{total - skipped} = {score:.1f} %", flush=True)
+    if len(rows) > 1 and sums["checked"]:
+        rows.append(["**all groups above**", sums["total"], sums["unchecked"],
+                     sums["killed"], sums["timeout"], sums["survived"],
+                     f"**{100.0 * sums['caught'] / sums['checked']:.1f} %**", "-", "-"])
     out.add("Score = (killed + timeout) / (mutants checked - skipped), against each "
             "group's fast focused tests only (a lower bound of the whole suite's score); "
             "`not checked`: mutants of a run still going or stopped (with `--report-only`). "
