@@ -461,7 +461,7 @@ class NewtonState:
             kr = ops.index(rows)
             out = []
             for i, (p, s) in enumerate(zip(base, direction)):
-                q = p[kr].clone() if ops.name == "torch" else p[kr].copy()
+                q = p[kr]  # indexed by an index array: a copy on either backend
                 q[:, 1:-1] = q[:, 1:-1] + a * s[kr]
                 if self.box:  # projected onto the box (held coordinates do not move)
                     q[:, 1:-1] = ops.clip(q[:, 1:-1], self.lo[i], self.hi[i])
