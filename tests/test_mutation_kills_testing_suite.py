@@ -380,3 +380,13 @@ def test_native_stderr_long_lines_cut_at_120():
         finally:
             sys.stderr = saved
     assert r.warnings == ["stderr: " + "y" * 120]
+
+
+def test_a_result_of_an_unlisted_name_needs_nothing(env, monkeypatch):
+    def domain(*args, **kw):
+        return [PropertyResult("domain", "c", PASSED), PropertyResult("extra", "c", PASSED)]
+
+    monkeypatch.setattr(S, "check_domain", domain)
+    rep = S.check(finsler.Euclidean())
+    extra = next(r for r in rep.results if r.name == "extra")
+    assert extra.needs == () and rep.results[0].needs == ()
