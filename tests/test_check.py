@@ -403,19 +403,82 @@ def test_a_detour_policy_fails_the_policy_properties() -> None:
 
 class TestShippedPandaPolicy(PolicyTests):
     """The shipped Panda policy through the policy properties (a pytest class, as a user
-    writes one for their run directory), with tolerances set from what it was measured to
-    do (the policy shipped in issue 25 with the 256-256-256 actor): first-level midpoint
-    errors up to 0.12 (68 pairs: 60 uniform, 8 at the joint limits; median 0.03), L(pi(x,
-    y), pi(y, x)) / L(x, y) up to 0.52 on 3999 of 4000 pairs (99th percentile 0.22; the
-    128-128 actor shipped before: max 0.52, 0.18). The one pair above, at 1.06, is a real
-    asymmetry: the two directions take routes 8.6% apart in cost (130.5 and 141.7), so the
-    symmetry tolerance stays 0.6 and would fail on that pair. The success rate and length
-    ratio on the 6 fresh pairs are at the defaults (0.8, 1.3)."""
+    writes one for their run directory), every tolerance derived from references that do
+    not come from the policy: the exact solver and a policy that learned nothing, the
+    joint-space straight line (``StraightPanda``; its failures are shown below). The
+    task's own criterion is no help on Panda: its eps (20) is 3.4-6.8 times the exact
+    32-segment paths' largest segment cost on these pairs, so even a first-level midpoint
+    error of 1.2 would still let a depth-5 recursion with exact later levels succeed.
+
+    - ``midpoint_rtol = 0.15``: on the three pairs the check draws (seed 0) the straight
+      midpoint's errors are 0.158, 0.083, 0.150 (8 pairs: max 0.179, median 0.08); 0.15
+      lies below its worst, so a policy that learned nothing fails. Shipped: 0.128, 0.036,
+      0.060 (8 pairs: max 0.159, median 0.02; its worst-case error is close to the straight
+      line's, its typical one four times smaller).
+    - ``symmetry_rtol = 0.6``: on the 96 pairs the check draws, the straight midpoint lies
+      up to 0.33 L(x, y) from the exact solver's midpoint (median 0.12); two predictions
+      each as far off as that, on opposite sides, are up to 0.66 L(x, y) apart, and the
+      tolerance is below that. Shipped: max 0.53 (median 0.04; the largest gaps are pairs
+      whose two directions take different routes).
+    - ``min_success = 0.8`` on 6 fresh pairs (at most one failure): the exact paths succeed
+      on 6 of 6, the straight path on 4 of 6 (segment costs 28 and 33 against eps 20), so
+      it fails. Shipped: 6 of 6.
+    - ``max_length_ratio = 1.12``: the straight path is 1.245 times the exact length on
+      these pairs (mean); the policy must remove at least half of that excess. Shipped:
+      1.032. (The default 1.3 would pass the straight path.)
+    """
 
     policy = "panda-pole"
     pairs = 6
-    midpoint_rtol = 0.35
+    midpoint_rtol = 0.15
     symmetry_rtol = 0.6
+    min_success = 0.8
+    max_length_ratio = 1.12
+
+
+class StraightPanda:
+    """A Panda policy that learned nothing: the joint-space straight midpoint and path."""
+
+    def __init__(self, metric: Metric) -> None:
+        self.metric, self.depth, self.eps = metric, metric.task.depth, metric.task.eps
+
+    def midpoint(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        return 0.5 * (np.asarray(x) + np.asarray(y))
+
+    def generate(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        t = np.linspace(0.0, 1.0, 2**self.depth + 1)[None, :, None]
+        return np.asarray(x)[:, None] * (1 - t) + np.asarray(y)[:, None] * t
+
+
+def test_the_panda_tolerances_fail_a_policy_that_learned_nothing() -> None:
+    """TestShippedPandaPolicy's tolerances against the straight line on the same pairs: the
+    midpoint, success and length properties fail (the derivation in its docstring); the
+    straight midpoint is symmetric, so a policy pulled 0.35 of the chord toward the goal
+    (gap about 0.7 L(x, y), the Seq/2:1 kind of bias) stands in for the symmetry."""
+    case = TestShippedPandaPolicy()
+    m = case.get_metric()
+    base = StraightPanda(m)
+    mid = vt.check_policy_midpoint(base, m, examples=case.solved_examples, seed=case.seed,
+                                   rtol=case.midpoint_rtol, shrink_limit=1)
+    assert mid.status == "failed", mid.describe()
+    assert mid.lhs is not None and mid.rhs is not None
+    assert abs(mid.lhs[1] - mid.rhs[1]) > case.midpoint_rtol * 2 * mid.rhs[1]
+    success, length = vt.check_policy_success(base, m, pairs=case.pairs, seed=case.seed,
+                                              min_success=case.min_success,
+                                              max_length_ratio=case.max_length_ratio)
+    assert success.status == "failed" and success.lhs[1] == pytest.approx(4 / 6)
+    assert length.status == "failed" and length.lhs[1] > 1.2
+    shipped = case.get_policy()
+
+    class TowardTheGoal:
+        metric = m
+
+        def midpoint(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+            return shipped.midpoint(x, y) + 0.35 * (np.asarray(y) - np.asarray(x))
+
+    sym = vt.check_policy_symmetry(TowardTheGoal(), m, examples=case.examples,
+                                   seed=case.seed, rtol=case.symmetry_rtol)
+    assert sym.status == "failed", sym.describe()
 
 
 def test_check_cli_with_a_shipped_policy() -> None:
