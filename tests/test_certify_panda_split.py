@@ -22,6 +22,7 @@ from solvers.certify_conformal import ConformalSpec
 from solvers.certify_conformal_split import certify_conformal_split, factor_parts
 
 split_mod = importlib.import_module("solvers.certify_conformal_split")
+cc = importlib.import_module("solvers.certify_conformal")
 QUICK = ConformalSpec(max_boxes=6000, s_cells=8, r_cells=4)
 
 
@@ -83,13 +84,16 @@ def panda_split() -> tuple[Metric, np.ndarray, np.ndarray, object]:
 
 
 def test_panda_parts_below_the_solver_path(panda_split: tuple) -> None:
-    m, x, y, r = panda_split
+    m, _, _, r = panda_split
     const, lengths = _part_lengths(m, r.full.path)
-    assert len(r.parts) == len(lengths) == 4
-    for part, length in zip(r.parts, lengths, strict=True):
-        assert 0.0 < part.lower <= length * (1 + 1e-6)
-    assert r.split_lower <= const * np.linalg.norm(y - x) + sum(lengths) + 1e-9
-    assert r.lower <= r.upper and r.lower >= r.full.lower
+    euclid = float(np.sum(np.linalg.norm(np.diff(r.full.path, axis=0), axis=1)))
+    assert len(r.parts) == len(lengths) == len(r.shares) == 4
+    assert 0.0 < sum(r.shares) <= const
+    for part, length, c in zip(r.parts, lengths, r.shares, strict=True):
+        assert 0.0 < part.lower <= (length + c * euclid) * (1 + 1e-6)
+    assert r.split_lower <= const * euclid + sum(lengths) + 1e-9
+    assert r.merged is not None and r.merged.active_dims == 4
+    assert r.lower <= r.upper and r.lower >= max(r.full.lower, r.merged.lower)
     assert r.ratio == pytest.approx(r.lower / r.upper)
 
 
@@ -105,4 +109,29 @@ def test_double_counted_part_is_caught(monkeypatch: pytest.MonkeyPatch) -> None:
     r = certify_conformal_split(m, x, y, ConformalSpec(max_boxes=20000, s_cells=12,
                                                         r_cells=6))
     _, lengths = _part_lengths(m, r.full.path)
-    assert any(p.lower > ln for p, ln in zip(r.parts, lengths, strict=True))
+    euclid = float(np.sum(np.linalg.norm(np.diff(r.full.path, axis=0), axis=1)))
+    assert any(p.lower > ln + c * euclid
+               for p, ln, c in zip(r.parts, lengths, r.shares, strict=True))
+
+
+def test_projected_enclosure_below_every_value() -> None:
+    """The whole factor's enclosure over boxes in q1..q4 with q5, q6 over their whole range
+    lies below the factor at random points of the boxes with any q5, q6 (and q7); with the
+    projected coordinates held at one value it does not (the check can fail)."""
+    m = finsler.get_metric("panda-pole")
+    fn, active = cc._factor_function(m, True, None, ".test", (4, 5))
+    assert active.tolist() == [True] * 4 + [False] * 3
+    lo0, hi0 = (np.asarray(b, float) for b in m.domain.bounds())
+    rng = np.random.default_rng(4)
+    c = lo0[:4] + 0.05 + rng.uniform(size=(300, 4)) * (hi0 - lo0 - 0.1)[:4]
+    lo, hi = c - 0.05, c + 0.05
+    q = np.concatenate([lo + rng.uniform(size=lo.shape) * 0.1,
+                        lo0 + rng.uniform(size=(300, 7)) * (hi0 - lo0)], axis=1)
+    q = np.concatenate([q[:, :4], q[:, 8:]], axis=1)
+    vals = np.asarray(m.F(q, np.eye(7)[np.zeros(300, int)]), float)
+    good = cc._Projected(fn, active, (4, 5), lo0, hi0)
+    assert np.all(good.enclose(lo, hi) <= vals)
+    assert np.all(good.value(c) >= good.enclose(lo, hi))
+    mid = 0.5 * (lo0 + hi0)
+    cut = cc._Projected(fn, active, (4, 5), mid, mid)  # q5, q6 held at their middle
+    assert np.any(cut.enclose(lo, hi) > vals)
