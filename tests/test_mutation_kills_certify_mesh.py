@@ -326,6 +326,32 @@ def test_slivers_are_dropped_and_located_as_none() -> None:
     assert area.sum() == pytest.approx(float(np.prod(np.ptp(g, axis=0))), rel=0.05)
 
 
+def test_a_region_keeps_exactly_the_triangles_it_marks() -> None:
+    """``region`` (certify's reachable triangles) gets the Delaunay corners and drops the
+    others: their rows, their edges' unknowns and their points' location."""
+    g = np.stack(np.meshgrid(np.linspace(0, 1, 5), np.linspace(0, 1, 5)), -1).reshape(-1, 2)
+    g = g + np.random.default_rng(8).normal(scale=1e-3, size=g.shape)
+    full = _Mesh(g)
+    seen = []
+
+    def left_half(corners: np.ndarray) -> np.ndarray:
+        seen.append(corners.copy())
+        return corners.mean(axis=1)[:, 0] < 0.5
+
+    mesh = _Mesh(g, left_half)
+    np.testing.assert_array_equal(seen[0], g[full.delaunay.simplices])
+    keep = g[full.tri].mean(axis=1)[:, 0] < 0.5
+    assert 0 < keep.sum() < keep.size
+    np.testing.assert_array_equal(mesh.tri, full.tri[keep])
+    np.testing.assert_array_equal(mesh.simplex_row[keep], np.arange(keep.sum()))
+    assert np.all(mesh.simplex_row[~keep] == -1)
+    assert mesh.edges.shape[0] < full.edges.shape[0]
+    assert mesh.n_dofs == g.shape[0] + mesh.edges.shape[0]
+    right = full.centroids[~keep]
+    assert np.all(mesh.locate(right) == -1)
+    assert np.all(mesh.locate(full.centroids[keep]) == np.arange(keep.sum()))
+
+
 def test_a_mesh_of_too_few_points_is_refused() -> None:
     with pytest.raises(InputError, match="mesh of 2 points cannot be triangulated"):
         _Mesh(np.array([[0.0, 0.0], [1.0, 0.0]]))
