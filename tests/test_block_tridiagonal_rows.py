@@ -181,3 +181,27 @@ def test_a_first_pivot_at_the_threshold_is_not_definite(path, scale: float) -> N
         blk = np.array([[[[p, 0.0], [0.0, 1.0]]]])
         _, ok = solve(blk, np.zeros((1, 1, 2, 2)), np.ones((1, 1, 2)), scale=[scale])
         assert bool(ok[0]) is want, p
+
+
+def test_no_systems_keep_their_shapes(path) -> None:
+    a, o, r = system(1, 5, seed=9)
+    x, ok = solve(a[:0], o[:0], r[:0], local=True)
+    assert x.shape == (0, 5, 2) and x.dtype == np.float64
+    assert ok.shape == (0,) and ok.dtype == bool
+
+
+@pytest.mark.parametrize("local", [False, True])
+def test_the_determinant_threshold_scales_with_the_pivots_second_entry(path, local) -> None:
+    """``det > 1e-13 * scale * |w|``: with ``w = 100`` a determinant of ~3e-12 (above
+    ``1e-13 / |w|``, below ``1e-13 * |w|``) is not definite; ``local`` shifts it by the
+    Gershgorin bound computed here."""
+    q = np.sqrt(100.0 - 3e-12)
+    blk = np.array([[1.0, q], [q, 100.0]])
+    det = blk[0, 0] * blk[1, 1] - q * q
+    assert 1e-15 < det < 1e-11
+    r = np.array([[[1.0, -2.0]]])
+    x, ok = solve(blk[None, None], np.zeros((1, 1, 2, 2)), r, scale=[1.0], local=local)
+    assert bool(ok[0]) is local
+    if local:
+        ref = np.linalg.solve(blk + shift(blk, 1.0) * np.eye(2), r[0, 0])
+        np.testing.assert_allclose(x[0, 0], ref, rtol=1e-12)
