@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import math
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -187,9 +187,22 @@ class SeedPlan:
             # pair. On 10 tuning pairs (sample_pairs(carlike, 20, 11)[:10]) every seed set
             # tried reached the best of all its solves from its best seed alone, and this
             # plan's answer is never above its best seed
-            return SeedPlan(bulges=(0.15, 0.3, 0.45, 0.6, 0.8), random=4, graph=True,
+            plan = SeedPlan(bulges=(0.15, 0.3, 0.45, 0.6, 0.8), random=4, graph=True,
                             coarse=256, restarts=3, restart_scale=0.02, polish=6,
                             polish_scale=0.05)
+            if newton:
+                # the batched interior point (method="newton", opt-in; issue 45): every seed
+                # at 32 segments, the best 3 distinct optima carried up a x2 ladder. Tuning
+                # pairs, 256 segments, one thread, CPU per pair against the IPOPT plan
+                # below: sample_pairs(carlike, 12, 20261206) 2.5 s against 13.3 s, within
+                # 1e-4 of the lower of the two answers on 9/12 (IPOPT 8/12, worst +3.6e-3);
+                # sample_pairs(carlike, 10, 20261207) 2.4 s against 13.8 s, but 6/10 against
+                # IPOPT's 10/10 (worst +9.5e-3: the ladder drops the winning basin on 2
+                # pairs, all 30 seeds at 256 reach +6e-4 and +6e-5). Coarse 64 x4, top 4: no
+                # better; coarse 32 with the interior point's cap at 1000 iterations: 4.5 s,
+                # no better. Not the default for that reason.
+                return replace(plan, coarse=32, factor=2, refine_top=3)
+            return plan
         if not metric.convex_everywhere:
             bulges = (0.1, 0.2, 0.3, 0.45, 0.6, 0.8)
             if newton:

@@ -139,6 +139,32 @@ def test_bad_input(car: finsler.Metric, rows: np.ndarray) -> None:
 def test_routing_is_opt_in(car: finsler.Metric) -> None:
     assert resolve_method(car, "auto") == "ipopt"
     assert resolve_method(car, "newton") == "newton"
+    # the opt-in path has its own plan: every seed at 32 segments, a x2 ladder
+    assert SeedPlan.default(car) == SeedPlan.default(car, "ipopt")
+    assert SeedPlan.default(car, "ipopt").ladder(256) == [256]
+    newton = SeedPlan.default(car, "newton")
+    assert newton.ladder(256) == [32, 64, 128, 256] and newton.refine_top == 3
+    assert dataclasses.replace(newton, coarse=256, factor=4, refine_top=3) == SeedPlan.default(
+        car, "ipopt")
+
+
+def test_batched_solve_against_ipopt(car: finsler.Metric) -> None:
+    """The batched solve (method='newton', its default plan: a ladder 16 -> 32) on a small
+    pair against the IPOPT plan's answer (an independent reference): no higher than 1e-4
+    above it, a converged status, the energy and KKT residual of its own points."""
+    pairs = np.asarray(finsler.sample_pairs(car, 1, 20261208))
+    n = 64
+    plan = dataclasses.replace(SeedPlan.default(car, "newton"), coarse=16)
+    new = solvers.solve_batch(car, pairs, segments=n, workers=1, method="newton", seeds=plan,
+                              progress=False)[0]
+    ref = solvers.solve_batch(car, pairs, segments=n, workers=1, method="ipopt",
+                              progress=False)[0]
+    assert new.status.converged and ref.status.converged
+    assert ref.method == "ipopt" and [lv["segments"] for lv in new.levels][:3] == [16, 32, 64]
+    assert new.energy <= ref.energy * (1 + 1e-4)
+    assert new.energy == pytest.approx(_energy(car, new.points), rel=1e-9)
+    assert new.residual == pytest.approx(
+        float(kkt_residual(car, new.points[None], domain_scale(car))[0]), rel=1e-9, abs=1e-15)
 
 
 def test_solve_batch_newton_is_a_local_optimum(car: finsler.Metric) -> None:
