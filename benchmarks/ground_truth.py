@@ -157,8 +157,8 @@ def finslerax_energies(m: finsler.Metric, pairs: np.ndarray, n: int, python: str
             f"project's to {gap:.1e})" + (f"; error: {fx['error']}" if fx.get("error") else "")}
 
 
-def default_records(m: finsler.Metric, pairs: np.ndarray, n: int, repeats: int
-                    ) -> dict[str, object]:
+def default_records(m: finsler.Metric, pairs: np.ndarray, n: int, repeats: int,
+                    method: str = "auto") -> dict[str, object]:
     """The default ``solve_batch(m, pairs, segments=n, workers=1)`` after one untimed pair
     (lowering, graph): per pair its energy (as returned: a status that is not converged
     is counted, not hidden), status, best seed, seeds tried and whether its seeds
@@ -168,11 +168,15 @@ def default_records(m: finsler.Metric, pairs: np.ndarray, n: int, repeats: int
     # ~30 solves with every seed)
     warm = dataclasses.replace(SeedPlan.default(m), bulges=(), random=0, own=False,
                                restarts=0, polish=0, routes=1)
-    solve_batch(m, pairs[:1], segments=n, seeds=warm, workers=1, progress=False)
+    if method != "auto":  # that method's own default plan
+        warm = dataclasses.replace(SeedPlan.default(m, method), bulges=(), random=0,
+                                   own=False, restarts=0, polish=0, routes=1)
+    solve_batch(m, pairs[:1], segments=n, seeds=warm, workers=1, progress=False,
+                method=method)
     times = []
     for _ in range(repeats):
         t0, c0 = time.perf_counter(), time.process_time()
-        rs = solve_batch(m, pairs, segments=n, workers=1, progress=False)
+        rs = solve_batch(m, pairs, segments=n, workers=1, progress=False, method=method)
         times.append(((time.perf_counter() - t0) / len(pairs),
                       (time.process_time() - c0) / len(pairs)))
     return {"energy": [float(r.energy) if np.isfinite(r.energy) else float("inf")
@@ -209,7 +213,7 @@ def merge_parts(paths: list[Path], name: str, k: int, seed: int, n: int, upto: i
 
 def run_metric(name: str, k: int, seed: int, starts: int, chunk: int, repeats: int = 1,
                finslerax: str | None = None, parts: list[Path] | None = None,
-               first: int | None = None) -> dict[str, object]:
+               first: int | None = None, method: str = "auto") -> dict[str, object]:
     m = finsler.get_metric(name)
     n = 2 ** m.task.depth
     drawn = finsler.sample_pairs(m, k, seed)
@@ -219,7 +223,7 @@ def run_metric(name: str, k: int, seed: int, starts: int, chunk: int, repeats: i
         k = first
     print(f"{name}: {k} pairs, {n} segments", flush=True)
     rec = (merge_parts(parts, name, len(drawn), seed, n, k) if parts
-           else default_records(m, pairs, n, repeats))
+           else default_records(m, pairs, n, repeats, method))
     wall, cpu = rec["wall"], rec["cpu"]
     e_def = np.asarray(rec["energy"], dtype=np.float64)
     e_ms = np.where(np.isfinite(best["energy"]), best["energy"], np.inf)
@@ -292,6 +296,9 @@ def main() -> None:
     ap.add_argument("--merge", type=Path, nargs="+", metavar="PART.json",
                     help="the table of one metric from --part records (covering all K "
                          "pairs) against the best known, instead of solving the default")
+    ap.add_argument("--method", choices=("auto", "newton", "ipopt"), default="auto",
+                    help="the method of the solve measured (default auto: the default "
+                         "solve; newton: e.g. car-like's opt-in batched interior point)")
     args = ap.parse_args()
     if args.repeats < 1:
         raise SystemExit("--repeats must be at least 1")
@@ -318,8 +325,8 @@ def main() -> None:
         m = finsler.get_metric(names[0])
         n = 2 ** m.task.depth
         rec = default_records(m, finsler.sample_pairs(m, k, args.seed)[int(a):int(b)], n,
-                              args.repeats)
-        rec.update(metric=m.name, K=k, seed=args.seed, N=n, a=int(a), b=int(b))
+                              args.repeats, args.method)
+        rec.update(metric=m.name, K=k, seed=args.seed, N=n, a=int(a), b=int(b), method=args.method)
         finsler.atomic_write_text(args.json, json.dumps(rec), "--json")
         print(f"{m.name} pairs {a}..{int(b) - 1}: {rec['cpu']:.2f} s CPU per pair", flush=True)
         return
@@ -327,7 +334,8 @@ def main() -> None:
                       "a wide multistart on fresh pairs")
     out.add(f"Fresh pairs `finsler.sample_pairs(metric, K, {args.seed})` at "
             "`2**task.depth` segments; default: `solve_batch(metric, pairs, segments=N, "
-            "workers=1)`; best known: the lower of the default and a multistart at the "
+            f"workers=1{'' if args.method == 'auto' else f', method={args.method!r}'})`; "
+            "best known: the lower of the default and a multistart at the "
             f"final size (every seed family, {args.best_starts} random starts, 6 polishing "
             "restarts, no ladder, no drop; batched Newton where it covers the metric, else "
             "IPOPT). Gap: relative discrete energy above the best known; a result whose "
@@ -338,7 +346,7 @@ def main() -> None:
     rows, notes, peer_rows, peer_notes = [], [], [], []
     for nm in names:
         r = run_metric(nm, count[nm], args.seed, args.best_starts, args.chunk, args.repeats,
-                       args.finslerax_python, args.merge, args.first)
+                       args.finslerax_python, args.merge, args.first, args.method)
         if r["peer"] is not None:
             pr = r["peer"]
             if "skipped" in pr:
