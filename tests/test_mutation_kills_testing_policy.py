@@ -686,3 +686,26 @@ def test_generated_paths_reach_the_metric_as_float64(solv):
 
     s, _ = P.check_policy_success(Ints(m), m, pairs=3)
     assert s.tried == 3
+
+
+def test_symmetry_claim_and_note_digits():
+    """Both predicted midpoints shifted by (0.00123456789, 0): the gap is unchanged, the
+    note shows each coordinate to 6 decimals."""
+    m = Flat()
+
+    class Off(Shifted):
+        def midpoint(self, x, y):
+            return super().midpoint(x, y) + np.array([1.23456789e-3, 0.0])
+
+    pol = Off(m, 0.6)
+    r = P.check_policy_symmetry(pol, m, examples=20, seed=2, rtol=0.15)
+    assert r.status == FAILED
+    assert r.claim == "L(pi(x, y), pi(y, x)) <= 0.15 L(x, y) on a reversible metric"
+    x, y = np.array(r.counterexample["x"]), np.array(r.counterexample["y"])
+    a = x + 0.6 * (y - x) + [1.23456789e-3, 0.0]
+    b = y + 0.6 * (x - y) + [1.23456789e-3, 0.0]
+    assert r.note == (f"pi(x, y) = ({round(float(a[0]), 6)}, {round(float(a[1]), 6)}), "
+                      f"pi(y, x) = ({round(float(b[0]), 6)}, {round(float(b[1]), 6)})")
+    ok = P.check_policy_symmetry(pol, m, examples=5, seed=2)
+    assert ok.status == PASSED
+    assert ok.claim == "L(pi(x, y), pi(y, x)) <= 0.25 L(x, y) on a reversible metric"
