@@ -4,6 +4,7 @@ a results file with the score and every surviving mutant (issue 48, item 6).
     python benchmarks/mutation.py                       # the DEFAULT groups below
     python benchmarks/mutation.py block_tridiagonal newton --max-children 2
     python benchmarks/mutation.py --report-only newton  # a run under way, as it stands
+    python benchmarks/mutation.py testing               # all of validation/testing/, summed
 
 For each group: the COMMITTED tree (``git archive HEAD``, so the score is for the commit
 the results file names) is unpacked into ``build/mutation/GROUP/``, its ``[tool.mutmut]``
