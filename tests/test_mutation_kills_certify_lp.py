@@ -187,6 +187,7 @@ def test_rows_that_vary_reach_the_highs_optimum_of_all_rows() -> None:
     assert r["iterations"] >= 2 and r["exact"].any()  # safe vertices were promoted
     # promoted vertices carry the 16 coarse directions
     assert np.all(r["active"][r["exact"]][:, :: K // 16])
+    assert not r["active"][r["exact"]].all()  # only the coarse, window and violated ones
     assert not r["active"][~r["exact"]].any()
 
 
@@ -211,6 +212,7 @@ def test_one_round_of_few_rows_is_scaled_into_a_valid_bound() -> None:
     rhs = b.reshape(NV, K)[vid, kk]
     assert r["n_rows"] == vid.size
     np.testing.assert_array_equal(r["rows"], np.stack([vid // 3, vid % 3, kk], 1))
+    assert r["rows"].dtype == np.int64
     y = r["duals"]
     assert np.all(y >= 0) and y @ rhs == pytest.approx(value, rel=1e-6)
     aty = rows.T @ y
@@ -277,10 +279,102 @@ def test_settle_stops_a_mesh_that_cannot_reach_the_target() -> None:
     assert not r3["settled"]
 
 
+class _Clock:
+    """A clock that advances by 1 s at each reading."""
+
+    def __init__(self) -> None:
+        self.now = 1000.0
+
+    def perf_counter(self) -> float:
+        self.now += 1.0
+        return self.now
+
+
+def test_lp_seconds_add_up_the_rounds(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(lp_mod, "time", _Clock())
+    r = _solve_lp(MESH, _weights(), DIRS, 0, 1, upper=100.0, target=1e-6, start=_none(),
+                  max_iter=3)
+    # each round reads the clock before the solve, after it (+1 s), and for the log
+    assert r["iterations"] == 3 and r["lp_seconds"] == 3.0
+
+
+def test_vertices_exact_with_no_rows_leave_the_goal_free() -> None:
+    """Every vertex exact but only triangle 0's with directions: the goal's unknown is in
+    no row, the LP is unbounded, and that is an LPFailure naming the status."""
+    active = np.zeros((NV, K), bool)
+    t = int(np.flatnonzero((MESH.dofs != 1).all(axis=1))[0])
+    active[3 * t: 3 * t + 3, ::4] = True
+    start = {"exact": np.ones(NV, bool), "active": active}
+    with pytest.raises(LPFailure, match=r"^the LP ended with status unbounded"):
+        _solve_lp(MESH, np.ones((MESH.n_tri, 3, K)), DIRS, 0, 1, upper=100.0, target=1e-6,
+                  start=start)
+
+
+def test_each_round_logs_its_rows_value_ratio_and_bound(
+        monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture) -> None:
+    import logging
+    import re
+
+    monkeypatch.setattr(lp_mod, "time", _Clock())
+    caplog.set_level(logging.DEBUG, logger="solvers.certify_lp")
+    r = _solve_lp(MESH, _weights(), DIRS, 0, 1, upper=100.0, target=1e-6, start=_none(),
+                  max_iter=1)
+    msgs = [rec.getMessage() for rec in caplog.records if rec.name == "solvers.certify_lp"]
+    assert len(msgs) == 1
+    got = re.fullmatch(r"LP rows (\d+) \((\d+) exact vertices\) (\S+) s: value (\S+), "
+                       r"max row ratio (\S+) -> bound (\S+)", msgs[0])
+    assert got is not None, msgs[0]
+    assert int(got[1]) == 8 * NV and int(got[2]) == 0 and got[3] == "2.00"
+    value = r["lower"] * max(r["ratio"], 1.0) * (1 + 1e-12)
+    assert float(got[4]) == pytest.approx(value, abs=2e-8)
+    assert float(got[5]) == pytest.approx(r["ratio"], abs=2e-6)
+    assert float(got[6]) == pytest.approx(r["lower"], abs=2e-8)
+    assert len(got[4].split(".")[1]) == 8 and len(got[5].split(".")[1]) == 6
+
+
+def test_the_target_is_relative_to_the_upper_bound() -> None:
+    """Rows scaled by 0.1 (optimum ~0.14) and an upper bound 0.5 with target 0.5: the gap
+    0.36 is above 0.5 * 0.5, so the rounds go on (a gap tested against target / upper,
+    1.0, would stop at once)."""
+    b = 0.1 * _weights()
+    best = _highs_optimum(b)
+    assert best < 0.2
+    r = _solve_lp(MESH, b, DIRS, 0, 1, upper=0.5, target=0.5, start=_none())
+    assert r["iterations"] > 1
+
+
+@needs_settle
+def test_a_value_above_the_target_line_never_settles() -> None:
+    """Few rows at first (unscaled values above the optimum, falling round by round) and
+    (1 - target) upper just below the optimum: every value stays above that line, so the
+    rounds never settle; they end on the target once the bound gets there."""
+    b = _weights()
+    best = _highs_optimum(b)
+    active = np.zeros((NV, K), bool)
+    active[:, [0, 7, 13, 20, 26]] = True
+    start = {"exact": np.ones(NV, bool), "active": active}
+    target = 0.01
+    upper = 0.999 * best / (1 - target)
+    r = _solve_lp(MESH, b, DIRS, 0, 1, upper=upper, target=target, start=start, settle=True)
+    assert not r["settled"] and upper - r["lower"] <= target * upper
+    assert r["iterations"] >= 2
+
+
+def test_promoted_vertices_get_every_direction_when_k_is_16() -> None:
+    """K = 16 directions: the coarse set (every K // 16 = 1st) is all of them."""
+    a = 2 * np.pi * np.arange(16) / 16
+    dirs = np.stack([np.cos(a), np.sin(a)], 1)
+    b = _weights()[:, :, :16]
+    start = {"exact": np.zeros(NV, bool), "active": np.zeros((NV, 16), bool)}
+    r = _solve_lp(MESH, b, dirs, 0, 1, upper=100.0, target=1e-6, start=start, max_iter=1)
+    assert r["exact"].any()
+    assert r["active"][r["exact"]].all()
+
+
 def test_a_failing_lp_solver_raises_lp_failure(monkeypatch: pytest.MonkeyPatch) -> None:
     b = np.ones((MESH.n_tri, 3, K))
     monkeypatch.setattr(lp_mod, "LP_SOLVER", "NO_SUCH_SOLVER")
-    with pytest.raises(LPFailure, match=r"^the LP solver failed: "):
+    with pytest.raises(LPFailure, match=r"^the LP solver failed: .*NO_SUCH_SOLVER"):
         _solve_lp(MESH, b, DIRS, 0, 1, upper=100.0, target=1e-6, start=_none())
     monkeypatch.undo()
     import cvxpy as cp
@@ -297,12 +391,13 @@ def _seg_dist(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
     return float(np.linalg.norm(p - (a + t * d)))
 
 
-def test_first_mesh_marks_the_triangles_near_the_path_with_its_direction() -> None:
-    path = np.array([[0.1, 0.5], [0.5, 0.5], [0.9, 0.9]])
-    k = 128  # window of 2 directions each side
+@pytest.mark.parametrize("k", [128, 16])  # windows of 2 and 1 directions each side
+def test_first_mesh_marks_the_triangles_near_the_path_with_its_direction(k: int) -> None:
+    path = np.array([[0.1, 0.5], [0.5, 0.62], [0.9, 0.8]])
     width = 0.15
     out = _initial_modes(MESH, k, None, path, width)
     assert out["exact"].shape == (NV,) and out["active"].shape == (NV, k)
+    assert out["exact"].dtype == bool and out["active"].dtype == bool
     for t in range(MESH.n_tri):
         c = MESH.centroids[t]
         dist = [_seg_dist(c, path[i], path[i + 1]) for i in range(2)]
@@ -316,8 +411,9 @@ def test_first_mesh_marks_the_triangles_near_the_path_with_its_direction() -> No
         d = path[seg + 1] - path[seg]
         kc = round(math.atan2(d[1], d[0]) / (2 * math.pi / k))
         want = np.zeros(k, bool)
-        want[::8] = True
-        want[[(kc + o) % k for o in range(-2, 3)]] = True
+        want[:: k // 16] = True
+        w = max(1, k // 64)
+        want[[(kc + o) % k for o in range(-w, w + 1)]] = True
         for m in range(3):
             np.testing.assert_array_equal(out["active"][3 * t + m], want)
     assert out["exact"].any() and not out["exact"].all()
@@ -349,3 +445,38 @@ def test_a_refined_mesh_inherits_exact_triangles_and_their_directions() -> None:
         for m in range(3):
             np.testing.assert_array_equal(out["active"][3 * t + m], want)
     assert out["exact"].sum() >= 3 * 4
+    assert out["exact"].dtype == bool and out["active"].dtype == bool
+
+
+def test_the_path_width_is_inclusive() -> None:
+    path = np.array([[0.1, 0.5], [0.9, 0.5]])
+    dist = np.abs(MESH.centroids[:, 1] - 0.5)  # all centroids project inside the segment
+    inside = (MESH.centroids[:, 0] >= 0.1) & (MESH.centroids[:, 0] <= 0.9)
+    t = int(np.flatnonzero(inside)[np.argsort(dist[inside])[3]])
+    from solvers.certify_mesh import _distance_to_path
+
+    width = float(_distance_to_path(MESH.centroids[t:t + 1], path)[0])
+    out = _initial_modes(MESH, K, None, path, width)
+    assert out["exact"][3 * t: 3 * t + 3].all()
+
+
+def test_triangles_of_a_new_mesh_outside_the_old_region_inherit_nothing() -> None:
+    """The old mesh drops the triangles right of x = 0.6 (a region), its last kept triangle
+    is exact; the new mesh keeps them all: those whose centroid lies in a dropped old
+    triangle (located as -1) are not exact."""
+    def region(z: np.ndarray) -> np.ndarray:
+        return z.mean(axis=1)[:, 0] < 0.6
+
+    old = _Mesh(MESH.points, region)
+    nv_old = 3 * old.n_tri
+    exact = np.zeros(nv_old, bool)
+    active = np.zeros((nv_old, K), bool)
+    exact[-3:] = True
+    active[-3:, 4] = True
+    new = _Mesh(MESH.points)
+    out = _initial_modes(new, K, (old, {"exact": exact, "active": active}), S[None], 0.1)
+    host = old.locate(new.centroids)
+    assert (host < 0).any()
+    want = np.repeat(host == old.n_tri - 1, 3)
+    np.testing.assert_array_equal(out["exact"], want)
+    np.testing.assert_array_equal(out["active"][:, 4], want)
