@@ -44,16 +44,24 @@ region's smallest bound ``m`` down, are bisected along their widest side each ro
 the work budget ``max_boxes`` (boxes enclosed in all): budgets, never wall clock, decide
 the result.
 
+Parts and projections (``part``, used by :mod:`solvers.certify_conformal_split`): the same
+machinery bounds the length of a part ``a <= f`` of the factor over the paths of ``F``-length
+at most ``U``, and can take coordinates over their whole range (the factor's minimum over
+them: fewer dimensions, those coordinates then free with the momentum).
+
 Limits: the bound is only as good as the enclosures of ``f`` over boxes (affine arithmetic,
 :mod:`finsler.affine`: about 1 % below the true minimum on 0.1-rad Panda boxes, 3 % on
 0.2-rad ones) and as the ``(s, r)`` reduction, which keeps only the distance to the chord's
-line: two regions at the same ``(s, r)`` share one bound. With exact cell minima the
-reduction alone would give about 0.96 of the upper bound on a tuning pair; the boxes a
-budget of 1e6 affords in 6-D (~3e5 kept) leave cells away from the chord near the
-factor's global minimum, so on fresh Panda pairs the proven lower bound is 0.56-0.94 of
-the upper bound (median below 0.8: ``benchmarks/results/certify_panda-*.md``), always
-above the trivial bound the same boxes prove. It proves a lower bound, not a tight
-interval; the ratio also carries the upper bound's own slack (the solver's path).
+line: two regions at the same ``(s, r)`` share one bound. In 6-D the cells next to the
+chord meet boxes whose ``(s, r)`` range spills over them (a box's half-diagonal): on Panda
+tuning pair 3 of seed 20261150 every cell, the chord's included, is bounded near the
+region's global minimum (14-16, where the factor's true minimum within 0.4 rad of the
+chord's middle is about 33), and the bound stays at the trivial one's ceiling (0.560 of
+the upper bound at 3e5 and at 1e6 boxes: budget does not help). Boxes aligned with the
+chord (exact ``(s, r)`` ranges) were tried and did worse (0.455 at 3e5: the rotated boxes
+are larger in the joints). It proves a lower bound, not a tight interval; the ratio also
+carries the upper bound's own slack (the solver's path: within 3e-4 of its 128-segment
+refinement on the ten tuning pairs).
 """
 
 from __future__ import annotations

@@ -21,7 +21,10 @@ it varies least with, on Panda ``q5, q6``, spanning their whole range): no split
 only the projection's. The bound is the largest of the split one, that one and the full
 run's own. Tuning pair 3 of seed 20261150 (budgets 3e5): full run 0.560 of the upper
 bound, split 0.643 (0.674 with the constant shared), whole factor in ``q1..q4`` 0.686
-(0.692 at 1e6; in ``q1..q3`` 0.608). Soundness: each part's
+(0.692 at 1e6; in ``q1..q3`` 0.608). Ten fresh pairs (seed 20261211, budgets 5e4 / 1e5
+per part / 3e5 for the whole factor, about 30-40 s CPU a pair): median 0.777 of the upper
+bound, lowest 0.683, above the trivial bound's ceiling on all ten; the full run alone
+0.587-0.767 (``benchmarks/results/certify_panda-2026-11-28-2.md``). Soundness: each part's
 bound is that module's (verified potential, outward-rounded enclosures) for the part's
 factor; a part's enclosures are checked nonnegative over the domain first (a negative part
 would make the clamp at 0 unsound: then the factor is not split). Limits: the parts choose
