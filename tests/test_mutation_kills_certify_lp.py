@@ -371,6 +371,45 @@ def test_promoted_vertices_get_every_direction_when_k_is_16() -> None:
     assert r["active"][r["exact"]].all()
 
 
+def test_one_rounds_refinement_recomputed_from_its_duals_and_rows() -> None:
+    """After one round from every other triangle's vertices exact (5 directions each) and
+    the rest safe: the safe vertices with a tight facet (dual above TIGHT_DUAL times the
+    largest) become exact with the window around that facet's direction and the coarse
+    directions; then every row of an exact vertex the unscaled potential breaks by more
+    than 0.1 target, and its worst row's neighbours, are added. Recomputed here from the
+    returned potential, duals and rows."""
+    b, target = _weights(), 0.1
+    ex0 = np.repeat(np.arange(MESH.n_tri) % 2 == 0, 3)
+    act0 = np.zeros((NV, K), bool)
+    act0[np.ix_(ex0, [0, 7, 13, 20, 26])] = True
+    r = _solve_lp(MESH, b, DIRS, 0, 1, upper=100.0, target=target,
+                  start={"exact": ex0.copy(), "active": act0.copy()}, max_iter=1)
+    phi = r["phi"] * max(r["ratio"], 1.0) * (1 + 1e-12)
+    ratio = (FULL @ phi).reshape(NV, K) / b.reshape(NV, K)
+    assert ratio.max() == pytest.approx(r["ratio"], rel=1e-9)
+    n_safe = 8 * int((~ex0).sum())
+    y, rows = r["duals"], r["rows"]
+    tight = np.zeros(y.size, bool)
+    tight[:n_safe] = y[:n_safe] > TIGHT_DUAL * y.max()
+    pv, kc = 3 * rows[tight, 0] + rows[tight, 1], rows[tight, 2]
+    assert not ex0[pv].any()
+    want = act0.copy()
+    for off in (-1, 0, 1):  # window of 32 directions: 1
+        want[pv, (kc + off) % K] = True
+    ex = ex0.copy()
+    ex[pv] = True
+    want[np.ix_(~ex0 & ex, np.arange(0, K, 2))] = True
+    over = ex[:, None] & (ratio > 1 + 0.1 * target)
+    worst = np.argmax(np.where(ex[:, None], ratio, -np.inf), axis=1)
+    bad = ex & (ratio[np.arange(NV), worst] > 1 + 0.1 * target)
+    for off in (-1, 0, 1):
+        want[np.flatnonzero(bad), (worst[bad] + off) % K] = True
+    want |= over
+    assert (ex & ~ex0).any() and bad.any()
+    np.testing.assert_array_equal(r["exact"], ex)
+    np.testing.assert_array_equal(r["active"], want)
+
+
 def test_a_failing_lp_solver_raises_lp_failure(monkeypatch: pytest.MonkeyPatch) -> None:
     b = np.ones((MESH.n_tri, 3, K))
     monkeypatch.setattr(lp_mod, "LP_SOLVER", "NO_SUCH_SOLVER")
