@@ -45,6 +45,7 @@ import numpy as np
 from finsler.intervals import Interval, enclose
 from finsler.lowering import lower
 from finsler.metric import Metric
+from finsler.status import CertifyStatus, Result
 from solvers.certify_conformal import ConformalCertifyResult, ConformalSpec, certify_conformal
 from solvers.inputs import as_metric
 
@@ -54,14 +55,16 @@ _SLACK = 1e-9
 
 
 @dataclass
-class SplitCertifyResult:
+class SplitCertifyResult(Result):
     """The full run (``full``, its lower bound, upper bound and status), the split bound
     ``split_lower`` (the sum of the parts' bounds ``parts``, part ``k`` with the share
     ``shares[k]`` of the constant ``constant``; ``constant |y - x|`` when the factor has no
     other part), ``merged`` the run on the whole factor with its weakest coordinates
     projected out (None when it has at most ``max_dims``), and ``lower = max(full.lower,
     min(split_lower, upper), merged.lower)``; ``ratio = lower / upper``; ``part_dims`` the
-    coordinates each part was bounded in."""
+    coordinates each part was bounded in; ``gap = 1 - ratio``; ``status`` ``certified``
+    when the gap is at most the spec's ``target_gap``, else ``budget_reached`` (the
+    bound is sound either way)."""
 
     lower: float
     upper: float
@@ -75,6 +78,8 @@ class SplitCertifyResult:
     merged: ConformalCertifyResult | None
     enclosures: int
     wall_time: float
+    gap: float = math.nan
+    status: CertifyStatus = CertifyStatus.BUDGET_REACHED
 
 
 def factor_parts(metric: Metric) -> tuple[float, list[tuple[tuple[int, ...], Any]]]:
@@ -198,11 +203,15 @@ def certify_conformal_split(metric: Metric | str, start: Any, goal: Any,
                                                              project))
             work += merged.enclosures
     lower_ = max(full.lower, min(split, upper), merged.lower if merged else 0.0)
+    target = (spec or ConformalSpec()).target_gap
+    status = (CertifyStatus.CERTIFIED if 1.0 - lower_ / upper <= target
+              else CertifyStatus.BUDGET_REACHED)
     return SplitCertifyResult(lower=lower_, upper=upper, ratio=lower_ / upper,
                               split_lower=split, constant=const, full=full, parts=results,
                               part_dims=dims, shares=[float(c) for c in shares],
                               merged=merged,
                               enclosures=work,
-                              wall_time=time.perf_counter() - t0)
+                              wall_time=time.perf_counter() - t0,
+                              gap=1.0 - lower_ / upper, status=status)
 
 

@@ -73,6 +73,7 @@ def test_constant_parts_give_the_exact_distance() -> None:
     r = certify_conformal_split(m, x, y, QUICK, path=np.stack([x, y]))
     assert r.constant == 3.5 and r.parts == []
     assert d * (1 - 1e-8) <= r.lower <= d <= r.upper * (1 + 1e-12)
+    assert r.status.label == "certified" and r.converged and r.gap <= QUICK.target_gap
 
 
 @pytest.fixture(scope="module")
@@ -95,6 +96,10 @@ def test_panda_parts_below_the_solver_path(panda_split: tuple) -> None:
     assert r.merged is not None and r.merged.active_dims == 4
     assert r.lower <= r.upper and r.lower >= max(r.full.lower, r.merged.lower)
     assert r.ratio == pytest.approx(r.lower / r.upper)
+    # a gap of 1e-1 or more is not certified at the default target: the status says so
+    assert r.gap == pytest.approx(1 - r.ratio)
+    assert (r.status.label == "certified") == (r.gap <= ConformalSpec().target_gap)
+    assert r.to_dict()["status"] == r.status.label
 
 
 def test_double_counted_part_is_caught(monkeypatch: pytest.MonkeyPatch) -> None:
