@@ -353,23 +353,44 @@ def _thomas2(ops: Any, a: Mat, off: Mat, r: Vec, scale: Any, local: bool
         zs.append((i00 * y0 + i01 * y1, i01 * y0 + i11 * y1))
         if j == m - 1:
             break
-        a00, a01, a10, a11 = o00[j], o01[j], o10[j], o11[j]
-        g00 = i00 * a00 + i01 * a10
-        g01 = i00 * a01 + i01 * a11
-        g10 = i01 * a00 + i11 * a10
-        g11 = i01 * a01 + i11 * a11
-        gs.append((g00, g01, g10, g11))
-        p = d00[j + 1] - (a00 * g00 + a10 * g10)
-        q = d01[j + 1] - (a00 * g01 + a10 * g11)
-        w = d11[j + 1] - (a01 * g01 + a11 * g11)
-        y0, y1 = r0[j + 1] - (g00 * y0 + g10 * y1), r1[j + 1] - (g01 * y0 + g11 * y1)
-    x0, x1 = [None] * m, [None] * m
+        g, p, q, w, y0, y1 = _eliminate2((i00, i01, i11), (o00[j], o01[j], o10[j], o11[j]),
+                                         (d00[j + 1], d01[j + 1], d11[j + 1]),
+                                         (r0[j + 1], r1[j + 1]), y0, y1)
+        gs.append(g)
+    x0, x1 = _back_substitute2(zs, gs, [None] * m, [None] * m)
+    return [ops.stack_cols(x0), ops.stack_cols(x1)], ok
+
+
+def _eliminate2(inv: tuple, off: tuple, nxt: tuple, rhs: tuple, y0: Any, y1: Any
+                ) -> tuple[tuple, Any, Any, Any, Any, Any]:
+    """One forward step of the 2 x 2 block elimination, on arrays (a batch) or on Python
+    floats (one system) alike: ``G = P^-1 A`` from the pivot's inverse ``inv = (i00, i01,
+    i11)`` and the off-diagonal block ``off = (a00, a01, a10, a11)``, the next pivot
+    ``D' - A^T G`` (symmetric: ``(p, q, w)``) and right side ``r' - G^T y``. The same
+    operations in the same order on both paths, so they agree bit for bit."""
+    i00, i01, i11 = inv
+    a00, a01, a10, a11 = off
+    g00 = i00 * a00 + i01 * a10
+    g01 = i00 * a01 + i01 * a11
+    g10 = i01 * a00 + i11 * a10
+    g11 = i01 * a01 + i11 * a11
+    p = nxt[0] - (a00 * g00 + a10 * g10)
+    q = nxt[1] - (a00 * g01 + a10 * g11)
+    w = nxt[2] - (a01 * g01 + a11 * g11)
+    return ((g00, g01, g10, g11), p, q, w, rhs[0] - (g00 * y0 + g10 * y1),
+            rhs[1] - (g01 * y0 + g11 * y1))
+
+
+def _back_substitute2(zs: list, gs: list, x0: list, x1: list) -> tuple[list, list]:
+    """The back substitution ``x_j = z_j - G_j x_{j+1}`` of the 2 x 2 elimination into the
+    lists ``x0``, ``x1`` (length ``m``; arrays or Python floats alike)."""
+    m = len(zs)
     x0[m - 1], x1[m - 1] = zs[m - 1]
     for j in range(m - 2, -1, -1):
         g00, g01, g10, g11 = gs[j]
         x0[j] = zs[j][0] - (g00 * x0[j + 1] + g01 * x1[j + 1])
         x1[j] = zs[j][1] - (g10 * x0[j + 1] + g11 * x1[j + 1])
-    return [ops.stack_cols(x0), ops.stack_cols(x1)], ok
+    return x0, x1
 
 
 #: Up to this many systems of 2 x 2 blocks (numpy), :func:`_thomas2` runs system by system
@@ -413,22 +434,11 @@ def _thomas2_rows(a: Mat, off: Mat, r: Vec, scale: Any, local: bool) -> tuple[Ve
             zs.append((i00 * y0 + i01 * y1, i01 * y0 + i11 * y1))
             if j == m - 1:
                 break
-            a00, a01, a10, a11 = f00[j], f01[j], f10[j], f11[j]
-            g00 = i00 * a00 + i01 * a10
-            g01 = i00 * a01 + i01 * a11
-            g10 = i01 * a00 + i11 * a10
-            g11 = i01 * a01 + i11 * a11
-            gs.append((g00, g01, g10, g11))
-            p = e00[j + 1] - (a00 * g00 + a10 * g10)
-            q = e01[j + 1] - (a00 * g01 + a10 * g11)
-            w = e11[j + 1] - (a01 * g01 + a11 * g11)
-            y0, y1 = s0[j + 1] - (g00 * y0 + g10 * y1), s1[j + 1] - (g01 * y0 + g11 * y1)
-        x0, x1 = [0.0] * m, [0.0] * m
-        x0[m - 1], x1[m - 1] = zs[m - 1]
-        for j in range(m - 2, -1, -1):
-            g00, g01, g10, g11 = gs[j]
-            x0[j] = zs[j][0] - (g00 * x0[j + 1] + g01 * x1[j + 1])
-            x1[j] = zs[j][1] - (g10 * x0[j + 1] + g11 * x1[j + 1])
+            g, p, q, w, y0, y1 = _eliminate2((i00, i01, i11), (f00[j], f01[j], f10[j], f11[j]),
+                                             (e00[j + 1], e01[j + 1], e11[j + 1]),
+                                             (s0[j + 1], s1[j + 1]), y0, y1)
+            gs.append(g)
+        x0, x1 = _back_substitute2(zs, gs, [0.0] * m, [0.0] * m)
         x0s.append(x0)
         x1s.append(x1)
         oks.append(ok)
