@@ -391,6 +391,52 @@ def test_the_global_optimum_comes_from_a_seed_other_than_the_first() -> None:
     assert np.max(np.abs(best.points[:, 1])) > 0.2  # it went around
 
 
+class _WallAbove(finsler.Metric):
+    """The bump of :class:`_Bump`, a wall across the upper half (``3 exp(-(x_0 / 0.1)^2)``,
+    only for ``x_1 > 0``) and a mild surcharge ``0.15`` on the lower half: the route below
+    is the shorter, but a coarse path steps over the wall with two vertices on either side
+    of it (``C(p, q) = F(p, q - p)`` sees F at the vertices only), so at 4 segments the
+    route above looks the shorter."""
+
+    name: ClassVar[str] = "test-wall-above"
+    task: ClassVar[finsler.Task] = finsler.Task(depth=6, eps=0.5)
+    reversible: ClassVar[bool] = True
+    domain = property(lambda self: finsler.Box((-1.0, -1.0), (1.0, 1.0)))
+
+    def F_sx(self, x: ca.SX, v: ca.SX) -> ca.SX:
+        bump = 5.0 * ca.exp(-ca.dot(x, x) / 0.09)
+        wall = 3.0 * ca.exp(-(x[0] / 0.1) ** 2) / (1 + ca.exp(-x[1] / 0.05))
+        low = 0.15 / (1 + ca.exp(x[1] / 0.05))
+        return (1 + bump + wall + low) * ca.sqrt(ca.dot(v, v))
+
+
+def test_the_ladder_carries_alternatives_to_the_size_where_they_win() -> None:
+    """A ladder from 4 segments to 64: at 4 the best optimum goes above (over the wall,
+    which the coarse path steps across), at 64 below. The reference is a second method:
+    every seed solved at 64 segments, no ladder. Carrying only the coarse winner
+    (``refine_top=1``) ends above, measurably longer; carrying the best 3 (both routes)
+    ends on the reference's path. (``drop_rtol=1``: the default 5 % would stop the route
+    below at the first level, where it is 10 % above.)"""
+    m = _WallAbove()
+    s, g = np.array([-0.8, 0.0]), np.array([0.8, 0.0])
+    base = dict(bulges=(0.5,), graph=False, own=False, random=0)
+    coarse = solvers.solve_geodesic(m, s, g, 4, seeds=solvers.SeedPlan(**base, coarse=None))
+    assert coarse.converged and coarse.points[:, 1].max() > 0.3  # above at 4 segments
+    ref = solvers.solve_geodesic(m, s, g, 64, seeds=solvers.SeedPlan(**base, coarse=None))
+    assert ref.converged and ref.points[:, 1].min() < -0.3  # below at 64
+
+    def ladder(top: int) -> solvers.GeodesicResult:
+        return solvers.solve_geodesic(m, s, g, 64, seeds=solvers.SeedPlan(
+            **base, coarse=4, factor=2, refine_top=top, drop_rtol=1.0))
+
+    one, three = ladder(1), ladder(3)
+    assert one.converged and three.converged
+    assert one.points[:, 1].max() > 0.3 and one.length > 1.05 * ref.length
+    assert three.points[:, 1].min() < -0.3
+    assert three.length == pytest.approx(ref.length, rel=1e-8)
+    np.testing.assert_allclose(three.points, ref.points, atol=1e-5)
+
+
 def test_residual_equals_finite_differences_of_the_energy() -> None:
     """The gradient of ``E = sum_i F(p_i, p_{i+1} - p_i)**2`` behind ``energy_residual``
     against central differences of E computed from ``metric.F`` alone (step 1e-6), and the
