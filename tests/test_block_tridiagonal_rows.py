@@ -205,3 +205,22 @@ def test_the_determinant_threshold_scales_with_the_pivots_second_entry(path, loc
     if local:
         ref = np.linalg.solve(blk + shift(blk, 1.0) * np.eye(2), r[0, 0])
         np.testing.assert_allclose(x[0, 0], ref, rtol=1e-12)
+
+
+@pytest.mark.parametrize("m", [4, 40])
+def test_the_defaults_report_an_indefinite_system_without_shifting(m: int) -> None:
+    """Called with neither ``local`` nor ``method`` (the defaults: report, do not shift;
+    the elimination chosen by size), an indefinite system is reported, and every definite
+    one is solved as numpy solves the assembled matrix."""
+    a, o, r = system(3, m, seed=40 + m)
+    a[1, m // 2] -= 40.0 * np.eye(2)
+    diag = [[np.ascontiguousarray(a[..., i, k]) for k in range(2)] for i in range(2)]
+    off = [[np.ascontiguousarray(o[..., i, k]) for k in range(2)] for i in range(2)]
+    rhs = [np.ascontiguousarray(r[..., i]) for i in range(2)]
+    x, ok = block_tridiagonal_solve(NP, diag, off, rhs)
+    assert np.asarray(ok).tolist() == [True, False, True]
+    x = np.stack(x, -1)
+    for k in (0, 2):
+        ref = np.linalg.solve(dense(a[k], o[k]), r[k].reshape(-1))
+        np.testing.assert_allclose(x[k].reshape(-1), ref, rtol=0,
+                                   atol=1e-11 * np.abs(ref).max())
