@@ -135,7 +135,12 @@ class Box(Domain):
 
     def sample(self, n: int, rng: np.random.Generator) -> np.ndarray:
         self._sample_check(n)
-        return rng.uniform(np.asarray(self.low), np.asarray(self.high), size=(n, self.dim))
+        lo, hi = np.asarray(self.low, float), np.asarray(self.high, float)
+        if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
+            raise InputError(f"cannot draw points uniformly from the unbounded {self.describe()}:"
+                             " give the domain finite bounds (a box that covers where paths "
+                             "go) to sample pairs or run the property checks")
+        return rng.uniform(lo, hi, size=(n, self.dim))
 
     def project(self, x: Any) -> Any:
         if is_torch(x):

@@ -129,3 +129,15 @@ def test_bad_domain_construction() -> None:
         Product(())
     with pytest.raises(InputError):
         Disk().sample(-3, np.random.default_rng(0))
+
+
+def test_an_unbounded_box_refuses_to_be_sampled_by_name() -> None:
+    """Uniform points of an unbounded box do not exist: a clear error naming the box, not
+    numpy's OverflowError (found through `geodesics check` on such a metric); a bounded box
+    still draws inside its bounds."""
+    box = finsler.Box((-1.0, -np.inf), (1.0, np.inf))
+    with pytest.raises(finsler.InputError, match=r"unbounded box \[-1, 1\] x \[-inf, inf\]"):
+        box.sample(3, np.random.default_rng(0))
+    pts = finsler.Box((-1.0, 2.0), (1.0, 3.0)).sample(50, np.random.default_rng(0))
+    assert pts.shape == (50, 2) and np.all((pts[:, 0] >= -1) & (pts[:, 0] <= 1))
+    assert np.all((pts[:, 1] >= 2) & (pts[:, 1] <= 3))
