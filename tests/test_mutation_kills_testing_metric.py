@@ -926,13 +926,10 @@ class _ShiftedZeroBox(Box):
         return np.broadcast_to(np.array([3.0, 10.5]), np.asarray(p, float).shape).copy()
 
 
-def test_domain_draws_around_a_shifted_box():
+def _domain_draws(metric, examples):
+    """``check_domain(metric, examples=...)`` with every point its search judged recorded:
+    ``(result, points (K, dim))``."""
     seen = []
-
-    class M(_Base):
-        name = "shifted-box-test"
-        domain = property(lambda self: _ShiftedZeroBox((2.0, 10.0), (4.0, 11.0)))
-
     real = VM.search
 
     def spy(name, claim, strategy, check, describe, **kw):
@@ -943,8 +940,17 @@ def test_domain_draws_around_a_shifted_box():
 
     import unittest.mock as um
     with um.patch.object(VM, "search", spy):
-        r = VM.check_domain(M(), examples=40)
-    pts = np.array(seen)
+        r = VM.check_domain(metric, examples=examples)
+    return r, np.array(seen)
+
+
+def test_domain_draws_around_a_shifted_box():
+
+    class M(_Base):
+        name = "shifted-box-test"
+        domain = property(lambda self: _ShiftedZeroBox((2.0, 10.0), (4.0, 11.0)))
+
+    r, pts = _domain_draws(M(), 40)
     assert np.all(pts[:, 0] >= 2.0 - 0.4) and np.all(pts[:, 0] <= 4.0 + 0.4)
     assert np.all(pts[:, 1] >= 10.0 - 0.2) and np.all(pts[:, 1] <= 11.0 + 0.2)
     assert pts[:, 0].min() < 2.0 or pts[:, 0].max() > 4.0  # beyond the box too
@@ -1358,24 +1364,12 @@ def test_domain_projection_containment_tolerance(leak, ok):
 
 
 def test_domain_draws_beyond_both_faces():
-    seen = []
 
     class M(_Base):
         name = "shifted-box-both-test"
         domain = property(lambda self: Box((2.0, 10.0), (4.0, 11.0)))
 
-    real = VM.search
-
-    def spy(name, claim, strategy, check, describe, **kw):
-        def judged(p):
-            seen.append(np.array(p))
-            return check(p)
-        return real(name, claim, strategy, judged, describe, **kw)
-
-    import unittest.mock as um
-    with um.patch.object(VM, "search", spy):
-        VM.check_domain(M(), examples=60)
-    pts = np.array(seen)
+    _, pts = _domain_draws(M(), 60)
     assert pts[:, 0].min() < 1.9 and pts[:, 0].max() > 4.1  # 20% of the width 2
 
 
