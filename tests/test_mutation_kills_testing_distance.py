@@ -354,7 +354,8 @@ def test_certificate_branches(monkeypatch):
     import solvers
 
     assert VD.check_certificate(_suite(metric=Euclidean(n=3)), 2).note == (
-        "certified intervals are for 2-D metrics; euclidean is 3-D")
+        "this check certifies 2-D metrics only; euclidean is 3-D (run `geodesics certify` "
+        "for its certified interval: minutes per pair beyond the plane)")
 
     class Rough(Flat):
         name = "rough-test"

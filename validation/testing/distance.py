@@ -465,8 +465,9 @@ def check_certificate(suite: DistanceSuite, examples: int = 2, mesh: Any = CERTI
     claim = "certify's interval [lower, upper] contains the solved distance"
     if m.dim != 2:
         return PropertyResult(name, claim, SKIPPED,
-                              note=f"certified intervals are for 2-D metrics; {m.name} is "
-                                   f"{m.dim}-D")
+                              note=f"this check certifies 2-D metrics only; {m.name} is "
+                                   f"{m.dim}-D (run `geodesics certify` for its certified "
+                                   "interval: minutes per pair beyond the plane)")
     if not m.smooth:
         return PropertyResult(name, claim, SKIPPED, note=(
             f"{m.name} is declared not smooth: certify's bounds are proven where F is twice "
