@@ -463,7 +463,8 @@ def certify(
 ) -> CertifyResult:
     """Certified interval ``lower <= d(start, goal) <= upper`` on a 2-D metric (a
     conformal metric of dimension > 3, hook ``conformal_factor_sx``, goes to
-    :func:`solvers.certify_conformal.certify_conformal`: a ``ConformalCertifyResult``).
+    :func:`solvers.certify_conformal_split.certify_conformal_best`: a
+    ``SplitCertifyResult``, the best of its bounds).
 
     ``start``, ``goal``: points ``(2,)`` in the domain. ``mesh``: a :class:`MeshSpec` or a
     preset name (``"coarse"``, ``"default"``, ``"fine"``). ``path`` ``(n+1, 2)``: a curve
@@ -483,10 +484,12 @@ def certify(
     t_start = time.perf_counter()
     m = as_metric(metric)
     if m.dim > 3 and m.provides("conformal_factor_sx"):  # n-D conformal (issue 46, item 3)
-        from solvers.certify_conformal import ConformalSpec, certify_conformal
+        from solvers.certify_conformal import ConformalSpec
+        from solvers.certify_conformal_split import certify_conformal_best
 
-        res = certify_conformal(m, start, goal,
-                                mesh if isinstance(mesh, ConformalSpec) else None, path=path)
+        res = certify_conformal_best(m, start, goal,
+                                     mesh if isinstance(mesh, ConformalSpec) else None,
+                                     path=path)
         return res.strict() if strict else res  # type: ignore[return-value]
     if m.dim != 2:  # any other dimension: a verified potential (issue 46, items 1-2)
         from solvers.certify_nd import certify_nd

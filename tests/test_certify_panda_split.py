@@ -42,9 +42,13 @@ class _ScaledEuclidean(Metric):
         return ca.SX(1.5) + ca.SX(2.0) + 0.0 * x[0]
 
 
-def _part_lengths(m: Metric, pts: np.ndarray) -> tuple[float, list[float]]:
-    """The constant and each part's length along the polyline (fine midpoint rule)."""
+def _part_lengths(m: Metric, pts: np.ndarray, group: bool = False
+                  ) -> tuple[float, list[float]]:
+    """The constant and each part's length along the polyline (fine midpoint rule);
+    ``group``: the parts as the split bounds them by default (nested ones merged)."""
     const, parts = factor_parts(m)
+    if group:
+        parts = split_mod._grouped(parts, 4)
     t = (np.arange(200) + 0.5) / 200
     out = [0.0] * len(parts)
     for a, b in itertools.pairwise(pts):
@@ -76,19 +80,21 @@ def test_constant_parts_give_the_exact_distance() -> None:
     assert r.status.label == "certified" and r.converged and r.gap <= QUICK.target_gap
 
 
-@pytest.fixture(scope="module")
-def panda_split() -> tuple[Metric, np.ndarray, np.ndarray, object]:
+@pytest.fixture(scope="module", params=[False, True], ids=["parts", "grouped"])
+def panda_split(request: pytest.FixtureRequest
+                ) -> tuple[Metric, np.ndarray, np.ndarray, object, bool]:
     m = finsler.get_metric("panda-pole")
     x, y = finsler.sample_pairs(m, 2, 20261150)[1]
     spec = ConformalSpec(max_boxes=20000, s_cells=12, r_cells=6)
-    return m, x, y, certify_conformal_split(m, x, y, spec)
+    return m, x, y, certify_conformal_split(m, x, y, spec, group=request.param), request.param
 
 
 def test_panda_parts_below_the_solver_path(panda_split: tuple) -> None:
-    m, _, _, r = panda_split
-    const, lengths = _part_lengths(m, r.full.path)
+    m, _, _, r, group = panda_split
+    const, lengths = _part_lengths(m, r.full.path, group)
     euclid = float(np.sum(np.linalg.norm(np.diff(r.full.path, axis=0), axis=1)))
-    assert len(r.parts) == len(lengths) == len(r.shares) == 4
+    assert len(r.parts) == len(lengths) == len(r.shares) == (2 if group else 4)
+    assert r.part_dims == ([4, 4] if group else [2, 3, 4, 4])
     assert 0.0 < sum(r.shares) <= const
     for part, length, c in zip(r.parts, lengths, r.shares, strict=True):
         assert 0.0 < part.lower <= (length + c * euclid) * (1 + 1e-6)
@@ -112,7 +118,7 @@ def test_double_counted_part_is_caught(monkeypatch: pytest.MonkeyPatch) -> None:
                        for dep, fn in parts])
     monkeypatch.setattr(split_mod, "factor_parts", lambda metric: doubled)
     r = certify_conformal_split(m, x, y, ConformalSpec(max_boxes=20000, s_cells=12,
-                                                        r_cells=6))
+                                                        r_cells=6), group=False)
     _, lengths = _part_lengths(m, r.full.path)
     euclid = float(np.sum(np.linalg.norm(np.diff(r.full.path, axis=0), axis=1)))
     assert any(p.lower > ln + c * euclid

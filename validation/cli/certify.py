@@ -13,10 +13,14 @@ a failure's label), ``status`` (:class:`solvers.CertifyStatus` label: certified 
 budget_reached | time_limit | corrections_too_large | lp_failed), ``message``.
 
 A conformal metric of dimension > 3 (hook ``conformal_factor_sx``, e.g. ``panda-pole``)
-gets a proven lower bound instead (:func:`solvers.certify_conformal.certify_conformal`;
-JSON: ``lower``, ``upper``, ``ratio``, ``gap``, ``trivial``, ``potential_lower``,
-``min_factor``, ``boxes``, ``enclosures``, ``cells``, ``momentum``, ``status``, ...;
-``--max-boxes`` is its work budget, ``--target-gap`` the gap that counts as certified).
+gets a proven lower bound instead, the best of the full run, the factor split into its parts
+and the whole factor in 4 coordinates
+(:func:`solvers.certify_conformal_split.certify_conformal_best`; JSON: ``lower``, ``upper``,
+``ratio``, ``gap``, ``trivial``, ``potential_lower``, ``min_factor``, ``boxes``,
+``enclosures``, ``cells``, ``momentum``, ``status``, ``bound_by`` (full | split | merged),
+``split_lower``, ``constant``, ``shares``, ``part_dims``, ``full``, ``parts``, ``merged``
+(the runs, each with the keys above), ...; ``--max-boxes`` is the work budget of all runs
+together, ``--target-gap`` the gap that counts as certified).
 
 Exit code 0 when the interval is certified or a budget ended the refinement (the interval
 is proven either way; ``status`` says which), 1 when the refinement failed (the result,
@@ -162,10 +166,11 @@ def _run_and_write(m: Any, start: str, goal: str, out: Path | None, as_json: boo
 def _certify_conformal(m: Any, start: str, goal: str, target_gap: float | None,
                        max_boxes: int | None, out: Path | None, as_json: bool) -> None:
     """``geodesics certify`` on a conformal metric of dimension > 3: a proven lower bound
-    (:func:`solvers.certify_conformal.certify_conformal`)."""
+    (:func:`solvers.certify_conformal_split.certify_conformal_best`)."""
     import dataclasses
 
-    from solvers.certify_conformal import ConformalSpec, certify_conformal
+    from solvers.certify_conformal import ConformalSpec
+    from solvers.certify_conformal_split import certify_conformal_best
     from solvers.status import CertifyStatus
 
     def spec() -> Any:
@@ -177,7 +182,7 @@ def _certify_conformal(m: Any, start: str, goal: str, target_gap: float | None,
         return dataclasses.replace(ConformalSpec(), **changes)
 
     done = _run_and_write(m, start, goal, out, as_json,
-                          lambda s, g: certify_conformal(m, s, g, spec()))
+                          lambda s, g: certify_conformal_best(m, s, g, spec()))
     if done is None:
         return
     s, g, res = done
@@ -188,6 +193,15 @@ def _certify_conformal(m: Any, start: str, goal: str, target_gap: float | None,
         typer.echo(f"upper  = {res.upper:.10g}   (path length, proven by interval arithmetic)")
         typer.echo(f"ratio  = {res.ratio:.4f}   lower / upper; trivial bound "
                    f"{res.trivial:.6g} (min f {res.min_factor:.6g} x |goal - start|)")
+        runs = [f"full run {res.full.lower:.6g}"]
+        if res.parts or res.constant:
+            runs.append(f"split {res.split_lower:.6g} (constant {res.constant:g}"
+                        + "".join(f", part in {d}-D {p.lower:.6g}"
+                                  for d, p in zip(res.part_dims, res.parts, strict=True))
+                        + ")")
+        if res.merged is not None:
+            runs.append(f"whole factor in {res.merged.active_dims}-D {res.merged.lower:.6g}")
+        typer.echo(f"bounds : {'; '.join(runs)}; the largest ({res.bound_by}) counts")
         typer.echo(f"work   : {res.enclosures} box enclosures, {res.boxes} boxes kept, "
                    f"{res.cells} cells; {res.times['total']:.2f} s")
     if res.status is CertifyStatus.LP_FAILED:
