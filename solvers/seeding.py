@@ -192,16 +192,16 @@ class SeedPlan:
                             polish_scale=0.05)
             if newton:
                 # the batched interior point (method="newton", opt-in; issue 45): every seed
-                # at 32 segments, the best 3 distinct optima carried up a x2 ladder. Tuning
-                # pairs, 256 segments, one thread, CPU per pair against the IPOPT plan
-                # below: sample_pairs(carlike, 12, 20261206) 2.5 s against 13.3 s, within
-                # 1e-4 of the lower of the two answers on 9/12 (IPOPT 8/12, worst +3.6e-3);
-                # sample_pairs(carlike, 10, 20261207) 2.4 s against 13.8 s, but 6/10 against
-                # IPOPT's 10/10 (worst +9.5e-3: the ladder drops the winning basin on 2
-                # pairs, all 30 seeds at 256 reach +6e-4 and +6e-5). Coarse 64 x4, top 4: no
-                # better; coarse 32 with the interior point's cap at 1000 iterations: 4.5 s,
-                # no better. Not the default for that reason.
-                return replace(plan, coarse=32, factor=2, refine_top=3)
+                # at 128 segments, the best 6 distinct optima within 30 % of the best
+                # carried to 256. Tuning pairs sample_pairs(carlike, 20, 20261206), 256
+                # segments, one thread (machine loaded ~7 on 2 cores): within 1e-4 of the
+                # lowest of three variants and of a wide IPOPT multistart (first 5 pairs)
+                # on 20/20, worst +4e-5, 3.9 s CPU per pair; the earlier plan (every seed
+                # at 32, a x2 ladder, best 3, drop 5 %) 17/20, worst +1e-3, 1.8 s; seeds
+                # at 64, best 6: 17/20, worst +2.3e-4, 2.6 s; a 100x larger first barrier
+                # parameter (mu0 = 10, nearer IPOPT's): 1/5 on the first 5. The kinks need
+                # the resolution: the coarse ranking misleads at 32 and 64
+                return replace(plan, coarse=128, factor=2, refine_top=6, drop_rtol=0.3)
             return plan
         if not metric.convex_everywhere:
             bulges = (0.1, 0.2, 0.3, 0.45, 0.6, 0.8)

@@ -139,13 +139,14 @@ def test_bad_input(car: finsler.Metric, rows: np.ndarray) -> None:
 def test_routing_is_opt_in(car: finsler.Metric) -> None:
     assert resolve_method(car, "auto") == "ipopt"
     assert resolve_method(car, "newton") == "newton"
-    # the opt-in path has its own plan: every seed at 32 segments, a x2 ladder
+    # the opt-in path has its own plan: every seed at 128 segments, the best 6 to 256
     assert SeedPlan.default(car) == SeedPlan.default(car, "ipopt")
     assert SeedPlan.default(car, "ipopt").ladder(256) == [256]
     newton = SeedPlan.default(car, "newton")
-    assert newton.ladder(256) == [32, 64, 128, 256] and newton.refine_top == 3
-    assert dataclasses.replace(newton, coarse=256, factor=4, refine_top=3) == SeedPlan.default(
-        car, "ipopt")
+    assert newton.ladder(256) == [128, 256] and newton.refine_top == 6
+    ipopt = SeedPlan.default(car, "ipopt")
+    assert dataclasses.replace(newton, coarse=256, factor=ipopt.factor, refine_top=ipopt.refine_top,
+                               drop_rtol=ipopt.drop_rtol) == ipopt
 
 
 def test_batched_solve_against_ipopt(car: finsler.Metric) -> None:
