@@ -370,23 +370,31 @@ def solve_pairs_batched(m: Metric, pairs: np.ndarray, n: int, plan: SeedPlan,
         # the row polished is the best of the plan's own rows: a caller-given row (a learned
         # warm start) is one more candidate beside them and changes nothing they do, so the
         # result is never worse than without it, for one more row (issue 47)
+        # ``polish_rounds`` rounds of basin hopping: each perturbs the best row so far
+        # (round r > 0 names its rows ``~p{r}.{j}``, draws seeds after round r - 1's)
         given_names = set(given_rows.names)
-        best = _best_of(rows, K, np.array([nm not in given_names for nm in rows.names],
-                                          dtype=bool))
-        okp = np.flatnonzero((best >= 0) & rows.ok[np.maximum(best, 0)])
-        extra = Rows(np.zeros(0, dtype=np.int64), [], np.zeros((0, n + 1, m.dim)))
-        if okp.size:
+        polished = []
+        for rnd in range(plan.polish_rounds):
+            best = _best_of(rows, K, np.array([nm not in given_names for nm in rows.names],
+                                              dtype=bool))
+            okp = np.flatnonzero((best >= 0) & rows.ok[np.maximum(best, 0)])
+            if not okp.size:
+                break
             b = best[okp]
+            tag = "" if rnd == 0 else f"{rnd}."
             curves = np.stack([perturbed_batch(m, rows.points[b], 1, plan.polish_scale,
-                                               plan.seed + 1000 + j)[:, 0]
+                                               plan.seed + 1000 + rnd * plan.polish + j)[:, 0]
                                for j in range(plan.polish)], 1)
             extra = run.solve(Rows(np.repeat(okp, plan.polish),
-                                   [f"{rows.names[i].split('~')[0]}~p{j}" for i in b
+                                   [f"{rows.names[i].split('~')[0]}~p{tag}{j}" for i in b
                                     for j in range(plan.polish)],
                                    curves.reshape(-1, n + 1, m.dim)),
                               plan.drop_after, plan.drop_factor)
+            polished.append(extra)
+            rows = Rows.cat([rows, extra])
+        extra = Rows.cat(polished) if polished else \
+            Rows(np.zeros(0, dtype=np.int64), [], np.zeros((0, n + 1, m.dim)))
         levels.append(_level(extra, K, n, polish=True))
-        rows = Rows.cat([rows, extra])
         stats["levels"].append({"segments": n, "rows": len(extra), "polish": True,
                                 "wall_time": time.perf_counter() - t1})
     if not global_seeds:
