@@ -149,8 +149,8 @@ class SeedPlan:
         convex everywhere (e.g. Matsumoto: local minima round the hill, near-equal discrete
         minima in the non-convex regions) -> bulges at six amplitudes, 20 random curves
         and the graph: for the batched Newton method solved at 16 segments, every
-        distinct optimum within 0.5 % of the best carried up a x4 ladder, then 3 rounds
-        of basin hopping at the final size (4 perturbations of 0.15 |g - s| of the best
+        distinct optimum within 0.5 % of the best carried up a x4 ladder, then 2 rounds
+        of basin hopping at the final size (6 perturbations of 0.15 |g - s| of the best
         so far each), nothing dropped; for IPOPT at 64 segments, the best 4 refined;
         convex and smooth (Finsler, e.g.
         Riemannian or Randers: few local minima) -> the straight line and one bulge each
@@ -225,24 +225,26 @@ class SeedPlan:
                 # winning seed at 16 led to a final optimum 5e-4 to 2e-3 above, and one
                 # polishing round from it did not get down; all 34 seeds solved at 64
                 # directly (4x the cost per row) reached 2 of the 3. Polishing in rounds,
-                # each perturbing the best so far, reaches all 3: 4 rows x 3 rounds at
+                # each perturbing the best so far, reaches all 3: 2 rounds of 6 at
                 # 0.15 |g - s|, with a ladder 16 -> 64 (x4; the level at 32 changed no
                 # answer). Tuning on 6 x 100 fresh pairs (seeds 424242, 777, 777001,
                 # 20261124, 31337, 5150; n = 64), within 1e-4 of the best of the
-                # multistart and every plan tried: 593/600 (100, 98, 100, 99, 98, 98),
-                # worst 8e-4, against 586/600 (worst 1.3e-3) for the one-round plan, at
-                # about 1.4x its CPU time (~7.5 -> ~10.5 ms per pair, machine loaded).
-                # One round of 12 rows (first four sets): 99, 99, 100, 99; 2 rounds of 6:
-                # 593/600; perturbation sizes 0.1 or 0.2, 3 rows per round: 592-593; 12
-                # random curves instead of 20: 594/600 at ~0.9x the time, but on
-                # sample_pairs(m, 3, 5) (tests/test_solvers.py) 3.9e-4 above on one pair.
-                # On sets never used for tuning, finslerax 1.1 in the same run (one thread,
-                # machine load ~8): seed 20261201 100/100, worst 1.4e-5, 11.7 ms CPU per
-                # pair against finslerax's 11.5; seed 20261215 99/100, worst 1.2e-4, 10.1
-                # against 10.4 (benchmarks/results/ground_truth-2026-11-28-12.md, -13.md)
+                # multistart and every plan tried: 594/600 (100, 99, 100, 99, 98, 98),
+                # worst 7e-4, against 586/600 (worst 1.3e-3) for the one-round plan.
+                # 3 rounds of 4: 593-595/600 at ~1.13x the CPU time of 2 rounds of 6
+                # (10.2 against 8.9 ms per pair, median of 3, machine loaded; a round
+                # costs a fixed ~40 sequential Newton steps over its rows); 3 rounds of 3:
+                # 592; one round of 12 (first four sets): 99, 99, 100, 99; perturbation
+                # sizes 0.1 or 0.2: no better; 12 random curves instead of 20: 594/600 at
+                # ~0.9x the time, but on sample_pairs(m, 3, 5) (tests/test_solvers.py)
+                # 3.9e-4 above on one pair. On sets never used for tuning, finslerax 1.1
+                # in the same run (one thread, machine load ~8), 3 rounds of 4: seed
+                # 20261201 100/100, worst 1.4e-5, 11.7 ms CPU per pair against
+                # finslerax's 11.5; seed 20261215 99/100, worst 1.2e-4, 10.1 against 10.4
+                # (benchmarks/results/ground_truth-2026-11-28-12.md, -13.md)
                 return SeedPlan(bulges=bulges, random=20, graph=True, coarse=16, factor=4,
-                                refine_top=8, drop_rtol=0.005, polish=4, polish_scale=0.15,
-                                polish_rounds=3, drop_after=0)
+                                refine_top=8, drop_rtol=0.005, polish=6, polish_scale=0.15,
+                                polish_rounds=2, drop_after=0)
             # measured on 100 fresh Matsumoto pairs (n = 64, benchmarks/solver_speed.py,
             # seed 2611): 8 seeds at 16 segments reached the best-known energy (1e-4) on
             # 96, 50 seeds at 16 on 93 (the coarse ranking misleads: discrete minima of the
