@@ -211,7 +211,12 @@ class SeedPlan:
                 # at 32, a x2 ladder, best 3, drop 5 %) 17/20, worst +1e-3, 1.8 s; seeds
                 # at 64, best 6: 17/20, worst +2.3e-4, 2.6 s; a 100x larger first barrier
                 # parameter (mu0 = 10, nearer IPOPT's): 1/5 on the first 5. The kinks need
-                # the resolution: the coarse ranking misleads at 32 and 64
+                # the resolution: the coarse ranking misleads at 32 and 64. But on
+                # sample_pairs(carlike, 10, 20261207) against a wide IPOPT multistart: 6/10
+                # (worst +3.4e-3, 4.6 s; the earlier plan 6/10, worst +9.5e-3), where
+                # IPOPT's plan reached 10/10 before: the interior point settles in nearer
+                # basins that IPOPT's long steps leave (pair 3: only IPOPT from the
+                # tangent-6 Hermite curve). Not the default for that reason
                 return replace(plan, coarse=128, factor=2, refine_top=6, drop_rtol=0.3)
             return plan
         if not metric.convex_everywhere:
@@ -238,10 +243,11 @@ class SeedPlan:
                 # sizes 0.1 or 0.2: no better; 12 random curves instead of 20: 594/600 at
                 # ~0.9x the time, but on sample_pairs(m, 3, 5) (tests/test_solvers.py)
                 # 3.9e-4 above on one pair. On sets never used for tuning, finslerax 1.1
-                # in the same run (one thread, machine load ~8), 3 rounds of 4: seed
-                # 20261201 100/100, worst 1.4e-5, 11.7 ms CPU per pair against
-                # finslerax's 11.5; seed 20261215 99/100, worst 1.2e-4, 10.1 against 10.4
-                # (benchmarks/results/ground_truth-2026-11-28-12.md, -13.md)
+                # in the same run (one thread, machine load 6-9): seed 20261201 100/100,
+                # worst 1.4e-5, 13.0 ms CPU per pair against finslerax's 16.1; seed
+                # 20261215 99/100, worst 1.2e-4, 11.7 against 16.8 (the same energies as 3
+                # rounds of 4, which took 11.7 against 11.5 and 10.1 against 10.4;
+                # benchmarks/results/ground_truth-2026-11-28-14.md, -15.md; -12, -13)
                 return SeedPlan(bulges=bulges, random=20, graph=True, coarse=16, factor=4,
                                 refine_top=8, drop_rtol=0.005, polish=6, polish_scale=0.15,
                                 polish_rounds=2, drop_after=0)
