@@ -23,8 +23,8 @@ the trivial bound. The figures also go to ``benchmarks/results/certify_panda-DAT
 
 Usage::
 
-    python benchmarks/certify_panda.py [--pairs 10] [--seed 20261217] [--max-boxes 50000]
-                                       [--part-boxes 150000] [--merged-boxes 200000]
+    python benchmarks/certify_panda.py [--pairs 10] [--seed 20261217] [--max-boxes 150000]
+                                       [--part-boxes 150000] [--merged-boxes 150000]
                                        [--no-group] [--no-results-file]
 
 Work budgets (boxes, rounds) end each run: the figures do not depend on the machine's
@@ -51,9 +51,9 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--pairs", type=int, default=10)
     ap.add_argument("--seed", type=int, default=20261217)
-    ap.add_argument("--max-boxes", type=int, default=50_000)
+    ap.add_argument("--max-boxes", type=int, default=150_000)
     ap.add_argument("--part-boxes", type=int, default=150_000)
-    ap.add_argument("--merged-boxes", type=int, default=200_000)
+    ap.add_argument("--merged-boxes", type=int, default=150_000)
     ap.add_argument("--no-group", action="store_true",
                     help="bound each part of the factor alone (default: nested parts as one)")
     ap.add_argument("--no-results-file", action="store_true")

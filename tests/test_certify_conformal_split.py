@@ -172,3 +172,34 @@ def test_cli_prints_the_best_bound(registered: object) -> None:
     assert text.exit_code == 0, text.output
     assert "bounds : full run" in text.stdout and "the largest" in text.stdout
     assert f"lower  = {out['lower']:.10g}" in text.stdout
+
+
+def test_box_ranges_contain_every_point() -> None:
+    """The (s, r) ranges of boxes (the tightened ones: ``|P c| - sum h_j |w_j|``, ``sqrt(|P
+    c|**2 + 2 sum h_j |(P c)_j| + |h|**2)``) contain (s, r) of random points of the boxes,
+    and are no wider than the centre -+ half-diagonal ranges; the exact ranges of thin
+    boxes along the chord are much tighter than those."""
+    cc = importlib.import_module("solvers.certify_conformal")
+    rng = np.random.default_rng(7)
+    for dim in (2, 4, 6):
+        x = rng.normal(size=dim)
+        u = rng.normal(size=dim)
+        u /= np.linalg.norm(u)
+        c = x + rng.normal(size=(400, dim)) * rng.choice([0.05, 1.0, 3.0], size=(400, 1))
+        h = rng.uniform(0.0, 0.5, size=(400, dim)) * rng.choice([0.1, 1.0], size=(400, dim))
+        lo, hi = c - h, c + h
+        s_lo, s_hi, r_lo, r_hi = cc._box_sr(lo, hi, x, u)
+        for _ in range(30):
+            q = lo + rng.uniform(size=lo.shape) * (hi - lo)
+            s = (q - x) @ u
+            r = np.linalg.norm(q - x - s[:, None] * u, axis=1)
+            assert np.all((s_lo <= s) & (s <= s_hi) & (r_lo <= r) & (r <= r_hi))
+        perp = (c - x) - ((c - x) @ u)[:, None] * u
+        rc, hd = np.linalg.norm(perp, axis=1), np.linalg.norm(h, axis=1)
+        assert np.all(r_lo >= np.maximum(rc - hd, 0) * (1 - 1e-9) - 1e-9)
+        assert np.all(r_hi <= (rc + hd) * (1 + 1e-9) + 1e-9)
+    # a box long along the chord, far from it: the half-diagonal would spill over r = 1
+    u = np.array([1.0, 0.0, 0.0, 0.0])
+    s_lo, s_hi, r_lo, r_hi = cc._box_sr(np.array([[0.0, 1.9, -0.05, -0.05]]),
+                                        np.array([[2.0, 2.1, 0.05, 0.05]]), np.zeros(4), u)
+    assert r_lo[0] > 1.85 and r_hi[0] < 2.11
