@@ -18,8 +18,11 @@ import solvers.certify_lp as lp_mod
 from solvers.certify_lp import (
     INITIAL_DIRECTIONS,
     LP_SOLVER,
+    NEAR_PER_TARGET,
+    NEAR_TIGHT,
     TIGHT_DUAL,
     WINDOW_FRACTION,
+    WORST_WINDOW,
     LPFailure,
     _initial_modes,
     _Rays,
@@ -95,6 +98,7 @@ def _max_ratio(phi: np.ndarray, b: np.ndarray) -> float:
 def test_constants_and_the_direction_window() -> None:
     assert LP_SOLVER == "CLARABEL" and INITIAL_DIRECTIONS == 8 and WINDOW_FRACTION == 1 / 64
     assert TIGHT_DUAL == 1e-7 and SETTLE in (None, 0.1)
+    assert NEAR_TIGHT == 0.06 and NEAR_PER_TARGET == 6.0 and WORST_WINDOW == 2
     assert [_window(k) for k in (8, 16, 64, 127, 128, 200, 640)] == [1, 1, 1, 1, 2, 3, 10]
 
 
@@ -374,10 +378,11 @@ def test_promoted_vertices_get_every_direction_when_k_is_16() -> None:
 def test_one_rounds_refinement_recomputed_from_its_duals_and_rows() -> None:
     """After one round from every other triangle's vertices exact (5 directions each) and
     the rest safe: the safe vertices with a tight facet (dual above TIGHT_DUAL times the
-    largest) become exact with the window around that facet's direction and the coarse
-    directions; then every row of an exact vertex the unscaled potential breaks by more
-    than 0.1 target, and its worst row's neighbours, are added. Recomputed here from the
-    returned potential, duals and rows."""
+    largest) become exact with the window around that facet's direction, the coarse
+    directions and the rows the unscaled potential fills beyond ``1 - near``; then every
+    such near-tight row of an exact vertex, and WORST_WINDOW neighbours each side of the
+    worst row of a vertex that breaks one by more than 0.1 target, are added. Recomputed
+    here from the returned potential, duals and rows."""
     b, target = _weights(), 0.1
     ex0 = np.repeat(np.arange(MESH.n_tri) % 2 == 0, 3)
     act0 = np.zeros((NV, K), bool)
@@ -399,12 +404,15 @@ def test_one_rounds_refinement_recomputed_from_its_duals_and_rows() -> None:
     ex = ex0.copy()
     ex[pv] = True
     want[np.ix_(~ex0 & ex, np.arange(0, K, 2))] = True
-    over = ex[:, None] & (ratio > 1 + 0.1 * target)
+    near = min(0.06, 6 * target)
+    over = ex[:, None] & (ratio > 1 - near)
     worst = np.argmax(np.where(ex[:, None], ratio, -np.inf), axis=1)
     bad = ex & (ratio[np.arange(NV), worst] > 1 + 0.1 * target)
-    for off in (-1, 0, 1):
+    for off in (-2, -1, 0, 1, 2):
         want[np.flatnonzero(bad), (worst[bad] + off) % K] = True
     want |= over
+    # the near-tight rows reach beyond the violated ones and the worst one's neighbours
+    assert (over & ~(ratio > 1 + 0.1 * target)).any()
     assert (ex & ~ex0).any() and bad.any()
     np.testing.assert_array_equal(r["exact"], ex)
     np.testing.assert_array_equal(r["active"], want)
