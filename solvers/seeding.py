@@ -216,7 +216,13 @@ class SeedPlan:
                 # (worst +3.4e-3, 4.6 s; the earlier plan 6/10, worst +9.5e-3), where
                 # IPOPT's plan reached 10/10 before: the interior point settles in nearer
                 # basins that IPOPT's long steps leave (pair 3: only IPOPT from the
-                # tangent-6 Hermite curve). Not the default for that reason
+                # tangent-6 Hermite curve). On the report pairs (sample_pairs(carlike, 100,
+                # 20261201), never tuned on): 88/100 within 1e-4 (the earlier plan 79),
+                # 96/100 within 1e-2 (90), below the multistart on 13, but worst +3.5 (pair
+                # 57: its basin only from the third graph route; IPOPT's plan reaches it),
+                # 3.6 s CPU per pair on a loaded machine, against IPOPT's 89/100, 100/100,
+                # worst +4.5e-3, 10.5 s (benchmarks/results/ground_truth-2026-11-28-16.md,
+                # -10.md). Not the default for that reason
                 return replace(plan, coarse=128, factor=2, refine_top=6, drop_rtol=0.3)
             return plan
         if not metric.convex_everywhere:
