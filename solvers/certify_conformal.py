@@ -53,11 +53,13 @@ Limits: the bound is only as good as the enclosures of ``f`` over boxes (affine 
 :mod:`finsler.affine`: about 1 % below the true minimum on 0.1-rad Panda boxes, 3 % on
 0.2-rad ones) and as the ``(s, r)`` reduction, which keeps only the distance to the chord's
 line: two regions at the same ``(s, r)`` share one bound. In 6-D the cells next to the
-chord meet boxes whose ``(s, r)`` range spills over them (a box's half-diagonal): on Panda
-tuning pair 3 of seed 20261150 every cell, the chord's included, is bounded near the
-region's global minimum (14-16, where the factor's true minimum within 0.4 rad of the
-chord's middle is about 33), and the bound stays at the trivial one's ceiling (0.560 of
-the upper bound at 3e5 and at 1e6 boxes: budget does not help). Boxes aligned with the
+chord meet boxes whose ``(s, r)`` range spills over them: on Panda tuning pair 3 of seed
+20261150 every cell, the chord's included, is bounded near the region's global minimum
+(14-16, where the factor's true minimum within 0.4 rad of the chord's middle is about 33),
+and the bound stays near the trivial one's ceiling (0.560 of the upper bound at 3e5 and at
+1e6 boxes with ``r`` ranges of centre -+ half-diagonal; 0.54 with the tighter ranges of
+:func:`_box_sr` and ``SPLIT_ALIGN``, which lift nearly straight pairs instead: tuning pair
+0, 0.888 -> 0.930 at 1.5e5 boxes). Boxes aligned with the
 chord (exact ``(s, r)`` ranges) were tried and did worse (0.455 at 3e5: the rotated boxes
 are larger in the joints). It proves a lower bound, not a tight interval; the ratio also
 carries the upper bound's own slack (the solver's path: within 3e-4 of its 128-segment
