@@ -21,11 +21,11 @@ from typing import ClassVar
 import casadi as ca
 import numpy as np
 import pytest
+from conformal_metrics import Conformal4D
 from typer.testing import CliRunner
 
 import finsler
-from finsler.domains import Box
-from finsler.metric import Metric, Task
+from finsler.metric import Task
 from finsler.registry import unregister_metric
 from solvers import certify
 from solvers.certify_conformal import ConformalCertifyResult, ConformalSpec, certify_conformal
@@ -43,18 +43,11 @@ SPEC = ConformalSpec(max_boxes=12000, r_cells=4)
 
 
 @dataclass(frozen=True)
-class _Valley(Metric):
+class _Valley(Conformal4D):
     """``F = (1 + q1**2 + q2**2 / 2 + (q3 q4)**2 / 5) |v|`` on ``[-1, 1]**4``."""
 
     name: ClassVar[str] = "test-valley-4d"
     task: ClassVar[Task] = Task(depth=3, eps=0.2)
-
-    @property
-    def domain(self) -> Box:
-        return Box((-1.0,) * 4, (1.0,) * 4)
-
-    def F_sx(self, x: ca.SX, v: ca.SX) -> ca.SX:
-        return self.conformal_factor_sx(x) * ca.norm_2(v)
 
     def conformal_factor_sx(self, x: ca.SX) -> ca.SX:
         return 1.0 + x[0] ** 2 + 0.5 * x[1] ** 2 + 0.2 * (x[2] * x[3]) ** 2
