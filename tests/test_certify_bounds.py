@@ -14,6 +14,7 @@ import casadi as ca
 import numpy as np
 import pytest
 from singular_metrics import Cone
+from tick_clock import TickClock
 
 import finsler
 from finsler.errors import InputError
@@ -387,19 +388,9 @@ def test_eval_values_refuse_non_finite_values(kind: str) -> None:
 
 
 # ---- _PointData ----------------------------------------------------------------------------
-class _Clock:
-    """``time.perf_counter`` advancing by one second per call."""
-
-    def __init__(self) -> None:
-        self.now = 100.0
-
-    def perf_counter(self) -> float:
-        self.now += 1.0
-        return self.now
-
 
 def test_point_data_time_is_summed_over_the_calls_that_compute(monkeypatch) -> None:
-    monkeypatch.setattr(cm, "time", _Clock())
+    monkeypatch.setattr(cm, "time", TickClock())
     data = cm._PointData(finsler.get_metric("poincare"), 4)
     data.rows(np.array([[0.1, 0.2]]))
     assert data.seconds == 1.0

@@ -13,6 +13,7 @@ import math
 import numpy as np
 import pytest
 from scipy.optimize import linprog
+from tick_clock import TickClock
 
 import solvers.certify_lp as lp_mod
 from solvers.certify_lp import (
@@ -291,19 +292,8 @@ def test_settle_stops_a_mesh_that_cannot_reach_the_target() -> None:
     assert r3["settled"] and r3["iterations"] == 2
 
 
-class _Clock:
-    """A clock that advances by 1 s at each reading."""
-
-    def __init__(self) -> None:
-        self.now = 1000.0
-
-    def perf_counter(self) -> float:
-        self.now += 1.0
-        return self.now
-
-
 def test_lp_seconds_add_up_the_rounds(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr(lp_mod, "time", _Clock())
+    monkeypatch.setattr(lp_mod, "time", TickClock())
     r = _solve_lp(MESH, _weights(), DIRS, 0, 1, upper=100.0, target=1e-6, start=_none(),
                   max_iter=3)
     # each round reads the clock before the solve, after it (+1 s), and for the log
@@ -327,7 +317,7 @@ def test_each_round_logs_its_rows_value_ratio_and_bound(
     import logging
     import re
 
-    monkeypatch.setattr(lp_mod, "time", _Clock())
+    monkeypatch.setattr(lp_mod, "time", TickClock())
     caplog.set_level(logging.DEBUG, logger="solvers.certify_lp")
     r = _solve_lp(MESH, _weights(), DIRS, 0, 1, upper=100.0, target=1e-6, start=_none(),
                   max_iter=1)
