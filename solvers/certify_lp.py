@@ -31,8 +31,15 @@ _LOG = logging.getLogger(__name__)
 
 #: cvxpy solver of the LPs (Clarabel: an interior-point method, far faster here than HiGHS).
 LP_SOLVER = "CLARABEL"
+#: Clarabel settings of the LPs. Every potential is checked against ALL rows and scaled
+#: (its bound never depends on the LP's accuracy), so 1e-5 instead of Clarabel's 1e-8 is
+#: enough; with :data:`TIGHT_DUAL` at 1e-4 the rounds are unchanged (with 1e-7 a loose
+#: solve promotes many more vertices).
+LP_OPTIONS: dict[str, Any] = {"tol_gap_abs": 1e-5, "tol_gap_rel": 1e-5, "tol_feas": 1e-5,
+                              "tol_ktratio": 1e-3}
 #: Rows whose dual exceeds this fraction of the largest dual count as tight (refined).
-TIGHT_DUAL = 1e-7
+#: 1e-4: the duals of an interior-point solve to :data:`LP_OPTIONS`' tolerance.
+TIGHT_DUAL = 1e-4
 #: Evenly spaced rays of the inner polygons that keep the vertices away from the path safe.
 INITIAL_DIRECTIONS = 8
 #: Directions an exact vertex starts with around the path's (or a tight edge's) direction:
@@ -51,6 +58,16 @@ NEAR_TIGHT = 0.06
 #: duals already say where to refine).
 SETTLE_ROUNDS = 3
 NEAR_PER_TARGET = 6.0
+#: A refined mesh inherits of its host's rows only the 16 evenly spaced directions and
+#: those (with one neighbour each side) the host's best potential filled to more than
+#: ``1 - near``, not every row the host's rounds ever added.
+INHERIT_NEAR_ONLY = True
+#: Evenly spaced directions an exact vertex always has (first mesh, promotion, inheritance).
+COARSE_DIRECTIONS = 16
+#: A promoted vertex gets this many windows (:func:`_window`) of directions each side of
+#: its tight facet's normal (3: its gradient moves out along that normal; on tuning pairs
+#: of seed 20261217 one LP round fewer on some meshes, 1 before).
+PROMOTE_WINDOW = 3
 WORST_WINDOW = 2
 
 
@@ -139,7 +156,7 @@ def _solve_lp(mesh: _Mesh, b: np.ndarray, dirs: np.ndarray, s_idx: int, g_idx: i
     active = start["active"].copy()
     active[~exact] = False
     coarse = np.zeros(k, bool)
-    coarse[:: max(1, k // 16)] = True
+    coarse[:: max(1, k // COARSE_DIRECTIONS)] = True
     near = min(NEAR_TIGHT, NEAR_PER_TARGET * target)
     best: dict[str, Any] = {"lower": -np.inf}
     n_iter = 0
@@ -165,7 +182,7 @@ def _solve_lp(mesh: _Mesh, b: np.ndarray, dirs: np.ndarray, s_idx: int, g_idx: i
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")  # "inaccurate" is in the status, checked below
-                prob.solve(solver=LP_SOLVER)
+                prob.solve(solver=LP_SOLVER, **LP_OPTIONS)
         except cp.error.SolverError as err:
             raise LPFailure(f"the LP solver failed: {short(str(err))}") from err
         lp_seconds += time.perf_counter() - t0
@@ -186,7 +203,8 @@ def _solve_lp(mesh: _Mesh, b: np.ndarray, dirs: np.ndarray, s_idx: int, g_idx: i
             kk = np.mod(np.rint(ang / (2 * np.pi / k)).astype(np.int64), k)
             best = {"phi": (phi - phi[s_idx]) / scale, "lower": lower, "status": status,
                     "rows": np.stack([vid // 3, vid % 3, kk], 1), "duals": duals,
-                    "n_rows": int(rhs.size), "ratio": ratio_max}
+                    "n_rows": int(rhs.size), "ratio": ratio_max,
+                    "near": ratio > 1.0 - near}
         if upper - lower <= target * upper:
             break
         value = float(phi[g_idx] - phi[s_idx])
@@ -205,7 +223,7 @@ def _solve_lp(mesh: _Mesh, b: np.ndarray, dirs: np.ndarray, s_idx: int, g_idx: i
             pv = s_vid[tight_safe]
             ang = np.arctan2(s_normal[tight_safe, 1], s_normal[tight_safe, 0])
             kc = np.rint(ang / (2 * np.pi / k)).astype(np.int64)
-            for off in range(-_window(k), _window(k) + 1):
+            for off in range(-PROMOTE_WINDOW * _window(k), PROMOTE_WINDOW * _window(k) + 1):
                 active[pv, (kc + off) % k] = True
             active[promote] |= coarse | (ratio[promote] > 1.0 - near)
             exact |= promote
@@ -242,7 +260,7 @@ def _initial_modes(mesh: _Mesh, k: int, previous: tuple[_Mesh, dict[str, Any]] |
         ang = np.arctan2(seg[nearest, 1], seg[nearest, 0])
         kc = np.rint(ang / (2 * np.pi / k)).astype(np.int64)
         act = np.zeros((int(near.sum()), k), bool)
-        act[:, :: max(1, k // 16)] = True
+        act[:, :: max(1, k // COARSE_DIRECTIONS)] = True
         rows = np.arange(act.shape[0])
         for off in range(-_window(k), _window(k) + 1):
             act[rows, (kc + off) % k] = True
@@ -254,7 +272,13 @@ def _initial_modes(mesh: _Mesh, k: int, previous: tuple[_Mesh, dict[str, Any]] |
         host = old.locate(mesh.centroids)
         ok = host >= 0
         old_exact = lp["exact"].reshape(-1, 3).any(axis=1)
-        old_active = (lp["active"] & lp["exact"][:, None]).reshape(-1, 3, k).any(axis=1)
+        keep = lp["active"] & lp["exact"][:, None]
+        if INHERIT_NEAR_ONLY and "near" in lp:
+            near = lp["near"]
+            coarse = np.zeros(k, bool)
+            coarse[:: max(1, k // COARSE_DIRECTIONS)] = True
+            keep &= near | np.roll(near, 1, axis=1) | np.roll(near, -1, axis=1) | coarse
+        old_active = keep.reshape(-1, 3, k).any(axis=1)
         new_exact = np.zeros(mesh.n_tri, bool)
         new_exact[ok] = old_exact[host[ok]]
         exact = np.repeat(new_exact, 3)
