@@ -15,6 +15,13 @@ energy of the best known, the worst gap, the time per pair of the default (wall 
 and of the default), and the pairs where the default beat the multistart (the best known
 is not the truth there).
 
+The best known also includes every other method's answers on the same pairs: each run
+keeps its default's per-pair energies (and ``--best-also`` part files of another method) in
+``benchmarks/results/ground_truth_cache/<metric>-answers-<key>.json``
+(``answer_store.py``), labelled by the method and a digest of its seed plan; the best known
+is the lowest of the default, the multistart and every other label's converged answers
+(stored answers only lower it; the measured default is always solved afresh).
+
 The multistart is the expensive part: its energies are cached in
 ``benchmarks/results/ground_truth_cache/<metric>-<key>.npz`` (keyed by the metric's
 parameters, the seed, K, N and the multistart's settings), written after every chunk of
@@ -51,6 +58,7 @@ import json  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
+import answer_store  # noqa: E402
 import numpy as np  # noqa: E402
 from results_file import RESULTS, ResultsFile, markdown_table  # noqa: E402
 
@@ -198,6 +206,18 @@ def default_records(m: finsler.Metric, pairs: np.ndarray, n: int, repeats: int,
             "cpu": float(np.median([t[1] for t in times]))}
 
 
+def read_part(path: Path, meta: dict) -> dict:
+    """One ``--part`` record file of the pairs ``meta`` (metric, K, seed, N) describes, with
+    its plan ``label`` (older parts carry none: one of their method and energies)."""
+    d = json.loads(Path(path).read_text())
+    if {f: d.get(f) for f in meta} != meta:
+        raise SystemExit(f"--best-also: {path} is not a part of {meta}")
+    if not d.get("label"):
+        d["label"] = (f"{d.get('method', 'auto')}-parts-unlabelled-"
+                      f"{answer_store._digest(d['energy'])}")
+    return d
+
+
 def merge_parts(paths: list[Path], name: str, k: int, seed: int, n: int, upto: int
                 ) -> dict[str, object]:
     """The records of ``--part`` runs (JSON files) of one metric joined in pair order;
@@ -215,6 +235,12 @@ def merge_parts(paths: list[Path], name: str, k: int, seed: int, n: int, upto: i
         raise SystemExit(f"--merge: the parts cover pairs 0..{a - 1}, not 0..{upto - 1}")
     out: dict[str, object] = {f: [x for d in parts for x in d[f]] for f in
                               ("energy", "converged", "best_seed", "seeds", "disagree")}
+    # the label of the plan the parts ran (answer_store.plan_label); parts of older runs
+    # carry none: then one of their method and energies, never a current plan's
+    labels = {d.get("label") for d in parts}
+    out["label"] = (labels.pop() if len(labels) == 1 and None not in labels else
+                    f"{parts[0].get('method', 'auto')}-parts-unlabelled-"
+                    f"{answer_store._digest(out['energy'])}")
     for t in ("wall", "cpu"):
         out[t] = sum(d[t] * (d["b"] - d["a"]) for d in parts) / upto
     return out
@@ -238,17 +264,28 @@ def run_metric(name: str, k: int, seed: int, starts: int, chunk: int, repeats: i
     e_def = np.asarray(rec["energy"], dtype=np.float64)
     e_ms = np.where(np.isfinite(best["energy"]), best["energy"], np.inf)
     e_best = np.minimum(e_def, e_ms)
+    # every method's answers on these pairs are kept (answer_store); the best known is the
+    # lowest of the default, the multistart and every other stored label, so a default is
+    # not measured against one solver alone, and answers of earlier runs are not lost
+    spath = answer_store.store_path(m, seed, len(drawn), n)
+    meta = {"metric": name, "seed": seed, "K": len(drawn), "N": n}
+    for path in also or ():  # --best-also: another method's parts join the store
+        o = read_part(path, meta)
+        answer_store.record(spath, o["label"], o["energy"], o["converged"], meta, o["a"],
+                            source=f"--best-also {Path(path).name}")
+    label = rec.get("label") or answer_store.plan_label(m, method)
+    answer_store.record(spath, label, e_def, rec["converged"], meta)
+    others = answer_store.stored(answer_store.load(spath), k, exclude=label)
     other = None
-    if also:
-        # another method's records on the same pairs (--best-also): the best known is the
-        # lowest of every method run, so a default is not measured against one solver alone
-        o = np.asarray(merge_parts(also, name, len(drawn), seed, n, k)["energy"], np.float64)
-        o = np.where(np.isfinite(o), o, np.inf)
-        other = {"beat": int(np.sum(o < e_best * (1.0 - TIGHT)))}
-        e_best = np.minimum(e_best, o)
-        for what, e in (("other", o), ("multistart", e_ms), ("lower", np.minimum(e_def, o))):
+    if others:
+        e_st = np.min(np.stack(list(others.values())), axis=0)
+        other = {"beat": int(np.sum(e_st < e_best * (1.0 - TIGHT))), "file": spath.name,
+                 "labels": {}}
+        e_best = np.minimum(e_best, e_st)
+        for what, e in (("multistart", e_ms), *others.items()):
             g = e / e_best - 1.0
-            other[what] = (int(np.sum(g <= TIGHT)), int(np.sum(g <= LOOSE)), float(np.max(g)))
+            other["labels"][what] = (int(np.sum(g <= TIGHT)), int(np.sum(g <= LOOSE)),
+                                     float(np.max(g)))
     peer = None
     if finslerax is not None and name in FINSLERAX:
         peer = finslerax_energies(m, pairs, n, finslerax, repeats)
@@ -318,9 +355,9 @@ def main() -> None:
                     help="the table of one metric from --part records (covering all K "
                          "pairs) against the best known, instead of solving the default")
     ap.add_argument("--best-also", type=Path, nargs="+", metavar="PART.json",
-                    help="--part records of another method on the same pairs (covering all "
-                         "K), whose energies join the best known (e.g. car-like's IPOPT "
-                         "default and its opt-in interior point)")
+                    help="--part records of another method on the same pairs, kept in the "
+                         "answer store (answer_store.py), whose energies join the best known "
+                         "(e.g. car-like's IPOPT default and its opt-in interior point)")
     ap.add_argument("--method", choices=("auto", "newton", "ipopt"), default="auto",
                     help="the method of the solve measured (default auto: the default "
                          "solve; newton: e.g. car-like's opt-in batched interior point)")
@@ -352,7 +389,8 @@ def main() -> None:
         n = 2 ** m.task.depth
         rec = default_records(m, finsler.sample_pairs(m, k, args.seed)[int(a):int(b)], n,
                               args.repeats, args.method)
-        rec.update(metric=m.name, K=k, seed=args.seed, N=n, a=int(a), b=int(b), method=args.method)
+        rec.update(metric=m.name, K=k, seed=args.seed, N=n, a=int(a), b=int(b),
+                   method=args.method, label=answer_store.plan_label(m, args.method))
         finsler.atomic_write_text(args.json, json.dumps(rec), "--json")
         print(f"{m.name} pairs {a}..{int(b) - 1}: {rec['cpu']:.2f} s CPU per pair", flush=True)
         return
@@ -406,16 +444,13 @@ def main() -> None:
                         f"{args.seed})` (`--first`)" if args.first else ""))
         if r["other"] is not None:
             o = r["other"]
+            each = "; ".join(f"{lb} {t[0]}/{r['K']} (within 1e-2 {t[1]}, worst {t[2]:.2e})"
+                             for lb, t in o["labels"].items())
             notes.append(
-                f"- {nm}: the best known also includes another method's answers on the same "
-                f"pairs (`--best-also`, {len(args.best_also)} part file(s)), lower than both "
-                f"the default and the multistart on {o['beat']} pairs; against it that method "
-                f"is within 1e-4 on {o['other'][0]}/{r['K']} (within 1e-2 {o['other'][1]}, "
-                f"worst {o['other'][2]:.2e}) and the multistart alone on "
-                f"{o['multistart'][0]}/{r['K']} (within 1e-2 {o['multistart'][1]}, worst "
-                f"{o['multistart'][2]:.2e}); the lower of the default and that method "
-                f"on {o['lower'][0]}/{r['K']} (within 1e-2 {o['lower'][1]}, worst "
-                f"{o['lower'][2]:.2e})")
+                f"- {nm}: the best known also includes the stored answers of other methods "
+                f"or plans on the same pairs (`ground_truth_cache/{o['file']}`, "
+                "benchmarks/answer_store.py), lower than both the default and the "
+                f"multistart on {o['beat']} pairs; against it, within 1e-4: {each}")
         print(markdown_table(["metric", "K", "N", "within 1e-4", "within 1e-2", "worst gap",
                               "wall ms/pair", "CPU ms/pair", "default beat multistart",
                               "not converged (default / multistart)", "seeds", "seeds disagree",

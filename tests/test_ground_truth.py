@@ -63,3 +63,62 @@ def test_lattice_nodes_are_the_lattices() -> None:
     spacing = (0.25, 0.25, np.pi / 4)
     assert np.array_equal(GraphSeeder.lattice_nodes(m, spacing),
                           GraphSeeder.lattice(m, spacing, (1, 1, 1)).nodes)
+
+
+def _fake_run(monkeypatch, tmp_path: Path, e_def, e_ms, converged=None) -> dict:
+    """``run_metric`` on 4 Poincaré pairs with the default and the multistart stood in by
+    the given energies, the answer store in ``tmp_path``."""
+    import answer_store
+
+    monkeypatch.setattr(answer_store, "STORE", tmp_path)
+    monkeypatch.setattr(ground_truth, "best_known", lambda *a, **k: {
+        "energy": np.asarray(e_ms, float), "converged": np.ones(len(e_ms), bool),
+        "families": np.asarray(["straight"] * len(e_ms)),
+        "best_seed": np.asarray(["straight"] * len(e_ms)), "cpu": np.zeros(len(e_ms))})
+    monkeypatch.setattr(ground_truth, "default_records", lambda *a, **k: {
+        "energy": list(e_def), "converged": converged or [True] * len(e_def),
+        "best_seed": ["straight"] * len(e_def), "seeds": [1] * len(e_def),
+        "disagree": [False] * len(e_def), "wall": 0.0, "cpu": 0.0})
+    return ground_truth.run_metric("poincare", len(e_def), 5, 20, 5)
+
+
+def test_stored_answers_of_another_plan_lower_the_best_known(monkeypatch, tmp_path) -> None:
+    """A second plan's answers, kept by an earlier run, join the best known (the gaps are
+    against the lowest of all three, computed here by hand); the measured plan's own
+    earlier answers do not (it is solved afresh), and a non-converged answer never
+    lowers it."""
+    import answer_store
+
+    monkeypatch.setattr(answer_store, "STORE", tmp_path)
+    m = finsler.get_metric("poincare")
+    path = answer_store.store_path(m, 5, 4, 2 ** m.task.depth)
+    assert path.parent == tmp_path
+    meta = {"metric": "poincare", "seed": 5, "K": 4, "N": 2 ** m.task.depth}
+    # another plan: lower on pair 1 (converged) and on pair 2 (not converged)
+    answer_store.record(path, "other-plan", [9.0, 1.0, 0.5, 9.0], [True, True, False, True],
+                        meta)
+    # the measured plan's own stale answers: lower on pair 3, must be ignored
+    answer_store.record(path, answer_store.plan_label(m, "auto"), [9.0, 9.0, 9.0, 0.1],
+                        [True] * 4, meta)
+    e_def, e_ms = [1.0, 2.0, 1.0, 1.0], [1.0, 2.0, 2.0, 1.0]
+    r = _fake_run(monkeypatch, tmp_path, e_def, e_ms)
+    best = np.array([1.0, 1.0, 1.0, 1.0])
+    assert np.allclose(r["gaps"], np.asarray(e_def) / best - 1.0)
+    assert r["within_tight"] == 3 and r["worst_pair"] == 1
+    assert r["other"]["beat"] == 1
+    # the run kept its default's answers under its label, replacing the stale ones
+    kept = answer_store.load(path)["answers"][answer_store.plan_label(m, "auto")]
+    assert kept["energy"] == e_def and kept["converged"] == [True] * 4
+
+
+def test_store_keeps_a_part_in_place(tmp_path: Path) -> None:
+    """Parts of one label fill their own pairs; pairs not computed read as infinite."""
+    import answer_store
+
+    path = tmp_path / "s.json"
+    meta = {"metric": "poincare", "seed": 5, "K": 5, "N": 8}
+    answer_store.record(path, "x", [3.0, 4.0], [True, True], meta, first=2)
+    answer_store.record(path, "x", [1.0], [True], meta, first=0)
+    e = answer_store.stored(answer_store.load(path), 5)["x"]
+    assert np.array_equal(e, [1.0, np.inf, 3.0, 4.0, np.inf])
+    assert answer_store.stored(answer_store.load(path), 5, exclude="x") == {}
