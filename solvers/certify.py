@@ -34,7 +34,9 @@ The LP keeps the vertices away from the path inside inner polygons
 of the rows' sets (they can never violate a row) and gives the vertices near the path the
 sampled rows themselves, adding violated directions in rounds; every round's potential is
 checked against ALL rows and divided by the largest ratio ``(grad phi . v_k) / bound``, so
-the returned lower bound satisfies every row exactly whatever the LP solver's tolerance.
+the returned lower bound satisfies every row exactly whatever the LP solver's tolerance
+(a round short of the target only by a few broken rows is first mended locally,
+:mod:`solvers.certify_repair`, and checked the same way).
 
 Convexity: where ``F(z, .)`` is not convex (Matsumoto outside ``|p| = 1/(2 sqrt 3)``) the
 condition ``dphi(v) <= F(z, v)`` for all ``v`` is the same as for the convexification

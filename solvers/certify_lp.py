@@ -26,6 +26,7 @@ import numpy as np
 
 from finsler.errors import short
 from solvers.certify_mesh import _distance_to_path, _Mesh
+from solvers.certify_repair import repair
 
 _LOG = logging.getLogger(__name__)
 
@@ -62,6 +63,9 @@ NEAR_PER_TARGET = 6.0
 #: those (with one neighbour each side) the host's best potential filled to more than
 #: ``1 - near``, not every row the host's rounds ever added.
 INHERIT_NEAR_ONLY = True
+#: Mend a round's potential that would reach the target but for a few broken rows
+#: (:mod:`solvers.certify_repair`) instead of solving another round.
+REPAIR = True
 #: Evenly spaced directions an exact vertex always has (first mesh, promotion, inheritance).
 COARSE_DIRECTIONS = 16
 #: A promoted vertex gets this many windows (:func:`_window`) of directions each side of
@@ -198,12 +202,27 @@ def _solve_lp(mesh: _Mesh, b: np.ndarray, dirs: np.ndarray, s_idx: int, g_idx: i
         _LOG.debug("LP rows %d (%d exact vertices) %.2f s: value %.8f, max row ratio %.6f "
                    "-> bound %.8f", rhs.size, int(exact.sum()), time.perf_counter() - t0,
                    phi[g_idx] - phi[s_idx], ratio_max, lower)
+        kept = (phi, ratio_max, scale)  # the potential the bound is of (maybe repaired)
+        if REPAIR and upper - lower > target * upper and (
+                phi[g_idx] - phi[s_idx] >= (1.0 - target) * upper):
+            # the value would reach the target but for a few broken rows: mend them locally
+            t1 = time.perf_counter()
+            fixed = repair(mesh, b_flat, dirs, phi, ratio, (s_idx, g_idx))
+            if fixed is not None:
+                r_max = float(np.max(np.einsum("vi,ki->vk", np.einsum(
+                    "vid,vd->vi", gradc, fixed[dofs]), dirs) / b_flat))
+                sc = max(r_max, 1.0) * (1.0 + 1e-12)
+                low = float(fixed[g_idx] - fixed[s_idx]) / sc
+                _LOG.debug("repaired in %.2f s: max row ratio %.6f -> bound %.8f",
+                           time.perf_counter() - t1, r_max, low)
+                if low > lower:
+                    kept, lower = (fixed, r_max, sc), low
         if lower > best["lower"]:
             ang = np.arctan2(normal[:, 1], normal[:, 0])
             kk = np.mod(np.rint(ang / (2 * np.pi / k)).astype(np.int64), k)
-            best = {"phi": (phi - phi[s_idx]) / scale, "lower": lower, "status": status,
-                    "rows": np.stack([vid // 3, vid % 3, kk], 1), "duals": duals,
-                    "n_rows": int(rhs.size), "ratio": ratio_max,
+            best = {"phi": (kept[0] - kept[0][s_idx]) / kept[2], "lower": lower,
+                    "status": status, "rows": np.stack([vid // 3, vid % 3, kk], 1),
+                    "duals": duals, "n_rows": int(rhs.size), "ratio": kept[1],
                     "near": ratio > 1.0 - near}
         if upper - lower <= target * upper:
             break

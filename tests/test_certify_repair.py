@@ -1,0 +1,86 @@
+"""solvers.certify_repair: the local repair of an LP round's potential, checked against
+every row rebuilt densely here (``FULL`` of the certify_lp kill tests) and the full LP's
+optimum by scipy's HiGHS."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.optimize import linprog
+from test_mutation_kills_certify_lp import DIRS, FULL, MESH, NV, K, _weights
+
+import solvers.certify_lp as lp_mod
+import solvers.certify_repair as rep
+from solvers.certify_lp import _solve_lp
+from solvers.certify_repair import repair
+
+
+def _optimum(b: np.ndarray) -> np.ndarray:
+    c = np.zeros(MESH.n_dofs)
+    c[1] = -1.0
+    bounds = [(None, None)] * MESH.n_dofs
+    bounds[0] = (0.0, 0.0)
+    res = linprog(c, A_ub=FULL, b_ub=b.reshape(-1), bounds=bounds, method="highs")
+    assert res.status == 0
+    return res.x
+
+
+def _ratio(phi: np.ndarray, b: np.ndarray) -> np.ndarray:
+    return (FULL @ phi / b.reshape(-1)).reshape(NV, K)
+
+
+def _broken(b: np.ndarray) -> tuple[np.ndarray, int]:
+    """The optimum at 95 %, with one interior vertex unknown pushed up until rows break."""
+    phi = 0.95 * _optimum(b)
+    j = int(np.flatnonzero(np.isin(np.arange(MESH.points.shape[0]), MESH.tri))[10])
+    assert j not in (0, 1)
+    phi[j] += 0.05
+    assert _ratio(phi, b).max() > 1.05
+    return phi, j
+
+
+def test_a_pushed_unknown_is_mended_locally_and_every_row_holds() -> None:
+    b = _weights()
+    phi, _ = _broken(b)
+    ratio = _ratio(phi, b)
+    out = repair(MESH, b.reshape(NV, K), DIRS, phi, ratio, (0, 1))
+    assert out is not None
+    assert _ratio(out, b).max() <= 1.0 + 1e-9  # every row, rebuilt here
+    assert out[0] == phi[0] and out[1] == phi[1]  # the value is kept
+    bad = np.unique(np.flatnonzero(ratio.max(axis=1) > 1.0) // 3)
+    ring = np.isin(MESH.dofs, MESH.dofs[bad]).any(axis=1)
+    moved = np.flatnonzero(out != phi)
+    assert moved.size and np.isin(moved, MESH.dofs[ring]).all()  # only the patch moves
+
+
+def test_nothing_broken_or_too_much_broken_gives_none(monkeypatch: pytest.MonkeyPatch
+                                                      ) -> None:
+    b = _weights()
+    good = 0.9 * _optimum(b)
+    assert repair(MESH, b.reshape(NV, K), DIRS, good, _ratio(good, b), (0, 1)) is None
+    phi, _ = _broken(b)
+    monkeypatch.setattr(rep, "REPAIR_MAX_TRIANGLES", 1)
+    assert repair(MESH, b.reshape(NV, K), DIRS, phi, _ratio(phi, b), (0, 1)) is None
+
+
+def test_a_round_short_of_the_target_only_by_broken_rows_is_repaired(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """All vertices exact with 5 directions: the round's potential breaks unsampled rows;
+    with the upper bound just above its value the repair lifts the bound from value /
+    ratio to a potential that holds every row (checked here), never below."""
+    b = _weights()
+    active = np.zeros((NV, K), bool)
+    active[:, [0, 7, 13, 20, 26]] = True
+    start = {"exact": np.ones(NV, bool), "active": active}
+    monkeypatch.setattr(lp_mod, "REPAIR", False)
+    plain = _solve_lp(MESH, b, DIRS, 0, 1, upper=100.0, target=1e-6, start=start,
+                      max_iter=1)
+    value = plain["lower"] * plain["ratio"] * (1 + 1e-12)
+    assert plain["ratio"] > 1.01
+    monkeypatch.setattr(lp_mod, "REPAIR", True)
+    r = _solve_lp(MESH, b, DIRS, 0, 1, upper=1.001 * value, target=0.05, start=start,
+                  max_iter=1)
+    assert r["lower"] > plain["lower"] * 1.001
+    assert _ratio(r["phi"], b).max() <= 1.0 + 1e-9
+    assert r["phi"][1] - r["phi"][0] == pytest.approx(r["lower"], rel=1e-12)
+    assert r["lower"] <= value * (1 + 1e-9)
