@@ -282,7 +282,10 @@ def run_metric(name: str, k: int, seed: int, starts: int, chunk: int, repeats: i
         other = {"beat": int(np.sum(e_st < e_best * (1.0 - TIGHT))), "file": spath.name,
                  "labels": {}}
         e_best = np.minimum(e_best, e_st)
-        for what, e in (("multistart", e_ms), *others.items()):
+        pairs_of = [("multistart", e_ms), *others.items()]
+        pairs_of += [(f"the lower of the default and {lb}", np.minimum(e_def, e))
+                     for lb, e in others.items()]
+        for what, e in pairs_of:
             g = e / e_best - 1.0
             other["labels"][what] = (int(np.sum(g <= TIGHT)), int(np.sum(g <= LOOSE)),
                                      float(np.max(g)))

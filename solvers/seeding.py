@@ -222,7 +222,23 @@ class SeedPlan:
                 # 57: its basin only from the third graph route; IPOPT's plan reaches it),
                 # 3.6 s CPU per pair on a loaded machine, against IPOPT's 89/100, 100/100,
                 # worst +4.5e-3, 10.5 s (benchmarks/results/ground_truth-2026-11-28-16.md,
-                # -10.md). Not the default for that reason
+                # -10.md). Not the default for that reason.
+                # No seed plan closes the gap (tuning pairs sample_pairs(carlike, 10,
+                # 20261207) and (.., 10, 20261208), 256 segments, one thread, loaded
+                # machine; against the lowest of every run): IPOPT's default 20/20 (12.4 s
+                # CPU per pair), this plan 12/20 (worst +0.26, 3.65 s); 3 graph routes, or 6
+                # routes and the best 10 carried (4.3 s): the same energies. On its 8
+                # misses: every seed at 256 (no 128 level, 8.4 s) 1/8 within 1e-4, the
+                # +0.26 pair still missed although IPOPT reaches it from the same
+                # hermite-track seed at 256; 16 random curves and the best 10 (6.6 s), with
+                # or without 2 polishing rounds: 0/8; polishing 3 rounds at 0.15 (7.6 s):
+                # 1/8; IPOPT from this plan's answer (0.3 s): lower on none of 10, higher
+                # on 4. The seeds' own energies (before solving) do not rank the winners:
+                # IPOPT's winning seed was 21st-29th of 30 on 5 of 20 pairs (the seeds
+                # break the heading constraints), so solving only the best-ranked seeds
+                # would drop winners. The interior point ends in other, mostly slightly
+                # higher discrete minima than IPOPT from the same seeds (1e-4 to 3e-3,
+                # one +26 %): the gap is the local method's, not the seeds'
                 return replace(plan, coarse=128, factor=2, refine_top=6, drop_rtol=0.3)
             return plan
         if not metric.convex_everywhere:
