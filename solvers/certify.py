@@ -493,8 +493,9 @@ def certify(
         from solvers.certify_conformal import ConformalSpec
         from solvers.certify_conformal_split import certify_conformal_best
 
+        spec = ConformalSpec.preset(mesh) if isinstance(mesh, str) else mesh
         res = certify_conformal_best(m, start, goal,
-                                     mesh if isinstance(mesh, ConformalSpec) else None,
+                                     spec if isinstance(spec, ConformalSpec) else None,
                                      path=path)
         return res.strict() if strict else res  # type: ignore[return-value]
     if m.dim != 2:  # any other dimension: a verified potential (issue 46, items 1-2)

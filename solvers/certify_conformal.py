@@ -71,7 +71,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, ClassVar
 
 import casadi as ca
 import numpy as np
@@ -110,6 +110,9 @@ MIN_SPLIT = 2000
 #: ``r`` ranges): 76.4 / 105.5 with 0 (the widest side), 79.8 / 106.3 with 1, 83.1 / 106.2
 #: with 10, 83.3 (pair 1) with 100.
 SPLIT_ALIGN = 10.0
+#: Box enclosures of the ``"coarse"`` preset (all runs of
+#: :func:`solvers.certify_conformal_split.certify_conformal_best` together).
+COARSE_BOXES = 100_000
 
 
 @dataclass(frozen=True)
@@ -155,6 +158,18 @@ class ConformalSpec:
             raise InputError(f"ConformalSpec.segments must be an integer >= 2, got "
                              f"{self.segments!r}")
 
+    @classmethod
+    def preset(cls, name: str) -> ConformalSpec:
+        """The presets by name, as :class:`solvers.certify.MeshSpec`'s: ``"coarse"`` (a
+        work budget of ``COARSE_BOXES`` box enclosures for all runs together: the quick
+        report's), ``"default"`` (the defaults above) or ``"fine"`` (4 x their boxes)."""
+        presets = {"coarse": cls(max_boxes=COARSE_BOXES), "default": cls(),
+                   "fine": cls(max_boxes=4 * cls.max_boxes, max_live=2 * cls.max_live)}
+        if name not in presets:
+            raise InputError(f"unknown mesh preset {name!r}; choose one of "
+                             f"{', '.join(presets)}")
+        return presets[name]
+
 
 @dataclass
 class ConformalCertifyResult(Result):
@@ -173,6 +188,17 @@ class ConformalCertifyResult(Result):
     potentials solved. ``stopped_by``: ``no_refinement`` (no box holds a cell down), ``max_boxes``,
     ``max_live`` or ``max_rounds`` (the budgets), or a failure's label. ``times`` in
     seconds (solve, boxes, lp, total); ``wall_time`` their total."""
+
+    rigour: ClassVar[dict[str, str]] = {
+        "upper": "proven: path length with interval bound of the quadrature error "
+                 "(Metric.path_length_bounds)",
+        "lower": "proven: a planar potential on the chord's (s, r) plane whose gradients are "
+                 "checked exactly against interval enclosures of the conformal factor over "
+                 "boxes (outward rounding); a lower bound only, the upper is the path's",
+        "region": "proven: boxes dropped only outside the ellipsoid a path shorter than the "
+                  "upper bound cannot leave (the factor's proven minimum over kept boxes)",
+    }
+    """What each part of the interval rests on (as ``NDResult.rigour``)."""
 
     metric: str
     start: np.ndarray

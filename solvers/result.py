@@ -9,7 +9,7 @@ result derives from :class:`finsler.status.Result` (``status``, ``converged``, `
 from __future__ import annotations
 
 from dataclasses import dataclass, field, fields
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -348,6 +348,17 @@ class CertifyResult(MeshCertificate):
     for a given path; its label, e.g. ``"success"``, in JSON) and ``lp_status`` the last
     LP's :class:`finsler.status.LPStatus` (a ``str`` enum of cvxpy's words).
     """
+
+    rigour: ClassVar[dict[str, str]] = {
+        "upper": "proven: path length with interval bound of the quadrature error "
+                 "(Metric.path_length_bounds)",
+        "lower": "proven: piecewise-quadratic dual potential (LP) whose rows hold on every "
+                 "triangle by interval enclosures of F's Hessians (outward rounding); the "
+                 "potential divided by its largest row ratio over all rows",
+        "region": "proven: triangles dropped only outside the ellipse a curve shorter than "
+                  "the upper bound cannot leave (a proven speed floor F >= m |v|)",
+    }
+    """What each part of the interval rests on (as ``NDResult.rigour``)."""
 
     metric: str
     start: np.ndarray

@@ -487,7 +487,8 @@ def test_report_agrees_with_geodesics_solve(report_dir: Path) -> None:
 def test_report_figures_for_car_and_arm(tmp_path: Path, env: str) -> None:
     m = finsler.get_metric(env)
     doc = build_report(env, tmp_path, pairs=finsler.default_pairs(m)[:2],
-                       policy=StraightLine(m), workers=1, progress=False, continuum=False)
+                       policy=StraightLine(m), workers=1, progress=False, continuum=False,
+                       certify=0)  # certificates beyond 2-D: tests/test_report_certify.py
     name = "carlike_headings.png" if env == "carlike" else "panda_motion.png"
     assert name in doc["figures"] and _png_has_content(tmp_path / name)
     assert math.isfinite(doc["success_rate"]["straight"])

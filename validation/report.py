@@ -24,19 +24,18 @@ from __future__ import annotations
 
 import json
 import math
-import time
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 import finsler
-import solvers
 from finsler import Metric, load_pairs
 from finsler.errors import InputError
 from finsler.infra.files import made_folders
 from validation.comparison import Comparison, compare, midpoint_error, ratio_stats
 from validation.jsonout import jsonable
+from validation.report_certify import certified_intervals, default_count, md_certified
 
 __all__ = ["build_report", "load_report_policy", "read_learning_curve", "write_figures"]
 
@@ -340,44 +339,6 @@ def _md_midpoint(doc: dict[str, Any], metric: Metric) -> list[str]:
     return lines
 
 
-def _md_certified(doc: dict[str, Any]) -> list[str]:
-    """The certified intervals (if computed)."""
-    lines: list[str] = []
-    cert = doc.get("certified")
-    if cert:
-        done = [r for r in cert["pairs"] if "error" not in r]
-        has_s = any("searched_excess_bound" in r for r in done)
-        lines += [
-            "## Certified distances",
-            "",
-            f"For the first {len(cert['pairs'])} pairs, `solvers.certify` ({cert['mesh']} "
-            "mesh) proves lower <= d(s, g) <= upper (a dual potential for the lower bound, "
-            "the exact path's proven length for the upper). The last columns are PROVEN "
-            "bounds on how much longer than the true distance the learned paths are: their "
-            "proven length over the certified lower bound, minus 1. The mesh's work "
-            "budgets (refinement rounds, triangles) end the refinement, never a time limit "
-            "(`stopped by`), so the intervals do not depend on the machine.",
-            "",
-            "| pair | lower | upper | gap | learned: excess <= |"
-            + (" learned + route search: excess <= |" if has_s else "")
-            + " stopped by | seconds |",
-            "|---|---|---|---|---|" + ("---|" if has_s else "") + "---|---|",
-        ]
-        for r in cert["pairs"]:
-            if "error" in r:
-                lines.append(f"| {r['pair']} | no certificate: {r['error']} |")
-                continue
-            lines.append(f"| {r['pair']} | {r['lower']:.6f} | {r['upper']:.6f} | "
-                         f"{r['gap']:.2e} | {_excess(r.get('learned_excess_bound'))} |"
-                         + (f" {_excess(r.get('searched_excess_bound'))} |" if has_s else "")
-                         + f" {r['stopped_by']} | {r['seconds']:.0f} |")
-        if done:
-            lines += ["", f"Convexity: {done[0]['convexity']} (where F(x, .) is not convex "
-                      "the bound holds for the distance, that of the convexified metric).",
-                      ""]
-    return lines
-
-
 def _md_finsler_and_timing(doc: dict[str, Any]) -> list[str]:
     """The share of non-convex path points, the time per path and the exact solver's statuses."""
     lines: list[str] = []
@@ -463,7 +424,7 @@ def _md_figures(doc: dict[str, Any], figures: list[str]) -> list[str]:
 def _markdown(doc: dict[str, Any], figures: list[str], metric: Metric) -> str:
     """``report.md``: one section per step, in the order a reader meets them."""
     lines = [*_md_summary(doc, metric), *_md_search(doc), *_md_midpoint(doc, metric),
-             *_md_certified(doc), *_md_finsler_and_timing(doc), *_md_figures(doc, figures),
+             *md_certified(doc), *_md_finsler_and_timing(doc), *_md_figures(doc, figures),
              "All numbers are also in `report.json`.", ""]
     return "\n".join(lines)
 
@@ -498,8 +459,10 @@ def build_report(
     with them (its run's own parameters are always the ones reported). ``search``: also
     report the policy-guided route search (:meth:`learn.Policy.search`; True = the default
     :class:`learn.SearchSpec`, or a spec, or False/None for none), for policies that have
-    it. ``certify``: certified intervals for this many pairs on 2-D metrics (default: 2
-    with ``quick``, on the coarse mesh, else 5 on the default mesh; 0: none)."""
+    it. ``certify``: certified intervals for this many pairs, in any dimension
+    :func:`solvers.certify` accepts (:mod:`validation.report_certify`; default:
+    :func:`~validation.report_certify.default_count` pairs with the preset
+    :func:`~validation.report_certify.preset_for` picks; 0: none)."""
     if certify is not None and (isinstance(certify, bool) or not isinstance(certify, int)
                                 or certify < 0):
         raise InputError(f"certify must be a number of pairs >= 0, got {certify!r}")
@@ -565,7 +528,7 @@ def _build_report(env: str | None, out: Path, *, run: str | Path | None,
     doc["time_to_success"] = time_to_success(doc["learning_curve"])
     doc["learned_length_ratio_per_pair"] = [
         None if not np.isfinite(x) else float(x) for x in cmp.ratios("learned")]
-    n_cert = (2 if quick else 5) if certify is None else int(certify)
+    n_cert = default_count(metric, quick) if certify is None else int(certify)
     cert = certified_intervals(cmp, metric, n_cert, quick)
     if cert is not None:
         doc["certified"] = cert
@@ -587,48 +550,3 @@ def _build_report(env: str | None, out: Path, *, run: str | Path | None,
     atomic_write_text(out / "report.json", json.dumps(doc, indent=2, allow_nan=False))
     atomic_write_text(out / "report.md", _markdown(doc, figures, metric))
     return doc
-
-
-def _excess(bound: float | None) -> str:
-    """A proven excess bound as a percentage (``-`` where none is finite: no lower bound)."""
-    return f"{100 * bound:.2f}%" if bound is not None and math.isfinite(bound) else "-"
-
-
-def certified_intervals(cmp: Comparison, metric: Metric, count: int, quick: bool
-                        ) -> dict[str, Any] | None:
-    """Certified intervals ``lower <= d <= upper`` (:func:`solvers.certify`) for the first
-    ``count`` pairs of a 2-D comparison, with the exact path as the curve of the upper
-    bound (no second solve), and per pair a PROVEN bound on how much longer than the
-    distance the learned path (and the route search's) is: its proven length
-    (:meth:`Metric.path_length_bounds`) over the certified lower bound. ``quick``: the
-    coarse mesh, else the default mesh; the meshes' work budgets (rounds, triangles) decide
-    the refinement, never a wall-clock limit, so the same report gives the same intervals
-    on any machine under any load. Each row has the certificate's ``status``
-    (:class:`solvers.CertifyStatus`; a failed refinement keeps the best interval proven,
-    lower bound 0 if none, and an infinite excess bound); a pair that cannot be certified
-    (bad input, e.g. start and goal too close) is listed with its ``error``. None where the
-    metric is not 2-D or ``count`` is 0."""
-    if metric.dim != 2 or count <= 0:
-        return None
-    mesh = "coarse" if quick else "default"
-    rows: list[dict[str, Any]] = []
-    for i in range(min(count, len(cmp.pairs))):
-        t0 = time.perf_counter()
-        try:
-            c = solvers.certify(metric, cmp.pairs[i, 0], cmp.pairs[i, 1], mesh,
-                                path=cmp.exact.paths[i])
-        except InputError as err:  # e.g. start and goal too close to certify
-            rows.append({"pair": i, "error": str(err), "seconds": time.perf_counter() - t0})
-            continue
-        row = {"pair": i, "lower": c.lower, "upper": c.upper, "gap": c.gap,
-               "exact_length_proven_upper": c.path_upper, "convexity": c.convexity,
-               "triangles": c.triangles, "stopped_by": c.stopped_by,
-               "status": c.status.label, "seconds": time.perf_counter() - t0}
-        for w in ("learned", "searched"):
-            ps = getattr(cmp, w, None)
-            if ps is not None:
-                up = metric.path_length_bounds(ps.paths[i]).upper
-                row[f"{w}_length_proven_upper"] = up
-                row[f"{w}_excess_bound"] = up / c.lower - 1.0 if c.lower > 0 else math.inf
-        rows.append(row)
-    return {"mesh": mesh, "pairs": rows}

@@ -58,15 +58,17 @@ def report_command(
              "midpoints at the top levels chosen by the cost of the policy's completed "
              "paths; values of C only).")] = True,
     certify: Annotated[int | None, typer.Option(
-        help="Certified intervals lower <= d <= upper (solvers.certify) for this many pairs "
-             "on 2-D metrics, with proven bounds on the learned paths' excess length "
-             "(default: 2 with --quick on the coarse mesh, else 5 on the default mesh; 0: "
-             "none).")] = None,
+        help="Certified intervals lower <= d <= upper (solvers.certify, any dimension it "
+             "accepts; beyond 2-D the lower bound may be far from the upper one) for this "
+             "many pairs, with proven bounds on the learned paths' excess length (default "
+             "in 2-D: 2 with --quick on the coarse mesh, else 5 on the default mesh; beyond "
+             "2-D: 1 with --quick, else 2, on the coarse preset; 0: none).")] = None,
 ) -> None:
     """Benchmark a learned policy against exact geodesics and the straight-line baseline:
     success rates, length ratios, midpoint errors, timing, figures."""
     from learn.registry import import_method_modules
     from validation.report import build_report
+    from validation.report_certify import cli_lines
 
     try:
         if workers is not None and workers < 1:
@@ -100,15 +102,8 @@ def report_command(
                    f"evaluations of C per path): success {sr['searched']:.0%}, length/exact "
                    f"mean {sl['mean']:.4f}, median {sl['median']:.4f}, 95th pct "
                    f"{sl['p95']:.4f}, max {sl['max']:.4f}")
-    for r in (doc.get("certified") or {}).get("pairs", []):
-        if "error" in r:
-            typer.echo(f"certified pair {r['pair']}: no certificate ({r['error']})")
-            continue
-        typer.echo(f"certified pair {r['pair']}: {r['lower']:.6f} <= d <= {r['upper']:.6f} "
-                   f"(gap {r['gap']:.1e}); learned path at most "
-                   f"{100 * r['learned_excess_bound']:.2f}% longer than d"
-                   + (f", with route search {100 * r['searched_excess_bound']:.2f}%"
-                      if "searched_excess_bound" in r else ""))
+    for line in cli_lines(doc):
+        typer.echo(line)
     typer.echo(f"figures: {', '.join(doc['figures'])}")
 
 
