@@ -143,7 +143,8 @@ def md_certified(doc: dict[str, Any]) -> list[str]:
     lines = [
         "## Certified distances",
         "",
-        f"For the first {len(cert['pairs'])} pairs, `solvers.certify` ({cert['mesh']} "
+        f"For the first {len(cert['pairs'])} pair{'s' * (len(cert['pairs']) != 1)}, "
+        f"`solvers.certify` ({cert['mesh']} "
         "preset) proves lower <= d(s, g) <= upper (a verified potential for the lower bound, "
         "the exact path's proven length for the upper). `bound by` says which potential "
         "gave the lower bound. The excess columns are PROVEN bounds on how much longer than "
@@ -169,11 +170,11 @@ def md_certified(doc: dict[str, Any]) -> list[str]:
                      + f" {r['stopped_by']} | {_work(r)} | {r['cpu_seconds']:.1f} |")
     if done:
         first = done[0]
-        lines += ["", f"Method: {first['method']}."]
+        lines += ["", f"Method (pair {first['pair']}): {first['method']}."]
         if "trivial_lower" in first:
-            lines += ["", "The lower bound is the best this toolkit proves here, not a tight "
-                      "interval: the trivial bound (the factor's proven minimum times the "
-                      "Euclidean distance) is "
+            lines += ["", "Here the lower bound is a sound bound, not one refined to a target "
+                      "interval; it must beat the trivial bound (the factor's proven minimum "
+                      "times the Euclidean distance): "
                       + ", ".join(f"{r['trivial_lower']:.6g} (pair {r['pair']})"
                                   for r in done if "trivial_lower" in r) + "."]
         if "convexity" in first:
@@ -192,8 +193,9 @@ def cli_lines(doc: dict[str, Any]) -> list[str]:
             lines.append(f"certified pair {r['pair']}: no certificate ({r['error']})")
             continue
         text = (f"certified pair {r['pair']}: {r['lower']:.6g} <= d <= {r['upper']:.6g} "
-                f"(gap {r['gap']:.1e}, {r['status']}, lower bound by {r['bound_by']}, "
-                f"{_work(r)}, {r['cpu_seconds']:.1f} s CPU)")
+                f"(gap {r['gap']:.1e}, {r['status']}, "
+                + (f"lower bound by {r['bound_by']}, " if r["bound_by"] != "potential" else "")
+                + f"{_work(r)}, {r['cpu_seconds']:.1f} s CPU)")
         if "learned_excess_bound" in r:
             text += f"; learned path at most {_excess(r['learned_excess_bound'])} longer than d"
         if "searched_excess_bound" in r:
