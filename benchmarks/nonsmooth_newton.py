@@ -17,15 +17,20 @@ CPU is the figure to compare):
    default ``solve_batch`` (IPOPT). Per pair: energies, the relative difference, status,
    method of the answer (``ipopt`` where the batched result was finished by IPOPT) and
    the reported KKT residual; time per pair.
-3. With ``--truth N``: the batched solve on the first N pairs of the ground-truth set
+3. With ``--work``: where the interior point's work goes, on the default plan's seed rows
+   at ``--segments`` (all rows of all pairs in one batch, as measurement 1): per seed
+   family the rows, how many converged / stalled / ended at the iteration cap, their
+   median iterations and their share of all row iterations (a row's iterations are what
+   it costs: every iteration evaluates its segments once and solves its system once).
+4. With ``--truth N``: the batched solve on the first N pairs of the ground-truth set
    (``sample_pairs(carlike, 50, 20261201)``) against the best-known energies that
    ``benchmarks/ground_truth.py`` cached (``results/ground_truth_cache``).
 
 Usage::
 
     python benchmarks/nonsmooth_newton.py [--pairs 4] [--segments 256] [--seed 20261202]
-        [--coarse 32] [--factor 2] [--top 3] [--skip-rows] [--skip-ipopt] [--truth 0]
-        [--tag NAME] [--no-write]
+        [--coarse 32] [--factor 2] [--top 3] [--skip-rows] [--skip-ipopt] [--skip-whole]
+        [--work] [--truth 0] [--tag NAME] [--no-write]
 """
 
 from __future__ import annotations
@@ -93,6 +98,47 @@ def same_seeds(m: finsler.Metric, pairs: np.ndarray, n: int) -> tuple[str, str]:
                f"CPU {(c2 - c1) / K:.2f} s per pair. Rows converged by both: "
                f"{int(both.sum())}, of which {int(np.sum(both & (np.abs(rel) <= RTOL)))} "
                f"equal to 1e-6.")
+    print(table)
+    print(summary)
+    return table, summary
+
+
+def _family(name: str) -> str:
+    """A seed row's family: its name up to the first ``[``, ``#`` or sign/digit suffix."""
+    for i, ch in enumerate(name):
+        if ch in "[#+-" or ch.isdigit():
+            return name[:i] or name
+    return name
+
+
+def work(m: finsler.Metric, pairs: np.ndarray, n: int) -> tuple[str, str]:
+    K = pairs.shape[0]
+    names, curves = seed_batch(m, pairs[:, 0], pairs[:, 1], n, SeedPlan.default(m))
+    S = len(names)
+    rows = curves.reshape(K * S, n + 1, m.dim)
+    w0, c0 = _clock()
+    ip = interior_energy(m, rows, scale=domain_scale(m))
+    w1, c1 = _clock()
+    fam = np.array([_family(x) for x in names] * K)
+    it, stt = ip.iterations, ip.status
+    total = int(it.sum())
+    out = []
+    for f in dict.fromkeys(fam):
+        sel = fam == f
+        out.append([f, int(sel.sum()), int(np.sum(stt[sel] == NewtonStatus.CONVERGED)),
+                    int(np.sum(stt[sel] == NewtonStatus.STALLED)),
+                    int(np.sum(stt[sel] == NewtonStatus.MAX_ITERATIONS)),
+                    f"{np.median(it[sel]):.0f}", f"{it[sel].sum() / total:.0%}"])
+        print(*out[-1], flush=True)
+    capped = stt == NewtonStatus.MAX_ITERATIONS
+    table = markdown_table(["seed family", "rows", "converged", "stalled", "at the cap",
+                            "median iterations", "share of iterations"], out)
+    summary = (f"{K} pairs x {S} seed rows at {n} segments (one batch): wall "
+               f"{(w1 - w0) / K:.2f} s, CPU {(c1 - c0) / K:.2f} s per pair; {total} row "
+               f"iterations, {int(capped.sum())}/{len(rows)} rows at the cap "
+               f"({ip.iterations.max()}) taking {it[capped].sum() / total:.0%} of them; "
+               f"converged rows' iterations median "
+               f"{np.median(it[stt == NewtonStatus.CONVERGED]):.0f}.")
     print(table)
     print(summary)
     return table, summary
@@ -175,6 +221,9 @@ def main() -> None:
     ap.add_argument("--top", type=int, default=3)
     ap.add_argument("--skip-rows", action="store_true", help="skip measurement 1")
     ap.add_argument("--skip-ipopt", action="store_true", help="measurement 2 without IPOPT")
+    ap.add_argument("--skip-whole", action="store_true", help="skip measurement 2")
+    ap.add_argument("--work", action="store_true",
+                    help="where the interior point's work goes (measurement 3)")
     ap.add_argument("--truth", type=int, default=0,
                     help="also solve the first N ground-truth pairs against the cache")
     ap.add_argument("--tag", default="", help="appended to the results file's name")
@@ -191,11 +240,15 @@ def main() -> None:
     if not a.skip_rows:
         t, s = same_seeds(m, pairs, a.segments)
         out.add("## 1. The same seed rows, each solver alone", t, "", s)
-    t, s = whole(m, pairs, a.segments, plan, not a.skip_ipopt)
-    out.add("## 2. The whole solve", t, "", s)
+    if not a.skip_whole:
+        t, s = whole(m, pairs, a.segments, plan, not a.skip_ipopt)
+        out.add("## 2. The whole solve", t, "", s)
+    if a.work:
+        t, s = work(m, pairs, a.segments)
+        out.add("## 3. Where the interior point's work goes", t, "", s)
     if a.truth:
         t, s = truth(m, a.truth, a.segments, plan)
-        out.add("## 3. Against the best known (ground truth cache)", t, "", s)
+        out.add("## 4. Against the best known (ground truth cache)", t, "", s)
     if not a.no_write:
         out.write()
 
