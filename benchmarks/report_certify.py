@@ -38,6 +38,8 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=20261230)
     ap.add_argument("--no-write", action="store_true", help="print only")
     args = ap.parse_args()
+    out = ResultsFile("report_certify", title="Certificates of a report: cost per pair "
+                      "(issue 46, item 5)")  # the header's start: date and load now
     metrics = args.metric or ["poincare-slab", "carlike", "panda-pole"]
     presets = args.preset or ["coarse"]
     rows, summary = [], []
@@ -65,8 +67,6 @@ def main() -> None:
     print("\n".join(summary))
     if args.no_write:
         return
-    out = ResultsFile("report_certify", title="Certificates of a report: cost per pair "
-                      "(issue 46, item 5)")
     out.add(f"{args.pairs} pairs `finsler.sample_pairs(metric, {args.pairs}, {args.seed})` "
             "per metric, solved by `solvers.solve_geodesic`, then `solvers.certify(metric, "
             "s, g, preset, path=the solved path)` as `geodesics report` does. CPU time is "

@@ -9,15 +9,17 @@ Every row is built from what the certificate carries, never from the metric's na
 on) and ``lp_status``; the row names their work counts as they are (``work``), their
 ``method`` (the result's own where it has one) and the source of each bound.
 
-Budgets (``benchmarks/report_certify.py``, ``benchmarks/results/report_certify-*.md``; CPU
-seconds of the certificate alone, per pair, on a machine shared with other jobs): in 2-D a
-report certifies ``QUICK_PAIRS`` pairs with the ``"coarse"`` preset under ``--quick`` (a few
-seconds a pair) and ``FULL_PAIRS`` with ``"default"``; beyond 2-D it certifies
-``QUICK_PAIRS_ND`` / ``FULL_PAIRS_ND`` pairs with ``"coarse"``: on two pairs of seed
-20261230 poincare-slab 11-24 s (gaps 4.4e-2, 7.0e-2), panda-pole 13-14 s (lower/upper
-0.80, 0.67; 1e5 box enclosures), car-like 121-163 s (gaps 0.28, 0.60), whose default preset
-costs about 230 s a pair. ``--certify N`` sets the count. Presets are work budgets (rounds,
-cells, boxes), never time limits: the same report gives the same intervals on any machine.
+Budgets (``benchmarks/report_certify.py``; ``benchmarks/results/report_certify-2026-11-28.md``
+and ``-2.md``: CPU seconds of the certificate alone, two pairs of seed 20261230 per metric, on a
+machine shared with other jobs): in 2-D a report certifies ``QUICK_PAIRS`` pairs with the
+``"coarse"`` preset under ``--quick`` (Matsumoto 5-15 s a pair, gap ~5e-2) and
+``FULL_PAIRS`` with ``"default"`` (4-32 s, gap < 1e-2); beyond 2-D it certifies
+``QUICK_PAIRS_ND`` / ``FULL_PAIRS_ND`` pairs with ``"coarse"``: poincare-slab 10-26 s (gaps
+4.4e-2, 7.0e-2), panda-pole 11-13 s (lower/upper 0.80, 0.67; 1e5 box enclosures), car-like
+114-164 s (gaps 0.28, 0.60), whose default preset costs about 230 s a pair. ``--certify N``
+sets the count. Presets are work budgets (rounds, cells, boxes), never time limits: the same
+report gives the same intervals on any machine (two runs of the benchmark gave the same
+intervals to every digit).
 """
 
 from __future__ import annotations
