@@ -22,6 +22,9 @@ CPU is the figure to compare):
    family the rows, how many converged / stalled / ended at the iteration cap, their
    median iterations and their share of all row iterations (a row's iterations are what
    it costs: every iteration evaluates its segments once and solves its system once).
+   With ``--before`` the same rows are first solved as before the interior point's
+   batched matrix products (commit "interior: batched matrix products"): CPU and wall of
+   both, statuses and energies compared.
 4. With ``--truth N``: the batched solve on the first N pairs of the ground-truth set
    (``sample_pairs(carlike, 50, 20261201)``) against the best-known energies that
    ``benchmarks/ground_truth.py`` cached (``results/ground_truth_cache``).
@@ -30,7 +33,7 @@ Usage::
 
     python benchmarks/nonsmooth_newton.py [--pairs 4] [--segments 256] [--seed 20261202]
         [--coarse 32] [--factor 2] [--top 3] [--skip-rows] [--skip-ipopt] [--skip-whole]
-        [--work] [--truth 0] [--tag NAME] [--no-write]
+        [--work [--before]] [--truth 0] [--tag NAME] [--no-write]
 """
 
 from __future__ import annotations
@@ -111,11 +114,33 @@ def _family(name: str) -> str:
     return name
 
 
-def work(m: finsler.Metric, pairs: np.ndarray, n: int) -> tuple[str, str]:
+def _before(m: finsler.Metric, rows: np.ndarray) -> tuple[object, float, float]:
+    """The interior point as before commit "interior: batched matrix products": its
+    small matrix-vector products as broadcast products and sums (the reference for
+    ``--before``), -> (result, wall, CPU)."""
+    import solvers.interior as ip_mod
+
+    new = ip_mod._mv, ip_mod._mtv
+    ip_mod._mv = lambda a, v: (a * v[..., None, :]).sum(-1)
+    ip_mod._mtv = lambda a, v: (a * v[..., :, None]).sum(-2)
+    try:
+        w0, c0 = _clock()
+        res = interior_energy(m, rows, scale=domain_scale(m))
+        w1, c1 = _clock()
+    finally:
+        ip_mod._mv, ip_mod._mtv = new
+    return res, w1 - w0, c1 - c0
+
+
+def work(m: finsler.Metric, pairs: np.ndarray, n: int, before: bool = False
+         ) -> tuple[str, str]:
     K = pairs.shape[0]
     names, curves = seed_batch(m, pairs[:, 0], pairs[:, 1], n, SeedPlan.default(m))
     S = len(names)
     rows = curves.reshape(K * S, n + 1, m.dim)
+    interior_energy(m, rows[:1], scale=domain_scale(m))  # CasADi functions built untimed
+    if before:
+        old, wb, cb = _before(m, rows)
     w0, c0 = _clock()
     ip = interior_energy(m, rows, scale=domain_scale(m))
     w1, c1 = _clock()
@@ -139,6 +164,25 @@ def work(m: finsler.Metric, pairs: np.ndarray, n: int) -> tuple[str, str]:
                f"({ip.iterations.max()}) taking {it[capped].sum() / total:.0%} of them; "
                f"converged rows' iterations median "
                f"{np.median(it[stt == NewtonStatus.CONVERGED]):.0f}.")
+    if before:
+        conv = stt == NewtonStatus.CONVERGED
+        oconv = old.status == NewtonStatus.CONVERGED
+        both = conv & oconv
+        rel = np.abs(ip.energy[both] - old.energy[both]) / old.energy[both]
+        best = np.array([np.min(np.where(conv[k * S:(k + 1) * S],
+                                         ip.energy[k * S:(k + 1) * S], np.inf))
+                         for k in range(K)])
+        obest = np.array([np.min(np.where(oconv[k * S:(k + 1) * S],
+                                          old.energy[k * S:(k + 1) * S], np.inf))
+                          for k in range(K)])
+        summary += (f" Before (the same rows, the same run): wall {wb / K:.2f} s, CPU "
+                    f"{cb / K:.2f} s per pair, {int(old.iterations.sum())} row iterations; "
+                    f"after/before CPU {(c1 - c0) / cb:.2f}. Status the same on "
+                    f"{int(np.sum(stt == old.status))}/{len(rows)} rows; rows converged by "
+                    f"both: {int(both.sum())}, energies equal to max relative difference "
+                    f"{np.max(rel, initial=0.0):.1e}; each pair's lowest converged energy "
+                    f"after/before - 1: max {np.max(best / obest - 1):+.1e}, min "
+                    f"{np.min(best / obest - 1):+.1e}.")
     print(table)
     print(summary)
     return table, summary
@@ -224,6 +268,9 @@ def main() -> None:
     ap.add_argument("--skip-whole", action="store_true", help="skip measurement 2")
     ap.add_argument("--work", action="store_true",
                     help="where the interior point's work goes (measurement 3)")
+    ap.add_argument("--before", action="store_true",
+                    help="with --work: also time the interior point as before its batched "
+                    "matrix products, on the same rows in the same run")
     ap.add_argument("--truth", type=int, default=0,
                     help="also solve the first N ground-truth pairs against the cache")
     ap.add_argument("--tag", default="", help="appended to the results file's name")
@@ -244,7 +291,7 @@ def main() -> None:
         t, s = whole(m, pairs, a.segments, plan, not a.skip_ipopt)
         out.add("## 2. The whole solve", t, "", s)
     if a.work:
-        t, s = work(m, pairs, a.segments)
+        t, s = work(m, pairs, a.segments, a.before)
         out.add("## 3. Where the interior point's work goes", t, "", s)
     if a.truth:
         t, s = truth(m, a.truth, a.segments, plan)
