@@ -22,9 +22,9 @@ CPU is the figure to compare):
    family the rows, how many converged / stalled / ended at the iteration cap, their
    median iterations and their share of all row iterations (a row's iterations are what
    it costs: every iteration evaluates its segments once and solves its system once).
-   With ``--before`` the same rows are first solved as before the interior point's
-   batched matrix products (commit "interior: batched matrix products"): CPU and wall of
-   both, statuses and energies compared.
+   With ``--before REV`` the same rows are first solved by ``solvers/interior.py`` as
+   committed at git revision ``REV`` (e.g. ``9d23a82``, before this session's speed-ups):
+   CPU and wall of both, statuses and energies compared.
 4. With ``--truth N``: the batched solve on the first N pairs of the ground-truth set
    (``sample_pairs(carlike, 50, 20261201)``) against the best-known energies that
    ``benchmarks/ground_truth.py`` cached (``results/ground_truth_cache``).
@@ -33,7 +33,7 @@ Usage::
 
     python benchmarks/nonsmooth_newton.py [--pairs 4] [--segments 256] [--seed 20261202]
         [--coarse 32] [--factor 2] [--top 3] [--skip-rows] [--skip-ipopt] [--skip-whole]
-        [--work [--before]] [--truth 0] [--tag NAME] [--no-write]
+        [--work [--before REV]] [--truth 0] [--tag NAME] [--no-write]
 """
 
 from __future__ import annotations
@@ -114,25 +114,33 @@ def _family(name: str) -> str:
     return name
 
 
-def _before(m: finsler.Metric, rows: np.ndarray) -> tuple[object, float, float]:
-    """The interior point as before commit "interior: batched matrix products": its
-    small matrix-vector products as broadcast products and sums (the reference for
-    ``--before``), -> (result, wall, CPU)."""
-    import solvers.interior as ip_mod
+def _before(m: finsler.Metric, rows: np.ndarray, rev: str) -> tuple[object, float, float]:
+    """``solvers/interior.py`` as committed at ``rev`` (``git show``, loaded as its own
+    module) on ``rows`` -> (result, wall, CPU): the reference for ``--before``."""
+    import importlib.util
+    import subprocess
+    import sys
+    import tempfile
+    from pathlib import Path
 
-    new = ip_mod._mv, ip_mod._mtv
-    ip_mod._mv = lambda a, v: (a * v[..., None, :]).sum(-1)
-    ip_mod._mtv = lambda a, v: (a * v[..., :, None]).sum(-2)
-    try:
-        w0, c0 = _clock()
-        res = interior_energy(m, rows, scale=domain_scale(m))
-        w1, c1 = _clock()
-    finally:
-        ip_mod._mv, ip_mod._mtv = new
+    root = Path(__file__).resolve().parent.parent
+    src = subprocess.run(["git", "show", f"{rev}:solvers/interior.py"], cwd=root, check=True,
+                         capture_output=True, text=True).stdout
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "interior_before.py"
+        path.write_text(src)
+        spec = importlib.util.spec_from_file_location("interior_before", path)
+        mod = importlib.util.module_from_spec(spec)
+        sys.modules[spec.name] = mod  # (its dataclasses look their module up there)
+        spec.loader.exec_module(mod)
+    mod.interior_energy(m, rows[:1], scale=domain_scale(m))
+    w0, c0 = _clock()
+    res = mod.interior_energy(m, rows, scale=domain_scale(m))
+    w1, c1 = _clock()
     return res, w1 - w0, c1 - c0
 
 
-def work(m: finsler.Metric, pairs: np.ndarray, n: int, before: bool = False
+def work(m: finsler.Metric, pairs: np.ndarray, n: int, before: str = ""
          ) -> tuple[str, str]:
     K = pairs.shape[0]
     names, curves = seed_batch(m, pairs[:, 0], pairs[:, 1], n, SeedPlan.default(m))
@@ -140,7 +148,7 @@ def work(m: finsler.Metric, pairs: np.ndarray, n: int, before: bool = False
     rows = curves.reshape(K * S, n + 1, m.dim)
     interior_energy(m, rows[:1], scale=domain_scale(m))  # CasADi functions built untimed
     if before:
-        old, wb, cb = _before(m, rows)
+        old, wb, cb = _before(m, rows, before)
     w0, c0 = _clock()
     ip = interior_energy(m, rows, scale=domain_scale(m))
     w1, c1 = _clock()
@@ -175,7 +183,8 @@ def work(m: finsler.Metric, pairs: np.ndarray, n: int, before: bool = False
         obest = np.array([np.min(np.where(oconv[k * S:(k + 1) * S],
                                           old.energy[k * S:(k + 1) * S], np.inf))
                           for k in range(K)])
-        summary += (f" Before (the same rows, the same run): wall {wb / K:.2f} s, CPU "
+        summary += (f" Before (`solvers/interior.py` at {before}, the same rows in the same "
+                    f"run): wall {wb / K:.2f} s, CPU "
                     f"{cb / K:.2f} s per pair, {int(old.iterations.sum())} row iterations; "
                     f"after/before CPU {(c1 - c0) / cb:.2f}. Status the same on "
                     f"{int(np.sum(stt == old.status))}/{len(rows)} rows; rows converged by "
@@ -268,9 +277,9 @@ def main() -> None:
     ap.add_argument("--skip-whole", action="store_true", help="skip measurement 2")
     ap.add_argument("--work", action="store_true",
                     help="where the interior point's work goes (measurement 3)")
-    ap.add_argument("--before", action="store_true",
-                    help="with --work: also time the interior point as before its batched "
-                    "matrix products, on the same rows in the same run")
+    ap.add_argument("--before", default="", metavar="REV",
+                    help="with --work: also time solvers/interior.py as committed at REV "
+                    "(git) on the same rows in the same run")
     ap.add_argument("--truth", type=int, default=0,
                     help="also solve the first N ground-truth pairs against the cache")
     ap.add_argument("--tag", default="", help="appended to the results file's name")
