@@ -24,7 +24,9 @@ CPU is the figure to compare):
    it costs: every iteration evaluates its segments once and solves its system once).
    With ``--before REV`` the same rows are first solved by ``solvers/interior.py`` as
    committed at git revision ``REV`` (e.g. ``9d23a82``, before this session's speed-ups):
-   CPU and wall of both, statuses and energies compared.
+   CPU and wall of both, statuses and energies compared; measurement 2 likewise runs the
+   whole solve first with that version of the interior point (``--default-plan``: the
+   default car-like plan as it is, not rebuilt from ``--coarse/--factor/--top``).
 4. With ``--truth N``: the batched solve on the first N pairs of the ground-truth set
    (``sample_pairs(carlike, 50, 20261201)``) against the best-known energies that
    ``benchmarks/ground_truth.py`` cached (``results/ground_truth_cache``).
@@ -32,8 +34,8 @@ CPU is the figure to compare):
 Usage::
 
     python benchmarks/nonsmooth_newton.py [--pairs 4] [--segments 256] [--seed 20261202]
-        [--coarse 32] [--factor 2] [--top 3] [--skip-rows] [--skip-ipopt] [--skip-whole]
-        [--work [--before REV]] [--truth 0] [--tag NAME] [--no-write]
+        [--coarse 32] [--factor 2] [--top 3] [--default-plan] [--skip-rows] [--skip-ipopt]
+        [--skip-whole] [--work [--before REV]] [--truth 0] [--tag NAME] [--no-write]
 """
 
 from __future__ import annotations
@@ -114,9 +116,9 @@ def _family(name: str) -> str:
     return name
 
 
-def _before(m: finsler.Metric, rows: np.ndarray, rev: str) -> tuple[object, float, float]:
-    """``solvers/interior.py`` as committed at ``rev`` (``git show``, loaded as its own
-    module) on ``rows`` -> (result, wall, CPU): the reference for ``--before``."""
+def _load_before(rev: str) -> object:
+    """``solvers/interior.py`` as committed at git revision ``rev``, loaded as its own
+    module (``interior_before``): the reference for ``--before``."""
     import importlib.util
     import subprocess
     import sys
@@ -133,6 +135,12 @@ def _before(m: finsler.Metric, rows: np.ndarray, rev: str) -> tuple[object, floa
         mod = importlib.util.module_from_spec(spec)
         sys.modules[spec.name] = mod  # (its dataclasses look their module up there)
         spec.loader.exec_module(mod)
+    return mod
+
+
+def _before(m: finsler.Metric, rows: np.ndarray, rev: str) -> tuple[object, float, float]:
+    """The interior point as committed at ``rev`` on ``rows`` -> (result, wall, CPU)."""
+    mod = _load_before(rev)
     mod.interior_energy(m, rows[:1], scale=domain_scale(m))
     w0, c0 = _clock()
     res = mod.interior_energy(m, rows, scale=domain_scale(m))
@@ -197,13 +205,25 @@ def work(m: finsler.Metric, pairs: np.ndarray, n: int, before: str = ""
     return table, summary
 
 
-def whole(m: finsler.Metric, pairs: np.ndarray, n: int, plan: SeedPlan, ipopt: bool
-          ) -> tuple[str, str]:
+def whole(m: finsler.Metric, pairs: np.ndarray, n: int, plan: SeedPlan, ipopt: bool,
+          before: str = "") -> tuple[str, str]:
     K = pairs.shape[0]
     # the graph seeder is built once per metric and process (a fixed cost): build it
     # outside the timing, as a long-running process would have it
     from solvers.seeding import graph_seeder
     graph_seeder(m)
+    if before:  # the same solve with solvers/interior.py as committed at ``before``
+        import solvers.batched as batched_mod
+
+        current = batched_mod.interior_energy
+        batched_mod.interior_energy = _load_before(before).interior_energy
+        try:
+            wb0, cb0 = _clock()
+            old = solvers.solve_batch(m, pairs, segments=n, workers=1, method="newton",
+                                      seeds=plan, progress=False)
+            wb1, cb1 = _clock()
+        finally:
+            batched_mod.interior_energy = current
     w0, c0 = _clock()
     new = solvers.solve_batch(m, pairs, segments=n, workers=1, method="newton", seeds=plan,
                               progress=False)
@@ -227,6 +247,15 @@ def whole(m: finsler.Metric, pairs: np.ndarray, n: int, plan: SeedPlan, ipopt: b
                f"top {plan.refine_top}, polish {plan.polish}: batched (method='newton') wall "
                f"{(w1 - w0) / K:.2f} s, CPU {(c1 - c0) / K:.2f} s per pair, "
                f"{sum(r.method == 'ipopt' for r in new)} answers finished by IPOPT")
+    if before:
+        eo = np.array([r.energy for r in old])
+        en = np.array([r.energy for r in new])
+        summary += (f". Before (`solvers/interior.py` at {before}, the same pairs in the same "
+                    f"run): wall {(wb1 - wb0) / K:.2f} s, CPU {(cb1 - cb0) / K:.2f} s per pair, "
+                    f"after/before CPU {(c1 - c0) / (cb1 - cb0):.2f}; energies after/before - "
+                    f"1: max {np.max(en / eo - 1):+.1e}, min {np.min(en / eo - 1):+.1e}; "
+                    f"status the same on "
+                    f"{sum(a.status == b.status for a, b in zip(new, old, strict=True))}/{K}")
     if ipopt:
         summary += (f"; IPOPT (default) wall {(w2 - w1) / K:.2f} s, CPU {(c2 - c1) / K:.2f} s "
                     f"per pair. Batched at or below IPOPT (1e-6 relative) on "
@@ -272,14 +301,17 @@ def main() -> None:
     ap.add_argument("--coarse", type=int, default=32)
     ap.add_argument("--factor", type=int, default=2)
     ap.add_argument("--top", type=int, default=3)
+    ap.add_argument("--default-plan", action="store_true",
+                    help="measurement 2 with the default car-like plan as it is (ignores "
+                    "--coarse, --factor, --top)")
     ap.add_argument("--skip-rows", action="store_true", help="skip measurement 1")
     ap.add_argument("--skip-ipopt", action="store_true", help="measurement 2 without IPOPT")
     ap.add_argument("--skip-whole", action="store_true", help="skip measurement 2")
     ap.add_argument("--work", action="store_true",
                     help="where the interior point's work goes (measurement 3)")
     ap.add_argument("--before", default="", metavar="REV",
-                    help="with --work: also time solvers/interior.py as committed at REV "
-                    "(git) on the same rows in the same run")
+                    help="with --work and measurement 2: also time solvers/interior.py as "
+                    "committed at REV (git) on the same rows / pairs in the same run")
     ap.add_argument("--truth", type=int, default=0,
                     help="also solve the first N ground-truth pairs against the cache")
     ap.add_argument("--tag", default="", help="appended to the results file's name")
@@ -287,8 +319,8 @@ def main() -> None:
     a = ap.parse_args()
     m = finsler.get_metric("carlike")
     pairs = np.asarray(finsler.sample_pairs(m, a.pairs, a.seed))
-    plan = dataclasses.replace(SeedPlan.default(m), coarse=a.coarse, factor=a.factor,
-                               refine_top=a.top)
+    plan = SeedPlan.default(m) if a.default_plan else dataclasses.replace(
+        SeedPlan.default(m), coarse=a.coarse, factor=a.factor, refine_top=a.top)
     out = ResultsFile("nonsmooth_newton" + (f"_{a.tag}" if a.tag else ""),
                       "Car-like: batched interior point against IPOPT")
     out.add(f"Pairs: `finsler.sample_pairs(carlike, {a.pairs}, {a.seed})`, "
@@ -297,7 +329,7 @@ def main() -> None:
         t, s = same_seeds(m, pairs, a.segments)
         out.add("## 1. The same seed rows, each solver alone", t, "", s)
     if not a.skip_whole:
-        t, s = whole(m, pairs, a.segments, plan, not a.skip_ipopt)
+        t, s = whole(m, pairs, a.segments, plan, not a.skip_ipopt, a.before)
         out.add("## 2. The whole solve", t, "", s)
     if a.work:
         t, s = work(m, pairs, a.segments, a.before)
