@@ -152,14 +152,22 @@ def _build(metric: Metric) -> _Fns:
 
 
 def _mv(a: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """Stacks of small matrices times vectors: ``a[..., i, j] v[..., j]`` (one batched
-    matrix product: ~3x faster than the broadcast product and sum it replaced)."""
-    return (a @ v[..., None])[..., 0]
+    """Stacks of small matrices times vectors: ``a[..., i, j] v[..., j]``, summed over
+    ``j`` in order, a product and a sum per ``j`` (bitwise the broadcast product and sum
+    over the short axis, ~2-6x faster; a matrix product rounds differently, and the
+    interior point's long runs amplify that into other local optima)."""
+    out = a[..., 0] * v[..., None, 0]
+    for j in range(1, a.shape[-1]):
+        out += a[..., j] * v[..., None, j]
+    return out
 
 
 def _mtv(a: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """Transposed: ``a[..., j, i] v[..., j]``."""
-    return (v[..., None, :] @ a)[..., 0, :]
+    """Transposed: ``a[..., j, i] v[..., j]`` (as :func:`_mv`)."""
+    out = a[..., 0, :] * v[..., 0, None]
+    for j in range(1, a.shape[-2]):
+        out += a[..., j, :] * v[..., j, None]
+    return out
 
 
 class _State:
