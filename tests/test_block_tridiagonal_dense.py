@@ -43,28 +43,29 @@ def test_dense_solves_definite_systems(m, d):
         np.testing.assert_allclose(x[k].ravel(), ref, rtol=1e-10, atol=1e-12)
 
 
+def _fields_solve(diag, off, rhs, scale, local):
+    """The same systems through the fields solve (one array per block entry), the reference."""
+    d = diag.shape[-1]
+    return block_tridiagonal_solve(
+        _NUMPY_OPS, [[np.ascontiguousarray(diag[..., i, j]) for j in range(d)]
+                     for i in range(d)],
+        [[np.ascontiguousarray(off[..., i, j]) for j in range(d)] for i in range(d)],
+        [np.ascontiguousarray(rhs[..., i]) for i in range(d)], scale[:, None], local=local,
+        method="cyclic")
+
+
 @pytest.mark.parametrize("m", [5, 63, 100])
 def test_dense_matches_fields_where_blocks_are_shifted(m):
     rng = np.random.default_rng(m)
     d = 3
     diag, off, rhs, scale = _system(rng, 4, m, d, -1.5)
     x, ok = block_tridiagonal_solve_dense(diag, off, rhs, scale, local=True)
-    ref, ok_ref = block_tridiagonal_solve(
-        _NUMPY_OPS, [[np.ascontiguousarray(diag[..., i, j]) for j in range(d)]
-                     for i in range(d)],
-        [[np.ascontiguousarray(off[..., i, j]) for j in range(d)] for i in range(d)],
-        [np.ascontiguousarray(rhs[..., i]) for i in range(d)], scale[:, None], local=True,
-        method="cyclic")
+    ref, ok_ref = _fields_solve(diag, off, rhs, scale, local=True)
     ref = np.stack(ref, -1)
     np.testing.assert_array_equal(ok, ok_ref)
     np.testing.assert_allclose(x, ref, rtol=1e-9, atol=1e-9 * np.abs(ref).max())
     # without the shift the systems that are not definite are reported, as on fields
     _, ok_plain = block_tridiagonal_solve_dense(diag, off, rhs, scale, local=False)
-    _, ok_fields = block_tridiagonal_solve(
-        _NUMPY_OPS, [[np.ascontiguousarray(diag[..., i, j]) for j in range(d)]
-                     for i in range(d)],
-        [[np.ascontiguousarray(off[..., i, j]) for j in range(d)] for i in range(d)],
-        [np.ascontiguousarray(rhs[..., i]) for i in range(d)], scale[:, None], local=False,
-        method="cyclic")
+    _, ok_fields = _fields_solve(diag, off, rhs, scale, local=False)
     assert not ok_plain.any()  # every system had blocks to shift: the shift is exercised
     np.testing.assert_array_equal(ok_plain, ok_fields)

@@ -6,8 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from scipy.optimize import linprog
-from test_mutation_kills_certify_lp import DIRS, FULL, MESH, NV, K, _weights
+from test_mutation_kills_certify_lp import DIRS, FULL, MESH, NV, K, _highs_solve, _weights
 
 import solvers.certify_lp as lp_mod
 import solvers.certify_repair as rep
@@ -16,13 +15,7 @@ from solvers.certify_repair import repair
 
 
 def _optimum(b: np.ndarray) -> np.ndarray:
-    c = np.zeros(MESH.n_dofs)
-    c[1] = -1.0
-    bounds = [(None, None)] * MESH.n_dofs
-    bounds[0] = (0.0, 0.0)
-    res = linprog(c, A_ub=FULL, b_ub=b.reshape(-1), bounds=bounds, method="highs")
-    assert res.status == 0
-    return res.x
+    return _highs_solve(b).x
 
 
 def _ratio(phi: np.ndarray, b: np.ndarray) -> np.ndarray:
