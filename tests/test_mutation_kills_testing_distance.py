@@ -353,9 +353,25 @@ class _FakeCert:
 def test_certificate_branches(monkeypatch):
     import solvers
 
-    assert VD.check_certificate(_suite(metric=Euclidean(n=3)), 2).note == (
-        "this check certifies 2-D metrics only; euclidean is 3-D (run `geodesics certify` "
-        "for its certified interval: minutes per pair beyond the plane)")
+    class Aniso5(Metric):  # F = sqrt(v0**2 + 2 v1**2 + ... + 5 v4**2): not conformal
+        name = "aniso-5d"
+        domain = property(lambda self: Box((-1.0,) * 5, (1.0,) * 5))
+
+        def F_sx(self, x, v):
+            return ca.sqrt(sum((i + 1.0) * v[i] ** 2 for i in range(5)))
+
+    assert VD.check_certificate(_suite(metric=Aniso5()), 2).note == (
+        "aniso-5d is 5-D and not conformal: certify proves intervals in 2-D and 3-D, and "
+        "lower bounds beyond 3-D only for metrics providing conformal_factor_sx")
+
+    class Bent3(Euclidean):
+        convex_everywhere = False
+        convexity_note = "bent somewhere"
+
+    bent = VD.check_certificate(_suite(metric=Bent3(n=3)), 2)
+    assert bent.status is SKIPPED and bent.note == (
+        "euclidean does not declare F(x, .) convex on the whole domain (bent somewhere): "
+        "the 3-D certificate needs it")
 
     class Rough(Flat):
         name = "rough-test"
@@ -388,6 +404,11 @@ def test_certificate_branches(monkeypatch):
     lo = VD.check_certificate(_suite(), 3)
     assert lo.status is FAILED and lo.rhs[0] == "certified upper bound"
     assert lo.note.startswith("interval [")
+    seen.clear()  # beyond the plane: at most CERTIFY_EXAMPLES_ND examples, same mesh
+    monkeypatch.setattr(solvers, "certify", fake("good"))
+    nd = VD.check_certificate(_suite(metric=Euclidean(n=3)), 10)
+    assert nd.status is PASSED and nd.tried == VD.CERTIFY_EXAMPLES_ND == 3
+    assert all(s == ("coarse", True) for s in seen)
     monkeypatch.setattr(solvers, "certify", fake("budget"))
     bud = VD.check_certificate(_suite(), 3)
     assert bud.status is INCONCLUSIVE
@@ -550,7 +571,10 @@ def test_skipped_names_and_claims():
         name = "rough-test"
         smooth = False
 
-    for r, name in ((VD.check_certificate(_suite(metric=Euclidean(n=3)), 2), "certificate"),
+    class Bent3(Euclidean):
+        convex_everywhere = False
+
+    for r, name in ((VD.check_certificate(_suite(metric=Bent3(n=3)), 2), "certificate"),
                     (VD.check_certificate(_suite(metric=Rough()), 2), "certificate"),
                     (VD.check_closed_form(_suite(metric=Flat()), 2), "closed-form-distance"),
                     (VD.check_distance_symmetry(_suite(metric=Randers()), 2),

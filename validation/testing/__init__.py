@@ -31,8 +31,8 @@ Properties (names as in the table of ``geodesics check``):
   ``distance-positive``, ``triangle-inequality``, ``segment-bound`` (the straight
   segment's length bounds ``d``), ``distance-symmetry`` (reversible metrics),
   ``closed-form-distance`` (a distance or geodesic you supply, or the metric's own,
-  against the solver), ``certificate`` (2-D: the certified interval contains the
-  solved distance), ``midpoint-halves``; all within the solver's stated errors;
+  against the solver), ``certificate`` (the certified interval contains the solved
+  distance: 2-D and 3-D, and conformal metrics beyond), ``midpoint-halves``; all within the solver's stated errors;
 * of a policy (:mod:`validation.testing.policy`): ``policy-midpoint`` (against exact
   midpoints where Proposition 1 holds), ``policy-symmetry`` (reversible metrics),
   ``policy-success`` and ``policy-length-ratio`` on fresh pairs.

@@ -54,6 +54,13 @@ __all__ = [
 #: (its work budget: at most 3 LP rounds and 3000 triangles per pair, not a wall-clock
 #: limit, so the result depends on the seed only).
 CERTIFY_MESH = "coarse"
+#: Examples of the certificate property beyond the plane (the first one drawn is x = y, so
+#: at most two certificates): one costs 2-5 s on a flat 3-D box and 10-26 s on
+#: ``poincare-slab`` with the coarse preset, 11-13 s on the 7-D Panda (conformal lower bound),
+#: against well under a second in 2-D.
+CERTIFY_EXAMPLES_ND = 3
+#: The certificate's work counts a budget note names, as far as the result carries them.
+_WORK = ("triangles", "directions", "cells", "lp_rows", "boxes")
 #: What a failed distance property suspects: F passed the properties the distance needs
 #: (else the property is not run), so the solve or its error estimate.
 SOLVE_HINT = ("F passed the properties this one needs, so suspect the solve: a local "
@@ -448,11 +455,16 @@ def check_segment_bound(suite: DistanceSuite, examples: int = 3) -> PropertyResu
 
 def check_certificate(suite: DistanceSuite, examples: int = 2, mesh: Any = CERTIFY_MESH
                       ) -> PropertyResult:
-    """On a 2-D metric, the certified interval of :func:`solvers.certify` (a dual lower
-    bound, and the proven length of the solved curve as upper bound) contains the solved
-    distance within its stated error: ``lower <= d + error`` and ``d - error <= upper``,
-    on pairs at least 1e-3 of the domain's size apart (the certificate's mesh is far
-    coarser; certify fails on near-coincident points, see issue 22). The interval is
+    """The certified interval of :func:`solvers.certify` (a proven lower bound, and the
+    proven length of the solved curve as upper bound) contains the solved distance within
+    its stated error: ``lower <= d + error`` and ``d - error <= upper``, on pairs at least
+    1e-3 of the domain's size apart (the certificate's mesh is far coarser; certify fails
+    on near-coincident points, see issue 22). In 2-D the lower bound is the mesh LP's; in
+    3-D a verified potential's (:func:`solvers.certify_nd.certify_nd`, which needs ``F(x,
+    .)`` convex on the whole domain: skipped otherwise); beyond 3-D only a metric providing
+    ``conformal_factor_sx`` is certified (a lower bound, the upper one the path's), any
+    other is skipped. Beyond the plane at most ``CERTIFY_EXAMPLES_ND`` examples are drawn
+    (each certificate takes seconds to a minute). The interval is
     proven whatever certify's status, so a pair outside it is a failure; a pair whose
     certificate ends without a usable bound within the mesh's work budget
     (``corrections_too_large``, ``lp_failed``) is inconclusive, and on a metric that
@@ -463,11 +475,16 @@ def check_certificate(suite: DistanceSuite, examples: int = 2, mesh: Any = CERTI
     m = suite.metric
     name = "certificate"
     claim = "certify's interval [lower, upper] contains the solved distance"
+    if m.dim > 3 and not m.provides("conformal_factor_sx"):
+        return PropertyResult(name, claim, SKIPPED, note=(
+            f"{m.name} is {m.dim}-D and not conformal: certify proves intervals in 2-D and "
+            "3-D, and lower bounds beyond 3-D only for metrics providing conformal_factor_sx"))
+    if m.dim == 3 and not m.convex_everywhere:
+        return PropertyResult(name, claim, SKIPPED, note=(
+            f"{m.name} does not declare F(x, .) convex on the whole domain "
+            f"({m.convexity_note}): the 3-D certificate needs it"))
     if m.dim != 2:
-        return PropertyResult(name, claim, SKIPPED,
-                              note=f"this check certifies 2-D metrics only; {m.name} is "
-                                   f"{m.dim}-D (run `geodesics certify` for its certified "
-                                   "interval: minutes per pair beyond the plane)")
+        examples = min(examples, CERTIFY_EXAMPLES_ND)
     if not m.smooth:
         return PropertyResult(name, claim, SKIPPED, note=(
             f"{m.name} is declared not smooth: certify's bounds are proven where F is twice "
@@ -491,10 +508,12 @@ def check_certificate(suite: DistanceSuite, examples: int = 2, mesh: Any = CERTI
                     f"(smallest eigenvalue {float(lam.min()):.3g} near the solved path)"))
         c = solvers.certify(m, x, y, mesh, path=s.path)
         if c.status.label in ("corrections_too_large", "lp_failed"):
+            work = "".join(f", {getattr(c, k)} {k.replace('_', ' ')}" for k in _WORK
+                           if isinstance(getattr(c, k, None), int))
             return Verdict.unjudged(
                 f"certify ran out of its work budget (status {c.status.label}: mesh "
-                f"{mesh if isinstance(mesh, str) else 'given'}, {c.triangles} triangles, "
-                f"{c.directions} directions; interval [{c.lower:.6g}, {c.upper:.6g}])")
+                f"{mesh if isinstance(mesh, str) else 'given'}{work}; interval "
+                f"[{c.lower:.6g}, {c.upper:.6g}])")
         if c.lower > s.value + s.error:
             return Verdict.compare(("certified lower bound", c.lower), "<=",
                                    ("d(x, y) + error", s.value + s.error), False)
