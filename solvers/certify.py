@@ -58,9 +58,11 @@ can reach (a proven speed floor ``F >= m |v|`` bounds the region by an ellipse a
 and goal, :mod:`solvers.certify_reach`); the others are dropped from the mesh, and the bound
 is then ``min(phi(goal) - phi(start), upper)``.
 
-Layout: this module holds the bound code (values of F, enclosures of its second
-derivatives, the corrections and rows) and the refinement loop; the meshes are in
-:mod:`solvers.certify_mesh`, the LPs in :mod:`solvers.certify_lp`.
+Layout: this module holds the refinement loop; the bound code (values of F, enclosures
+of its second derivatives, bounded first over groups of directions and then direction by
+direction where the LP needs it, the corrections and rows) is in
+:mod:`solvers.certify_bounds`, the meshes in :mod:`solvers.certify_mesh`, the LPs in
+:mod:`solvers.certify_lp`.
 """
 
 from __future__ import annotations
@@ -72,15 +74,21 @@ from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from typing import Any
 
-import casadi as ca
 import numpy as np
 
 from finsler.errors import InputError
 from finsler.infra.limits import check_memory
-from finsler.intervals import Interval, enclose, isqrt
-from finsler.lowering import LoweredFunction, lower
 from finsler.metric import Metric
 from finsler.status import Status
+from solvers.certify_bounds import SPLIT_DEPTH as SPLIT_DEPTH
+from solvers.certify_bounds import SPLIT_FRACTION as SPLIT_FRACTION
+from solvers.certify_bounds import SPLIT_OVERESTIMATE as SPLIT_OVERESTIMATE
+from solvers.certify_bounds import _bounds_on_boxes as _bounds_on_boxes
+from solvers.certify_bounds import _corrections as _corrections
+from solvers.certify_bounds import _eval_values as _eval_values
+from solvers.certify_bounds import _PointData, _RowBounds, direction_group
+from solvers.certify_bounds import _row_bounds as _row_bounds
+from solvers.certify_bounds import _second_derivatives as _second_derivatives
 from solvers.certify_lp import INITIAL_DIRECTIONS as INITIAL_DIRECTIONS
 from solvers.certify_lp import LP_SOLVER, LPFailure, _initial_modes, _solve_lp
 from solvers.certify_lp import TIGHT_DUAL as TIGHT_DUAL
@@ -103,12 +111,6 @@ _LOG = logging.getLogger(__name__)
 
 #: Refinements of triangles whose corrections exceed half of F, before the first LP.
 MAX_PRE_REFINE = 8
-#: Sub-box splitting (2 x 2 per level) of triangles whose enclosures are infinite or loose.
-SPLIT_DEPTH = 2
-#: A triangle's box is split where its correction exceeds this fraction of F and its
-#: enclosures exceed this multiple of their values at the box's centre.
-SPLIT_FRACTION = 0.25
-SPLIT_OVERESTIMATE = 1.5
 
 
 @dataclass(frozen=True)
@@ -182,266 +184,6 @@ class MeshSpec:
             raise InputError(f"unknown mesh preset {name!r}; choose one of "
                              f"{', '.join(presets)}")
         return presets[name]
-
-
-# ----------------------------------------------------------------------------------------
-# derivatives of F (CasADi, lowered once per metric and kept in the metric's own cache)
-# ----------------------------------------------------------------------------------------
-def _second_derivatives(metric: Metric) -> tuple[LoweredFunction, ...]:
-    """Lowered functions whose interval enclosures bound the corrections:
-
-    * ``(x, v) -> (h, dh)``: ``h`` the entries ``(H11, H12, H22)`` of ``Hess_x F(x, v)``,
-      ``dh`` their gradients in ``x`` (``dh[2 j + i] = d h_j / d x_i``);
-    * ``(x, v, d) -> (q, dq)``: ``q = d' Hess_v F(x, v) d`` (the second derivative of F
-      along a chord of direction ``d``) and its gradient in ``(x, v)``;
-    * ``(x, v) -> h`` and ``(x, v, d) -> q`` alone (the centres of the mean-value forms).
-
-    Built once per metric, in :meth:`finsler.Metric.derived` (the metric's one cache of
-    derived geometry). The values of F themselves are the metric's
-    :attr:`~finsler.Metric.lowered_F`.
-    """
-    return metric.derived("certify.second_derivatives",
-                          lambda: _lower_second_derivatives(metric))
-
-
-def _lower_second_derivatives(metric: Metric) -> tuple[LoweredFunction, ...]:
-    """Build :func:`_second_derivatives` (CasADi Hessians of the metric's own ``F``)."""
-    x = ca.SX.sym("x", 2)
-    v = ca.SX.sym("v", 2)
-    d = ca.SX.sym("d", 2)
-    f = metric.F_sx(x, v)
-    hx, _ = ca.hessian(f, x)
-    h = ca.vertcat(hx[0, 0], hx[0, 1], hx[1, 1])
-    dh = ca.vertcat(*[ca.gradient(h[j], x) for j in range(3)])
-    hv, _ = ca.hessian(f, v)
-    q = ca.mtimes([d.T, hv, d])
-    dq = ca.gradient(q, ca.vertcat(x, v))
-    tag = metric._ident
-    return (lower(ca.Function(f"certify_hz_{tag}", [x, v], [ca.densify(h), ca.densify(dh)])),
-            lower(ca.Function(f"certify_ht_{tag}", [x, v, d], [ca.densify(q), ca.densify(dq)])),
-            lower(ca.Function(f"certify_h_{tag}", [x, v], [ca.densify(h)])),
-            lower(ca.Function(f"certify_q_{tag}", [x, v, d], [ca.densify(q)])))
-
-
-def _eval_values(metric: Metric, x: np.ndarray, v: np.ndarray,
-                 chunk: int = 200_000) -> np.ndarray:
-    fun = metric.lowered_F
-    fs = []
-    for a in range(0, x.shape[0], chunk):
-        with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
-            (f,) = fun(x[a:a + chunk], v[a:a + chunk])
-        fs.append(np.asarray(f, float).reshape(-1))
-    out = np.concatenate(fs)
-    if not np.all(np.isfinite(out)):
-        raise InputError(f"{metric.name}: F is not finite on the mesh (the polygon covering "
-                         "the domain reaches a singularity of F?)")
-    # a lower bound of the exact value: numpy's float64 F is within a few ulp of it
-    return out - np.abs(out) * (16 * np.finfo(float).eps)
-
-
-def _lam_max_upper(h: list[Interval]) -> np.ndarray:
-    """Upper bound of the largest eigenvalue of every symmetric 2x2 matrix whose entries
-    ``(H11, H12, H22)`` lie in the intervals ``h`` (increasing in H11, H22 and |H12|)."""
-    a, b, c = Interval(h[0].hi), Interval(h[1].magnitude()), Interval(h[2].hi)
-    lam = 0.5 * (a + c) + isqrt(0.25 * (a - c).square() + b.square())
-    return lam.hi
-
-
-def _centered(at_centre: Interval, slopes: list[Interval], offsets: list[Interval]) -> Interval:
-    """Mean-value form ``f(c) + sum_i df/dx_i(X) (X_i - c_i)``."""
-    out = at_centre
-    for s, o in zip(slopes, offsets, strict=True):
-        out = out + s * o
-    return out
-
-
-def _bounds_on_boxes(metric: Metric, lo: np.ndarray, hi: np.ndarray, v: np.ndarray,
-                     w: np.ndarray, with_centre: bool = False) -> tuple[np.ndarray, ...]:
-    """Enclosure upper bounds, for boxes ``[lo, hi]`` ``(M, 2)`` of points, each with a
-    sampled direction ``v`` ``(M, 2)`` and the next one ``w``: ``Hz`` ``(M,)`` >=
-    ``lambda_max(Hess_z F(z, v))`` and ``Ht`` ``(M,)`` >= ``d' Hess_v F(z, u) d`` for all
-    ``z`` in the box and ``u`` on the chord from ``v`` to ``w`` (``d = w - v``), both >= 0
-    (``inf`` where an enclosure is not finite). Each is the tighter of the natural interval
-    extension and the mean-value form (interval arithmetic with outward rounding,
-    :mod:`finsler.intervals`). ``with_centre``: also the same two quantities at the box's
-    centre (what the bounds would be without any variation over the box)."""
-    fz, ft, fz_centre, ft_centre = _second_derivatives(metric)
-    xbox = Interval(lo, hi)
-    centre = 0.5 * (lo + hi)
-    dx = [Interval(lo[:, i], hi[:, i]) - Interval(centre[:, i]) for i in range(2)]
-    # Hz: Hess_z F at the sampled direction (an exact float64 vector)
-    h_box, dh_box = enclose(fz, xbox, Interval(v))
-    (h_c,) = enclose(fz_centre, Interval(centre), Interval(v))
-    h = [h_box[j].intersect(_centered(h_c[j], dh_box[2 * j:2 * j + 2], dx)) for j in range(3)]
-    hz = np.maximum(_lam_max_upper(h), 0.0)
-    # Ht: the chord from v to w
-    wl, wh = np.minimum(v, w), np.maximum(v, w)
-    wc = 0.5 * (wl + wh)
-    d = [Interval(w[:, i]) - Interval(v[:, i]) for i in range(2)]
-    dw = [Interval(wl[:, i], wh[:, i]) - Interval(wc[:, i]) for i in range(2)]
-    q_box, dq_box = enclose(ft, xbox, Interval(wl, wh), d)
-    (q_c,) = enclose(ft_centre, Interval(centre), Interval(wc), d)
-    q = q_box[0].intersect(_centered(q_c[0], dq_box, dx + dw))
-    ht = np.maximum(q.hi, 0.0)
-    bad = ~(np.isfinite(hz) & np.isfinite(ht))
-    hz[bad] = np.inf
-    ht[bad] = np.inf
-    if with_centre:
-        return hz, ht, np.maximum(_lam_max_upper(h_c), 0.0), np.maximum(q_c[0].hi, 0.0)
-    return hz, ht
-
-
-def _box_meets_triangle(lo: np.ndarray, hi: np.ndarray, tri: np.ndarray) -> np.ndarray:
-    """Whether the boxes ``[lo, hi]`` ``(M, 2)`` meet the triangles ``tri`` ``(M, 3, 2)``
-    (separating axes: the box's two axes and the triangle's three edge normals; touching
-    counts as meeting)."""
-    meets = np.all(tri.max(axis=1) >= lo, axis=1) & np.all(tri.min(axis=1) <= hi, axis=1)
-    corners = np.stack([lo, np.stack([hi[:, 0], lo[:, 1]], 1), hi,
-                        np.stack([lo[:, 0], hi[:, 1]], 1)], axis=1)  # (M, 4, 2)
-    for a in range(3):
-        p, q, r = tri[:, a], tri[:, (a + 1) % 3], tri[:, (a + 2) % 3]
-        normal = np.stack([q[:, 1] - p[:, 1], p[:, 0] - q[:, 0]], 1)
-        side = np.einsum("mi,mi->m", r - p, normal)  # the third vertex's side
-        proj = np.einsum("mci,mi->mc", corners - p[:, None], normal)
-        beyond = np.where(side[:, None] > 0, proj < 0, proj > 0)  # opposite to the vertex
-        meets &= ~np.all(beyond, axis=1)
-    return meets
-
-
-def _index_new(keys: list[bytes], index: dict[bytes, int]) -> list[int]:
-    """Give the keys not yet in ``index`` the next row numbers; their positions in
-    ``keys`` (in order, each key once)."""
-    new = []
-    for i, key in enumerate(keys):
-        if key not in index:
-            index[key] = len(index)
-            new.append(i)
-    return new
-
-
-class _PointData:
-    """Per-point values ``F(p, v_k)`` ``(K,)`` (lowered by a few ulp), computed once per
-    point and reused across refinement rounds, and per-triangle second-order bounds
-    (:func:`_bounds_on_boxes` on the triangle's bounding box; where a direction's
-    correction is above ``SPLIT_FRACTION`` of F and its enclosure above
-    ``SPLIT_OVERESTIMATE`` times its centre value (or infinite), on the 2 x 2 sub-boxes
-    that meet the triangle, down to ``SPLIT_DEPTH`` levels), cached by the triangle's
-    vertices."""
-
-    def __init__(self, metric: Metric, k: int) -> None:
-        self.metric = metric
-        ang = 2 * np.pi * np.arange(k) / k
-        self.dirs = np.stack([np.cos(ang), np.sin(ang)], 1)
-        self.index: dict[bytes, int] = {}
-        self.F = np.zeros((0, k))
-        self.tri_index: dict[bytes, int] = {}
-        self.Hz = np.zeros((0, k))
-        self.Ht = np.zeros((0, k))
-        self.seconds = 0.0
-
-    def rows(self, pts: np.ndarray) -> np.ndarray:
-        """Row indices of ``pts`` ``(P, 2)``, computing the values of new points."""
-        keys = [p.tobytes() for p in np.ascontiguousarray(pts)]
-        new = _index_new(keys, self.index)
-        if new:
-            t0 = time.perf_counter()
-            p = pts[new]
-            k = self.dirs.shape[0]
-            f = _eval_values(self.metric, np.repeat(p, k, axis=0),
-                             np.tile(self.dirs, (len(new), 1)))
-            self.F = np.concatenate([self.F, f.reshape(len(new), k)])
-            self.seconds += time.perf_counter() - t0
-        return np.fromiter((self.index[key] for key in keys), dtype=np.int64, count=len(keys))
-
-    def triangle_bounds(self, corners: np.ndarray, fmin: np.ndarray, r2: np.ndarray,
-                        chunk: int = 32768) -> tuple[np.ndarray, np.ndarray]:
-        """``Hz``, ``Ht`` ``(T, K)`` of the triangles with vertices ``corners`` ``(T, 3, 2)``,
-        circumradii squared ``r2`` ``(T,)`` and smallest vertex values ``fmin`` ``(T, K)``
-        of F."""
-        srt = np.sort(np.ascontiguousarray(corners).view(np.complex128)[..., 0], axis=1)
-        keys = [row.tobytes() for row in srt]
-        new = _index_new(keys, self.tri_index)
-        if new:
-            t0 = time.perf_counter()
-            k = self.dirs.shape[0]
-            n = len(new)
-            tri = np.repeat(corners[new], k, axis=0)  # (n K, 3, 2): element = (triangle, k)
-            kidx = np.tile(np.arange(k), n)
-            fm, rr = fmin[new].reshape(-1), np.repeat(r2[new], k)
-            hz = np.empty(n * k)
-            ht = np.empty(n * k)
-            for a in range(0, n * k, chunk):
-                sl = slice(a, a + chunk)
-                hz[sl], ht[sl] = self._split_bounds(tri[sl].min(axis=1), tri[sl].max(axis=1),
-                                                    tri[sl], kidx[sl], fm[sl], rr[sl], 0)
-            self.Hz = np.concatenate([self.Hz, hz.reshape(n, k)])
-            self.Ht = np.concatenate([self.Ht, ht.reshape(n, k)])
-            self.seconds += time.perf_counter() - t0
-        rows = np.fromiter((self.tri_index[key] for key in keys), dtype=np.int64,
-                           count=len(keys))
-        return self.Hz[rows], self.Ht[rows]
-
-    def _split_bounds(self, lo: np.ndarray, hi: np.ndarray, tri: np.ndarray, kidx: np.ndarray,
-                      fmin: np.ndarray, r2: np.ndarray, depth: int
-                      ) -> tuple[np.ndarray, np.ndarray]:
-        """Bounds of elements ``(M,)``: box ``[lo, hi]`` within triangle ``tri``, direction
-        ``kidx``; a loose element is bounded by the max over its sub-boxes meeting the
-        triangle."""
-        k = self.dirs.shape[0]
-        hz, ht, hz_c, ht_c = _bounds_on_boxes(self.metric, lo, hi, self.dirs[kidx],
-                                              self.dirs[(kidx + 1) % k], with_centre=True)
-        if depth >= SPLIT_DEPTH:
-            return hz, ht
-        with np.errstate(invalid="ignore"):
-            # split where the correction matters AND the enclosure overestimates (where F
-            # truly curves that much, smaller boxes cannot help: the mesh is refined instead)
-            large = ~(0.5 * hz * r2 + ht / 8.0 <= SPLIT_FRACTION * fmin)
-            over = ~((hz <= SPLIT_OVERESTIMATE * hz_c + 1e-12 * fmin)
-                     & (ht <= SPLIT_OVERESTIMATE * ht_c + 1e-12 * fmin))
-            loose = large & over
-        if not np.any(loose):
-            return hz, ht
-        idx = np.flatnonzero(loose)
-        lo_l, hi_l = lo[idx], hi[idx]
-        mid = 0.5 * (lo_l + hi_l)
-        sub_lo, sub_hi, parent = [], [], []
-        for ax, bx in ((lo_l[:, 0], mid[:, 0]), (mid[:, 0], hi_l[:, 0])):
-            for ay, by in ((lo_l[:, 1], mid[:, 1]), (mid[:, 1], hi_l[:, 1])):
-                sl, sh = np.stack([ax, ay], 1), np.stack([bx, by], 1)
-                keep = _box_meets_triangle(sl, sh, tri[idx])
-                sub_lo.append(sl[keep])
-                sub_hi.append(sh[keep])
-                parent.append(idx[keep])
-        par = np.concatenate(parent)
-        shz, sht = self._split_bounds(np.concatenate(sub_lo), np.concatenate(sub_hi),
-                                      tri[par], kidx[par], fmin[par], r2[par], depth + 1)
-        hz[idx] = -np.inf
-        ht[idx] = -np.inf
-        np.maximum.at(hz, par, shz)
-        np.maximum.at(ht, par, sht)
-        return hz, ht
-
-
-# ----------------------------------------------------------------------------------------
-# the rows of the LP
-# ----------------------------------------------------------------------------------------
-def _row_bounds(mesh: _Mesh, data: _PointData) -> tuple[np.ndarray, np.ndarray]:
-    """Right-hand sides ``b`` ``(T, 3, K)`` and the corrections ``c`` ``(T, K)`` (infinite
-    where the enclosures are)."""
-    vert_rows = data.rows(mesh.points)
-    f = data.F[vert_rows[mesh.tri]]  # (T, 3, K)
-    hz, ht = data.triangle_bounds(mesh.points[mesh.tri], f.min(axis=1), mesh.r2)
-    with np.errstate(invalid="ignore"):
-        corr = _corrections(hz, ht, mesh.r2)
-    return f - corr[:, None, :], corr
-
-
-def _corrections(hz: np.ndarray, ht: np.ndarray, r2: np.ndarray) -> np.ndarray:
-    """``Hz R**2 / 2 + max(Ht_{k-1}, Ht_k) / 8`` ``(T, K)``, inflated for the float64
-    rounding of this line and of ``R**2``."""
-    corr = 0.5 * hz * r2[:, None] + np.maximum(ht, np.roll(ht, 1, axis=1)) / 8.0
-    return corr * (1.0 + 1e-12)
-
 
 
 def _convexity(m: Metric, points: np.ndarray) -> tuple[str, str]:
@@ -615,16 +357,16 @@ class _Lower:
 
 def _pre_refine(msh: _Mesh, data: _PointData, spec: MeshSpec,
                 region: Callable[[np.ndarray], np.ndarray] | None = None
-                ) -> tuple[_Mesh, np.ndarray, np.ndarray, tuple[CertifyStatus, str] | None,
-                           float]:
-    """Row bounds of ``msh``; triangles whose corrections eat half of F somewhere are
-    refined before any LP (at most :data:`MAX_PRE_REFINE` times) -> the mesh, its bounds
-    and corrections, a failure if the corrections do not shrink, the meshing seconds."""
+                ) -> tuple[_Mesh, _RowBounds, tuple[CertifyStatus, str] | None, float]:
+    """Row bounds of ``msh``; triangles whose corrections eat half of F somewhere (after
+    tightening those rows direction by direction) are refined before any LP (at most
+    :data:`MAX_PRE_REFINE` times) -> the mesh, its rows, a failure if the corrections do
+    not shrink, the meshing seconds."""
     t_mesh = 0.0
     failure: tuple[CertifyStatus, str] | None = None
-    b, corr = _row_bounds(msh, data)
+    rb = _bad_tightened(msh, data)
     for _ in range(MAX_PRE_REFINE):
-        bad = np.min(b / data.F[data.rows(msh.points)][msh.tri], axis=(1, 2)) < 0.5
+        bad = np.min(rb.b / rb.f, axis=(1, 2)) < 0.5
         if not np.any(bad):
             break
         if msh.n_tri + 3 * int(bad.sum()) > spec.max_triangles:
@@ -639,13 +381,22 @@ def _pre_refine(msh: _Mesh, data: _PointData, spec: MeshSpec,
         t0 = time.perf_counter()
         msh = _Mesh(msh.refine(np.flatnonzero(bad)), region)
         t_mesh += time.perf_counter() - t0
-        b, corr = _row_bounds(msh, data)
-    if failure is None and np.min(b) <= 0.0:
+        rb = _bad_tightened(msh, data)
+    if failure is None and np.min(rb.b) <= 0.0:
         failure = (CertifyStatus.CORRECTIONS_TOO_LARGE,
-                   f"{int(np.sum(np.min(b, axis=(1, 2)) <= 0))} triangles keep "
+                   f"{int(np.sum(np.min(rb.b, axis=(1, 2)) <= 0))} triangles keep "
                    f"second-order corrections above F after {MAX_PRE_REFINE} "
                    "refinements; use a smaller h_path / h_far")
-    return msh, b, corr, failure, t_mesh
+    return msh, rb, failure, t_mesh
+
+
+def _bad_tightened(msh: _Mesh, data: _PointData) -> _RowBounds:
+    """The rows of ``msh``, those whose corrections eat half of F tightened."""
+    rb = _RowBounds(msh, data)
+    t, kk = np.nonzero(np.min(rb.b / rb.f, axis=1) < 0.5)
+    if t.size:
+        rb.tighten(t, kk)
+    return rb
 
 
 def _marked(lp: dict[str, Any], corr: np.ndarray, n_tri: int,
@@ -678,7 +429,7 @@ def _lower_bound(m: Metric, poly: np.ndarray, up: _Upper, s: np.ndarray, g: np.n
     t0 = time.perf_counter()
     points = _initial_points(poly, up.pts, s, g, spec)
     t_mesh = time.perf_counter() - t0
-    data = _PointData(m, spec.directions)
+    data = _PointData(m, spec.directions, direction_group(spec.directions))
     out = _Lower(None, None, [], "max_rounds", None, t_mesh, 0.0, data)
     # rows only on the triangles a curve no longer than the upper bound can reach
     floor = speed_floor(m, poly)
@@ -693,7 +444,8 @@ def _lower_bound(m: Metric, poly: np.ndarray, up: _Upper, s: np.ndarray, g: np.n
         t0 = time.perf_counter()
         msh = _Mesh(points, region)
         out.t_mesh += time.perf_counter() - t0
-        msh, b, corr, out.failure, t_pre = _pre_refine(msh, data, spec, region)
+        msh, rb, out.failure, t_pre = _pre_refine(msh, data, spec, region)
+        b, corr = rb.b, rb.corr
         out.t_mesh += t_pre
         if out.failure is not None:
             out.last_mesh = msh
@@ -703,10 +455,11 @@ def _lower_bound(m: Metric, poly: np.ndarray, up: _Upper, s: np.ndarray, g: np.n
         try:
             # short of the target, a mesh that will be refined stops its LP rounds early
             lp = _solve_lp(msh, b, data.dirs, 0, 1, up.upper, spec.target_gap, start=start,
-                           settle=rnd + 1 < spec.max_rounds)
+                           settle=rnd + 1 < spec.max_rounds, tighten=rb.tighten)
             if lp["settled"] and _last_round(lp, corr, msh, spec):
                 lp = _solve_lp(msh, b, data.dirs, 0, 1, up.upper, spec.target_gap,
-                               start={"exact": lp["exact"], "active": lp["active"]})
+                               start={"exact": lp["exact"], "active": lp["active"]},
+                               tighten=rb.tighten)
         except LPFailure as err:
             out.failure, out.last_mesh = (CertifyStatus.LP_FAILED, str(err)), msh
             break

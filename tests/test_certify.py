@@ -24,6 +24,7 @@ from validation.cli import app
 runner = CliRunner()
 # the module (``solvers.certify`` the attribute is the function of the same name)
 certify_mod = importlib.import_module("solvers.certify")
+bounds_mod = importlib.import_module("solvers.certify_bounds")
 
 #: the metrics that provide a closed-form distance (asked, not listed)
 CLOSED_FORM = finsler.list_metrics(provides="distance", dim=2)
@@ -105,7 +106,7 @@ def _no_corrections(monkeypatch: pytest.MonkeyPatch) -> None:
     def zero(hz: np.ndarray, ht: np.ndarray, r2: np.ndarray) -> np.ndarray:
         return np.zeros_like(hz)
 
-    monkeypatch.setattr(certify_mod, "_corrections", zero)
+    monkeypatch.setattr(bounds_mod, "_corrections", zero)
     # and no region (certify_reach): its bound min(rise, upper) would hide the overshoot
     monkeypatch.setattr(certify_mod, "speed_floor", lambda metric, poly: 0.0)
 
@@ -388,7 +389,7 @@ def test_corrections_that_do_not_shrink_are_a_status(monkeypatch: pytest.MonkeyP
     def huge(hz: np.ndarray, ht: np.ndarray, r2: np.ndarray) -> np.ndarray:
         return np.full_like(hz, 1e6)
 
-    monkeypatch.setattr(certify_mod, "_corrections", huge)
+    monkeypatch.setattr(bounds_mod, "_corrections", huge)
     m = finsler.get_metric("poincare")
     s, g = POINCARE_PAIR
     r = certify(m, s, g, "coarse")

@@ -1,8 +1,9 @@
-"""The bound code of :mod:`solvers.certify` (issue 22, mutation testing): the corrections,
-the interval enclosures of the Hessians, the box / triangle test, the lowered values and the
-per-point / per-triangle caches, each against an independent reference (CasADi evaluation
-at sampled points, brute-force geometry, hand-computed numbers). Fast: every test is well
-under a second, so that mutation runs can afford them."""
+"""The bound code of :mod:`solvers.certify` (in :mod:`solvers.certify_bounds`; issue 22,
+mutation testing): the corrections, the interval enclosures of the Hessians (one direction
+or a group), the box / triangle test, the lowered values, the per-point / per-triangle
+caches and their tightening on demand, each against an independent reference (CasADi
+evaluation at sampled points, brute-force geometry, hand-computed numbers). Fast: every
+test is well under a second, so that mutation runs can afford them."""
 
 from __future__ import annotations
 
@@ -19,9 +20,10 @@ from tick_clock import TickClock
 import finsler
 from finsler.errors import InputError
 from finsler.intervals import Interval
+from solvers.certify_mesh import _Mesh
 
-# the module (``solvers.certify`` the attribute is the function of the same name)
-cm = importlib.import_module("solvers.certify")
+# the module of the bound code (``solvers.certify`` the attribute is a function)
+cm = importlib.import_module("solvers.certify_bounds")
 EPS = np.finfo(float).eps
 
 
@@ -602,34 +604,45 @@ def test_split_decisions_follow_the_documented_rule(metric: finsler.Metric) -> N
         assert 0 < split.sum() < len(lo)  # both kinds present
 
 
-def test_triangle_bounds_evaluate_each_element_once_whatever_the_chunk(monkeypatch) -> None:
+@pytest.mark.parametrize("group", [1, 2])
+def test_triangle_bounds_evaluate_each_element_once_whatever_the_chunk(monkeypatch,
+                                                                        group: int) -> None:
     m = finsler.get_metric("poincare")
     rows = [0]
-    real = cm._bounds_on_boxes
+    real = cm._bounds_on_dir_boxes
 
-    def counted(metric, lo, hi, v, w, with_centre=False):
+    def counted(metric, lo, hi, db, with_centre=False):
         rows[0] += lo.shape[0]
-        return real(metric, lo, hi, v, w, with_centre=with_centre)
+        return real(metric, lo, hi, db, with_centre=with_centre)
 
-    monkeypatch.setattr(cm, "_bounds_on_boxes", counted)
+    monkeypatch.setattr(cm, "_bounds_on_dir_boxes", counted)
     corners = np.array([[[0.0, 0.0], [0.1, 0.0], [0.0, 0.1]],
                         [[0.2, 0.2], [0.3, 0.2], [0.2, 0.3]]])
     ref = None
     for chunk in (32768, 5, 1):
-        data = cm._PointData(m, 8)
+        data = cm._PointData(m, 32, group)
         rows[0] = 0
-        out = data.triangle_bounds(corners, np.full((2, 8), 1e3), np.full(2, 1e-4), chunk=chunk)
-        assert rows[0] == 16, chunk  # no split (small corrections): 2 triangles x 8
+        out = data.triangle_bounds(corners, np.full((2, 32), 1e3), np.full(2, 1e-4), chunk=chunk)
+        # no split (small corrections): 2 triangles x 32 / group
+        assert rows[0] == 64 // group, chunk
         if ref is None:
             ref = out
         assert np.array_equal(out[0], ref[0]) and np.array_equal(out[1], ref[1])
+        # tightening: each (triangle, direction) once, only where grouped
+        rows[0] = 0
+        data.tighten(np.array([0, 0, 1, 0]), np.array([3, 3, 5, 4]), np.full(4, 1e3),
+                     chunk=chunk)
+        assert rows[0] == (0 if group == 1 else 3), chunk
+        rows[0] = 0
+        data.tighten(np.array([0, 1]), np.array([3, 5]), np.full(2, 1e3), chunk=chunk)
+        assert rows[0] == 0
 
 
 # ---- _row_bounds -------------------------------------------------------------------------
 def test_row_bounds_are_values_minus_corrections() -> None:
     m = finsler.get_metric("poincare")
     pts = np.array([[0.0, 0.0], [0.3, 0.0], [0.0, 0.3], [0.3, 0.3], [-0.2, 0.1]])
-    msh = cm._Mesh(pts)
+    msh = _Mesh(pts)
     data = cm._PointData(m, 8)
     b, corr = cm._row_bounds(msh, data)
     t = msh.n_tri
@@ -641,3 +654,78 @@ def test_row_bounds_are_values_minus_corrections() -> None:
     want = cm._corrections(hz, ht, msh.r2)
     assert np.array_equal(corr, want) and np.all(corr > 0)
     assert np.all(b < f) and np.allclose(b, f - corr[:, None, :], rtol=1e-13, atol=0)
+
+
+# ---- groups of directions, tightened on demand ----------------------------------------------
+def test_direction_group_spans_at_most_the_group_arc() -> None:
+    assert [cm.direction_group(k) for k in (8, 128, 200, 256, 512, 1024)] == [1, 1, 1, 2, 4, 8]
+    for k in (96, 384, 600, 768):
+        g = cm.direction_group(k)
+        assert k % g == 0 and (g == 1 or g * 2 * np.pi / k <= cm.GROUP_ARC * (1 + 1e-12))
+        assert not any(k % h == 0 and h * 2 * np.pi / k <= cm.GROUP_ARC for h in
+                       range(g + 1, k + 1))
+
+
+@pytest.mark.parametrize("name", ["matsumoto", "poincare"])
+def test_group_bounds_hold_for_every_direction_and_chord_of_the_group(name: str) -> None:
+    """One enclosure per triangle and group of 4 directions (arcs of 11 degrees at 128): a
+    proven bound for each of the group's directions and chords, checked against the sampled
+    Hessians of every direction; above the direction-by-direction bounds (looser), and
+    tightening gives exactly the smaller of the two."""
+    m = finsler.get_metric(name)
+    k, group = 128, 4
+    loose = cm._PointData(m, k, group)
+    single = cm._PointData(m, k)
+    corners = np.array([[[0.1, 0.0], [0.25, 0.05], [0.12, 0.18]],
+                        [[-0.45, -0.3], [-0.3, -0.4], [-0.35, -0.2]]])
+    f = np.full((2, k), 1e3)  # no split: the enclosures over the bounding boxes
+    r2 = np.array([1e-4, 2e-4])
+    hz, ht = loose.triangle_bounds(corners, f, r2)
+    hz1, ht1 = single.triangle_bounds(corners, f, r2)
+    assert np.all(np.isfinite(hz)) and np.all(np.isfinite(ht))
+    # constant over each group, and mostly looser than one direction at a time (not
+    # everywhere: the mean-value form of a group is centred elsewhere)
+    assert np.all(hz.reshape(2, -1, group) == hz[:, ::group, None])
+    assert np.mean(hz > hz1) > 0.5 and np.mean(ht > ht1) > 0.5
+    hx, hv = _hessians(m)
+    rng = np.random.default_rng(3)
+    for t in range(2):
+        z = _triangle_samples(corners[t], rng, 20)
+        for j in range(k):
+            v = np.repeat(loose.dirs[j][None], len(z), 0)
+            w = np.repeat(loose.dirs[(j + 1) % k][None], len(z), 0)
+            s = rng.uniform(0, 1, (len(z), 1))
+            assert _lam_max(hx, z, v).max() <= hz[t, j] * (1 + 1e-12)
+            assert _chord_q(hv, z, (1 - s) * v + s * w, w - v).max() <= ht[t, j] * (1 + 1e-12)
+    # tightening every element: the smaller of the group's and the direction's own bound
+    rows = np.repeat([0, 1], k)
+    kk = np.tile(np.arange(k), 2)
+    changed = loose.tighten(rows, kk, f.reshape(-1))
+    assert changed.all() and loose.tight.all()
+    assert np.array_equal(loose.Hz, np.minimum(hz, hz1))
+    assert np.array_equal(loose.Ht, np.minimum(ht, ht1))
+
+
+def test_row_bounds_tighten_in_place_the_rows_asked_for_and_the_chord_before() -> None:
+    """``_RowBounds.tighten`` bounds (triangle, direction) and (triangle, direction - 1)
+    direction by direction (a row's correction takes both chords' Ht) and rewrites ``b``
+    and ``corr`` of those triangles in place: the arrays the LP holds see the change."""
+    m = finsler.get_metric("matsumoto")
+    pts = np.array([[0.0, 0.0], [0.3, 0.0], [0.0, 0.3], [0.3, 0.3], [-0.2, 0.1]])
+    msh = _Mesh(pts)
+    k = 256
+    data = cm._PointData(m, k, 2)
+    rb = cm._RowBounds(msh, data)
+    b_view, corr_view = rb.b, rb.corr
+    b0, corr0 = rb.b.copy(), rb.corr.copy()
+    rb.tighten(np.array([1]), np.array([10]))
+    assert rb.b is b_view and rb.corr is corr_view
+    assert data.tight[rb.trows[1], [9, 10]].all() and data.tight.sum() == 2
+    want = cm._corrections(data.Hz[rb.trows], data.Ht[rb.trows], msh.r2)
+    assert np.array_equal(rb.corr, want)
+    assert np.array_equal(rb.b, rb.f - want[:, None, :])
+    # only triangle 1 changed, and only where its bounds did (rows 9-11: Hz_10, Ht_9, Ht_10)
+    diff = np.flatnonzero(np.any(rb.corr != corr0, axis=0))
+    assert set(diff) <= {9, 10, 11} and diff.size > 0
+    assert np.array_equal(np.delete(rb.b, 1, axis=0), np.delete(b0, 1, axis=0))
+    assert np.all(rb.corr <= corr0) and np.all(rb.b >= b0)

@@ -108,7 +108,7 @@ def test_constants_and_the_direction_window() -> None:
     assert NEAR_TIGHT == 0.06 and NEAR_PER_TARGET == 6.0 and WORST_WINDOW == 2
     assert SETTLE_ROUNDS == 3 and lp_mod.PROMOTE_WINDOW == 3
     assert lp_mod.LP_OPTIONS == {"tol_gap_abs": 1e-5, "tol_gap_rel": 1e-5, "tol_feas": 1e-5,
-                                 "tol_ktratio": 1e-3}
+                                 "tol_ktratio": 1e-3, "iterative_refinement_enable": False}
     assert [_window(k) for k in (8, 16, 64, 127, 128, 200, 640)] == [1, 1, 1, 1, 2, 3, 10]
 
 
@@ -203,6 +203,39 @@ def test_rows_that_vary_reach_the_highs_optimum_of_all_rows() -> None:
     assert np.all(r["active"][r["exact"]][:, :: K // 16])
     assert not r["active"][r["exact"]].all()  # only the coarse, window and violated ones
     assert not r["active"][~r["exact"]].any()
+
+
+def test_rows_tightened_on_demand_reach_the_optimum_of_the_tight_rows() -> None:
+    """Rows that start loose (90 % of their proven value, as a group of directions' bound
+    would) and a ``tighten`` callback that sets the asked (triangle, direction) rows of all
+    three vertices to their tight value: the LP asks for every row it holds and every row
+    its potential nearly fills, and so reaches the HiGHS optimum of the TIGHT rows (the
+    loose rows alone give about 10 % less); the bound holds for the rows it ended with."""
+    tight = _weights()
+    b = 0.9 * tight
+    asked: set[tuple[int, int]] = set()
+
+    def tighten(tri: np.ndarray, kk: np.ndarray) -> None:
+        for t, k in zip(tri.tolist(), kk.tolist(), strict=True):
+            asked.add((t, k))
+            b[t, :, k] = tight[t, :, k]
+
+    best = _highs_optimum(tight)
+    loose = _solve_lp(MESH, 0.9 * tight, DIRS, 0, 1, upper=100.0, target=1e-6, start=_none())
+    assert loose["lower"] < 0.91 * best
+    r = _solve_lp(MESH, b, DIRS, 0, 1, upper=100.0, target=1e-6, start=_none(),
+                  tighten=tighten)
+    assert best * (1 - 1e-6) <= r["lower"] <= best * (1 + 1e-9)
+    assert _max_ratio(r["phi"], b) <= 1.0
+    # every row of an exact vertex the LP held, and every row filled beyond 1 - near
+    vid, kk = np.nonzero(r["active"] & r["exact"][:, None])
+    assert {(v // 3, k) for v, k in zip(vid.tolist(), kk.tolist(), strict=True)} <= asked
+    near = min(NEAR_TIGHT, NEAR_PER_TARGET * 1e-6)
+    fill = (FULL @ r["phi"]).reshape(NV, K) / tight.reshape(NV, K)
+    vid, kk = np.nonzero(fill > 1.0 - near)
+    assert vid.size and {(v // 3, k) for v, k in zip(vid.tolist(), kk.tolist(),
+                                                     strict=True)} <= asked
+    assert len(asked) < 0.5 * MESH.n_tri * K  # on demand, not everything
 
 
 def test_one_round_of_few_rows_is_scaled_into_a_valid_bound() -> None:
