@@ -448,6 +448,24 @@ def _triangle_samples(tri: np.ndarray, rng: np.random.Generator, n: int) -> np.n
     return lam @ tri
 
 
+def _assert_above_sampled_hessians(m: finsler.Metric, corners: np.ndarray, dirs: np.ndarray,
+                                   hz: np.ndarray, ht: np.ndarray, seed: int, n: int) -> None:
+    """``hz[t, j]`` above ``lambda_max(Hess_z F(z, v_j))`` and ``ht[t, j]`` above the chord
+    second derivatives from ``v_j`` to ``v_{j+1}``, at ``n`` sampled points of each
+    triangle ``corners[t]`` (and random points of each chord)."""
+    hx, hv = _hessians(m)
+    rng = np.random.default_rng(seed)
+    k = dirs.shape[0]
+    for t in range(corners.shape[0]):
+        z = _triangle_samples(corners[t], rng, n)
+        for j in range(k):
+            v = np.repeat(dirs[j][None], len(z), 0)
+            w = np.repeat(dirs[(j + 1) % k][None], len(z), 0)
+            s = rng.uniform(0, 1, (len(z), 1))
+            assert _lam_max(hx, z, v).max() <= hz[t, j] * (1 + 1e-12)
+            assert _chord_q(hv, z, (1 - s) * v + s * w, w - v).max() <= ht[t, j] * (1 + 1e-12)
+
+
 def test_point_data_triangle_bounds_hold_inside_and_are_cached() -> None:
     m = finsler.get_metric("poincare")
     k = 16
@@ -467,16 +485,7 @@ def test_point_data_triangle_bounds_hold_inside_and_are_cached() -> None:
     assert len(data.tri_index) == 2 and data.Hz.shape == (2, k)
     data.Hz[:] -= 1.0
     # sound: above the sampled Hessians over each triangle (and its chords)
-    hx, hv = _hessians(m)
-    rng = np.random.default_rng(1)
-    for t in range(2):
-        z = _triangle_samples(corners[t], rng, 30)
-        for j in range(k):
-            v = np.repeat(data.dirs[j][None], len(z), 0)
-            w = np.repeat(data.dirs[(j + 1) % k][None], len(z), 0)
-            s = rng.uniform(0, 1, (len(z), 1))
-            assert _lam_max(hx, z, v).max() <= hz[t, j] * (1 + 1e-12)
-            assert _chord_q(hv, z, (1 - s) * v + s * w, w - v).max() <= ht[t, j] * (1 + 1e-12)
+    _assert_above_sampled_hessians(m, corners, data.dirs, hz, ht, seed=1, n=30)
     # and equal to the bounds on the triangles' bounding boxes (no split: corrections small)
     for t in range(2):
         bz, bt = cm._bounds_on_boxes(m, np.repeat(corners[t].min(0)[None], k, 0),
@@ -687,16 +696,7 @@ def test_group_bounds_hold_for_every_direction_and_chord_of_the_group(name: str)
     # everywhere: the mean-value form of a group is centred elsewhere)
     assert np.all(hz.reshape(2, -1, group) == hz[:, ::group, None])
     assert np.mean(hz > hz1) > 0.5 and np.mean(ht > ht1) > 0.5
-    hx, hv = _hessians(m)
-    rng = np.random.default_rng(3)
-    for t in range(2):
-        z = _triangle_samples(corners[t], rng, 20)
-        for j in range(k):
-            v = np.repeat(loose.dirs[j][None], len(z), 0)
-            w = np.repeat(loose.dirs[(j + 1) % k][None], len(z), 0)
-            s = rng.uniform(0, 1, (len(z), 1))
-            assert _lam_max(hx, z, v).max() <= hz[t, j] * (1 + 1e-12)
-            assert _chord_q(hv, z, (1 - s) * v + s * w, w - v).max() <= ht[t, j] * (1 + 1e-12)
+    _assert_above_sampled_hessians(m, corners, loose.dirs, hz, ht, seed=3, n=20)
     # tightening every element: the smaller of the group's and the direction's own bound
     rows = np.repeat([0, 1], k)
     kk = np.tile(np.arange(k), 2)
