@@ -223,7 +223,11 @@ class _PointData:
     correction is above ``SPLIT_FRACTION`` of F and its enclosure above
     ``SPLIT_OVERESTIMATE`` times its centre value (or infinite), on the 2 x 2 sub-boxes
     that meet the triangle, down to ``SPLIT_DEPTH`` levels), cached by the triangle's
-    vertices."""
+    vertices. ``group``: the bounds are first taken over groups of that many consecutive
+    directions (:func:`_chord_boxes`; ``tight`` marks the elements since bounded one
+    direction at a time by :meth:`tighten`). A group's chord boxes must stay clear of the
+    origin (arcs well below 90 degrees): :func:`direction_group` keeps them at most 2.8
+    degrees."""
 
     def __init__(self, metric: Metric, k: int, group: int = 1) -> None:
         self.metric = metric
