@@ -238,6 +238,41 @@ def test_rows_tightened_on_demand_reach_the_optimum_of_the_tight_rows() -> None:
     assert len(asked) < 0.5 * MESH.n_tri * K  # on demand, not everything
 
 
+def test_one_round_tightens_the_rows_its_potential_fills_before_scaling() -> None:
+    """One round, every vertex exact with 5 directions: the potential breaks unsampled rows.
+    Those it fills beyond ``1 - near`` (and only rows of the triangles asked) are tightened
+    BEFORE the scale, so the bound is the value over the largest ratio against the TIGHT
+    rows there (a loose row would scale it down by about 10 %)."""
+    tight = _weights()
+    b = 0.9 * tight
+    asked: list[tuple[int, int]] = []
+
+    def tighten(tri: np.ndarray, kk: np.ndarray) -> None:
+        for t, k in zip(tri.tolist(), kk.tolist(), strict=True):
+            asked.append((t, k))
+            b[t, :, k] = tight[t, :, k]
+
+    active = np.zeros((NV, K), bool)
+    active[:, [0, 7, 13, 20, 26]] = True
+    start = {"exact": np.ones(NV, bool), "active": active}
+    target = 1e-3
+    r = _solve_lp(MESH, b, DIRS, 0, 1, upper=100.0, target=target, start=start, max_iter=1,
+                  tighten=tighten)
+    value = r["lower"] * r["ratio"] * (1 + 1e-12)
+    slope = (FULL @ (r["phi"] * r["ratio"] * (1 + 1e-12))).reshape(NV, K)
+    near = min(NEAR_TIGHT, NEAR_PER_TARGET * target)
+    # the rows the unscaled potential fills beyond 1 - near against the rows it was given
+    # (the sampled ones tight, the others loose) were all asked for, by triangle
+    given = np.where(active, tight.reshape(NV, K), 0.9 * tight.reshape(NV, K))
+    vid, kk = np.nonzero(slope / given > 1.0 - near)
+    assert vid.size and {(v // 3, k) for v, k in zip(vid.tolist(), kk.tolist(),
+                                                     strict=True)} <= set(asked)
+    assert {t for t, _ in asked} <= set(range(MESH.n_tri))
+    # the scale is the largest ratio against the rows as tightened, equal to the tight one
+    assert r["ratio"] == pytest.approx(float(np.max(slope / tight.reshape(NV, K))), rel=1e-9)
+    assert r["ratio"] > 1.01 and value > _highs_optimum(tight)
+
+
 def test_one_round_of_few_rows_is_scaled_into_a_valid_bound() -> None:
     """All vertices exact with 5 directions each (not enough: the potential violates
     other rows): the bound is the LP value over its largest row ratio; the duals satisfy
