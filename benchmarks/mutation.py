@@ -40,7 +40,9 @@ GROUPS: dict[str, tuple[list[str], list[str]]] = {
     "block_tridiagonal": (["solvers/block_tridiagonal.py"], ["tests/test_block_tridiagonal.py",
                                                              "tests/test_block_tridiagonal_rows.py"]),
     "certify_mesh": (["solvers/certify_mesh.py"], ["tests/test_mutation_kills_certify_mesh.py"]),
-    "certify_lp": (["solvers/certify_lp.py"], ["tests/test_mutation_kills_certify_lp.py"]),
+    # certify_lp: its kill tests and the repair's (which run _solve_lp's repair branch)
+    "certify_lp": (["solvers/certify_lp.py"], ["tests/test_mutation_kills_certify_lp.py",
+                                               "tests/test_certify_repair.py"]),
     "newton": (["solvers/newton.py"], ["tests/test_newton.py",
                                        "tests/test_mutation_kills_newton.py"]),
     # batched: its own kill tests alone (closed forms, hand counts: 17 tests in ~3 s);

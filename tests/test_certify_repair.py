@@ -57,10 +57,16 @@ def test_nothing_broken_or_too_much_broken_gives_none(monkeypatch: pytest.Monkey
 
 
 def test_a_round_short_of_the_target_only_by_broken_rows_is_repaired(
-        monkeypatch: pytest.MonkeyPatch) -> None:
+        monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture) -> None:
     """All vertices exact with 5 directions: the round's potential breaks unsampled rows;
     with the upper bound just above its value the repair lifts the bound from value /
-    ratio to a potential that holds every row (checked here), never below."""
+    ratio to a potential that holds every row (checked here), never below; the debug log
+    says how long the repair took (clock readings), its largest row ratio and its bound."""
+    import logging
+    import re
+
+    from tick_clock import TickClock
+
     b = _weights()
     active = np.zeros((NV, K), bool)
     active[:, [0, 7, 13, 20, 26]] = True
@@ -71,8 +77,19 @@ def test_a_round_short_of_the_target_only_by_broken_rows_is_repaired(
     value = plain["lower"] * plain["ratio"] * (1 + 1e-12)
     assert plain["ratio"] > 1.01
     monkeypatch.setattr(lp_mod, "REPAIR", True)
+    monkeypatch.setattr(lp_mod, "time", TickClock())
+    caplog.set_level(logging.DEBUG, logger="solvers.certify_lp")
     r = _solve_lp(MESH, b, DIRS, 0, 1, upper=1.001 * value, target=0.05, start=start,
                   max_iter=1)
+    msgs = [rec.getMessage() for rec in caplog.records if rec.name == "solvers.certify_lp"]
+    got = [re.fullmatch(r"repaired in (\S+) s: max row ratio (\S+) -> bound (\S+)", m)
+           for m in msgs]
+    got = [g for g in got if g is not None]
+    assert len(got) == 1, msgs
+    assert got[0][1] == "1.00"  # one clock reading between the repair's start and end
+    assert float(got[0][2]) == pytest.approx(r["ratio"], abs=2e-6)
+    assert float(got[0][3]) == pytest.approx(r["lower"], abs=2e-8)
+    assert len(got[0][2].split(".")[1]) == 6 and len(got[0][3].split(".")[1]) == 8
     assert r["lower"] > plain["lower"] * 1.001
     assert _ratio(r["phi"], b).max() <= 1.0 + 1e-9
     assert r["phi"][1] - r["phi"][0] == pytest.approx(r["lower"], rel=1e-12)
