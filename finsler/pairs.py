@@ -34,6 +34,13 @@ def sample_pairs(metric: Metric, k: int, seed: int | np.random.Generator) -> np.
     Deterministic for a given seed (numpy's PCG64 stream is stable across versions). A
     :class:`numpy.random.Generator` is drawn from in place (a training run's own stream:
     fresh pairs for its trees and actor terms).
+
+    Pair ``i`` of a seed depends on ``k`` wherever the domain draws one block of numbers
+    after another (the disk: ``2 k`` radii, then ``2 k`` angles; products: factor after
+    factor): for Matsumoto, Poincaré, car-like and the sphere the first 9 of
+    ``sample_pairs(m, 20, s)`` are not ``sample_pairs(m, 9, s)``; on a box they are. To
+    name "pair ``i`` of seed ``s``", give ``k`` too (the benchmarks' ``--only`` numbers
+    pairs in the set of ``--pairs``).
     """
     if not isinstance(k, (int, np.integer)) or k < 1:
         raise InputError(f"number of pairs must be a positive integer, got {k!r}")

@@ -141,3 +141,14 @@ def test_an_unbounded_box_refuses_to_be_sampled_by_name() -> None:
     pts = finsler.Box((-1.0, 2.0), (1.0, 3.0)).sample(50, np.random.default_rng(0))
     assert pts.shape == (50, 2) and np.all((pts[:, 0] >= -1) & (pts[:, 0] <= 1))
     assert np.all((pts[:, 1] >= 2) & (pts[:, 1] <= 3))
+
+
+def test_pair_i_of_a_seed_depends_on_k_where_the_domain_rejects() -> None:
+    """What ``sample_pairs``' docstring says: a prefix of a larger set is the smaller set on
+    a box (Randers), not on a disk (Matsumoto), which draws all radii, then all angles."""
+    box = finsler.get_metric("randers")
+    disk = finsler.get_metric("matsumoto")
+    np.testing.assert_array_equal(finsler.sample_pairs(box, 20, 7)[:9],
+                                  finsler.sample_pairs(box, 9, 7))
+    assert not np.array_equal(finsler.sample_pairs(disk, 20, 7)[:9],
+                              finsler.sample_pairs(disk, 9, 7))
