@@ -143,7 +143,7 @@ def test_an_unbounded_box_refuses_to_be_sampled_by_name() -> None:
     assert np.all((pts[:, 1] >= 2) & (pts[:, 1] <= 3))
 
 
-def test_pair_i_of_a_seed_depends_on_k_where_the_domain_rejects() -> None:
+def test_pair_i_of_a_seed_depends_on_k_where_the_domain_draws_in_blocks() -> None:
     """What ``sample_pairs``' docstring says: a prefix of a larger set is the smaller set on
     a box (Randers), not on a disk (Matsumoto), which draws all radii, then all angles."""
     box = finsler.get_metric("randers")
