@@ -100,6 +100,35 @@ def test_refinement_tightens_the_bound() -> None:
     assert fine.lower <= float(m.distance(s, g)[0])
 
 
+def _weights_lp(w: list[float]) -> tuple[dict, np.ndarray]:
+    """An LP result whose triangle ``t`` carries dual-weighted correction ``w[t]`` (one row
+    per triangle, correction 1)."""
+    n = len(w)
+    rows = np.stack([np.arange(n), np.zeros(n, int), np.zeros(n, int)], 1)
+    return {"rows": rows, "duals": np.asarray(w, float)}, np.ones((n, 1))
+
+
+@pytest.mark.parametrize(("scale", "goal", "expected"), [
+    # W = 1e-3 (the target): cutting 0.45 W brings it to 0.7 x target -> the top triangle
+    (1e-4, True, [0]),
+    # W = 1e-2, far above the target: Doerfler's 0.99 of the weight, every triangle here
+    (1e-3, True, [0, 1, 2, 3, 4]),
+    # without the goal, Doerfler's fraction at any W
+    (1e-4, False, [0, 1, 2, 3, 4]),
+    # W below 0.7 x target: the floor (0.3 of the weight) still refines the top triangle
+    (0.6e-4, True, [0])])
+def test_marking_refines_what_the_target_needs(monkeypatch: pytest.MonkeyPatch, scale: float,
+                                               goal: bool, expected: list[int]) -> None:
+    monkeypatch.setattr(certify_mod, "GOAL_MARKING", goal)
+    lp, corr = _weights_lp([5 * scale, 3 * scale, scale, 0.5 * scale, 0.5 * scale])
+    spec = MeshSpec(target_gap=1e-3, mark_fraction=0.99)
+    marked = certify_mod._marked(lp, corr, 5, spec, 1.0)
+    assert sorted(marked.tolist()) == expected
+    # ten times the upper bound is ten times the absolute target: less weight to cut
+    if goal and scale == 1e-3:
+        assert len(certify_mod._marked(lp, corr, 5, spec, 10.0)) < 5
+
+
 def _no_corrections(monkeypatch: pytest.MonkeyPatch) -> None:
     """Drop the second-order corrections: constraints at sampled points and directions
     only (not a bound)."""
