@@ -36,7 +36,7 @@ import numpy as np
 from finsler.intervals import Interval, _IntervalBackend
 from finsler.lowering import LoweredFunction
 
-__all__ = ["enclose_affine"]
+__all__ = ["affine_forms", "enclose_affine"]
 
 _U = 2.0**-53
 _TINY = 1e-300
@@ -217,8 +217,26 @@ def enclose_affine(fn: LoweredFunction, lo: Any, hi: Any) -> list[Interval]:
     Raises :class:`NotImplementedError` for a program with an operation that has no affine
     rule (callers then use :func:`finsler.intervals.enclose`), ``ValueError`` for bad
     shapes."""
+    return [v.iv for v in _run(fn, np.asarray(lo, np.float64), np.asarray(hi, np.float64))[2]]
+
+
+def affine_forms(fn: LoweredFunction, lo: Any, hi: Any) -> tuple[
+        np.ndarray, np.ndarray, list[tuple[np.ndarray, np.ndarray, np.ndarray, Interval]]]:
+    """The affine forms themselves: ``(mid, rad, forms)`` with each input coordinate
+    ``q_k = mid_k + rad_k eps_k`` (``eps_k in [-1, 1]``, a superset of the box) and one
+    ``(c, a, e, iv)`` per output coordinate: for every point of the box the value lies in
+    ``c + a . eps + [-e, e]`` (``c`` ``(N,)``, ``a`` ``(N, n)``, ``e`` ``(N,)``, the float
+    errors of the forms' own arithmetic included) and in the interval ``iv``. Callers
+    maximise the linear part over sets smaller than the box (a simplex inside it). Same
+    errors as :func:`enclose_affine`."""
     lo = np.asarray(lo, np.float64)
     hi = np.asarray(hi, np.float64)
+    mid, rad, outs = _run(fn, lo, hi)
+    return mid, rad, [(v.c, v.a, v.e, v.iv) for v in outs]
+
+
+def _run(fn: LoweredFunction, lo: np.ndarray, hi: np.ndarray) -> tuple[
+        np.ndarray, np.ndarray, list[_Affine]]:
     if fn.n_in != 1 or lo.ndim != 2 or lo.shape != hi.shape or lo.shape[1] != fn.in_sizes[0]:
         raise ValueError(f"{fn.name}: enclose_affine needs one input of shape (N, "
                          f"{fn.in_sizes[0]}), got {lo.shape} / {hi.shape}")
@@ -239,7 +257,9 @@ def enclose_affine(fn: LoweredFunction, lo: Any, hi: Any) -> list[Interval]:
     for o in outs:
         for v in o:
             if isinstance(v, _Affine):
-                result.append(v.iv)
+                result.append(v)
             else:  # a constant output
-                result.append(Interval(np.full(lo.shape[0], float(v))))
-    return result
+                k = np.full(lo.shape[0], float(v))
+                result.append(_Affine(k, np.zeros((lo.shape[0], n)), np.zeros(lo.shape[0]),
+                                      Interval(k)))
+    return mid, rad, result

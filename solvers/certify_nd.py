@@ -50,11 +50,15 @@ from finsler.status import CertifyStop, LPStatus, Status
 from solvers.certify_nd_parts import (
     LP_SOLVER,
     Cells,
+    box_distance,
+    build_cells,
     LPFailure,
     cube_directions,
+    edge_midpoints,
     f_lower,
     lowered_f_grad,
     point_cloud,
+    reached,
     scale_lower_bound,
     solve_lp,
     verify,
@@ -96,6 +100,10 @@ class NDSpec:
     """Segments of the solver's path (default: 4 x the task's)."""
     seed: int = 0
     """Seed of the jitter of the point cloud (reproducible)."""
+    element: str = "P1"
+    """The potential: ``"P1"`` (piecewise linear), ``"P2"`` (piecewise quadratic: loses
+    second order in the cell's width instead of first; F must have affine rules, see
+    :mod:`solvers.certify_nd_p2`) or ``"auto"`` (P2 where F allows it)."""
 
     def __post_init__(self) -> None:
         for name in ("h_path", "corridor", "h_far", "target_gap", "verify_tol",
@@ -104,6 +112,9 @@ class NDSpec:
             if isinstance(val, bool) or not isinstance(val, (int, float)) or not (
                     math.isfinite(val) and val > 0):
                 raise InputError(f"NDSpec.{name} must be positive and finite, got {val!r}")
+        if self.element not in ("P1", "P2", "auto"):
+            raise InputError(f"NDSpec.element must be 'P1', 'P2' or 'auto', got "
+                             f"{self.element!r}")
         if self.h_path > self.h_far:
             raise InputError(f"NDSpec.h_path ({self.h_path}) must be <= h_far ({self.h_far})")
         for name, low in (("faces", 2), ("max_cells", 10), ("max_rounds", 1),
@@ -244,18 +255,20 @@ def certify_nd(metric: Metric | str, start: Any, goal: Any, mesh: NDSpec | str |
     best: dict[str, Any] = {"lower": 0.0, "R": float("nan"), "lp_status": "not_solved",
                             "rows": 0, "cells": 0, "rel": 0, "vertices": 0}
     stopped_by, status, message = "max_rounds", CertifyStatus.BUDGET_REACHED, ""
-    for _ in range(spec.max_rounds):
+    element = spec.element
+    if element != "P1":
+        from solvers.certify_nd_p2 import affine_ready, run_p2
+
+        ready = affine_ready(m)
+        if element == "P2" and not ready:
+            raise InputError(f"the P2 element needs affine rules for every operation of "
+                             f"{m.name}'s F (max and abs have none); use element='P1'")
+        element = "P2" if ready else "P1"
+    for _ in range(spec.max_rounds if element == "P1" else 0):
         t0 = time.perf_counter()
-        cells = Cells(points, blo, bhi)
-        for _try in range(3):  # flat cells (degenerate positions): move the points a little
-            if not np.any(cells.flat & cells.inside):
-                break
-            fixed = np.zeros(points.shape[0], bool)
-            fixed[-2:] = True
-            points = points + np.where(fixed[:, None], 0.0,
-                                       rng.uniform(-1e-6, 1e-6, points.shape) * spec.h_path)
-            cells = Cells(points, blo, bhi)
-        dist = _box_distance(s, cells.zlo, cells.zhi) + _box_distance(g, cells.zlo, cells.zhi)
+        cells = build_cells(points, blo, bhi, rng, spec.h_path)
+        points = cells.points
+        dist = box_distance(s, cells.zlo, cells.zhi) + box_distance(g, cells.zlo, cells.zhi)
         rel = np.flatnonzero(cells.inside & ~cells.flat & ~(scale * dist > upper * (1 + 1e-9)))
         zlo, zhi = cells.zlo[rel], cells.zhi[rel]
         times["mesh"] += time.perf_counter() - t0
@@ -313,7 +326,7 @@ def certify_nd(metric: Metric | str, start: Any, goal: Any, mesh: NDSpec | str |
             if lower > best["lower"]:
                 best = result
             cc, cw, _ = ver["cuts"]
-            if (_reached(upper, best["lower"], spec.target_gap) or not cc.size
+            if (reached(upper, best["lower"], spec.target_gap) or not cc.size
                     or ver["R"] <= r_lp * (1 + 2 * spec.verify_tol)):
                 break
             # cuts: the directions the verification could not close become rows
@@ -335,15 +348,20 @@ def certify_nd(metric: Metric | str, start: Any, goal: Any, mesh: NDSpec | str |
                        "verify_open": result["ver"]["open"], "lower": result["lower"],
                        "gap": (upper - result["lower"]) / upper,
                        "seconds": time.perf_counter() - t_start})
-        if _reached(upper, best["lower"], spec.target_gap):
+        if reached(upper, best["lower"], spec.target_gap):
             stopped_by, status = "target_gap", CertifyStatus.CERTIFIED
             break
         marked = _mark(cells, rel, result, f_fn, spec.mark_fraction)
-        new = _edge_midpoints(cells, marked, rng)
+        new = edge_midpoints(cells, marked, rng)
         if cells.n_cells + 6 * new.shape[0] > spec.max_cells:
             stopped_by = "max_cells"
             break
         points = np.concatenate([cells.points, new])
+    if element == "P2":
+        run = run_p2(m, f_fn, s, g, upper, cap, spec, blo, bhi, scale, rng, points, dirs,
+                     times, t_start)
+        best, rounds = run["best"], run["rounds"]
+        stopped_by, status, message = run["stopped_by"], run["status"], run["message"]
     lower = float(best["lower"])
     if not math.isfinite(upper):
         message = ("the path's length has no finite proven bound (path_length_bounds: its "
@@ -357,19 +375,8 @@ def certify_nd(metric: Metric | str, start: Any, goal: Any, mesh: NDSpec | str |
         directions=int(dirs.shape[0]), lp_rows=int(best["rows"]), lp_status=best["lp_status"],
         lp_solver=LP_SOLVER, verified_ratio=float(best["R"]), scale_bound=float(scale),
         solver_status=solver_status, rigour=dict(RIGOUR),
-        mesh={**asdict(spec), "element": "P1 (Delaunay)"}, times=times, rounds=rounds,
+        mesh={**asdict(spec), "element": f"{element} (Delaunay)"}, times=times, rounds=rounds,
         path=pts, stopped_by=stopped_by, status=status, message=message)
-
-
-def _reached(upper: float, lower: float, target: float) -> bool:
-    """The target gap is reached (never with an infinite upper bound)."""
-    return bool(math.isfinite(upper) and upper - lower <= target * upper)
-
-
-def _box_distance(p: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-    """Euclidean distance of the point ``p`` to each box, rounded down."""
-    d = np.linalg.norm(p - np.clip(p, lo, hi), axis=1)
-    return d * (1 - 1e-12)
 
 
 def _mark(cells: Cells, rel: np.ndarray, result: dict[str, Any], f_fn: Any,
@@ -388,16 +395,3 @@ def _mark(cells: Cells, rel: np.ndarray, result: dict[str, Any], f_fn: Any,
         return rel[order[: max(1, rel.size // 10)]]
     k = int(np.searchsorted(cum, fraction * cum[-1]) + 1)
     return rel[order[:k]]
-
-
-def _edge_midpoints(cells: Cells, marked: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-    """Midpoints of the marked cells' edges (each once), jittered by 2 % of the edge."""
-    simp = cells.simp[marked]
-    k = simp.shape[1]
-    pairs = np.array([(i, j) for i in range(k) for j in range(i + 1, k)])
-    e = np.sort(np.stack([simp[:, pairs[:, 0]], simp[:, pairs[:, 1]]], -1).reshape(-1, 2), 1)
-    e = np.unique(e, axis=0)
-    a, b = cells.points[e[:, 0]], cells.points[e[:, 1]]
-    length = np.linalg.norm(b - a, axis=1, keepdims=True)
-    return 0.5 * (a + b) + rng.uniform(-0.02, 0.02, a.shape) * length
-

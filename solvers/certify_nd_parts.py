@@ -166,6 +166,34 @@ class Cells:
         return g, 2.0 * inv_norm * rnorm * (1 + 1e-6)
 
 
+def reached(upper: float, lower: float, target: float) -> bool:
+    """The target gap is reached (never with an infinite upper bound)."""
+    return bool(np.isfinite(upper) and upper - lower <= target * upper)
+
+
+def box_distance(p: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """Euclidean distance of the point ``p`` to each box, rounded down."""
+    d = np.linalg.norm(p - np.clip(p, lo, hi), axis=1)
+    return d * (1 - 1e-12)
+
+
+def build_cells(points: np.ndarray, blo: np.ndarray, bhi: np.ndarray,
+                rng: np.random.Generator, h: float) -> Cells:
+    """:class:`Cells` of ``points`` whose last two (start and goal) stay put; flat cells
+    inside the box (degenerate positions) are removed by moving the others by up to
+    ``1e-6 h`` (up to three tries)."""
+    cells = Cells(points, blo, bhi)
+    for _try in range(3):
+        if not np.any(cells.flat & cells.inside):
+            break
+        fixed = np.zeros(points.shape[0], bool)
+        fixed[-2:] = True
+        points = points + np.where(fixed[:, None], 0.0,
+                                   rng.uniform(-1e-6, 1e-6, points.shape) * h)
+        cells = Cells(points, blo, bhi)
+    return cells
+
+
 # ----------------------------------------------------------------------------------------
 # enclosures
 # ----------------------------------------------------------------------------------------
@@ -401,18 +429,27 @@ def solve_lp(cells: Cells, rel: np.ndarray, rows_cell: np.ndarray, rows_dir: np.
     ``grad phi_T . w <= b`` (cell ``rows_cell`` (indices into ``rel``), direction
     ``rows_dir`` ``(R, n)``, bound ``rows_b``) with ``phi(start) = 0`` and
     ``|phi| <= bound``. Returns ``phi``, the rows' duals and cvxpy's status."""
+    t = rel[rows_cell]
+    coef = np.einsum("ri,rij->rj", rows_dir, cells.coef[t])  # (R, n+1)
+    return solve_rows_lp(coef, cells.simp[t], cells.points.shape[0], rows_b, s_w, g_w, bound)
+
+
+def solve_rows_lp(coef: np.ndarray, cols: np.ndarray, n_vars: int, rows_b: np.ndarray,
+                  s_w: tuple[np.ndarray, np.ndarray], g_w: tuple[np.ndarray, np.ndarray],
+                  bound: float) -> tuple[np.ndarray, np.ndarray, str]:
+    """Maximise ``x(goal) - x(start)`` (``(indices, weights)`` ``s_w``, ``g_w``) over
+    ``n_vars`` unknowns under the rows ``sum_k coef[r, k] x[cols[r, k]] <= rows_b[r]``,
+    ``x(start) = 0`` and ``|x| <= bound``. Returns ``x``, the rows' duals and cvxpy's
+    status; raises :class:`LPFailure`."""
     import warnings
 
     import cvxpy as cp
     import scipy.sparse as sp
 
-    t = rel[rows_cell]
-    coef = np.einsum("ri,rij->rj", rows_dir, cells.coef[t])  # (R, n+1)
-    cols = cells.simp[t]
-    nr, nv = rows_b.size, cells.points.shape[0]
+    nr = rows_b.size
     a = sp.csr_matrix((coef.ravel(), (np.repeat(np.arange(nr), coef.shape[1]), cols.ravel())),
-                      shape=(nr, nv))
-    x = cp.Variable(nv)
+                      shape=(nr, n_vars))
+    x = cp.Variable(n_vars)
     obj = g_w[1] @ x[g_w[0]] - s_w[1] @ x[s_w[0]]
     cons = [a @ x <= rows_b, s_w[1] @ x[s_w[0]] == 0, x <= bound, x >= -bound]
     prob = cp.Problem(cp.Maximize(obj), cons)
@@ -426,3 +463,15 @@ def solve_lp(cells: Cells, rel: np.ndarray, rows_cell: np.ndarray, rows_dir: np.
         raise LPFailure(f"the LP ended with status {prob.status}")
     duals = np.maximum(np.asarray(cons[0].dual_value, float), 0.0)
     return np.asarray(x.value, float), duals, str(prob.status)
+
+
+def edge_midpoints(cells: Cells, marked: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """Midpoints of the marked cells' edges (each once), jittered by 2 % of the edge."""
+    simp = cells.simp[marked]
+    k = simp.shape[1]
+    pairs = np.array([(i, j) for i in range(k) for j in range(i + 1, k)])
+    e = np.sort(np.stack([simp[:, pairs[:, 0]], simp[:, pairs[:, 1]]], -1).reshape(-1, 2), 1)
+    e = np.unique(e, axis=0)
+    a, b = cells.points[e[:, 0]], cells.points[e[:, 1]]
+    length = np.linalg.norm(b - a, axis=1, keepdims=True)
+    return 0.5 * (a + b) + rng.uniform(-0.02, 0.02, a.shape) * length
