@@ -41,13 +41,16 @@ def main() -> None:
     ap.add_argument("--target-gap", type=float, default=None)
     ap.add_argument("--segments", type=int, default=None,
                     help="segments of the solver's path (default: 4 x the task's)")
+    ap.add_argument("--element", default=None, choices=("P1", "P2", "auto"),
+                    help="the potential (default: the preset's)")
     ap.add_argument("--no-write", action="store_true")
     args = ap.parse_args()
     m = finsler.get_metric(args.metric)
     spec = NDSpec.preset(args.preset)
     changes = {k: v for k, v in (("h_path", args.h_path), ("max_rounds", args.max_rounds),
                                  ("target_gap", args.target_gap),
-                                 ("segments", args.segments)) if v is not None}
+                                 ("segments", args.segments),
+                                 ("element", args.element)) if v is not None}
     spec = dataclasses.replace(spec, **changes)
     pairs = finsler.sample_pairs(m, args.pairs, args.seed)
     idx = [int(i) for i in args.only.split(",")] if args.only else range(args.pairs)
@@ -76,7 +79,8 @@ def main() -> None:
     summary = (f"{len(rows)} pairs of {args.metric} (sample_pairs seed {args.seed}), spec "
                f"{dataclasses.asdict(spec)}: median gap {np.median(gaps):.3e}, max "
                f"{gaps.max():.3e}; median CPU {np.median(cpus):.1f} s, max {cpus.max():.1f} s"
-               "; the machine was shared with other jobs (wall >> CPU).")
+               + ("; the machine was shared with other jobs (wall >> CPU)." if sum(
+                   float(r["wall s"]) for r in rows) > 1.3 * cpus.sum() else "."))
     if closed:
         summary += (f" Every interval contains the exact distance: "
                     f"{all(r['contains'] for r in rows)}.")

@@ -263,3 +263,29 @@ def _run(fn: LoweredFunction, lo: np.ndarray, hi: np.ndarray) -> tuple[
                 result.append(_Affine(k, np.zeros((lo.shape[0], n)), np.zeros(lo.shape[0]),
                                       Interval(k)))
     return mid, rad, result
+
+
+class AffineInput:
+    """Helpers to run a lowered program on caller-built affine forms (correlated inputs)."""
+
+    @staticmethod
+    def form(c: Any, a: Any, e: Any, lo: Any, hi: Any) -> _Affine:
+        """The form ``c + a . eps + [-e, e]`` of a value known to lie in ``[lo, hi]``."""
+        return _Affine(np.asarray(c, float), np.asarray(a, float), np.asarray(e, float),
+                       Interval(np.asarray(lo, float), np.asarray(hi, float)))
+
+    @staticmethod
+    def run(fn: LoweredFunction, columns: list[list[_Affine]]) -> list[_Affine]:
+        """All output coordinates of ``fn`` on the input forms ``columns[i][j]``."""
+        outs = fn.run(_BACKEND, columns)
+        n = columns[0][0].a.shape[-1]
+        size = columns[0][0].c.shape
+        res = []
+        for o in outs:
+            for v in o:
+                if isinstance(v, _Affine):
+                    res.append(v)
+                else:
+                    k = np.full(size, float(v))
+                    res.append(_Affine(k, np.zeros((*size, n)), np.zeros(size), Interval(k)))
+        return res

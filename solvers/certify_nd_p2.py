@@ -46,7 +46,12 @@ _EPS = float(np.finfo(float).eps)
 #: every (sub)simplex is verified blown up by this factor about its centroid, so that the
 #: pieces of a bisection cover their parent whatever the rounding of the midpoint
 _GROW = 1e-9
-_DEBUG = bool(__import__("os").environ.get("CERTIFY_P2_DEBUG"))
+#: rounds of the separation (fine directions at the order-4 lattice) before the proof, and
+#: the ratio above 1 it cuts
+SEP_ROUNDS = 6
+SEP_TOL = 5e-4
+#: work budget of one verification (items alive at a level x 2**n)
+MAX_ELEMENTS = 6_000_000
 
 
 def lowered_f_joint(metric: Metric) -> LoweredFunction:
@@ -173,7 +178,7 @@ class P2Cells:
 def verify_p2(fj: LoweredFunction, fg: LoweredFunction, x: np.ndarray, gc: np.ndarray,
               hess: np.ndarray, gerr: np.ndarray, blo: np.ndarray, bhi: np.ndarray,
               r_start: float, tol: float, start_faces: int = 4, max_depth: int = 10,
-              max_elements: int = int(__import__("os").environ.get("P2_MAXEL", "2000000"))) -> dict[str, Any]:
+              max_elements: int = MAX_ELEMENTS) -> dict[str, Any]:
     """A proven ``R`` with ``g_T(z) . v <= R F(z, v)`` for every cell ``T`` (vertices ``x``
     ``(T, n+1, n)``, gradient ``gc + hess (z - centroid)`` with error ``gerr``), every ``z``
     of the cell inside the box ``[blo, bhi]`` and every ``v``. ``fj``: ``(z, w) -> F`` as
@@ -192,6 +197,8 @@ def verify_p2(fj: LoweredFunction, fg: LoweredFunction, x: np.ndarray, gc: np.nd
     n = gc.shape[1]
     centroid = x.mean(axis=1)
     cell_diam = np.max(np.linalg.norm(x - centroid[:, None], axis=2), axis=1)
+    diam_scale = float(np.median(cell_diam))
+    w_map = tangent_maps(fg, x, gc, hess)
     wlo0, whi0 = face_boxes(n, start_faces)
     nb = wlo0.shape[0]
     cell = np.repeat(np.arange(gc.shape[0]), nb)
@@ -211,8 +218,8 @@ def verify_p2(fj: LoweredFunction, fg: LoweredFunction, x: np.ndarray, gc: np.nd
         zhi = np.minimum(grown.max(axis=1), bhi)
         outside = np.any(zlo > zhi, axis=1)
         zlo, zhi = np.minimum(zlo, zhi), np.maximum(zlo, zhi)
-        c = 0.5 * (wlo + whi)
         zp = np.clip(sc, zlo, zhi)
+        c = 0.5 * (wlo + whi) + np.einsum("tjk,tk->tj", w_map[cell], zp - centroid[cell])
         gz = gc[cell] + np.einsum("tab,tb->ta", hess[cell], zp - centroid[cell])
         (fp, _g) = fg(zp, c)
         fp = np.asarray(fp, float).reshape(-1)
@@ -224,8 +231,8 @@ def verify_p2(fj: LoweredFunction, fg: LoweredFunction, x: np.ndarray, gc: np.nd
         if np.any(cut):
             cuts.append((cell[cut], zp[cut], c[cut], point[cut]))
         r_target = max(r_target, float(np.max(point, initial=-np.inf)) * (1.0 + tol))
-        up_h, up_p, f_low = _bounds(fj, fg, cell, grown, zlo, zhi, wlo, whi, centroid, gc, hess,
-                                    gerr, r_target)
+        up_h, up_p, f_low = _bounds_moving(fj, fg, cell, grown, zlo, zhi, wlo, whi, centroid,
+                                           gc, hess, gerr, w_map, r_target)
         open_ = ~(up_h <= 0.0) & ~outside
         final = depth >= max_depth or int(open_.sum()) * 2 ** n > max_elements
         if final and np.any(open_):
@@ -235,14 +242,6 @@ def verify_p2(fj: LoweredFunction, fg: LoweredFunction, x: np.ndarray, gc: np.nd
                                           up_p[open_] / f_low[open_] * (1 + 4 * _EPS),
                                           np.inf))
             r_fail = max(r_fail, float(np.max(ratio)))
-            if _DEBUG:
-                o = np.flatnonzero(open_)
-                worst = o[np.argsort(-ratio)[:8]]
-                for q in worst:
-                    print("   open", cell[q], zlo[q].round(3), zhi[q].round(3), wlo[q].round(3),
-                          whi[q].round(3), "ratio", ratio[np.searchsorted(o, q)].round(4),
-                          "up_h", up_h[q], flush=True)
-                print("   open items", o.size, "cells", np.unique(cell[o]).size, flush=True)
             break
         cell, simp, wlo, whi = cell[open_], simp[open_], wlo[open_], whi[open_]
         if not cell.size:
@@ -251,7 +250,7 @@ def verify_p2(fj: LoweredFunction, fg: LoweredFunction, x: np.ndarray, gc: np.nd
         # (relative to its cell's diameter, x 2)
         wwid = np.max(whi - wlo, axis=1)
         zdiam = np.max(np.linalg.norm(simp - simp.mean(axis=1, keepdims=True), axis=2), 1)
-        by_w = wwid > 2.0 * zdiam / cell_diam[cell]
+        by_w = wwid > 2.0 * zdiam / diam_scale
         iw, iz = np.flatnonzero(by_w), np.flatnonzero(~by_w)
         wlo_a, whi_a, pa = _split_dirs(wlo[iw], whi[iw], iw)
         simp_b, pb = _bisect(simp[iz])
@@ -277,72 +276,6 @@ def verify_p2(fj: LoweredFunction, fg: LoweredFunction, x: np.ndarray, gc: np.nd
     return {"R": max(r_target, r_fail), "r_target": r_target, "boxes": boxes, "depth": depth,
             "open": int(np.unique(cut_out[0]).size), "cuts": cut_out,
             "seconds": time.perf_counter() - t0}
-
-
-def _bounds(fj: LoweredFunction, fg: LoweredFunction, cell: np.ndarray, simp: np.ndarray,
-            zlo: np.ndarray, zhi: np.ndarray, wlo: np.ndarray, whi: np.ndarray,
-            centroid: np.ndarray, gc: np.ndarray, hess: np.ndarray, gerr: np.ndarray,
-            r: float, chunk: int = 200_000) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Upper bounds of ``H = g(z) . w - r F(z, w)`` and of ``g(z) . w``, and a lower bound
-    of ``F``, over (simplex ``simp``) x (direction box ``B``, centre ``c``) for each item.
-
-    ``H(z, w) <= H(z, c) + (g(z) - r grad_w F(z, B)) . (w - c)`` (mean value in ``w``);
-    ``H(z, c)`` by one affine form in ``z`` (the affine gradient and ``F(., c)`` share the
-    noise symbols: second order in the simplex's width), its linear part maximised over the
-    simplex's vertices; the second term by intervals (second order near the tangency, where
-    ``g`` touches ``r grad_w F``). The smaller of that and ``max g . w - r min F``."""
-    from finsler.intervals import Interval, enclose
-
-    n = gc.shape[1]
-    out_h, out_p, out_f = (np.empty(cell.size) for _ in range(3))
-    for a0 in range(0, cell.size, chunk):
-        sl = slice(a0, a0 + chunk)
-        t = cell[sl]
-        sv = simp[sl]
-        g, h, ge = gc[t], hess[t], gerr[t]
-        c = 0.5 * (wlo[sl] + whi[sl])
-        with np.errstate(all="ignore"):
-            mid, rad, [(cf, af, ef, _)] = affine_forms(
-                fj, np.concatenate([zlo[sl], c], 1), np.concatenate([zhi[sl], c], 1))
-            mz, rz = mid[:, :n], rad[:, :n]
-            dz = mz - centroid[t]
-            q = g + np.einsum("tab,tb->ta", h, dz)  # g at the box's centre
-            cp = np.einsum("ta,ta->t", q, c)
-            apz = rz * np.einsum("tab,ta->tb", h, c)
-            mag = np.einsum("ta,ta->t", np.abs(g) + np.einsum(
-                "tab,tb->ta", np.abs(h), np.abs(dz)), np.abs(c)) + np.sum(np.abs(apz), 1)
-            ch = cp - r * cf
-            az = apz - r * af[:, :n]
-            eh = (r * ef * (1 + 4 * _EPS) + 32 * (n + 2) * _EPS * (mag + r * np.abs(cf))
-                  + ge * np.linalg.norm(c, axis=1) * (1 + 1e-12) + 1e-300)
-            eps_v = np.where(rz[:, None] > 0, (sv - mz[:, None]) / np.where(
-                rz[:, None] > 0, rz[:, None], 1.0), 0.0)
-            lin = np.einsum("tvk,tk->tv", eps_v, az)
-            h_c = (ch + np.max(lin, axis=1) + eh
-                   + 16 * (n + 2) * _EPS * (np.abs(ch) + np.max(np.abs(lin), axis=1) + eh))
-            # the range of the affine gradient over the simplex (its vertices) +- gerr
-            gv = g[:, None] + np.einsum("tab,tvb->tva", h, sv - centroid[t][:, None])
-            slack_g = 32 * (n + 2) * _EPS * (np.abs(g) + np.einsum(
-                "tab,tb->ta", np.abs(h), np.max(np.abs(sv - centroid[t][:, None]), axis=1)))
-            glo = gv.min(axis=1) - ge[:, None] - slack_g
-            ghi = gv.max(axis=1) + ge[:, None] + slack_g
-            (fb,), grad = enclose(fg, Interval(zlo[sl], zhi[sl]), Interval(wlo[sl], whi[sl]))
-            rr = Interval(np.float64(r))
-            mv = Interval(h_c)
-            for i in range(n):
-                off = Interval(wlo[sl, i]) - Interval(c[:, i])
-                off = Interval(off.lo, (Interval(whi[sl, i]) - Interval(c[:, i])).hi)
-                mv = mv + (Interval(glo[:, i], ghi[:, i]) - rr * grad[i]) * off
-            # max over (simplex, box) of g . w: per coordinate, the largest product
-            prod = np.maximum(np.maximum(glo * wlo[sl], glo * whi[sl]),
-                              np.maximum(ghi * wlo[sl], ghi * whi[sl]))
-            pmax = np.sum(prod, axis=1) * (1 + 4 * n * _EPS) + 1e-300
-            plain = Interval(pmax) - rr * fb
-        uh = np.minimum(mv.hi, plain.hi)
-        out_h[sl] = np.where(np.isnan(uh), np.inf, uh)
-        out_p[sl] = np.where(np.isnan(pmax), np.inf, pmax)
-        out_f[sl] = np.where(np.isnan(fb.lo), -np.inf, fb.lo)
-    return out_h, out_p, out_f
 
 
 def _split_dirs(wlo: np.ndarray, whi: np.ndarray, parent: np.ndarray
@@ -400,12 +333,11 @@ def run_p2(m: Metric, f_fn: LoweredFunction, s: np.ndarray, g: np.ndarray, upper
         box_distance,
         build_cells,
         edge_midpoints,
+        lowered_f_grad,
         reached,
         solve_rows_lp,
     )
     from solvers.status import CertifyStatus
-
-    from solvers.certify_nd_parts import lowered_f_grad
 
     fj = lowered_f_joint(m)
     fg_fn = lowered_f_grad(m)[1]
@@ -444,6 +376,8 @@ def run_p2(m: Metric, f_fn: LoweredFunction, s: np.ndarray, g: np.ndarray, upper
         ew, eb = np.zeros((0, n)), np.zeros(0)
         result: dict[str, Any] | None = None
         failure = None
+        sep_lat = lattice(n, 4)
+        sep_rounds = 0
         for _lp in range(spec.lp_rounds):
             rc, rk, rd = np.nonzero(active)
             t_rows = np.concatenate([rc, ec])
@@ -459,14 +393,10 @@ def run_p2(m: Metric, f_fn: LoweredFunction, s: np.ndarray, g: np.ndarray, upper
                 failure = str(err)
                 break
             times["lp"] += time.perf_counter() - t0
-            if _DEBUG:
-                print(f"  lp {_lp}: rows {b_rows.size} value "
-                      f"{float(g_w[1] @ phi[g_w[0]] - s_w[1] @ phi[s_w[0]]):.6f} "
-                      f"{time.perf_counter() - t0:.1f} s", flush=True)
             gcs, hs, gerr = p2.affine_gradients(phi, rel)
             gk = gcs[:, None] + np.einsum("tab,tkb->tka", hs, zk - cen[:, None])
             ratio = np.einsum("tkn,dn->tkd", gk, dirs) / b_lp
-            viol = (ratio > 1.0 + 1e-7) & ~active
+            viol = (ratio > 1.0 + (1e-7 if sep_rounds == 0 else 1e-3)) & ~active
             if np.any(viol):  # row generation: the 2 worst directions of each node
                 flat = np.where(viol, ratio, -np.inf).reshape(nr * k_nodes, nd)
                 order = np.argsort(-flat, axis=1)[:, :2]
@@ -474,6 +404,28 @@ def run_p2(m: Metric, f_fn: LoweredFunction, s: np.ndarray, g: np.ndarray, upper
                 node = np.repeat(np.arange(nr * k_nodes), 2)[take.ravel()]
                 active.reshape(nr * k_nodes, nd)[node, order.ravel()[take.ravel()]] = True
                 continue
+            if sep_rounds < SEP_ROUNDS:  # separation at the order-4 lattice, fine directions
+                zs = np.clip(np.einsum("kv,tvn->tkn", sep_lat, x), blo, bhi)
+                ps = gcs[:, None] + np.einsum("tab,tkb->tka", hs, zs - cen[:, None])
+                wbest, rb = best_directions(fg_fn, zs.reshape(-1, n), ps.reshape(-1, n), faces=4)
+                rb = rb.reshape(nr, -1)
+                sep_rounds += 1
+                bad = rb > 1.0 + SEP_TOL
+                if np.any(bad):
+                    order = np.argsort(-np.where(bad, rb, -np.inf), axis=1)[:, :8]
+                    take = np.take_along_axis(bad, order, 1)
+                    tt = np.repeat(np.arange(nr), order.shape[1])[take.ravel()]
+                    kk = order.ravel()[take.ravel()]
+                    zz_new = zs[tt, kk]
+                    ww_new = wbest.reshape(nr, -1, n)[tt, kk]
+                    fb, _ = fg_fn(zz_new, ww_new)
+                    fb = np.asarray(fb, float).reshape(-1)
+                    ok = np.isfinite(fb) & (fb > 0)
+                    ec = np.concatenate([ec, tt[ok]])
+                    elam = np.concatenate([elam, sep_lat[kk[ok]]])
+                    ew = np.concatenate([ew, ww_new[ok]])
+                    eb = np.concatenate([eb, fb[ok]])
+                    continue
             r_lp = max(float(np.max(ratio)), 1e-300)
             if ec.size:
                 ge = gcs[ec] + np.einsum("tab,tb->ta", hs[ec],
@@ -483,10 +435,6 @@ def run_p2(m: Metric, f_fn: LoweredFunction, s: np.ndarray, g: np.ndarray, upper
             ver = verify_p2(fj, fg_fn, x, gcs, hs, gerr, blo, bhi, r_lp, spec.verify_tol,
                             max_depth=spec.verify_depth)
             times["verify"] += time.perf_counter() - t0
-            if _DEBUG:
-                print(f"  verify: r_lp {r_lp:.5f} R {ver['R']:.5f} target {ver['r_target']:.5f}"
-                      f" boxes {ver['boxes']} depth {ver['depth']} cuts {ver['cuts'][0].size} "
-                      f"{ver['seconds']:.1f} s", flush=True)
             dphi = float(g_w[1] @ phi[g_w[0]] - s_w[1] @ phi[s_w[0]])
             lower = min(dphi / ver["R"] * (1 - 1e-12), upper) if ver["R"] > 0 else 0.0
             result = {"lower": max(lower, 0.0), "R": ver["R"], "lp_status": lp_status,
@@ -536,3 +484,172 @@ def run_p2(m: Metric, f_fn: LoweredFunction, s: np.ndarray, g: np.ndarray, upper
         points = np.concatenate([cells.points, new])
     return {"best": best, "rounds": rounds, "stopped_by": stopped_by, "status": status,
             "message": message}
+
+
+# ----------------------------------------------------------------------------------------
+# moving direction boxes: w = u + W_T (z - z_T), W_T the derivative of the tangency
+# ----------------------------------------------------------------------------------------
+def best_directions(fg: LoweredFunction, zz: np.ndarray, pp: np.ndarray, faces: int = 6,
+                    chunk: int = 4000) -> tuple[np.ndarray, np.ndarray]:
+    """For points ``zz`` ``(m, n)`` and covectors ``pp``: unit directions nearly maximising
+    ``p . w / F(z, w)`` (a grid on the cube, then four rounds of 24 random perturbations at
+    shrinking scales) and the ratios there (not a proof: rows and targets only)."""
+    from solvers.certify_nd_parts import cube_directions
+
+    n = zz.shape[1]
+    dirs = cube_directions(n, faces)
+    dirs = dirs / np.linalg.norm(dirs, axis=1, keepdims=True)
+    m = zz.shape[0]
+    best = np.empty((m, n))
+    for a in range(0, m, chunk):
+        sl = slice(a, a + chunk)
+        q = zz[sl].shape[0]
+        f, _ = fg(np.repeat(zz[sl], dirs.shape[0], 0), np.tile(dirs, (q, 1)))
+        r = (pp[sl] @ dirs.T) / np.asarray(f, float).reshape(q, -1)
+        best[sl] = dirs[np.argmax(r, axis=1)]
+    rng = np.random.default_rng(0)
+    ratio = np.zeros(m)
+    for scale in (0.15, 0.05, 0.016, 0.005):
+        pert = rng.normal(size=(24, n)) * scale
+        cand = best[:, None] + np.concatenate([np.zeros((1, n)), pert])[None]
+        cand /= np.linalg.norm(cand, axis=2, keepdims=True)
+        f, _ = fg(np.repeat(zz, cand.shape[1], 0), cand.reshape(-1, n))
+        r = np.einsum("mcn,mn->mc", cand, pp) / np.asarray(f, float).reshape(m, -1)
+        k = np.argmax(r, axis=1)
+        best = cand[np.arange(m), k]
+        ratio = r[np.arange(m), k]
+    return best, ratio
+
+
+def lattice(n: int, order: int) -> np.ndarray:
+    """Barycentric coordinates of the order-``order`` lattice of the simplex."""
+    pts = [np.array(c, float) / order for c in itertools.product(range(order + 1),
+                                                                 repeat=n + 1)
+           if sum(c) == order]
+    return np.array(pts)
+
+
+def tangent_maps(fg: LoweredFunction, x: np.ndarray, gc: np.ndarray, hess: np.ndarray
+                 ) -> np.ndarray:
+    """Per cell an ``(n, n)`` map ``W`` with ``w*(z) ~ w*(c) + W (z - c)``, ``w*(z)`` the
+    direction (scaled onto the cube's surface) maximising ``g(z) . w / F(z, w)``; zero where
+    the maximisers at the vertices and centre are not on one face. Only steers the
+    verification (any ``W`` keeps it sound)."""
+
+    t_n, k, n = x.shape
+    cen = x.mean(axis=1)
+    pts = np.concatenate([x, cen[:, None]], axis=1)  # (T, k+1, n)
+    p = gc[:, None] + np.einsum("tab,tkb->tka", hess, pts - cen[:, None])
+    zz, pp = pts.reshape(-1, n), p.reshape(-1, n)
+    m = zz.shape[0]
+    best, _ = best_directions(fg, zz, pp)
+    face = np.argmax(np.abs(best), axis=1) * 2 + (best[np.arange(m), np.argmax(
+        np.abs(best), axis=1)] > 0)
+    cube = best / np.max(np.abs(best), axis=1, keepdims=True)
+    cube = cube.reshape(t_n, k + 1, n)
+    same = np.all(face.reshape(t_n, k + 1) == face.reshape(t_n, k + 1)[:, :1], axis=1)
+    design = np.concatenate([np.ones((t_n, k + 1, 1)), pts - cen[:, None]], axis=2)
+    coef = np.linalg.pinv(design) @ cube  # (T, n+1, n)
+    w_map = np.swapaxes(coef[:, 1:], 1, 2)  # (T, n, n): w_j = sum_k W_jk dz_k
+    # the moved surface must keep the origin well inside: |W (z - c)|_inf <= 0.25
+    reach = np.max(np.abs(np.einsum("tjk,tvk->tvj", w_map, x - cen[:, None])), axis=(1, 2))
+    ok = same & np.isfinite(reach) & (reach <= 0.25)
+    return np.where(ok[:, None, None], w_map, 0.0)
+
+
+def _bounds_moving(fj: LoweredFunction, fg: LoweredFunction, cell: np.ndarray,
+                   simp: np.ndarray, zlo: np.ndarray, zhi: np.ndarray, wlo: np.ndarray,
+                   whi: np.ndarray, centroid: np.ndarray, gc: np.ndarray, hess: np.ndarray,
+                   gerr: np.ndarray, w_map: np.ndarray, r: float, chunk: int = 100_000
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """As :func:`_bounds` with the direction box moving with z: ``w = u + W (z - c_T)``,
+    ``u`` in the box. Mean value in ``u``: ``H(z, c_u) + sum_i max|g_i(z) - r dF/dw_i| r_i``
+    with both terms affine forms over (z, u), so the cross terms cancel near the tangency."""
+    from finsler.affine import AffineInput
+
+    n = gc.shape[1]
+    u_ = _EPS / 2
+    out_h, out_p, out_f = (np.empty(cell.size) for _ in range(3))
+    for a0 in range(0, cell.size, chunk):
+        sl = slice(a0, a0 + chunk)
+        t = cell[sl]
+        nn = t.size
+        sv = simp[sl]
+        g, h, ge, wm = gc[t], hess[t], gerr[t], w_map[t]
+        cz = centroid[t]
+        zl, zh = zlo[sl], zhi[sl]
+        mz = 0.5 * zl + 0.5 * zh
+        rz = np.maximum(zh - mz, mz - zl) * (1 + 4 * u_)
+        mu = 0.5 * (wlo[sl] + whi[sl])
+        ru = np.maximum(whi[sl] - mu, mu - wlo[sl]) * (1 + 4 * u_)
+        with np.errstate(all="ignore"):
+            def lin_form(c0: np.ndarray, az: np.ndarray, au: np.ndarray) -> Any:
+                a = np.concatenate([az, au], axis=1)
+                e = 16 * (n + 2) * u_ * (np.abs(c0) + np.sum(np.abs(a), 1)) + 1e-300
+                rad = np.sum(np.abs(a), 1) + e
+                return AffineInput.form(c0, a, e, c0 - rad * (1 + 1e-12), c0 + rad * (1 + 1e-12))
+
+            zero = np.zeros((nn, n))
+            zf = [lin_form(mz[:, j], np.eye(n)[j][None] * rz, zero) for j in range(n)]
+            dz0 = mz - cz
+            gf = [lin_form(g[:, i] + np.einsum("tk,tk->t", h[:, i], dz0), h[:, i] * rz, zero)
+                  for i in range(n)]
+            wc = mu + np.einsum("tjk,tk->tj", wm, dz0)
+            w0 = [lin_form(wc[:, j], wm[:, j] * rz, zero) for j in range(n)]
+            wf = [lin_form(wc[:, j], wm[:, j] * rz, np.eye(n)[j][None] * ru)
+                  for j in range(n)]
+            eps_v = np.where(rz[:, None] > 0, (sv - mz[:, None]) / np.where(
+                rz[:, None] > 0, rz[:, None], 1.0), 0.0)
+
+            def upper(form: Any, eps_v: np.ndarray = eps_v) -> np.ndarray:
+                az, au = form.a[:, :n], form.a[:, n:]
+                lin = np.einsum("tvk,tk->tv", eps_v, az)
+                val = form.c + np.max(lin, 1) + np.sum(np.abs(au), 1) + form.e
+                return val + 16 * (n + 2) * u_ * (np.abs(form.c) + np.max(np.abs(lin), 1)
+                                                  + np.sum(np.abs(au), 1) + form.e)
+
+            wnorm = np.linalg.norm(np.abs(wc) + np.einsum("tjk,tk->tj", np.abs(wm), rz)
+                                   + ru, axis=1)
+            # first term: u at the box's centre
+            (f1,) = AffineInput.run(fj, [zf + w0])
+            p1 = gf[0] * w0[0]
+            for i in range(1, n):
+                p1 = p1 + gf[i] * w0[i]
+            term1 = upper(p1 - f1 * r) + ge * wnorm
+            # second term: the coefficient of (u - c_u)
+            outs = AffineInput.run(fg, [zf, wf])
+            fw, grads = outs[0], outs[1:]
+            term2 = np.zeros(nn)
+            for i in range(n):
+                kap = gf[i] - grads[i] * r
+                mag = np.abs(kap.c) + np.sum(np.abs(kap.a), 1) + kap.e
+                mag = np.minimum(mag, np.maximum(np.abs(kap.iv.lo), np.abs(kap.iv.hi)))
+                term2 = term2 + (mag + ge) * ru[:, i] * (1 + 4 * u_)
+            mv = term1 + term2 * (1 + 8 * n * u_)
+            # joint form (far from the tangency)
+            pj = gf[0] * wf[0]
+            for i in range(1, n):
+                pj = pj + gf[i] * wf[i]
+            uj = upper(pj - fw * r) + ge * wnorm
+            up = upper(pj) + ge * wnorm
+            # plain intervals: max g . w - r min F over the simplex x the moved box
+            from finsler.intervals import Interval, enclose
+
+            gv = g[:, None] + np.einsum("tab,tvb->tva", h, sv - cz[:, None])
+            sg = 32 * (n + 2) * u_ * (np.abs(g) + np.einsum(
+                "tab,tb->ta", np.abs(h), np.max(np.abs(sv - cz[:, None]), axis=1)))
+            glo, ghi = gv.min(axis=1) - ge[:, None] - sg, gv.max(axis=1) + ge[:, None] + sg
+            wlo2 = np.array([wf[j].iv.lo for j in range(n)]).T
+            whi2 = np.array([wf[j].iv.hi for j in range(n)]).T
+            prod = np.maximum(np.maximum(glo * wlo2, glo * whi2),
+                              np.maximum(ghi * wlo2, ghi * whi2))
+            pmax = np.sum(prod, axis=1) * (1 + 4 * n * u_) + 1e-300
+            (fb,), _g = enclose(fg, Interval(zl, zh), Interval(wlo2, whi2))
+            plain = (Interval(pmax) - Interval(np.float64(r)) * fb).hi
+        uh = np.minimum(np.minimum(mv, uj), plain)
+        up = np.minimum(up, pmax)
+        out_h[sl] = np.where(np.isnan(uh), np.inf, uh)
+        out_p[sl] = np.where(np.isnan(up), np.inf, up)
+        flo = np.maximum(fw.iv.lo, fb.lo)
+        out_f[sl] = np.where(np.isnan(flo), -np.inf, flo)
+    return out_h, out_p, out_f
