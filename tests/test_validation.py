@@ -97,6 +97,13 @@ class TestDiscreteDistances(DistanceTests):
     def _metric(self, name: str) -> None:
         self.metric = finsler.get_metric(name)
 
+    @pytest.mark.slow
+    def test_certificate(self) -> None:
+        """Slow (60-140 s: two 7-D Panda certificates; car-like is skipped, not smooth).
+        The default run proves Panda's certificate sound in tests/test_certify_panda_split.py
+        (lower bound below the solver's path on fresh pairs, parts and grouped)."""
+        super().test_certificate()
+
 
 class TestMatsumotoDistancesWhereFinsler(DistanceTests):
     """The same suite on Matsumoto's convex disk (well inside it: short pairs whose
