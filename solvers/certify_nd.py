@@ -217,6 +217,15 @@ def certify_nd(metric: Metric | str, start: Any, goal: Any, mesh: NDSpec | str |
     if not isinstance(spec, NDSpec):
         raise InputError(f"mesh must be an NDSpec or a preset name, got {type(mesh).__name__}")
     s, g = _check(m, start, goal)
+    element = spec.element
+    if element != "P1":
+        from solvers.certify_nd_p2 import affine_ready
+
+        ready = affine_ready(m)
+        if element == "P2" and not ready:
+            raise InputError(f"the P2 element needs affine rules for every operation of "
+                             f"{m.name}'s F (max and abs have none); use element='P1'")
+        element = "P2" if ready else "P1"
     n = m.dim
     blo, bhi = (np.asarray(b, float) for b in m.domain.bounds())
 
@@ -258,15 +267,6 @@ def certify_nd(metric: Metric | str, start: Any, goal: Any, mesh: NDSpec | str |
     best: dict[str, Any] = {"lower": 0.0, "R": float("nan"), "lp_status": "not_solved",
                             "rows": 0, "cells": 0, "rel": 0, "vertices": 0}
     stopped_by, status, message = "max_rounds", CertifyStatus.BUDGET_REACHED, ""
-    element = spec.element
-    if element != "P1":
-        from solvers.certify_nd_p2 import affine_ready, run_p2
-
-        ready = affine_ready(m)
-        if element == "P2" and not ready:
-            raise InputError(f"the P2 element needs affine rules for every operation of "
-                             f"{m.name}'s F (max and abs have none); use element='P1'")
-        element = "P2" if ready else "P1"
     for _ in range(spec.max_rounds if element == "P1" else 0):
         t0 = time.perf_counter()
         cells = build_cells(points, blo, bhi, rng, spec.h_path)
@@ -361,6 +361,8 @@ def certify_nd(metric: Metric | str, start: Any, goal: Any, mesh: NDSpec | str |
             break
         points = np.concatenate([cells.points, new])
     if element == "P2":
+        from solvers.certify_nd_p2 import run_p2
+
         run = run_p2(m, f_fn, s, g, upper, cap, spec, blo, bhi, scale, rng, points, dirs,
                      times, t_start)
         best, rounds = run["best"], run["rounds"]

@@ -60,7 +60,8 @@ def certify_command(
     goal: Annotated[str, typer.Option(help='Goal point, e.g. "0.5,0.3".')],
     mesh: Annotated[str, typer.Option(
         help="Mesh preset: coarse (a few 1e-2, fastest), default (gap <= 1e-2) or fine "
-             "(gap <= 1e-3, minutes).")] = "default",
+             "(gap <= 1e-3, minutes); in 3-D also p2 (a quadratic potential: gap <= 1e-2 "
+             "in minutes where F has affine rules).")] = "default",
     h: Annotated[float | None, typer.Option(
         "--h", help="Spacing of the first mesh along the path (overrides the preset).")] = None,
     directions: Annotated[int | None, typer.Option(
@@ -210,8 +211,8 @@ def _certify_conformal(m: Any, start: str, goal: str, target_gap: float | None,
 
 def _certify_nd(m: Any, start: str, goal: str, mesh: str, h: float | None,
                 target_gap: float | None, out: Path | None, as_json: bool) -> None:
-    """``geodesics certify`` in dimension 3 and up: a verified piecewise-linear potential
-    (:func:`solvers.certify_nd.certify_nd`)."""
+    """``geodesics certify`` in dimension 3 and up: a verified piecewise-linear (or, with
+    ``--mesh p2``, piecewise-quadratic) potential (:func:`solvers.certify_nd.certify_nd`)."""
     import dataclasses
 
     from solvers.certify_nd import NDSpec, certify_nd
