@@ -32,7 +32,8 @@ Properties (names as in the table of ``geodesics check``):
   segment's length bounds ``d``), ``distance-symmetry`` (reversible metrics),
   ``closed-form-distance`` (a distance or geodesic you supply, or the metric's own,
   against the solver), ``certificate`` (the certified interval contains the solved
-  distance: 2-D and 3-D, and conformal metrics beyond), ``midpoint-halves``; all within the solver's stated errors;
+  distance: 2-D and 3-D, and conformal metrics beyond), ``midpoint-halves``; all within
+  the solver's stated errors;
 * of a policy (:mod:`validation.testing.policy`): ``policy-midpoint`` (against exact
   midpoints where Proposition 1 holds), ``policy-symmetry`` (reversible metrics),
   ``policy-success`` and ``policy-length-ratio`` on fresh pairs.
