@@ -59,6 +59,7 @@ from solvers.certify_nd_parts import (
     lowered_f_grad,
     point_cloud,
     reached,
+    round_record,
     scale_lower_bound,
     solve_lp,
     verify,
@@ -344,13 +345,7 @@ def certify_nd(metric: Metric | str, start: Any, goal: Any, mesh: NDSpec | str |
         if result is None:
             stopped_by = "lp_rounds"
             continue
-        rounds.append({"cells": result["cells"], "relevant_cells": result["rel"],
-                       "vertices": result["vertices"], "rows": result["rows"],
-                       "lp_value": result["dphi"], "verified_ratio": result["R"],
-                       "verify_boxes": result["ver"]["boxes"],
-                       "verify_open": result["ver"]["open"], "lower": result["lower"],
-                       "gap": (upper - result["lower"]) / upper,
-                       "seconds": time.perf_counter() - t_start})
+        rounds.append(round_record(result, upper, t_start))
         if reached(upper, best["lower"], spec.target_gap):
             stopped_by, status = "target_gap", CertifyStatus.CERTIFIED
             break

@@ -40,7 +40,7 @@ import numpy as np
 from finsler.affine import affine_forms
 from finsler.lowering import LoweredFunction, lower
 from finsler.metric import Metric
-from solvers.certify_nd_parts import Cells, face_boxes
+from solvers.certify_nd_parts import Cells, face_boxes, split_directions
 
 _EPS = float(np.finfo(float).eps)
 #: every (sub)simplex is verified blown up by this factor about its centroid, so that the
@@ -252,7 +252,7 @@ def verify_p2(fj: LoweredFunction, fg: LoweredFunction, x: np.ndarray, gc: np.nd
         zdiam = np.max(np.linalg.norm(simp - simp.mean(axis=1, keepdims=True), axis=2), 1)
         by_w = wwid > 2.0 * zdiam / diam_scale
         iw, iz = np.flatnonzero(by_w), np.flatnonzero(~by_w)
-        wlo_a, whi_a, pa = _split_dirs(wlo[iw], whi[iw], iw)
+        wlo_a, whi_a, pa = split_directions(wlo[iw], whi[iw], iw)
         simp_b, pb = _bisect(simp[iz])
         pb = iz[pb]
         cell = np.concatenate([cell[pa], cell[pb]])
@@ -276,22 +276,6 @@ def verify_p2(fj: LoweredFunction, fg: LoweredFunction, x: np.ndarray, gc: np.nd
     return {"R": max(r_target, r_fail), "r_target": r_target, "boxes": boxes, "depth": depth,
             "open": int(np.unique(cut_out[0]).size), "cuts": cut_out,
             "seconds": time.perf_counter() - t0}
-
-
-def _split_dirs(wlo: np.ndarray, whi: np.ndarray, parent: np.ndarray
-                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Each direction box cut in two along every free coordinate."""
-    lo, hi = wlo, whi
-    for i in range(wlo.shape[1]):
-        f = hi[:, i] > lo[:, i]
-        mid = 0.5 * (lo[f, i] + hi[f, i])
-        hi_a = hi.copy()
-        hi_a[f, i] = mid
-        lo_b, hi_b = lo[f].copy(), hi[f]
-        lo_b[:, i] = mid
-        lo, hi = np.concatenate([lo, lo_b]), np.concatenate([hi_a, hi_b])
-        parent = np.concatenate([parent, parent[f]])
-    return lo, hi, parent
 
 
 def _bisect(simp: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -335,6 +319,7 @@ def run_p2(m: Metric, f_fn: LoweredFunction, s: np.ndarray, g: np.ndarray, upper
         edge_midpoints,
         lowered_f_grad,
         reached,
+        round_record,
         solve_rows_lp,
     )
     from solvers.status import CertifyStatus
@@ -460,13 +445,7 @@ def run_p2(m: Metric, f_fn: LoweredFunction, s: np.ndarray, g: np.ndarray, upper
         if result is None:
             stopped_by = "lp_rounds"
             continue
-        rounds.append({"cells": result["cells"], "relevant_cells": result["rel"],
-                       "vertices": result["vertices"], "rows": result["rows"],
-                       "lp_value": result["dphi"], "verified_ratio": result["R"],
-                       "verify_boxes": result["ver"]["boxes"],
-                       "verify_open": result["ver"]["open"], "lower": result["lower"],
-                       "gap": (upper - result["lower"]) / upper,
-                       "seconds": time.perf_counter() - t_start})
+        rounds.append(round_record(result, upper, t_start))
         if reached(upper, best["lower"], spec.target_gap):
             stopped_by, status = "target_gap", CertifyStatus.CERTIFIED
             break

@@ -177,6 +177,16 @@ def box_distance(p: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     return d * (1 - 1e-12)
 
 
+def round_record(result: dict[str, Any], upper: float, t_start: float) -> dict[str, Any]:
+    """What a mesh round reports (``NDResult.rounds``), from the round's best LP result."""
+    return {"cells": result["cells"], "relevant_cells": result["rel"],
+            "vertices": result["vertices"], "rows": result["rows"],
+            "lp_value": result["dphi"], "verified_ratio": result["R"],
+            "verify_boxes": result["ver"]["boxes"], "verify_open": result["ver"]["open"],
+            "lower": result["lower"], "gap": (upper - result["lower"]) / upper,
+            "seconds": time.perf_counter() - t_start}
+
+
 def build_cells(points: np.ndarray, blo: np.ndarray, bhi: np.ndarray,
                 rng: np.random.Generator, h: float) -> Cells:
     """:class:`Cells` of ``points`` whose last two (start and goal) stay put; flat cells
@@ -305,7 +315,7 @@ def verify(fg: LoweredFunction, zlo: np.ndarray, zhi: np.ndarray, g: np.ndarray,
         # directions in 2**(n-1); every other level the cell's box too, in two along its
         # widest side (the gradient of F over a large box is too wide to decide)
         k = cell.size
-        wlo, whi, idx = _split(wlo, whi, np.arange(k))
+        wlo, whi, idx = split_directions(wlo, whi, np.arange(k))
         cell, zl, zh = cell[idx], zl[idx], zh[idx]
         if depth % 2 == 1:
             zl, zh, idx = _split_z(zl, zh)
@@ -388,7 +398,7 @@ def _ratio_bound(fg: LoweredFunction, zl: np.ndarray, zh: np.ndarray, g: np.ndar
     return ratio, np.where(np.isfinite(point), point, np.inf)
 
 
-def _split(wlo: np.ndarray, whi: np.ndarray, parent: np.ndarray
+def split_directions(wlo: np.ndarray, whi: np.ndarray, parent: np.ndarray
            ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Each direction box cut in two along every free coordinate (``2**(n-1)``
     children); returns them and their parents' indices."""
