@@ -53,9 +53,11 @@ def main() -> None:
                                  ("element", args.element)) if v is not None}
     spec = dataclasses.replace(spec, **changes)
     pairs = finsler.sample_pairs(m, args.pairs, args.seed)
-    idx = [int(i) for i in args.only.split(",")] if args.only else range(args.pairs)
+    idx = [int(i) for i in args.only.split(",")] if args.only else list(range(args.pairs))
     rows = []
     closed = m.provides("distance")
+    out = ResultsFile(f"certify_nd-{args.metric}",
+                      title=f"Certified intervals in 3-D: {args.metric}")
     for i in idx:
         s, g = pairs[i]
         c0, w0 = time.process_time(), time.perf_counter()
@@ -74,6 +76,11 @@ def main() -> None:
             row["lower <= path length"] = bool(r.lower <= path_len)
         rows.append(row)
         print(row, flush=True)
+        if not args.no_write and len(rows) < len(idx):  # what is finished survives a kill
+            out.sections = []
+            out.add(f"In progress: {len(rows)} of {len(idx)} pairs.",
+                    markdown_table(list(rows[0]), [list(r.values()) for r in rows]))
+            out.write()
     gaps = np.array([float(r["gap"]) for r in rows])
     cpus = np.array([float(r["cpu s"]) for r in rows])
     summary = (f"{len(rows)} pairs of {args.metric} (sample_pairs seed {args.seed}), spec "
@@ -87,9 +94,8 @@ def main() -> None:
     print(summary)
     if args.no_write:
         return
-    out = ResultsFile(f"certify_nd-{args.metric}",
-                      title=f"Certified intervals in 3-D: {args.metric}")
     header = list(rows[0])
+    out.sections = []
     out.add(summary, markdown_table(header, [[r[k] for k in header] for r in rows]))
     print(out.write())
 

@@ -93,6 +93,7 @@ class ResultsFile:
         self.started = _dt.datetime.now(_dt.timezone.utc)
         self.load_start = _load()
         self.sections: list[str] = []
+        self._written: Path | None = None
 
     def add(self, *chunks: str) -> None:
         """Append Markdown (headings, tables, paragraphs) in order."""
@@ -125,11 +126,14 @@ class ResultsFile:
         return p
 
     def write(self) -> Path:
-        """Write the file atomically and return its path (also printed)."""
+        """Write the file atomically and return its path (also printed). A second call
+        rewrites the same file (a benchmark that writes after every item loses nothing
+        finished when it is interrupted)."""
         from finsler.infra.files import atomic_write_text
 
         self.directory.mkdir(parents=True, exist_ok=True)
-        p = self.path()
+        p = self._written or self.path()
+        self._written = p
         atomic_write_text(p, self.header() + "\n" + "\n".join(self.sections))
         print(f"results written to {p}")
         return p
