@@ -91,6 +91,7 @@ from solvers.certify_conformal_grid import (
     potential,
     reduced,
 )
+from solvers.certify_domain import domain_constraints, outside_domain
 from solvers.inputs import as_metric
 from solvers.status import CertifyStatus
 
@@ -318,25 +319,6 @@ class _Projected:
             return np.min(np.where(np.isfinite(val), val, np.inf), axis=1)
 
 
-def _constraint_function(metric: Metric, active: np.ndarray
-                         ) -> tuple[LoweredFunction, np.ndarray, np.ndarray] | None:
-    """The domain's constraints on the coordinates ``active`` alone, ``q_A -> g`` with
-    bounds ``lb <= g <= ub`` (those involving other coordinates are left out: a
-    superset), or None."""
-    def build() -> Any:
-        q = ca.SX.sym("q", metric.dim)
-        free = [q[i] for i in range(metric.dim) if not active[i]]
-        cons = [c for c in metric.domain.constraints_sx(q)
-                if not any(ca.depends_on(ca.SX(c[0]), v) for v in free)]
-        if not cons:
-            return None
-        qa = ca.vertcat(*[q[i] for i in range(metric.dim) if active[i]])
-        g = ca.vertcat(*[ca.SX(c[0]) for c in cons])
-        return (lower(ca.Function(f"domain_{metric._ident}", [qa], [ca.densify(g)])),
-                np.array([c[1] for c in cons], float), np.array([c[2] for c in cons], float))
-    return metric.derived(f"certify.domain_constraints.{active.tobytes().hex()}", build)
-
-
 def _enclose_factor(fn: LoweredFunction, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     """Proven lower bounds ``(N,)`` of ``f`` over the boxes ``[lo, hi]``: affine
     arithmetic intersected with the natural interval extension (the natural one alone for
@@ -352,22 +334,6 @@ def _enclose_factor(fn: LoweredFunction, lo: np.ndarray, hi: np.ndarray) -> np.n
                 (val,) = enclose(fn, Interval(lo[sl], hi[sl]))[0]
         out[sl] = np.broadcast_to(val.lo, (lo[sl].shape[0],))
     return np.maximum(np.nan_to_num(out, nan=0.0, neginf=0.0), 0.0)
-
-
-def _outside_domain(cons: Any, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-    """True where a box certainly misses the domain (a constraint's enclosure lies
-    outside its bounds)."""
-    out = np.zeros(lo.shape[0], bool)
-    if cons is None:
-        return out
-    fn, lb, ub = cons
-    for a in range(0, lo.shape[0], _CHUNK):
-        sl = slice(a, a + _CHUNK)
-        with np.errstate(all="ignore"):
-            (vals,) = enclose(fn, Interval(lo[sl], hi[sl]))
-        for k, v in enumerate(vals):
-            out[sl] |= np.broadcast_to((v.lo > ub[k]) | (v.hi < lb[k]), out[sl].shape)
-    return out
 
 
 def _box_point_distance(lo: np.ndarray, hi: np.ndarray, p: np.ndarray) -> np.ndarray:
@@ -473,7 +439,7 @@ def certify_conformal(metric: Metric | str, start: Any, goal: Any,
     if float(np.linalg.norm((y - x)[active])) <= 1e-9 * dist:  # only free coordinates move
         fn, active = _factor_function(m, False, factor, key)
         project = ()
-    cons = _constraint_function(m, active)
+    cons = domain_constraints(m, active)
     free_dist = float(np.linalg.norm((y - x)[~active]))
     full_dist, x_full, y_full = dist, x, y
     x, y = x[active], y[active]
@@ -510,7 +476,7 @@ def certify_conformal(metric: Metric | str, start: Any, goal: Any,
         # the region: drop boxes outside the domain or the ellipse of the current m
         m_low = float(np.min(f_lo)) if f_lo.size else 0.0
         radius = ellipse(m_low)
-        keep = ~_outside_domain(cons, lo, hi)
+        keep = ~outside_domain(cons, lo, hi)
         if math.isfinite(radius):
             keep &= (_box_point_distance(lo, hi, x) + _box_point_distance(lo, hi, y)
                      <= radius)

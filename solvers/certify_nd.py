@@ -47,6 +47,7 @@ import numpy as np
 from finsler.errors import InputError
 from finsler.metric import Metric
 from finsler.status import CertifyStop, LPStatus, Status
+from solvers.certify_domain import domain_constraints, outside_domain
 from solvers.certify_nd_parts import (
     LP_SOLVER,
     Cells,
@@ -256,6 +257,7 @@ def certify_nd(metric: Metric | str, start: Any, goal: Any, mesh: NDSpec | str |
     cap = upper if math.isfinite(upper) else float(est.value) + abs(float(est.error))
 
     f_fn, fg_fn = lowered_f_grad(m)
+    cons = domain_constraints(m)  # cells that miss the domain hold no path
     t0 = time.perf_counter()
     scale = scale_lower_bound(f_fn, blo, bhi)
     rng = np.random.default_rng(spec.seed)
@@ -273,7 +275,8 @@ def certify_nd(metric: Metric | str, start: Any, goal: Any, mesh: NDSpec | str |
         cells = build_cells(points, blo, bhi, rng, spec.h_path)
         points = cells.points
         dist = box_distance(s, cells.zlo, cells.zhi) + box_distance(g, cells.zlo, cells.zhi)
-        rel = np.flatnonzero(cells.inside & ~cells.flat & ~(scale * dist > upper * (1 + 1e-9)))
+        rel = np.flatnonzero(cells.inside & ~cells.flat & ~(scale * dist > upper * (1 + 1e-9))
+                             & ~outside_domain(cons, cells.zlo, cells.zhi))
         zlo, zhi = cells.zlo[rel], cells.zhi[rel]
         times["mesh"] += time.perf_counter() - t0
         t0 = time.perf_counter()

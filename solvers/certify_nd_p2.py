@@ -31,6 +31,7 @@ Nothing here imports :mod:`solvers.certify_nd`.
 from __future__ import annotations
 
 import itertools
+import logging
 import time
 from typing import Any
 
@@ -40,8 +41,10 @@ import numpy as np
 from finsler.affine import affine_forms
 from finsler.lowering import LoweredFunction, lower
 from finsler.metric import Metric
+from solvers.certify_domain import domain_constraints, outside_domain
 from solvers.certify_nd_parts import Cells, face_boxes, split_directions
 
+_LOG = logging.getLogger(__name__)
 _EPS = float(np.finfo(float).eps)
 #: every (sub)simplex is verified blown up by this factor about its centroid, so that the
 #: pieces of a bisection cover their parent whatever the rounding of the midpoint
@@ -50,6 +53,10 @@ _GROW = 1e-9
 #: the ratio above 1 it cuts
 SEP_ROUNDS = 6
 SEP_TOL = 5e-4
+#: directions added per node and round of row generation (the worst violated ones); with 2,
+#: a few nodes whose gradient the objective does not fix kept a row generation going for
+#: 40 rounds at a constant LP value
+ROWGEN_PER_NODE = 16
 #: work budget of one verification (items alive at a level x 2**n)
 MAX_ELEMENTS = 6_000_000
 
@@ -178,11 +185,12 @@ class P2Cells:
 def verify_p2(fj: LoweredFunction, fg: LoweredFunction, x: np.ndarray, gc: np.ndarray,
               hess: np.ndarray, gerr: np.ndarray, blo: np.ndarray, bhi: np.ndarray,
               r_start: float, tol: float, start_faces: int = 4, max_depth: int = 10,
-              max_elements: int = MAX_ELEMENTS) -> dict[str, Any]:
+              max_elements: int = MAX_ELEMENTS, cons: Any = None) -> dict[str, Any]:
     """A proven ``R`` with ``g_T(z) . v <= R F(z, v)`` for every cell ``T`` (vertices ``x``
     ``(T, n+1, n)``, gradient ``gc + hess (z - centroid)`` with error ``gerr``), every ``z``
-    of the cell inside the box ``[blo, bhi]`` and every ``v``. ``fj``: ``(z, w) -> F`` as
-    one input; ``fg``: ``(z, w) -> (F, grad_w F)``.
+    of the cell inside the box ``[blo, bhi]`` and the domain (``cons`` from
+    :func:`solvers.certify_domain.domain_constraints`; None: the box) and every ``v``.
+    ``fj``: ``(z, w) -> F`` as one input; ``fg``: ``(z, w) -> (F, grad_w F)``.
 
     Items are (cell, simplex inside it, box of directions on the cube's surface). On each,
     one affine form of ``H = g(z) . w - R F(z, w)`` over the box of the simplex times the
@@ -218,6 +226,7 @@ def verify_p2(fj: LoweredFunction, fg: LoweredFunction, x: np.ndarray, gc: np.nd
         zhi = np.minimum(grown.max(axis=1), bhi)
         outside = np.any(zlo > zhi, axis=1)
         zlo, zhi = np.minimum(zlo, zhi), np.maximum(zlo, zhi)
+        outside |= outside_domain(cons, zlo, zhi)  # no path goes there
         zp = np.clip(sc, zlo, zhi)
         c = 0.5 * (wlo + whi) + np.einsum("tjk,tk->tj", w_map[cell], zp - centroid[cell])
         gz = gc[cell] + np.einsum("tab,tb->ta", hess[cell], zp - centroid[cell])
@@ -247,10 +256,12 @@ def verify_p2(fj: LoweredFunction, fg: LoweredFunction, x: np.ndarray, gc: np.nd
         if not cell.size:
             break
         # split what is wider: the direction box (cube coordinates) or the simplex
-        # (relative to its cell's diameter, x 2)
+        # (relative to the median cell's diameter, x 1/2: with x 2 the proof of a pair near
+        # the disk's rim kept splitting simplices under direction boxes of width 1/16 and
+        # ran out of items, 8.3 M boxes; with x 1/2 it closed in 1.6 M)
         wwid = np.max(whi - wlo, axis=1)
         zdiam = np.max(np.linalg.norm(simp - simp.mean(axis=1, keepdims=True), axis=2), 1)
-        by_w = wwid > 2.0 * zdiam / diam_scale
+        by_w = wwid > 0.5 * zdiam / diam_scale
         iw, iz = np.flatnonzero(by_w), np.flatnonzero(~by_w)
         wlo_a, whi_a, pa = split_directions(wlo[iw], whi[iw], iw)
         simp_b, pb = _bisect(simp[iz])
@@ -325,6 +336,7 @@ def run_p2(m: Metric, f_fn: LoweredFunction, s: np.ndarray, g: np.ndarray, upper
     from solvers.status import CertifyStatus
 
     fj = lowered_f_joint(m)
+    cons = domain_constraints(m)
     fg_fn = lowered_f_grad(m)[1]
     n = m.dim
     lat = nodes(n)
@@ -342,12 +354,17 @@ def run_p2(m: Metric, f_fn: LoweredFunction, s: np.ndarray, g: np.ndarray, upper
         points = cells.points
         dist = box_distance(s, cells.zlo, cells.zhi) + box_distance(g, cells.zlo, cells.zhi)
         rel = np.flatnonzero(cells.inside & ~cells.flat
-                             & ~(scale * dist > upper * (1 + 1e-9)))
+                             & ~(scale * dist > upper * (1 + 1e-9))
+                             & ~outside_domain(cons, cells.zlo, cells.zhi))
         p2 = P2Cells(cells)
         x = cells.points[cells.simp[rel]]
         cen = x.mean(axis=1)
-        zk = np.clip(np.einsum("kv,tvn->tkn", lat, x), blo, bhi)  # (nr, K, n)
         nr = rel.size
+        # the nodes, moved into the box where the cell sticks out of it (the proof covers the
+        # cell's part in the box); rows at their own barycentric coordinates
+        zk = np.clip(np.einsum("kv,tvn->tkn", lat, x), blo, bhi)  # (nr, K, n)
+        lam_k = p2.barycentric(np.repeat(rel, k_nodes), zk.reshape(-1, n)).reshape(
+            nr, k_nodes, n + 1)
         times["mesh"] += time.perf_counter() - t0
         t0 = time.perf_counter()
         (bv,) = f_fn(np.repeat(zk.reshape(-1, n), nd, 0), np.tile(dirs, (nr * k_nodes, 1)))
@@ -366,7 +383,7 @@ def run_p2(m: Metric, f_fn: LoweredFunction, s: np.ndarray, g: np.ndarray, upper
         for _lp in range(spec.lp_rounds):
             rc, rk, rd = np.nonzero(active)
             t_rows = np.concatenate([rc, ec])
-            lam_rows = np.concatenate([lat[rk], elam])
+            lam_rows = np.concatenate([lam_k[rc, rk], elam])
             w_rows = np.concatenate([dirs[rd], ew])
             b_rows = np.concatenate([b_lp[rc, rk, rd], eb])
             t0 = time.perf_counter()
@@ -382,11 +399,16 @@ def run_p2(m: Metric, f_fn: LoweredFunction, s: np.ndarray, g: np.ndarray, upper
             gk = gcs[:, None] + np.einsum("tab,tkb->tka", hs, zk - cen[:, None])
             ratio = np.einsum("tkn,dn->tkd", gk, dirs) / b_lp
             viol = (ratio > 1.0 + (1e-7 if sep_rounds == 0 else 1e-3)) & ~active
-            if np.any(viol):  # row generation: the 2 worst directions of each node
+            _LOG.debug("P2 LP %d: %d rows, value %.6g, grid ratio %.6g, %d violations, "
+                       "%d separation rounds, %.1f s", _lp, b_rows.size,
+                       float(g_w[1] @ phi[g_w[0]] - s_w[1] @ phi[s_w[0]]),
+                       float(np.max(ratio)), int(np.count_nonzero(viol)), sep_rounds,
+                       time.perf_counter() - t0)
+            if np.any(viol):  # row generation: the worst directions of each node
                 flat = np.where(viol, ratio, -np.inf).reshape(nr * k_nodes, nd)
-                order = np.argsort(-flat, axis=1)[:, :2]
+                order = np.argsort(-flat, axis=1)[:, :ROWGEN_PER_NODE]
                 take = np.isfinite(np.take_along_axis(flat, order, 1))
-                node = np.repeat(np.arange(nr * k_nodes), 2)[take.ravel()]
+                node = np.repeat(np.arange(nr * k_nodes), order.shape[1])[take.ravel()]
                 active.reshape(nr * k_nodes, nd)[node, order.ravel()[take.ravel()]] = True
                 continue
             if sep_rounds < SEP_ROUNDS:  # separation at the order-4 lattice, fine directions
@@ -395,7 +417,9 @@ def run_p2(m: Metric, f_fn: LoweredFunction, s: np.ndarray, g: np.ndarray, upper
                 wbest, rb = best_directions(fg_fn, zs.reshape(-1, n), ps.reshape(-1, n), faces=4)
                 rb = rb.reshape(nr, -1)
                 sep_rounds += 1
-                bad = rb > 1.0 + SEP_TOL
+                bad = (rb > 1.0 + SEP_TOL) & m.domain.contains(zs.reshape(-1, n)).reshape(nr, -1)
+                _LOG.debug("P2 separation %d: largest ratio %.6g, %d points above 1 + %g",
+                           sep_rounds, float(np.max(rb)), int(np.count_nonzero(bad)), SEP_TOL)
                 if np.any(bad):
                     order = np.argsort(-np.where(bad, rb, -np.inf), axis=1)[:, :8]
                     take = np.take_along_axis(bad, order, 1)
@@ -407,7 +431,7 @@ def run_p2(m: Metric, f_fn: LoweredFunction, s: np.ndarray, g: np.ndarray, upper
                     fb = np.asarray(fb, float).reshape(-1)
                     ok = np.isfinite(fb) & (fb > 0)
                     ec = np.concatenate([ec, tt[ok]])
-                    elam = np.concatenate([elam, sep_lat[kk[ok]]])
+                    elam = np.concatenate([elam, p2.barycentric(rel[tt[ok]], zz_new[ok])])
                     ew = np.concatenate([ew, ww_new[ok]])
                     eb = np.concatenate([eb, fb[ok]])
                     continue
@@ -418,8 +442,10 @@ def run_p2(m: Metric, f_fn: LoweredFunction, s: np.ndarray, g: np.ndarray, upper
                 r_lp = max(r_lp, float(np.max(np.einsum("ij,ij->i", ge, ew) / eb)))
             t0 = time.perf_counter()
             ver = verify_p2(fj, fg_fn, x, gcs, hs, gerr, blo, bhi, r_lp, spec.verify_tol,
-                            max_depth=spec.verify_depth)
+                            max_depth=spec.verify_depth, cons=cons)
             times["verify"] += time.perf_counter() - t0
+            _LOG.debug("P2 proof: R %.6g (grid %.6g), %.1f s", ver["R"], r_lp,
+                       time.perf_counter() - t0)
             dphi = float(g_w[1] @ phi[g_w[0]] - s_w[1] @ phi[s_w[0]])
             lower = min(dphi / ver["R"] * (1 - 1e-12), upper) if ver["R"] > 0 else 0.0
             result = {"lower": max(lower, 0.0), "R": ver["R"], "lp_status": lp_status,
