@@ -143,3 +143,20 @@ def test_p2_certifies_a_closed_form_pair_to_1e_2() -> None:
     assert r.lower <= exact <= r.upper
     assert r.gap <= 1e-2 and r.status.label == "certified"
     assert r.mesh["element"].startswith("P2")
+
+
+def test_row_nodes_lie_in_the_box_at_their_own_barycentric_coordinates() -> None:
+    cells = _cells(4)  # the mesh's corners at +-0.6; rows only inside [-0.4, 0.4]^3
+    p2 = p2mod.P2Cells(cells)
+    t = np.arange(cells.n_cells)[~cells.flat]
+    blo, bhi = np.full(3, -0.4), np.full(3, 0.4)
+    zk, lam = p2.row_nodes(t, blo, bhi)
+    x = cells.points[cells.simp[t]]
+    assert np.all(zk >= blo) and np.all(zk <= bhi)
+    np.testing.assert_allclose(np.einsum("tkv,tvn->tkn", lam, x), zk, atol=1e-12)
+    np.testing.assert_allclose(lam.sum(axis=2), 1.0, atol=1e-12)
+    # a cell inside the box keeps the P2 nodes (vertices, then edge midpoints)
+    inner = np.all((x >= blo) & (x <= bhi), axis=(1, 2))
+    assert inner.any() and (~inner).any()
+    np.testing.assert_allclose(lam[inner], np.broadcast_to(p2mod.nodes(3), lam[inner].shape),
+                               atol=1e-12)
