@@ -52,6 +52,7 @@ from solvers.certify_nd_parts import (
     LP_SOLVER,
     Cells,
     LPFailure,
+    add_points,
     box_distance,
     build_cells,
     cube_directions,
@@ -357,7 +358,7 @@ def certify_nd(metric: Metric | str, start: Any, goal: Any, mesh: NDSpec | str |
         if cells.n_cells + 6 * new.shape[0] > spec.max_cells:
             stopped_by = "max_cells"
             break
-        points = np.concatenate([cells.points, new])
+        points = add_points(cells.points, new)
     if element == "P2":
         from solvers.certify_nd_p2 import run_p2
 

@@ -338,6 +338,7 @@ def run_p2(m: Metric, f_fn: LoweredFunction, s: np.ndarray, g: np.ndarray, upper
     rounds and how it stopped."""
     from solvers.certify_nd_parts import (
         LPFailure,
+        add_points,
         box_distance,
         build_cells,
         edge_midpoints,
@@ -495,7 +496,7 @@ def run_p2(m: Metric, f_fn: LoweredFunction, s: np.ndarray, g: np.ndarray, upper
         if cells.n_cells + 6 * new.shape[0] > spec.max_cells:
             stopped_by = "max_cells"
             break
-        points = np.concatenate([cells.points, new])
+        points = add_points(cells.points, new)
     return {"best": best, "rounds": rounds, "stopped_by": stopped_by, "status": status,
             "message": message}
 

@@ -204,6 +204,12 @@ def build_cells(points: np.ndarray, blo: np.ndarray, bhi: np.ndarray,
     return cells
 
 
+def add_points(points: np.ndarray, new: np.ndarray) -> np.ndarray:
+    """``points`` with ``new`` inserted before the last two (start and goal), which
+    :func:`build_cells` keeps in place."""
+    return np.concatenate([points[:-2], new, points[-2:]])
+
+
 # ----------------------------------------------------------------------------------------
 # enclosures
 # ----------------------------------------------------------------------------------------

@@ -112,3 +112,20 @@ def test_bad_input() -> None:
         NDSpec(h_path=1.0, h_far=0.5)
     with pytest.raises(InputError, match="preset"):
         NDSpec.preset("nope")
+
+
+def test_start_and_goal_stay_mesh_vertices_after_refinement() -> None:
+    rng = np.random.default_rng(3)
+    lo, hi = np.zeros(3), np.ones(3)
+    s, g = np.array([0.2, 0.3, 0.4]), np.array([0.7, 0.6, 0.5])
+    pts = np.concatenate([parts.point_cloud(lo, hi, np.stack([s, g]), 0.25, 0.2, 0.5, rng),
+                          s[None], g[None]])
+    cells = parts.build_cells(pts, lo, hi, rng, 0.25)
+    new = parts.edge_midpoints(cells, np.arange(0, cells.n_cells, 3), rng)
+    # a degenerate refinement (points on a lattice) so that build_cells perturbs the others
+    new = np.round(new * 8) / 8
+    refined = parts.build_cells(parts.add_points(cells.points, new), lo, hi, rng, 0.25)
+    np.testing.assert_array_equal(refined.points[-2:], np.stack([s, g]))
+    for p in (s, g):
+        _idx, w = refined.weights(p)
+        assert np.isclose(np.max(w), 1.0, atol=1e-12)  # a vertex, not inside a cell
