@@ -92,6 +92,10 @@ class ResultsFile:
         self.directory = Path(directory) if directory is not None else RESULTS
         self.started = _dt.datetime.now(_dt.timezone.utc)
         self.load_start = _load()
+        # the code that runs is the code at the start: a commit made while a long run goes
+        # on must not be credited with its figures
+        self.commit = _git("rev-parse", "HEAD") or "unknown"
+        self.dirty = bool(_git("status", "--porcelain", "--untracked-files=no"))
         self.sections: list[str] = []
         self._written: Path | None = None
 
@@ -100,15 +104,16 @@ class ResultsFile:
         self.sections.extend(c.rstrip() + "\n" for c in chunks)
 
     def header(self) -> str:
-        commit = _git("rev-parse", "HEAD") or "unknown"
-        dirty = _git("status", "--porcelain", "--untracked-files=no")
+        now = _git("rev-parse", "HEAD") or "unknown"
+        moved = f" (HEAD moved to `{now}` during the run)" if now != self.commit else ""
         cmd = " ".join(shlex.quote(a) for a in [Path(sys.executable).name, *sys.argv])
         ended = _dt.datetime.now(_dt.timezone.utc)
         return "\n".join([
             f"# {self.title}",
             "",
             f"- command: `{cmd}`",
-            f"- commit: `{commit}`" + (" (with uncommitted changes)" if dirty else ""),
+            f"- commit: `{self.commit}`" + (" (with uncommitted changes)" if self.dirty else "")
+            + moved,
             f"- machine: {os.cpu_count()} cores, {_cpu_model()}; load averages "
             f"(1, 5, 15 min) {self.load_start} at the start, {_load()} at the end",
             f"- software: {_versions()}",
