@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import logging
 import sys
 import time
 from pathlib import Path
@@ -44,7 +45,12 @@ def main() -> None:
     ap.add_argument("--element", default=None, choices=("P1", "P2", "auto"),
                     help="the potential (default: the preset's)")
     ap.add_argument("--no-write", action="store_true")
+    ap.add_argument("--verbose", action="store_true",
+                    help="log each LP, separation and proof of the P2 element")
     args = ap.parse_args()
+    if args.verbose:
+        logging.basicConfig(format="%(asctime)s %(message)s")
+        logging.getLogger("solvers.certify_nd_p2").setLevel(logging.DEBUG)
     m = finsler.get_metric(args.metric)
     spec = NDSpec.preset(args.preset)
     changes = {k: v for k, v in (("h_path", args.h_path), ("max_rounds", args.max_rounds),
