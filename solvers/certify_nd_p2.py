@@ -329,6 +329,18 @@ def p2_weights(p2: P2Cells, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return p2.dof[s], p2.basis(lam)[0]
 
 
+def _more_rows(rows: tuple[np.ndarray, ...], p2: P2Cells, rel: np.ndarray, t: np.ndarray,
+               z: np.ndarray, w: np.ndarray, f: Any) -> tuple[np.ndarray, ...]:
+    """The LP's extra rows ``(cell, barycentric, direction, F)`` with rows at points ``z``
+    of region cells ``t`` in directions ``w`` appended where ``F`` is finite and positive."""
+    f = np.asarray(f, float).reshape(-1)
+    ok = np.isfinite(f) & (f > 0)
+    ec, elam, ew, eb = rows
+    return (np.concatenate([ec, t[ok]]),
+            np.concatenate([elam, p2.barycentric(rel[t[ok]], z[ok])]),
+            np.concatenate([ew, w[ok]]), np.concatenate([eb, f[ok]]))
+
+
 def run_p2(m: Metric, f_fn: LoweredFunction, s: np.ndarray, g: np.ndarray, upper: float,
            cap: float, spec: Any, blo: np.ndarray, bhi: np.ndarray, scale: float,
            rng: np.random.Generator, points: np.ndarray, dirs: np.ndarray,
@@ -438,12 +450,8 @@ def run_p2(m: Metric, f_fn: LoweredFunction, s: np.ndarray, g: np.ndarray, upper
                     zz_new = zs[tt, kk]
                     ww_new = wbest.reshape(nr, -1, n)[tt, kk]
                     fb, _ = fg_fn(zz_new, ww_new)
-                    fb = np.asarray(fb, float).reshape(-1)
-                    ok = np.isfinite(fb) & (fb > 0)
-                    ec = np.concatenate([ec, tt[ok]])
-                    elam = np.concatenate([elam, p2.barycentric(rel[tt[ok]], zz_new[ok])])
-                    ew = np.concatenate([ew, ww_new[ok]])
-                    eb = np.concatenate([eb, fb[ok]])
+                    ec, elam, ew, eb = _more_rows((ec, elam, ew, eb), p2, rel, tt, zz_new,
+                                                  ww_new, fb)
                     continue
             r_lp = max(float(np.max(ratio)), 1e-300)
             if ec.size:
@@ -469,12 +477,7 @@ def run_p2(m: Metric, f_fn: LoweredFunction, s: np.ndarray, g: np.ndarray, upper
                     or ver["R"] <= r_lp * (1 + 2 * spec.verify_tol)):
                 break
             (fb,) = f_fn(cz, cw)
-            fb = np.asarray(fb, float).reshape(-1)
-            ok = np.isfinite(fb) & (fb > 0)
-            ec = np.concatenate([ec, cc[ok]])
-            elam = np.concatenate([elam, p2.barycentric(rel[cc[ok]], cz[ok])])
-            ew = np.concatenate([ew, cw[ok]])
-            eb = np.concatenate([eb, fb[ok]])
+            ec, elam, ew, eb = _more_rows((ec, elam, ew, eb), p2, rel, cc, cz, cw, fb)
         if failure is not None:
             stopped_by, status, message = "lp_failed", CertifyStatus.LP_FAILED, failure
             break
