@@ -253,8 +253,24 @@ def verify_p2(fj: LoweredFunction, fg: LoweredFunction, x: np.ndarray, gc: np.nd
         if np.any(cut):
             cuts.append((cell[cut], zp[cut], c[cut], point[cut]))
         r_target = max(r_target, float(np.max(point, initial=-np.inf)) * (1.0 + tol))
-        up_h, up_p, f_low = _bounds_moving(fj, fg, cell, grown, zlo, zhi, wlo, whi, centroid,
-                                           gc, hess, gerr, w_map, r_target)
+        # simplices inside the box: noise along their own axes first; the axis box where
+        # that leaves the item open or the simplex sticks out; the tighter bound of the two
+        up_h, up_p = np.full(cell.size, np.inf), np.full(cell.size, np.inf)
+        f_low = np.full(cell.size, -np.inf)
+        inner = np.flatnonzero(np.all(grown.min(axis=1) >= blo, axis=1)
+                               & np.all(grown.max(axis=1) <= bhi, axis=1) & ~outside)
+        if inner.size:
+            up_h[inner], up_p[inner], f_low[inner] = _bounds_moving(
+                fj, fg, cell[inner], grown[inner], zlo[inner], zhi[inner], wlo[inner],
+                whi[inner], centroid, gc, hess, gerr, w_map, r_target, oriented=True)
+        rest = np.flatnonzero(~(up_h <= 0.0) & ~outside)
+        if rest.size:
+            ua_h, ua_p, fa_low = _bounds_moving(
+                fj, fg, cell[rest], grown[rest], zlo[rest], zhi[rest], wlo[rest], whi[rest],
+                centroid, gc, hess, gerr, w_map, r_target)
+            up_h[rest] = np.minimum(up_h[rest], ua_h)
+            up_p[rest] = np.minimum(up_p[rest], ua_p)
+            f_low[rest] = np.maximum(f_low[rest], fa_low)
         open_ = ~(up_h <= 0.0) & ~outside
         final = depth >= max_depth or int(open_.sum()) * 2 ** n > max_elements
         if final and np.any(open_):
@@ -575,14 +591,38 @@ def tangent_maps(fg: LoweredFunction, x: np.ndarray, gc: np.ndarray, hess: np.nd
     return np.where(ok[:, None, None], w_map, 0.0)
 
 
+def oriented_frames(simp: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """For simplices ``(N, k, n)``: centres ``m``, matrices ``A`` ``(N, n, n)`` and the
+    vertices' coordinates ``eps`` ``(N, k, n)`` with ``vertex = m + A eps`` and
+    ``|eps| <= 1``: a box along the principal axes of each simplex's vertices, widened by
+    ``1e-9`` (relative) so that it holds the simplex whatever the rounding."""
+    c = simp.mean(axis=1)
+    xc = simp - c[:, None]
+    _, vec = np.linalg.eigh(np.einsum("tvj,tvk->tjk", xc, xc))
+    y = np.einsum("tvj,tjk->tvk", xc, vec)
+    lo, hi = y.min(axis=1), y.max(axis=1)
+    mid = 0.5 * (lo + hi)
+    r = 0.5 * (hi - lo)
+    r = np.maximum(r, 1e-12 * np.max(r, axis=1, keepdims=True) + 1e-300) * (1 + 1e-9)
+    eps = (y - mid[:, None]) / r[:, None]
+    return c + np.einsum("tjk,tk->tj", vec, mid), vec * r[:, None, :], eps
+
+
 def _bounds_moving(fj: LoweredFunction, fg: LoweredFunction, cell: np.ndarray,
                    simp: np.ndarray, zlo: np.ndarray, zhi: np.ndarray, wlo: np.ndarray,
                    whi: np.ndarray, centroid: np.ndarray, gc: np.ndarray, hess: np.ndarray,
-                   gerr: np.ndarray, w_map: np.ndarray, r: float, chunk: int = 100_000
-                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                   gerr: np.ndarray, w_map: np.ndarray, r: float, chunk: int = 100_000,
+                   oriented: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """As :func:`_bounds` with the direction box moving with z: ``w = u + W (z - c_T)``,
     ``u`` in the box. Mean value in ``u``: ``H(z, c_u) + sum_i max|g_i(z) - r dF/dw_i| r_i``
-    with both terms affine forms over (z, u), so the cross terms cancel near the tangency."""
+    with both terms affine forms over (z, u), so the cross terms cancel near the tangency.
+
+    The noise symbols of ``z`` span the box ``[zlo, zhi]``, or with ``oriented`` a box along
+    the simplex's principal axes that holds it (:func:`oriented_frames`; sound only for
+    simplices inside ``[zlo, zhi]``, which the caller checks). A sliver across the axes
+    fills a small part of its axis box: there the products ``g(z) . w`` and ``F(z, w)`` are
+    enclosed over much more than the simplex (a proof ran out of items on two such cells,
+    whose potential bends fast across them)."""
     from finsler.affine import AffineInput
 
     n = gc.shape[1]
@@ -596,8 +636,12 @@ def _bounds_moving(fj: LoweredFunction, fg: LoweredFunction, cell: np.ndarray,
         g, h, ge, wm = gc[t], hess[t], gerr[t], w_map[t]
         cz = centroid[t]
         zl, zh = zlo[sl], zhi[sl]
-        mz = 0.5 * zl + 0.5 * zh
-        rz = np.maximum(zh - mz, mz - zl) * (1 + 4 * u_)
+        if oriented:
+            mz, az_, eps_o = oriented_frames(sv)
+        else:
+            mz = 0.5 * zl + 0.5 * zh
+            rz = np.maximum(zh - mz, mz - zl) * (1 + 4 * u_)
+            az_ = rz[:, :, None] * np.eye(n)[None]  # z_j = mz_j + sum_k az_[j, k] eps_k
         mu = 0.5 * (wlo[sl] + whi[sl])
         ru = np.maximum(whi[sl] - mu, mu - wlo[sl]) * (1 + 4 * u_)
         with np.errstate(all="ignore"):
@@ -608,26 +652,34 @@ def _bounds_moving(fj: LoweredFunction, fg: LoweredFunction, cell: np.ndarray,
                 return AffineInput.form(c0, a, e, c0 - rad * (1 + 1e-12), c0 + rad * (1 + 1e-12))
 
             zero = np.zeros((nn, n))
-            zf = [lin_form(mz[:, j], np.eye(n)[j][None] * rz, zero) for j in range(n)]
+            zf = [lin_form(mz[:, j], az_[:, j], zero) for j in range(n)]
             dz0 = mz - cz
-            gf = [lin_form(g[:, i] + np.einsum("tk,tk->t", h[:, i], dz0), h[:, i] * rz, zero)
+            ha = np.einsum("tib,tbk->tik", h, az_)
+            wa = np.einsum("tjb,tbk->tjk", wm, az_)
+            gf = [lin_form(g[:, i] + np.einsum("tk,tk->t", h[:, i], dz0), ha[:, i], zero)
                   for i in range(n)]
             wc = mu + np.einsum("tjk,tk->tj", wm, dz0)
-            w0 = [lin_form(wc[:, j], wm[:, j] * rz, zero) for j in range(n)]
-            wf = [lin_form(wc[:, j], wm[:, j] * rz, np.eye(n)[j][None] * ru)
+            w0 = [lin_form(wc[:, j], wa[:, j], zero) for j in range(n)]
+            wf = [lin_form(wc[:, j], wa[:, j], np.eye(n)[j][None] * ru)
                   for j in range(n)]
-            eps_v = np.where(rz[:, None] > 0, (sv - mz[:, None]) / np.where(
-                rz[:, None] > 0, rz[:, None], 1.0), 0.0)
+            # the simplex's vertices in the noise coordinates (the linear part's maximum
+            # over the simplex is at one of them)
+            if oriented:
+                eps_v = eps_o
+            else:
+                eps_v = np.where(rz[:, None] > 0, (sv - mz[:, None]) / np.where(
+                    rz[:, None] > 0, rz[:, None], 1.0), 0.0)
 
             def upper(form: Any, eps_v: np.ndarray = eps_v) -> np.ndarray:
                 az, au = form.a[:, :n], form.a[:, n:]
                 lin = np.einsum("tvk,tk->tv", eps_v, az)
                 val = form.c + np.max(lin, 1) + np.sum(np.abs(au), 1) + form.e
+                if oriented:  # eps_v is computed, not exact: 1e-9 covers its error
+                    val = val + 1e-9 * np.sum(np.abs(az), 1)
                 return val + 16 * (n + 2) * u_ * (np.abs(form.c) + np.max(np.abs(lin), 1)
                                                   + np.sum(np.abs(au), 1) + form.e)
 
-            wnorm = np.linalg.norm(np.abs(wc) + np.einsum("tjk,tk->tj", np.abs(wm), rz)
-                                   + ru, axis=1)
+            wnorm = np.linalg.norm(np.abs(wc) + np.sum(np.abs(wa), axis=2) + ru, axis=1)
             # first term: u at the box's centre
             (f1,) = AffineInput.run(fj, [zf + w0])
             p1 = gf[0] * w0[0]

@@ -160,3 +160,50 @@ def test_row_nodes_lie_in_the_box_at_their_own_barycentric_coordinates() -> None
     assert inner.any() and (~inner).any()
     np.testing.assert_allclose(lam[inner], np.broadcast_to(p2mod.nodes(3), lam[inner].shape),
                                atol=1e-12)
+
+
+def test_oriented_frames_hold_their_simplices() -> None:
+    rng = np.random.default_rng(7)
+    simp = rng.normal(size=(200, 4, 3)) * rng.uniform(1e-3, 1.0, (200, 1, 3))
+    m, a, eps = p2mod.oriented_frames(simp)
+    np.testing.assert_allclose(m[:, None] + np.einsum("tjk,tvk->tvj", a, eps), simp,
+                               atol=1e-12)
+    assert np.all(np.abs(eps) <= 1.0)
+    lam = rng.dirichlet(np.ones(4), 200)
+    z = np.einsum("tv,tvn->tn", lam, simp)
+    inside = np.linalg.solve(a, (z - m)[..., None])[..., 0]
+    assert np.all(np.abs(inside) <= 1.0 + 1e-12)
+
+
+def test_oriented_bound_is_sound_and_tighter_on_a_sliver() -> None:
+    """A sliver across the axes under a potential bending fast across it (the cells on
+    which a proof ran out of items): the bound along the simplex's own axes is above every
+    sampled ``H = g(z) . w - r F(z, w)`` of the item and well below the axis box's."""
+    m = finsler.get_metric("poincare-slab")
+    _, fg = lowered_f_grad(m)
+    fj = p2mod.lowered_f_joint(m)
+    n_thin = np.array([1.0, 0.0, -1.0]) / np.sqrt(2.0)
+    base = np.array([[0.0, 0.0, 0.0], [0.2, 0.0, 0.2], [0.0, 0.2, 0.0], [0.1, 0.1, 0.1]])
+    simp = (base + 0.01 * np.outer([0, 0, 0, 1.0], n_thin) + [0.1, 0.05, 0.2])[None]
+    cen = simp.mean(axis=1)
+    gc = np.array([[1.0, 0.5, -0.3]])
+    hess = (30.0 * np.outer(n_thin, n_thin) + np.eye(3))[None]
+    gerr = np.zeros(1)
+    w_map = (4.0 * np.outer([1.0, 1.0, 0.0], n_thin))[None]
+    wlo, whi = np.array([[-0.5, 0.25, -1.0]]), np.array([[-0.25, 0.5, -1.0]])
+    zlo, zhi = simp.min(axis=1), simp.max(axis=1)
+    args = (fj, fg, np.zeros(1, np.int64), simp, zlo, zhi, wlo, whi, cen, gc, hess, gerr,
+            w_map, 0.8)
+    axis_h, _, _ = p2mod._bounds_moving(*args)
+    ori_h, ori_p, ori_f = p2mod._bounds_moving(*args, oriented=True)
+    rng = np.random.default_rng(8)
+    lam = rng.dirichlet(np.ones(4), 20000)
+    z = lam @ simp[0]
+    u = rng.uniform(wlo[0], whi[0], (20000, 3))
+    w = u + (z - cen[0]) @ w_map[0].T
+    g = gc[0] + (z - cen[0]) @ hess[0].T
+    f = np.asarray(fj(np.concatenate([z, w], axis=1))[0], float).reshape(-1)
+    h = np.einsum("ij,ij->i", g, w) - 0.8 * f
+    assert h.max() <= ori_h[0] and np.einsum("ij,ij->i", g, w).max() <= ori_p[0]
+    assert f.min() >= ori_f[0]
+    assert ori_h[0] - h.max() < 0.5 * (axis_h[0] - h.max()), (h.max(), ori_h, axis_h)
