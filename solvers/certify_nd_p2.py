@@ -57,6 +57,10 @@ SEP_TOL = 5e-4
 #: a few nodes whose gradient the objective does not fix kept a row generation going for
 #: 40 rounds at a constant LP value
 ROWGEN_PER_NODE = 16
+#: a cell's simplices are split before its direction boxes when ``BEND_WEIGHT`` x (the
+#: Hessian's norm over the gradient's + the tangent map's norm) x their diameter exceeds
+#: the boxes' width, and never later than ``0.5 / median cell diameter`` x the diameter
+BEND_WEIGHT = 0.1
 #: work budget of one verification (items alive at a level x 2**n)
 MAX_ELEMENTS = 6_000_000
 
@@ -220,6 +224,13 @@ def verify_p2(fj: LoweredFunction, fg: LoweredFunction, x: np.ndarray, gc: np.nd
     cell_diam = np.max(np.linalg.norm(x - centroid[:, None], axis=2), axis=1)
     diam_scale = float(np.median(cell_diam))
     w_map = tangent_maps(fg, x, gc, hess)
+    # per cell, how fast the bound's ingredients move with z: the gradient relative to its
+    # size and the direction boxes (a cell whose potential bends 1000x faster than its
+    # neighbours' needs simplices that much smaller)
+    bend = (np.linalg.norm(hess, ord=2, axis=(1, 2))
+            / np.maximum(np.linalg.norm(gc, axis=1), 1e-300)
+            + np.linalg.norm(w_map, ord=2, axis=(1, 2)))
+    z_weight = np.maximum(0.5 / diam_scale, BEND_WEIGHT * bend)
     wlo0, whi0 = face_boxes(n, start_faces)
     nb = wlo0.shape[0]
     cell = np.repeat(np.arange(gc.shape[0]), nb)
@@ -290,7 +301,7 @@ def verify_p2(fj: LoweredFunction, fg: LoweredFunction, x: np.ndarray, gc: np.nd
         # ran out of items, 8.3 M boxes; with x 1/2 it closed in 1.6 M)
         wwid = np.max(whi - wlo, axis=1)
         zdiam = np.max(np.linalg.norm(simp - simp.mean(axis=1, keepdims=True), axis=2), 1)
-        by_w = wwid > 0.5 * zdiam / diam_scale
+        by_w = wwid > zdiam * z_weight[cell]
         iw, iz = np.flatnonzero(by_w), np.flatnonzero(~by_w)
         wlo_a, whi_a, pa = split_directions(wlo[iw], whi[iw], iw)
         simp_b, pb = _bisect(simp[iz])
@@ -455,9 +466,12 @@ def run_p2(m: Metric, f_fn: LoweredFunction, s: np.ndarray, g: np.ndarray, upper
                 wbest, rb = best_directions(fg_fn, zs.reshape(-1, n), ps.reshape(-1, n), faces=4)
                 rb = rb.reshape(nr, -1)
                 sep_rounds += 1
-                bad = (rb > 1.0 + SEP_TOL) & m.domain.contains(zs.reshape(-1, n)).reshape(nr, -1)
-                _LOG.debug("P2 separation %d: largest ratio %.6g, %d points above 1 + %g",
-                           sep_rounds, float(np.max(rb)), int(np.count_nonzero(bad)), SEP_TOL)
+                in_dom = m.domain.contains(zs.reshape(-1, n)).reshape(nr, -1)
+                bad = (rb > 1.0 + SEP_TOL) & in_dom
+                _LOG.debug("P2 separation %d: largest ratio %.6g in the domain, %d points "
+                           "above 1 + %g", sep_rounds,
+                           float(np.max(np.where(in_dom, rb, -np.inf), initial=-np.inf)),
+                           int(np.count_nonzero(bad)), SEP_TOL)
                 if np.any(bad):
                     order = np.argsort(-np.where(bad, rb, -np.inf), axis=1)[:, :8]
                     take = np.take_along_axis(bad, order, 1)
