@@ -224,7 +224,7 @@ def test_bend_rule_splits_a_fast_bending_sliver_before_its_directions(
     base = 0.2 * np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 1.0], [0.0, 1.0, 0.0], [0.5, 0.5, 0.5]])
     sliver = base + 0.01 * np.outer([0, 0, 0, 1.0], n_thin) + [0.1, 0.05, 0.2]
     tet = 0.4 * np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
-    x = np.stack([sliver, tet + [-0.5, -0.3, -0.3], tet + [-0.2, -0.6, 0.1]])
+    x = np.stack([sliver, tet + np.array([-0.5, -0.3, -0.3]), tet + np.array([-0.2, -0.6, 0.1])])
     gc = np.array([[1.0, 0.5, -0.3], [0.3, 0.2, 0.1], [0.2, -0.3, 0.1]])
     hess = np.stack([300.0 * np.outer(n_thin, n_thin) + np.eye(3), np.eye(3), np.eye(3)])
     gerr = np.zeros(3)
