@@ -22,7 +22,7 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-__all__ = ["LoweredFunction", "lower"]
+__all__ = ["LoweredFunction", "lower", "max_through_abs"]
 
 
 def _op(name: str) -> int:
@@ -362,3 +362,53 @@ def lower(fn: ca.Function) -> LoweredFunction:
         source=source,
         _program=namespace["program"],
     )
+
+
+_OP_FMAX, _OP_FMIN = _op("FMAX"), _op("FMIN")
+
+
+def max_through_abs(fn: ca.Function) -> ca.Function:
+    """The same function (dense SX inputs and outputs) with every ``fmax(a, b)`` written
+    ``(a + b + |a - b|) / 2`` and ``fmin(a, b)`` as ``(a + b - |a - b|) / 2``: equal in exact
+    arithmetic (and in float64 where one argument is 0, as in ``max(x, 0)``), for the
+    programs of its derivatives. CasADi differentiates ``fmax`` into
+    ``le(b, a) / (le(b, a) + le(a, b))``; on a box across the kink the interval extension
+    divides by an interval holding 0, and the enclosure of the gradient is unbounded. The
+    derivative of ``|x|`` is ``sign(x)``, whose extension is ``[-1, 1]`` there: the
+    enclosure stays bounded and holds Clarke's generalised gradient."""
+    if not fn.is_a("SXFunction"):
+        fn = fn.expand()
+    ins = []
+    for i in range(fn.n_in()):
+        if not fn.sparsity_in(i).is_dense():
+            raise ValueError(f"max_through_abs: input {i} of {fn.name()} is not dense")
+        ins.append(ca.SX.sym(fn.name_in(i), fn.sparsity_in(i)))
+    outs: list[list[Any]] = [[ca.SX(0.0)] * fn.nnz_out(o) for o in range(fn.n_out())]
+    work: dict[int, Any] = {}
+    for k in range(fn.n_instructions()):
+        op = fn.instruction_id(k)
+        if op == _OP_OUTPUT:
+            (w,) = fn.instruction_input(k)
+            o, nz = fn.instruction_output(k)
+            outs[o][nz] = work[w]
+            continue
+        (w,) = fn.instruction_output(k)
+        if op == _OP_INPUT:
+            i, nz = fn.instruction_input(k)
+            work[w] = ins[i].nz[nz]
+        elif op == _OP_CONST:
+            work[w] = ca.SX(fn.instruction_constant(k))
+        elif op in (_OP_FMAX, _OP_FMIN):
+            a, b = (work[j] for j in fn.instruction_input(k)[:2])
+            sign = 1.0 if op == _OP_FMAX else -1.0
+            work[w] = 0.5 * (a + b + sign * ca.fabs(a - b))
+        elif op in _UNARY:
+            work[w] = ca.SX.unary(op, work[fn.instruction_input(k)[0]])
+        elif op in _BINARY:
+            a, b = fn.instruction_input(k)[:2]
+            work[w] = ca.SX.binary(op, work[a], work[b])
+        else:
+            raise NotImplementedError(f"max_through_abs: CasADi operation {op} is not supported")
+    out_sx = [ca.SX(fn.sparsity_out(o), ca.vertcat(*vals)) if vals else
+              ca.SX(fn.sparsity_out(o)) for o, vals in enumerate(outs)]
+    return ca.Function(fn.name(), ins, out_sx)

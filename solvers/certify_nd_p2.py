@@ -39,7 +39,7 @@ import casadi as ca
 import numpy as np
 
 from finsler.affine import affine_forms
-from finsler.lowering import LoweredFunction, lower
+from finsler.lowering import LoweredFunction, lower, max_through_abs
 from finsler.metric import Metric
 from solvers.certify_domain import domain_constraints, outside_domain
 from solvers.certify_nd_parts import Cells, face_boxes, split_directions
@@ -69,7 +69,8 @@ def lowered_f_joint(metric: Metric) -> LoweredFunction:
     """``u = (z, w) -> F(z, w)`` as one input (what the affine forms need), lowered once."""
     def build() -> LoweredFunction:
         u = ca.SX.sym("u", 2 * metric.dim)
-        f = metric.F_sx(u[: metric.dim], u[metric.dim:])
+        f = max_through_abs(ca.Function("f", [u], [metric.F_sx(u[: metric.dim],
+                                                               u[metric.dim:])]))(u)
         return lower(ca.Function(f"cnd_fj_{metric._ident}", [u], [f]))
     return metric.derived("certify_nd.f_joint", build)
 

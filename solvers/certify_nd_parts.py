@@ -24,7 +24,7 @@ import numpy as np
 
 from finsler.errors import InputError, short
 from finsler.intervals import Interval, enclose
-from finsler.lowering import LoweredFunction, lower
+from finsler.lowering import LoweredFunction, lower, max_through_abs
 from finsler.metric import Metric
 
 #: cvxpy solver of the LPs (as the 2-D certificate).
@@ -214,11 +214,13 @@ def add_points(points: np.ndarray, new: np.ndarray) -> np.ndarray:
 # enclosures
 # ----------------------------------------------------------------------------------------
 def lowered_f_grad(metric: Metric) -> tuple[LoweredFunction, LoweredFunction]:
-    """``(x, v) -> F`` and ``(x, v) -> (F, grad_v F)`` lowered once per metric."""
+    """``(x, v) -> F`` and ``(x, v) -> (F, grad_v F)`` lowered once per metric, with
+    ``max``/``min`` written through ``abs`` (:func:`finsler.lowering.max_through_abs`: the
+    enclosure of the gradient across a kink stays bounded)."""
     def build() -> tuple[LoweredFunction, LoweredFunction]:
         x = ca.SX.sym("x", metric.dim)
         v = ca.SX.sym("v", metric.dim)
-        f = metric.F_sx(x, v)
+        f = max_through_abs(ca.Function("f", [x, v], [metric.F_sx(x, v)]))(x, v)
         gv = ca.gradient(f, v)
         tag = metric._ident
         return (lower(ca.Function(f"cnd_f_{tag}", [x, v], [f])),
