@@ -19,7 +19,13 @@ Rules (``rad = sum |a_k| + e``):
 - unary ``g`` (``sin``, ``cos``, ``sqrt``, constant powers): first-order Taylor form at the
   centre, ``g(c) + g'(c) (x - c)``, remainder ``max |g''| rad**2 / 2`` with ``max |g''|``
   an interval enclosure over the value's range; where that is not finite (a power near 0)
-  the form falls back to the interval.
+  the form falls back to the interval;
+- ``abs``: the form or its negation where the sign is certain, else the Chebyshev line over
+  the value's interval ``[l, u]`` (slope ``(u + l) / (u - l)``, error ``-u l / (u - l)``);
+  ``max(a, b) = (a + b + |a - b|) / 2``, ``min`` likewise;
+- signs and truth values (``sign``, comparisons, ``and``/``or``/``not``): the natural
+  interval, no correlations; ``if_else_zero(c, a)`` keeps ``a``'s form where ``c`` is
+  certainly true.
 
 Every float64 operation on the forms adds ``8 ulp`` of the magnitudes it combined to ``e``
 (16 for the elementary functions, whose numpy errors are documented at <= 4 ulp), so the
@@ -33,7 +39,7 @@ from typing import Any
 
 import numpy as np
 
-from finsler.intervals import Interval, _IntervalBackend
+from finsler.intervals import Interval, _certainly, _IntervalBackend
 from finsler.lowering import LoweredFunction
 
 __all__ = ["affine_forms", "enclose_affine"]
@@ -201,9 +207,110 @@ class _AffineBackend:
             raise NotImplementedError("affine enclosure of a power with a variable exponent")
         return _unary(x, "pow", float(p))
 
+    @staticmethod
+    def abs(x: Any) -> Any:
+        if not isinstance(x, _Affine):
+            return abs(float(x))
+        return _abs(x)
+
+    @staticmethod
+    def maximum(a: Any, b: Any) -> Any:
+        if not (isinstance(a, _Affine) or isinstance(b, _Affine)):
+            return max(float(a), float(b))
+        return _with_natural((a + b + _BACKEND.abs(a - b)) * 0.5, "maximum", a, b)
+
+    @staticmethod
+    def minimum(a: Any, b: Any) -> Any:
+        if not (isinstance(a, _Affine) or isinstance(b, _Affine)):
+            return min(float(a), float(b))
+        return _with_natural((a + b - _BACKEND.abs(a - b)) * 0.5, "minimum", a, b)
+
+    # discrete values (signs, truth values): the natural interval, correlations dropped;
+    # if_else_zero keeps its argument's form where the condition is certain
+    def sign(self, x: Any) -> Any:
+        return _discrete("sign", x)
+
+    def lt(self, a: Any, b: Any) -> Any:
+        return _discrete("lt", a, b)
+
+    def le(self, a: Any, b: Any) -> Any:
+        return _discrete("le", a, b)
+
+    def eq(self, a: Any, b: Any) -> Any:
+        return _discrete("eq", a, b)
+
+    def ne(self, a: Any, b: Any) -> Any:
+        return _discrete("ne", a, b)
+
+    def logical_not(self, a: Any) -> Any:
+        return _discrete("logical_not", a)
+
+    def logical_and(self, a: Any, b: Any) -> Any:
+        return _discrete("logical_and", a, b)
+
+    def logical_or(self, a: Any, b: Any) -> Any:
+        return _discrete("logical_or", a, b)
+
+    def if_else_zero(self, c: Any, a: Any) -> Any:
+        hull = _discrete("if_else_zero", c, a)
+        if not isinstance(hull, _Affine) or not isinstance(a, _Affine):
+            return hull
+        true = _certainly(c.iv if isinstance(c, _Affine) else Interval(float(c)))[0]
+        true = np.broadcast_to(true, hull.c.shape)
+        return _Affine(np.where(true, a.c, hull.c), np.where(true[..., None], a.a, hull.a),
+                       np.where(true, a.e, hull.e), hull.iv)
+
     def __getattr__(self, name: str) -> Any:
         raise NotImplementedError(f"affine enclosure of the CasADi operation {name!r} is not "
                                   "implemented")
+
+
+def _abs(x: _Affine) -> _Affine:
+    """``|x|``: the form itself or its negation where the sign is certain; across 0 the
+    Chebyshev line ``alpha x + D / 2 +- D / 2`` with ``alpha = (u + l) / (u - l)`` over the
+    value's interval ``[l, u]`` (``|x| - alpha x`` is convex, 0 at 0 and at most ``D`` at
+    the ends)."""
+    lo, hi = x.iv.lo, x.iv.hi
+    natural = _IV.abs(x.iv)
+    with np.errstate(all="ignore"):
+        across = (lo < 0.0) & (hi > 0.0)
+        alpha = np.where(across, (hi + lo) / np.where(across, hi - lo, 1.0),
+                         np.where(lo >= 0.0, 1.0, -1.0))
+        alpha = np.clip(alpha, -1.0, 1.0)
+        # the residual's largest value at the ends, rounded up (0 where the sign is certain)
+        d = np.where(across, np.maximum(hi - alpha * hi, -lo - alpha * lo), 0.0)
+        d = np.where(across, d * (1.0 + 8.0 * _U) + _slack(hi, lo), 0.0)
+        c = alpha * x.c + 0.5 * d
+        a = alpha[..., None] * x.a
+        e = (np.abs(alpha) * x.e + 0.5 * d) * (1.0 + 8.0 * _U) + _slack(
+            c, np.sum(np.abs(a), axis=-1), d)
+    good = np.isfinite(c) & np.isfinite(e) & np.all(np.isfinite(a), axis=-1)
+    if np.all(good):
+        return _Affine(c, a, e, natural)
+    fallback = _Affine.from_interval(natural, x.a.shape[-1])
+    return _Affine(np.where(good, c, fallback.c), np.where(good[..., None], a, fallback.a),
+                   np.where(good, e, fallback.e), natural)
+
+
+def _ivs(args: tuple[Any, ...]) -> list[Interval]:
+    return [v.iv if isinstance(v, _Affine) else Interval(np.float64(v)) for v in args]
+
+
+def _with_natural(form: _Affine, name: str, *args: Any) -> _Affine:
+    """``form`` with its interval cut to the natural extension of ``name`` on ``args``."""
+    natural = getattr(_IV, name)(*_ivs(args))
+    return _Affine(form.c, form.a, form.e, form.iv.intersect(natural))
+
+
+def _discrete(name: str, *args: Any) -> Any:
+    """A sign or truth value by the interval backend's rule on the arguments' intervals."""
+    forms = [v for v in args if isinstance(v, _Affine)]
+    out = getattr(_IV, name)(*_ivs(args))
+    if not forms:
+        return float(out.lo)
+    shape = forms[0].c.shape
+    out = Interval(np.broadcast_to(out.lo, shape), np.broadcast_to(out.hi, shape))
+    return _Affine.from_interval(out, forms[0].a.shape[-1])
 
 
 _BACKEND = _AffineBackend()

@@ -222,13 +222,13 @@ def certify_nd(metric: Metric | str, start: Any, goal: Any, mesh: NDSpec | str |
     s, g = _check(m, start, goal)
     element = spec.element
     if element != "P1":
-        from solvers.certify_nd_p2 import affine_ready
+        from solvers.certify_nd_p2 import affine_missing
 
-        ready = affine_ready(m)
-        if element == "P2" and not ready:
+        missing = affine_missing(m)
+        if element == "P2" and missing is not None:
             raise InputError(f"the P2 element needs affine rules for every operation of "
-                             f"{m.name}'s F (max and abs have none); use element='P1'")
-        element = "P2" if ready else "P1"
+                             f"{m.name}'s F ({missing}); use element='P1'")
+        element = "P2" if missing is None else "P1"
     n = m.dim
     blo, bhi = (np.asarray(b, float) for b in m.domain.bounds())
 

@@ -75,20 +75,26 @@ def lowered_f_joint(metric: Metric) -> LoweredFunction:
     return metric.derived("certify_nd.f_joint", build)
 
 
-def affine_ready(metric: Metric) -> bool:
-    """Whether every operation of the metric's F has an affine rule (P2 is possible)."""
+def affine_missing(metric: Metric) -> str | None:
+    """Why the P2 element is not possible for the metric (an operation of F without an
+    affine rule, or an unbounded domain), or None."""
     fn = lowered_f_joint(metric)
     n = metric.dim
     lo = np.concatenate([np.asarray(metric.domain.bounds()[0], float), -np.ones(n)])
     hi = np.concatenate([np.asarray(metric.domain.bounds()[1], float), np.ones(n)])
     if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
-        return False
+        return "the domain's bounding box is not finite"
     mid = 0.5 * (lo + hi)
     try:
         affine_forms(fn, mid[None], mid[None] + 1e-3)
-    except NotImplementedError:
-        return False
-    return True
+    except NotImplementedError as err:
+        return str(err)
+    return None
+
+
+def affine_ready(metric: Metric) -> bool:
+    """Whether every operation of the metric's F has an affine rule (P2 is possible)."""
+    return affine_missing(metric) is None
 
 
 def nodes(n: int) -> np.ndarray:

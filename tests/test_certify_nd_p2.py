@@ -123,14 +123,28 @@ def test_proven_ratio_is_never_below_a_sampled_one() -> None:
 
 
 def test_p2_options_are_checked() -> None:
+    """A bad element is named; P2 on a metric with an operation that has no affine rule
+    (here exp: a slab whose factor grows with height, not registered) is refused before
+    any work. Car-like (max, abs) has affine rules."""
+    from typing import ClassVar
+
     with pytest.raises(InputError, match="element"):
         NDSpec(element="P3")
-    m = finsler.get_metric("carlike")
-    s, g = finsler.sample_pairs(m, 1, 3)[0]
-    with pytest.raises(InputError, match="affine rules"):
+    slab = finsler.get_metric("poincare-slab")
+
+    @dataclasses.dataclass(frozen=True)
+    class ExpSlab(type(slab)):  # type: ignore[misc]
+        name: ClassVar[str] = "exp-slab-test"
+
+        def F_sx(self, x: ca.SX, v: ca.SX) -> ca.SX:
+            return super().F_sx(x, v) * ca.exp(0.1 * x[2])
+
+    m = ExpSlab()
+    s, g = finsler.sample_pairs(slab, 1, 3)[0]
+    with pytest.raises(InputError, match=r"affine rules.*'exp'"):
         certify_nd(m, s, g, NDSpec(element="P2"))
     assert not p2mod.affine_ready(m)
-    assert p2mod.affine_ready(finsler.get_metric("poincare-slab"))
+    assert p2mod.affine_ready(slab) and p2mod.affine_ready(finsler.get_metric("carlike"))
 
 
 @pytest.mark.slow
