@@ -21,9 +21,12 @@ order. The pieces:
 3. the gradient ``(g_c, G)`` of each cell is computed in float64 with an a-posteriori bound
    of its error (:meth:`P2Cells.affine_gradients`), added to ``g . w`` in step 2.
 
-F must have affine rules for every operation of its program (smooth metrics: ``sqrt``,
-powers, ``sin``, ``cos``, the arithmetic); where it has not (``max``, ``abs``: car-like)
-:func:`affine_ready` says so and the caller keeps the P1 element.
+F must have affine rules for every operation of its program (``sqrt``, powers, ``sin``,
+``cos``, the arithmetic, ``abs``, ``max``/``min`` through ``abs``, signs and truth values:
+:mod:`finsler.affine`); where it has not (``exp``, say) :func:`affine_missing` names the
+operation and the caller keeps the P1 element. ``max`` and ``min`` are written through
+``abs`` before F is differentiated (:func:`finsler.lowering.max_through_abs`), so the
+enclosure of ``grad_w F`` stays bounded across a kink (car-like's).
 
 Nothing here imports :mod:`solvers.certify_nd`.
 """
