@@ -35,6 +35,7 @@ enclosure holds in exact arithmetic. Operations without an affine rule raise
 
 from __future__ import annotations
 
+import functools
 from typing import Any
 
 import numpy as np
@@ -225,32 +226,8 @@ class _AffineBackend:
             return min(float(a), float(b))
         return _with_natural((a + b - _BACKEND.abs(a - b)) * 0.5, "minimum", a, b)
 
-    # discrete values (signs, truth values): the natural interval, correlations dropped;
-    # if_else_zero keeps its argument's form where the condition is certain
-    def sign(self, x: Any) -> Any:
-        return _discrete("sign", x)
-
-    def lt(self, a: Any, b: Any) -> Any:
-        return _discrete("lt", a, b)
-
-    def le(self, a: Any, b: Any) -> Any:
-        return _discrete("le", a, b)
-
-    def eq(self, a: Any, b: Any) -> Any:
-        return _discrete("eq", a, b)
-
-    def ne(self, a: Any, b: Any) -> Any:
-        return _discrete("ne", a, b)
-
-    def logical_not(self, a: Any) -> Any:
-        return _discrete("logical_not", a)
-
-    def logical_and(self, a: Any, b: Any) -> Any:
-        return _discrete("logical_and", a, b)
-
-    def logical_or(self, a: Any, b: Any) -> Any:
-        return _discrete("logical_or", a, b)
-
+    # if_else_zero keeps its argument's form where the condition is certain; the other
+    # signs and truth values: the natural interval, correlations dropped (__getattr__)
     def if_else_zero(self, c: Any, a: Any) -> Any:
         hull = _discrete("if_else_zero", c, a)
         if not isinstance(hull, _Affine) or not isinstance(a, _Affine):
@@ -261,8 +238,15 @@ class _AffineBackend:
                        np.where(true, a.e, hull.e), hull.iv)
 
     def __getattr__(self, name: str) -> Any:
+        if name in _DISCRETE:
+            return functools.partial(_discrete, name)
         raise NotImplementedError(f"affine enclosure of the CasADi operation {name!r} is not "
                                   "implemented")
+
+
+#: operations whose values are signs or truth values (enclosed by their natural interval)
+_DISCRETE = frozenset({"sign", "lt", "le", "eq", "ne", "logical_not", "logical_and",
+                       "logical_or"})
 
 
 def _abs(x: _Affine) -> _Affine:
