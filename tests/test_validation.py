@@ -490,7 +490,9 @@ def test_report_agrees_with_geodesics_solve(report_dir: Path) -> None:
             b["exact_minmax_max_segment_cost"], rel=1e-9)
 
 
-@pytest.mark.parametrize("env", ["carlike", "panda-pole"])
+# car-like costs ~80 s (its exact solve at 256 segments): slow; the same figure is drawn for
+# a user's pose metric in tests/test_metric_params.py (test_report_picks_figures_...)
+@pytest.mark.parametrize("env", [pytest.param("carlike", marks=pytest.mark.slow), "panda-pole"])
 def test_report_figures_for_car_and_arm(tmp_path: Path, env: str) -> None:
     m = finsler.get_metric(env)
     doc = build_report(env, tmp_path, pairs=finsler.default_pairs(m)[:1],
