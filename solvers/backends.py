@@ -69,19 +69,6 @@ class _Numpy:
         return np.stack(arrays, axis)
 
     @staticmethod
-    def cholesky(a: np.ndarray) -> np.ndarray | None:
-        """LAPACK's lower Cholesky factors of a stack of symmetric matrices, or None if
-        one of them is not positive definite."""
-        try:
-            return np.linalg.cholesky(a)
-        except np.linalg.LinAlgError:
-            return None
-
-    @staticmethod
-    def inv(a: np.ndarray) -> np.ndarray:
-        return np.linalg.inv(a)
-
-    @staticmethod
     def clip(a: np.ndarray, lo: float, hi: float) -> np.ndarray:
         return np.clip(a, lo, hi)
 
@@ -139,14 +126,6 @@ class _Torch:
 
     def stack(self, arrays: list[Any], axis: int) -> Any:
         return self.torch.stack(arrays, dim=axis)
-
-    def cholesky(self, a: Any) -> Any:
-        """As the numpy backend's: factors, or None if a matrix is not positive definite."""
-        low, info = self.torch.linalg.cholesky_ex(a)
-        return None if bool((info != 0).any()) else low
-
-    def inv(self, a: Any) -> Any:
-        return self.torch.linalg.inv(a)
 
     def clip(self, a: Any, lo: float, hi: float) -> Any:
         return self.torch.clamp(a, lo, hi)

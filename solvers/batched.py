@@ -210,7 +210,8 @@ class _Runner:
             # the slack reformulation by the batched interior point; the reported residual
             # is left unknown (NaN) so that the results compute the KKT residual of the
             # points themselves (solvers.nonsmooth.kkt_residual), not the method's own
-            res = interior_energy(self.m, rows.points, self.opts.interior, scale=self.scale)
+            res = interior_energy(self.m, rows.points, self.opts.interior, scale=self.scale,
+                                  groups=rows.pair)
             self.evaluations += res.evaluations
             self.value_evaluations += res.value_evaluations
             np.add.at(self.iterations, rows.pair, res.iterations)

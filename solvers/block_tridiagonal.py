@@ -243,16 +243,13 @@ def _inv_dense(ops: Any, a: Any, scale: Any, local: bool) -> tuple[Any, Any]:
     """Inverses of dense symmetric blocks ``(K, d, d)`` -> (inverses, definite ``(K,)``),
     by the Cholesky factor; with ``local`` the blocks that are not positive definite are
     shifted by ``tau I`` first, ``tau`` from Gershgorin's bound of the smallest eigenvalue
-    (as :func:`_chol`)."""
+    (as :func:`_chol`). Every block by the same arithmetic, whatever the others are: a
+    block's inverse never depends on the stack it is in (LAPACK where the whole stack was
+    definite, pivot by pivot otherwise, sent one car-like path to another basin when a
+    pair was solved beside others). Pivot by pivot is also the faster one from ~1000
+    3 x 3 blocks on (0.87 against 1.5 ms; 1.1x slower at 100)."""
     d = a.shape[-1]
-    low = ops.cholesky(a)  # LAPACK where every block is definite (the common case) ...
-    if low is not None:
-        piv = low.diagonal(0, -2, -1)
-        ok = ((piv * piv) > (1e-13 * scale)[:, None]).all(-1)
-        if bool(ok.all()):
-            inv_l = ops.inv(low)
-            return inv_l.mT @ inv_l, ok
-    low, ok = _chol_dense(ops, a, 1e-13 * scale)  # ... else pivot by pivot
+    low, ok = _chol_dense(ops, a, 1e-13 * scale)
     if local and not bool(ok.all()):
         diag = a.diagonal(0, -2, -1)
         rest = ops.abs(a).sum(-1) - ops.abs(diag)

@@ -52,13 +52,16 @@ from solvers.status import NewtonStatus
 __all__ = ["InteriorOptions", "covers_interior", "interior_energy"]
 
 
-#: Up to this many blocks in a step's systems (rows times interior points) the
-#: block-tridiagonal solve runs on dense stacks (:func:`block_tridiagonal_solve_dense`,
-#: fewer and larger array operations), above it on fields (the smooth Newton method's
-#: solve); the same elimination, equal to rounding. Measured with 3 x 3 blocks, one
-#: thread: 127 blocks, 1 / 8 / 16 / 32 systems 1.1 / 2.2 / 4.0 / 6.2 ms dense against 2.5 /
-#: 3.4 / 4.2 / 5.7 ms on fields (255 blocks: 8 systems 4.4 against 5.3 ms, 16 5.9 against
-#: 5.0 ms): the last iterations of a batch run a few rows.
+#: Up to this many blocks in a group's systems (its running rows times interior points;
+#: a group is one pair's rows, see :func:`interior_energy`) the block-tridiagonal solve
+#: runs on dense stacks (:func:`block_tridiagonal_solve_dense`, fewer and larger array
+#: operations), above it on fields (the smooth Newton method's solve): the same
+#: elimination, equal only to rounding, so the choice is the group's own (a row's path
+#: never depends on rows of other groups: chosen by the whole batch's count, one car-like
+#: pair converged to a path of length 10.02 alone and 16.15 beside one other pair).
+#: Measured with 3 x 3 blocks, one thread: 127 blocks, 1 / 8 / 16 / 32 systems 1.1 / 2.2 /
+#: 4.0 / 6.2 ms dense against 2.5 / 3.4 / 4.2 / 5.7 ms on fields (255 blocks: 8 systems 4.4
+#: against 5.3 ms, 16 5.9 against 5.0 ms): the last iterations of a group run a few rows.
 DENSE_BLOCKS_MAX = 1500
 
 
@@ -176,7 +179,7 @@ class _State:
     barrier parameter ``mu`` and objective scale ``fs`` ``(B,)``."""
 
     def __init__(self, metric: Metric, paths: np.ndarray, opt: InteriorOptions,
-                 scale: float) -> None:
+                 scale: float, groups: np.ndarray | None = None) -> None:
         self.f = _functions(metric)
         self.opt, self.scale, self.d = opt, float(scale), metric.dim
         self.evaluations = 0
@@ -205,6 +208,8 @@ class _State:
         self.L = self.mu[:, None, None] / c
         self.Ld = self.mu[:, None, None] / cd if f.md else np.zeros((B, self.n - 1, 0))
         self.status = np.zeros(B, dtype=np.int64)
+        self.groups = (np.zeros(B, dtype=np.int64) if groups is None
+                       else np.unique(groups, return_inverse=True)[1].reshape(B))
         self.iterations = np.zeros(B, dtype=np.int64)
         self.delta = np.zeros(B)
         self.error = np.full(B, np.inf)
@@ -319,19 +324,27 @@ class _State:
         dscale = np.abs(np.trace(D, axis1=2, axis2=3)).mean(1) / d
         dscale = np.where(np.isfinite(dscale) & (dscale > 0), dscale, 1.0)
         shift = (self.delta[idx] * dscale)[:, None]
-        if A * (n - 1) <= DENSE_BLOCKS_MAX:  # a few rows: fewer, larger array operations
+        # per group (never by the whole batch: the two solves agree only to rounding)
+        grp = self.groups[idx]
+        few = np.bincount(grp)[grp] * (n - 1) <= DENSE_BLOCKS_MAX
+        dp, okf = np.zeros((A, n - 1, d)), np.zeros(A, bool)
+        if few.any():  # a few rows: fewer, larger array operations
+            r = np.flatnonzero(few)
             with np.errstate(all="ignore"):
-                dp, okf = block_tridiagonal_solve_dense(D + shift[..., None, None] * np.eye(d),
-                                                        off, rhs, dscale, local=True)
-        else:
-            diagf = [[np.ascontiguousarray(D[..., i, j]) + (shift if i == j else 0.0)
+                dp[r], okf[r] = block_tridiagonal_solve_dense(
+                    D[r] + shift[r, ..., None, None] * np.eye(d), off[r], rhs[r], dscale[r],
+                    local=True)
+        if not few.all():
+            r = np.flatnonzero(~few)
+            diagf = [[np.ascontiguousarray(D[r, :, i, j]) + (shift[r] if i == j else 0.0)
                       for j in range(d)] for i in range(d)]
-            offf = [[np.ascontiguousarray(off[..., i, j]) for j in range(d)] for i in range(d)]
-            rhsf = [np.ascontiguousarray(rhs[..., i]) for i in range(d)]
+            offf = [[np.ascontiguousarray(off[r, :, i, j]) for j in range(d)] for i in range(d)]
+            rhsf = [np.ascontiguousarray(rhs[r, :, i]) for i in range(d)]
             with np.errstate(all="ignore"):
-                sol, okf = block_tridiagonal_solve(_NUMPY_OPS, diagf, offf, rhsf,
-                                                   dscale[:, None], local=True, method="cyclic")
-            dp = np.stack(sol, -1)  # (A, n-1, d)
+                sol, okr = block_tridiagonal_solve(_NUMPY_OPS, diagf, offf, rhsf,
+                                                   dscale[r, None], local=True,
+                                                   method="cyclic")
+            dp[r], okf[r] = np.stack(sol, -1), np.asarray(okr, bool)  # (A, n-1, d)
         factored = np.asarray(okf, bool) & np.all(np.isfinite(dp), axis=(1, 2))
         dp = np.where(factored[:, None, None], dp, 0.0)
         dfull = np.zeros((A, n + 1, d))
@@ -426,13 +439,16 @@ class _State:
 
 
 def interior_energy(metric: Metric, paths: Any, options: InteriorOptions | None = None, *,
-                    scale: float = 1.0) -> NewtonBatch:
+                    scale: float = 1.0, groups: Any = None) -> NewtonBatch:
     """Minimise the discrete energy of every path of ``paths`` ``(B, n+1, d)`` (ends fixed)
     for a metric that :func:`covers_interior`, through its slack reformulation, all rows at
     once (numpy); ``scale``: the domain's size. Interior points are first moved strictly
     inside the domain (by ``1e-6`` of their distance from the bounds' centre). Returns a
     :class:`~solvers.newton.NewtonBatch`: ``energy`` the energy ``sum C**2`` of the points
-    (exact slacks), ``residual`` the final KKT error (see the module docstring)."""
+    (exact slacks), ``residual`` the final KKT error (see the module docstring).
+    ``groups`` ``(B,)`` (e.g. each row's pair): a row's result depends only on the rows of
+    its group (the block solve is chosen per group, :data:`DENSE_BLOCKS_MAX`); default one
+    group."""
     if not covers_interior(metric):
         raise InputError(f"{metric.name}: the interior-point method needs a metric that is "
                          "not smooth and provides smooth_square_sx")
@@ -441,7 +457,12 @@ def interior_energy(metric: Metric, paths: Any, options: InteriorOptions | None 
     if len(shape) != 3 or shape[2] != metric.dim or shape[1] < 3:
         raise InputError(f"paths must have shape (B, n+1, {metric.dim}) with n >= 2, got "
                          f"{shape}")
-    st = _State(metric, np.asarray(paths, dtype=np.float64), opt, scale)
+    if groups is not None:
+        groups = np.asarray(groups)
+        if groups.shape != (shape[0],) or not np.issubdtype(groups.dtype, np.integer):
+            raise InputError(f"groups must be integers of shape ({shape[0]},), got "
+                             f"{groups.dtype} {groups.shape}")
+    st = _State(metric, np.asarray(paths, dtype=np.float64), opt, scale, groups)
     while True:
         idx = np.flatnonzero(st.status == NewtonStatus.RUNNING)
         if idx.size == 0:

@@ -287,15 +287,19 @@ def test_residual_is_small_only_at_a_minimiser() -> None:
     assert energy_residual(m, moved[None], 1.6)[0] > 1e-2
 
 
-def test_batch_results_do_not_depend_on_the_other_pairs() -> None:
-    """A pair solved alone, or in a batch with others, gives the same path (every problem
-    has its own steps and tests; drops compare seeds of one pair only)."""
-    m = finsler.get_metric("matsumoto")
+@pytest.mark.parametrize("name, n", [("matsumoto", 32), ("panda-pole", 8)])
+def test_batch_results_do_not_depend_on_the_other_pairs(name: str, n: int) -> None:
+    """A pair solved alone, or in a batch with others, gives the same path to the last bit
+    (every problem has its own steps and tests; drops compare seeds of one pair only; a
+    pivot block is inverted by the same arithmetic whatever the other blocks are: with
+    LAPACK taken only where the whole stack was definite, Panda's paths differed by up to
+    5e-10 between a pair alone and in a batch of four)."""
+    m = finsler.get_metric(name)
     pairs = finsler.sample_pairs(m, 4, seed=9)
-    batch = solvers.solve_batch(m, pairs, 32, workers=1, progress=False)
+    batch = solvers.solve_batch(m, pairs, n, workers=1, progress=False, method="newton")
     for (s, g), r in zip(pairs, batch):
-        alone = solvers.solve_geodesic(m, s, g, 32)
-        np.testing.assert_allclose(alone.points, r.points, atol=1e-12)
+        alone = solvers.solve_geodesic(m, s, g, n, method="newton")
+        np.testing.assert_array_equal(alone.points, r.points)
         assert alone.best_seed == r.best_seed
 
 
