@@ -341,6 +341,17 @@ def solve_pairs_batched(m: Metric, pairs: np.ndarray, n: int, plan: SeedPlan,
                              [f"{rows.names[i]}~{j}" for i in b for j in range(plan.restarts)],
                              curves.reshape(-1, n0 + 1, m.dim))
                 rows = Rows.cat([rows, run.solve(extra, plan.drop_after, plan.drop_factor)])
+        if plan.equalize:
+            # rows whose segment costs are far from even (energy above (1 + equalize)
+            # times length**2 / n): resampled at equal cost spacing and solved again
+            costs = np.asarray(m.path_costs(rows.points, check=False))
+            length = costs.sum(1)
+            uneven = np.flatnonzero(rows.ok & (rows.energy > (1.0 + plan.equalize)
+                                                * length**2 / n0))
+            if uneven.size:
+                eq = np.stack([resample(rows.points[i], costs[i], n0) for i in uneven])
+                extra = Rows(rows.pair[uneven], [f"{rows.names[i]}=eq" for i in uneven], eq)
+                rows = Rows.cat([rows, run.solve(extra)])
         agree = _agreeing(rows, K)
         first = rows
         levels.append(_level(rows, K, n0))

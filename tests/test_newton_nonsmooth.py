@@ -139,14 +139,16 @@ def test_bad_input(car: finsler.Metric, rows: np.ndarray) -> None:
 def test_routing_is_opt_in(car: finsler.Metric) -> None:
     assert resolve_method(car, "auto") == "ipopt"
     assert resolve_method(car, "newton") == "newton"
-    # the opt-in path has its own plan: every seed at 128 segments, the best 6 to 256
+    # the opt-in path has its own plan: every seed at 128 segments, uneven rows solved
+    # again at equal cost spacing, the best 6 to 256
     assert SeedPlan.default(car) == SeedPlan.default(car, "ipopt")
     assert SeedPlan.default(car, "ipopt").ladder(256) == [256]
     newton = SeedPlan.default(car, "newton")
     assert newton.ladder(256) == [128, 256] and newton.refine_top == 6
+    assert newton.equalize == 0.05
     ipopt = SeedPlan.default(car, "ipopt")
     assert dataclasses.replace(newton, coarse=256, factor=ipopt.factor, refine_top=ipopt.refine_top,
-                               drop_rtol=ipopt.drop_rtol) == ipopt
+                               drop_rtol=ipopt.drop_rtol, equalize=0.0) == ipopt
 
 
 def test_batched_solve_against_ipopt(car: finsler.Metric) -> None:
@@ -225,3 +227,30 @@ def test_a_pairs_answer_does_not_depend_on_the_other_pairs(car: finsler.Metric) 
                                     method="newton", seeds=plan, progress=False)[0]
         np.testing.assert_array_equal(alone.points, batch[k].points)
         assert alone.best_seed == batch[k].best_seed
+
+
+def test_uneven_rows_are_solved_again_at_equal_cost_spacing(car: finsler.Metric) -> None:
+    """SeedPlan(equalize=0.05): every converged row of the first size whose energy is more
+    than 5 % above length**2 / n (uneven segment costs) gets a sibling ``=eq``, solved from
+    it resampled at equal cost spacing; the plan's own rows are untouched (solved apart),
+    and some siblings end lower than their rows (the point of it)."""
+    from solvers.batched import solve_pairs_batched
+
+    pairs = np.asarray(finsler.sample_pairs(car, 2, 20261236))
+    n = 32
+    base = dataclasses.replace(SeedPlan.default(car, "newton"), graph=False, polish=0,
+                               restarts=0, equalize=0.0)
+    off = solve_pairs_batched(car, pairs, n, base).first
+    on = solve_pairs_batched(car, pairs, n, dataclasses.replace(base, equalize=0.05)).first
+    k = len(off)
+    assert on.names[:k] == off.names
+    np.testing.assert_array_equal(on.energy[:k], off.energy[:k])
+    length = car.path_costs(off.points, check=False).sum(1)
+    uneven = np.flatnonzero(off.ok & (off.energy > 1.05 * length**2 / n))
+    assert uneven.size >= 3
+    assert on.names[k:] == [f"{off.names[i]}=eq" for i in uneven]
+    assert np.all(on.pair[k:] == off.pair[uneven])
+    lower = on.ok[k:] & (on.energy[k:] < off.energy[uneven] * (1 - 1e-6))
+    assert lower.sum() >= 1
+    with pytest.raises(InputError, match="equalize"):
+        SeedPlan(equalize=-0.1)
