@@ -255,7 +255,10 @@ class SeedPlan:
                 # 4/20 within 1e-4 of the best known against 1/20; on 50 fresh pairs
                 # (sample_pairs(carlike, 100, 20261236)[:50]) lower on 3 (one by 44 %),
                 # higher on 1 (by 2e-4), 49/50 within 1e-4 of the lower of the two against
-                # 47/50, CPU +14 % (6.7 against 5.9 s per pair, two jobs on two cores)
+                # 47/50, CPU +14 % (6.7 against 5.9 s per pair, two jobs on two cores); on
+                # the report pairs (seed 20261201, 100) lower on 4, higher on 2, both
+                # 84/100 within 1e-4 of the best known, 5.9 against 5.3 s CPU per pair alone
+                # (benchmarks/results/ground_truth-2026-11-29-2.md)
                 return replace(plan, coarse=128, factor=2, refine_top=6, drop_rtol=0.3,
                                equalize=0.05)
             return plan
