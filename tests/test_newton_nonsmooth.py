@@ -134,6 +134,10 @@ def test_bad_input(car: finsler.Metric, rows: np.ndarray) -> None:
         interior_energy(finsler.get_metric("matsumoto"), np.zeros((1, 5, 2)))
     with pytest.raises(InputError, match="max_iter"):
         InteriorOptions(max_iter=0)
+    with pytest.raises(InputError, match="groups must be integers of shape"):
+        interior_energy(car, rows, groups=np.zeros(len(rows) - 1, dtype=int))
+    with pytest.raises(InputError, match="groups must be integers of shape"):
+        interior_energy(car, rows, groups=np.zeros(len(rows)))
 
 
 def test_routing_is_opt_in(car: finsler.Metric) -> None:
