@@ -14,7 +14,9 @@ convergence flag of every pair (``null``: not computed, e.g. a ``--first`` run),
 and the date. The best known of a run is the lowest of its default, the multistart and
 every *other* label's converged energies: stored answers only lower the best known (a
 stale entry is still a valid path's energy), and the measured default is always solved
-afresh, never read from here.
+afresh, never read from here. A rerun of a label that ends higher than its stored answer on
+some pair (or fails to converge there) keeps the earlier entry apart, as
+``<label>@<commit> <date>``, so that a best known never rises.
 """
 
 from __future__ import annotations
@@ -81,10 +83,21 @@ def record(path: Path, label: str, energy, converged, meta: dict, first: int = 0
     store.update({f: meta[f] for f in ("metric", "seed", "K", "N")})
     old = store["answers"].get(label, {"energy": [None] * k, "converged": [None] * k})
     e, c = list(old["energy"]), list(old["converged"])
+    lost = False  # would a lower converged answer of the label be overwritten?
     for i, (ei, ci) in enumerate(zip(energy, converged, strict=True)):
         ei = float(ei)
+        prev, prev_ok = e[first + i], c[first + i]
+        if prev is not None and prev_ok and not (ci and math.isfinite(ei)
+                                                 and ei <= prev * (1 + 1e-12)):
+            lost = True
         e[first + i] = ei if math.isfinite(ei) else None
         c[first + i] = bool(ci)
+    if lost:
+        # a rerun of the same plan (a rounding-level change of the code, say) ended higher
+        # on some pair: the earlier answers stay, under their own label, so that the best
+        # known never rises
+        store["answers"][f"{label}@{old.get('commit', 'unknown')} {old.get('date', '')}"
+                         .rstrip()] = old
     store["answers"][label] = {"energy": e, "converged": c, "commit": commit or _commit(),
                                "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
                                "source": source}

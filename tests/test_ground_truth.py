@@ -85,8 +85,9 @@ def _fake_run(monkeypatch, tmp_path: Path, e_def, e_ms, converged=None) -> dict:
 def test_stored_answers_of_another_plan_lower_the_best_known(monkeypatch, tmp_path) -> None:
     """A second plan's answers, kept by an earlier run, join the best known (the gaps are
     against the lowest of all three, computed here by hand); the measured plan's own
-    earlier answers do not (it is solved afresh), and a non-converged answer never
-    lowers it."""
+    earlier answers are not read as its own (it is solved afresh), but where a rerun ends
+    higher they are kept apart (``<label>@<commit> <date>``) and, being valid paths,
+    lower the best known; a non-converged answer never lowers it."""
     import answer_store
 
     monkeypatch.setattr(answer_store, "STORE", tmp_path)
@@ -97,18 +98,23 @@ def test_stored_answers_of_another_plan_lower_the_best_known(monkeypatch, tmp_pa
     # another plan: lower on pair 1 (converged) and on pair 2 (not converged)
     answer_store.record(path, "other-plan", [9.0, 1.0, 0.5, 9.0], [True, True, False, True],
                         meta)
-    # the measured plan's own stale answers: lower on pair 3, must be ignored
+    # the measured plan's own earlier answers: lower on pair 3 (0.1 against the run's 1.0)
     answer_store.record(path, answer_store.plan_label(m, "auto"), [9.0, 9.0, 9.0, 0.1],
                         [True] * 4, meta)
     e_def, e_ms = [1.0, 2.0, 1.0, 1.0], [1.0, 2.0, 2.0, 1.0]
     r = _fake_run(monkeypatch, tmp_path, e_def, e_ms)
-    best = np.array([1.0, 1.0, 1.0, 1.0])
+    best = np.array([1.0, 1.0, 1.0, 0.1])
     assert np.allclose(r["gaps"], np.asarray(e_def) / best - 1.0)
-    assert r["within_tight"] == 3 and r["worst_pair"] == 1
-    assert r["other"]["beat"] == 1
+    assert r["within_tight"] == 2 and r["worst_pair"] == 3
+    assert r["other"]["beat"] == 2  # pairs 1 (the other plan) and 3 (the earlier run)
     # the run kept its default's answers under its label, replacing the stale ones
-    kept = answer_store.load(path)["answers"][answer_store.plan_label(m, "auto")]
+    answers = answer_store.load(path)["answers"]
+    kept = answers[answer_store.plan_label(m, "auto")]
     assert kept["energy"] == e_def and kept["converged"] == [True] * 4
+    # ... and kept the stale ones apart (lower on pair 3: they still lower a best known)
+    stale = [v for lab, v in answers.items()
+             if lab.startswith(answer_store.plan_label(m, "auto") + "@")]
+    assert len(stale) == 1 and stale[0]["energy"] == [9.0, 9.0, 9.0, 0.1]
 
 
 def test_store_keeps_a_part_in_place(tmp_path: Path) -> None:
@@ -122,3 +128,16 @@ def test_store_keeps_a_part_in_place(tmp_path: Path) -> None:
     e = answer_store.stored(answer_store.load(path), 5)["x"]
     assert np.array_equal(e, [1.0, np.inf, 3.0, 4.0, np.inf])
     assert answer_store.stored(answer_store.load(path), 5, exclude="x") == {}
+    # rerun, lower or equal everywhere: replaced in place, nothing kept apart
+    answer_store.record(path, "x", [1.0, 2.0, 3.0, 3.5], [True] * 4, meta, first=0)
+    assert list(answer_store.load(path)["answers"]) == ["x"]
+    # rerun, higher on pair 2 (or not converged on pair 3): the earlier answers stay apart
+    answer_store.record(path, "x", [4.0, 3.0], [True, False], meta, first=2)
+    answers = answer_store.load(path)["answers"]
+    assert len(answers) == 2
+    (apart,) = [lab for lab in answers if lab != "x"]
+    assert apart.startswith("x@")
+    assert answers[apart]["energy"] == [1.0, 2.0, 3.0, 3.5, None]
+    assert np.array_equal(answer_store.stored(answers and answer_store.load(path), 5,
+                                              exclude="x")[apart],
+                          [1.0, 2.0, 3.0, 3.5, np.inf])
