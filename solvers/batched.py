@@ -29,7 +29,14 @@ from solvers.backends import backend_for
 from solvers.inputs import domain_scale
 from solvers.interior import InteriorOptions, covers_interior, interior_energy
 from solvers.newton import NewtonOptions, NewtonState, NewtonStatus, energy_residual
-from solvers.seeding import SeedPlan, graph_seeds, perturbed_batch, resample, seed_batch
+from solvers.seeding import (
+    SeedPlan,
+    graph_seeds,
+    perturbed_batch,
+    resample,
+    seed_batch,
+    warped_batch,
+)
 
 __all__ = ["BatchOptions", "BatchSolution", "Rows", "covers", "covers_opt_in",
            "solve_pairs_batched"]
@@ -271,6 +278,8 @@ class BatchSolution:
                  "iterations": int(lv["iterations"][k])}
             if lv.get("polish"):
                 d["polish"] = True
+            if lv.get("warp"):
+                d["warp"] = True
             out.append(d)
         return out
 
@@ -409,6 +418,34 @@ def solve_pairs_batched(m: Metric, pairs: np.ndarray, n: int, plan: SeedPlan,
         levels.append(_level(extra, K, n, polish=True))
         stats["levels"].append({"segments": n, "rows": len(extra), "polish": True,
                                 "wall_time": time.perf_counter() - t1})
+    if global_seeds and plan.warps:
+        t1 = time.perf_counter()
+        # reparametrised copies of the best of the plan's own rows (as the polish):
+        # the same curve with its points slid along it, which moves the segments where
+        # a kinked metric's path changes phase (round r > 0 names its rows ``~w{r}.{j}``)
+        given_names = set(given_rows.names)
+        warped = []
+        for rnd in range(plan.warp_rounds):
+            best = _best_of(rows, K, np.array([nm not in given_names for nm in rows.names],
+                                              dtype=bool))
+            okp = np.flatnonzero((best >= 0) & rows.ok[np.maximum(best, 0)])
+            if not okp.size:
+                break
+            b = best[okp]
+            tag = "" if rnd == 0 else f"{rnd}."
+            curves = warped_batch(m, rows.points[b], plan.warps, plan.warp_scale)
+            extra = run.solve(Rows(np.repeat(okp, plan.warps),
+                                   [f"{rows.names[i].split('~')[0]}~w{tag}{j}" for i in b
+                                    for j in range(plan.warps)],
+                                   curves.reshape(-1, n + 1, m.dim)),
+                              plan.drop_after, plan.drop_factor)
+            warped.append(extra)
+            rows = Rows.cat([rows, extra])
+        extra = Rows.cat(warped) if warped else \
+            Rows(np.zeros(0, dtype=np.int64), [], np.zeros((0, n + 1, m.dim)))
+        levels.append({**_level(extra, K, n, polish=True), "warp": True})
+        stats["levels"].append({"segments": n, "rows": len(extra), "polish": True,
+                                "warp": True, "wall_time": time.perf_counter() - t1})
     if not global_seeds:
         agree = _agreeing(rows, K)
     stats["evaluations"] = run.evaluations

@@ -144,15 +144,17 @@ def test_routing_is_opt_in(car: finsler.Metric) -> None:
     assert resolve_method(car, "auto") == "ipopt"
     assert resolve_method(car, "newton") == "newton"
     # the opt-in path has its own plan: every seed at 128 segments, uneven rows solved
-    # again at equal cost spacing, the best 6 to 256
+    # again at equal cost spacing, the best 6 to 256, then 2 rounds of 6 warped copies
     assert SeedPlan.default(car) == SeedPlan.default(car, "ipopt")
     assert SeedPlan.default(car, "ipopt").ladder(256) == [256]
     newton = SeedPlan.default(car, "newton")
     assert newton.ladder(256) == [128, 256] and newton.refine_top == 6
     assert newton.equalize == 0.05
+    assert (newton.warps, newton.warp_rounds) == (6, 2)
     ipopt = SeedPlan.default(car, "ipopt")
     assert dataclasses.replace(newton, coarse=256, factor=ipopt.factor, refine_top=ipopt.refine_top,
-                               drop_rtol=ipopt.drop_rtol, equalize=0.0) == ipopt
+                               drop_rtol=ipopt.drop_rtol, equalize=0.0, warps=0,
+                               warp_rounds=1) == ipopt
 
 
 def test_batched_solve_against_ipopt(car: finsler.Metric) -> None:
@@ -258,3 +260,34 @@ def test_uneven_rows_are_solved_again_at_equal_cost_spacing(car: finsler.Metric)
     assert lower.sum() >= 1
     with pytest.raises(InputError, match="equalize"):
         SeedPlan(equalize=-0.1)
+
+
+def test_warped_copies_of_the_best_row_reach_a_lower_phase_switch(car: finsler.Metric
+                                                                   ) -> None:
+    """SeedPlan(warps=6): after the plan's rows, six copies of each pair's best row with
+    their points slid along the curve (solvers.seeding.warped_batch) are solved; the
+    plan's rows are unchanged, the copies are named ``<best>~w<j>``, and on this pair
+    (pair 3 of sample_pairs(carlike, 6, 20261240), 32 segments) one ends more than 1 %
+    lower: car-like's discrete minima differ by the segment where the path changes phase,
+    which sliding the points moves (random perturbations of the same size do not reach
+    it: polish=6 at 0.05 stays above)."""
+    from solvers.batched import solve_pairs_batched
+
+    pairs = np.asarray(finsler.sample_pairs(car, 6, 20261240))[3:4]
+    n = 32
+    base = dataclasses.replace(SeedPlan.default(car, "newton"), graph=False, polish=0,
+                               restarts=0, equalize=0.0, coarse=None, warps=0)
+    off = solve_pairs_batched(car, pairs, n, base)
+    on = solve_pairs_batched(car, pairs, n, dataclasses.replace(base, warps=6, warp_rounds=1))
+    k = len(off.final)
+    assert on.final.names[:k] == off.final.names
+    np.testing.assert_array_equal(on.final.energy[:k], off.final.energy[:k])
+    best = off.final.names[off.best[0]]
+    assert on.final.names[k:] == [f"{best.split('~')[0]}~w{j}" for j in range(6)]
+    e_off = off.final.energy[off.best[0]]
+    warped = np.where(on.final.ok[k:], on.final.energy[k:], np.inf)
+    assert warped.min() < e_off * (1 - 1e-2)
+    assert on.final.energy[on.best[0]] == warped.min()
+    polished = solve_pairs_batched(car, pairs, n, dataclasses.replace(
+        base, polish=6, polish_scale=0.05))
+    assert polished.final.energy[polished.best[0]] > e_off * (1 - 1e-3)

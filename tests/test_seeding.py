@@ -119,8 +119,51 @@ def test_seed_family_names() -> None:
     assert seed_family("hermite-track[3]@64") == "hermite-track"
     assert seed_family("bulge+0.45#0@16~p2") == "polish"
     assert seed_family("random4~1") == "restart"
+    assert seed_family("graph~w1.5") == "warp"
+    assert seed_family("bulge+0.45#0=eq@128~w3") == "warp"
     assert seed_family("graph~ipopt") == "graph"
     assert seed_family("initial0") == "initial"
+
+
+def test_warped_copies_trace_the_same_curve_with_their_points_slid_along_it() -> None:
+    """warped_batch: every point of a copy lies on the original polyline (distance to it
+    ~0), in the same order (arc position increasing), the ends fixed; copy i slides the
+    point at parameter t to t + e sin(j pi t) / (j pi) of the curve's parameter, checked
+    against the arc position of each point found by projecting it onto the polyline."""
+    from solvers.seeding import warped_batch
+
+    m = finsler.get_metric("euclidean")
+    rng = np.random.default_rng(3)
+    # a polyline of unequal edges, so parameter and arc length differ
+    path = np.cumsum(rng.uniform(0.01, 0.1, size=(21, 2)), axis=0)
+    path -= path.mean(0)
+    out = warped_batch(m, path[None], 12, 0.06)
+    assert out.shape == (1, 12, 21, 2)
+    n = len(path) - 1
+    t = np.linspace(0, 1, n + 1)
+    edges = path[1:] - path[:-1]
+    for i in range(12):
+        q = out[0, i]
+        np.testing.assert_array_equal(q[[0, -1]], path[[0, -1]])
+        # projection of each point onto each edge: its polyline parameter
+        rel = q[:, None, :] - path[None, :-1, :]
+        lam = np.clip((rel * edges).sum(-1) / (edges * edges).sum(-1), 0, 1)
+        dist = np.linalg.norm(rel - lam[..., None] * edges, axis=-1)
+        e = dist.argmin(1)
+        assert dist.min(1).max() < 1e-12
+        param = (e + lam[np.arange(n + 1), e]) / n
+        j = 1 + (i // 2) % 3
+        eps = (1 if i % 2 == 0 else -1) * 0.06 * 2.5 ** (i // 6)
+        np.testing.assert_allclose(param, t + eps * np.sin(j * np.pi * t) / (j * np.pi),
+                                   atol=1e-12)
+        assert np.all(np.diff(param) > 0)
+        assert np.abs(q - path).max() > 1e-3  # a copy is not the path itself
+    with pytest.raises(InputError, match="warp_scale"):
+        SeedPlan(warp_scale=0.5)
+    with pytest.raises(InputError, match="warps"):
+        SeedPlan(warps=-1)
+    with pytest.raises(InputError, match="warp_rounds"):
+        SeedPlan(warp_rounds=0)
 
 
 def test_family_stats_and_alternative_gap() -> None:
