@@ -202,8 +202,21 @@ def default_records(m: finsler.Metric, pairs: np.ndarray, n: int, repeats: int,
             "best_seed": [r.best_seed for r in rs],
             "seeds": [int(r.seeds_tried) for r in rs],
             "disagree": [r.alternative_gap is not None for r in rs],
+            "before_warp": [_before_warp(r) for r in rs],
+            "warp_iterations": [sum(lv["iterations"] for lv in r.levels if lv.get("warp"))
+                                for r in rs],
+            "iterations": [int(r.iterations) for r in rs],
             "wall": float(np.median([t[0] for t in times])),
             "cpu": float(np.median([t[1] for t in times]))}
+
+
+def _before_warp(r) -> float:
+    """The lowest converged energy of a result's rows other than its warp rows
+    (``SeedPlan.warps``): those are solved last and nothing else starts from them, so this
+    is the answer of the same plan without them (``inf``: no such row converged)."""
+    e = [v for name, v in r.seed_energies.items()
+         if seed_family(name) != "warp" and np.isfinite(v)]
+    return float(min(e)) if e else float("inf")
 
 
 def read_part(path: Path, meta: dict) -> dict:
@@ -235,6 +248,9 @@ def merge_parts(paths: list[Path], name: str, k: int, seed: int, n: int, upto: i
         raise SystemExit(f"--merge: the parts cover pairs 0..{a - 1}, not 0..{upto - 1}")
     out: dict[str, object] = {f: [x for d in parts for x in d[f]] for f in
                               ("energy", "converged", "best_seed", "seeds", "disagree")}
+    for f in ("before_warp", "warp_iterations", "iterations"):  # absent from older parts
+        if all(f in d for d in parts):
+            out[f] = [x for d in parts for x in d[f]]
     # the label of the plan the parts ran (answer_store.plan_label); parts of older runs
     # carry none: then one of their method and energies, never a current plan's
     labels = {d.get("label") for d in parts}
@@ -310,8 +326,17 @@ def run_metric(name: str, k: int, seed: int, starts: int, chunk: int, repeats: i
         if g <= TIGHT:
             f = seed_family(b)
             win_def[f] = win_def.get(f, 0) + 1
+    warp = None
+    if "before_warp" in rec and np.sum(rec.get("warp_iterations", [0])) > 0:
+        # the same run without its warp rows: the rows before them are unchanged by them
+        e_bw = np.asarray(rec["before_warp"], dtype=np.float64)
+        g_bw = e_bw / e_best - 1.0
+        warp = {"within_tight": int(np.sum(g_bw <= TIGHT)),
+                "within_loose": int(np.sum(g_bw <= LOOSE)), "worst_gap": float(np.max(g_bw)),
+                "lowered": int(np.sum(e_def < e_bw * (1.0 - TIGHT))),
+                "share": float(np.sum(rec["warp_iterations"]) / np.sum(rec["iterations"]))}
     worst = int(np.argmax(gap))
-    return {
+    return {"warp": warp,
         "metric": name, "K": k, "N": n, "within_tight": int(np.sum(gap <= TIGHT)),
         "within_loose": int(np.sum(gap <= LOOSE)), "worst_gap": float(gap[worst]),
         "worst_pair": worst, "wall": wall, "cpu": cpu, "best_cpu": float(np.mean(best["cpu"])),
@@ -445,6 +470,15 @@ def main() -> None:
                         if r["parts"] else "")
                      + (f"; the first {r['K']} of `sample_pairs(metric, {count[nm]}, "
                         f"{args.seed})` (`--first`)" if args.first else ""))
+        if r.get("warp") is not None:
+            w = r["warp"]
+            notes.append(
+                f"- {nm}: the same run without its warp rows (`SeedPlan.warps`, solved last, "
+                "so the rows before them are those of the plan without warps): within 1e-4 "
+                f"{w['within_tight']}/{r['K']}, within 1e-2 {w['within_loose']}/{r['K']}, "
+                f"worst {w['worst_gap']:.2e}; the warp rows lowered {w['lowered']} pairs by "
+                f"more than 1e-4, at {100 * w['share']:.0f} % of the default's row "
+                "iterations")
         if r["other"] is not None:
             o = r["other"]
             each = "; ".join(f"{lb} {t[0]}/{r['K']} (within 1e-2 {t[1]}, worst {t[2]:.2e})"

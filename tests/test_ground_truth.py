@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import sys
+import types
 from pathlib import Path
 
 import numpy as np
@@ -141,3 +142,33 @@ def test_store_keeps_a_part_in_place(tmp_path: Path) -> None:
     assert np.array_equal(answer_store.stored(answers and answer_store.load(path), 5,
                                               exclude="x")[apart],
                           [1.0, 2.0, 3.0, 3.5, np.inf])
+
+
+def test_the_run_without_its_warp_rows_is_measured_too(monkeypatch, tmp_path) -> None:
+    """The default's answers without its warp rows (solved last) are judged against the
+    same best known: here the warps lowered pair 1 (2.0 -> 1.0), so without them 3/4."""
+    import answer_store
+
+    monkeypatch.setattr(answer_store, "STORE", tmp_path)
+    e_def, e_ms = [1.0, 1.0, 1.0, 1.0], [1.0, 1.0, 1.0, 1.0]
+    monkeypatch.setattr(ground_truth, "best_known", lambda *a, **k: {
+        "energy": np.asarray(e_ms), "converged": np.ones(4, bool),
+        "families": np.asarray(["straight"] * 4), "best_seed": np.asarray(["straight"] * 4),
+        "cpu": np.zeros(4)})
+    monkeypatch.setattr(ground_truth, "default_records", lambda *a, **k: {
+        "energy": e_def, "converged": [True] * 4, "best_seed": ["straight~w2"] * 4,
+        "seeds": [1] * 4, "disagree": [False] * 4, "wall": 0.0, "cpu": 0.0,
+        "before_warp": [1.0, 2.0, 1.0 + 1e-6, 1.0], "warp_iterations": [10, 20, 10, 0],
+        "iterations": [100] * 4})
+    r = ground_truth.run_metric("poincare", 4, 5, 20, 5)
+    assert r["within_tight"] == 4
+    assert r["warp"] == {"within_tight": 3, "within_loose": 3, "worst_gap": 1.0,
+                         "lowered": 1, "share": 0.1}
+
+
+def test_before_warp_is_the_best_of_the_other_rows() -> None:
+    r = types.SimpleNamespace(seed_energies={"graph": 2.0, "graph~w1": 1.0,
+                                             "bulge+0.3#0@128~p2": 1.5, "random1": np.nan})
+    assert ground_truth._before_warp(r) == 1.5
+    r = types.SimpleNamespace(seed_energies={"graph~w0": 1.0, "graph": np.nan})
+    assert ground_truth._before_warp(r) == np.inf
