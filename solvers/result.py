@@ -103,8 +103,8 @@ class GeodesicResult(Result):
     Evidence of global optimality (agreement within one seed family is no evidence):
     ``seed_families`` breaks the seeds down by family (:func:`solvers.seeding.seed_family`:
     ``straight``, ``bulge``, ``random``, ``graph``, the metric's own ``seed_curves``
-    families, ``restart``, ``polish``, ``initial``): ``{family: {"tried", "agreeing",
-    "best_energy"}}``, ``tried`` / ``agreeing`` counted on the candidates solved from
+    families, ``restart``, ``polish``, ``warp``, ``initial``): ``{family: {"tried",
+    "agreeing", "best_energy"}}``, ``tried`` / ``agreeing`` counted on the candidates solved from
     the seeds (as ``seeds_tried`` / ``seeds_agreeing``, the ladder's first size),
     ``best_energy`` the family's lowest energy at the final size (``None``: none of its
     candidates was carried there converged). ``alternative_gap`` is the relative energy
