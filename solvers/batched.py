@@ -386,72 +386,68 @@ def solve_pairs_batched(m: Metric, pairs: np.ndarray, n: int, plan: SeedPlan,
         levels.append(_level(rows, K, n))
         agree = _agreeing(rows, K)
         first = rows
+    given_names = set(given_rows.names)
     if global_seeds and plan.polish:
-        t1 = time.perf_counter()
-        # the row polished is the best of the plan's own rows: a caller-given row (a learned
-        # warm start) is one more candidate beside them and changes nothing they do, so the
-        # result is never worse than without it, for one more row (issue 47)
         # ``polish_rounds`` rounds of basin hopping: each perturbs the best row so far
         # (round r > 0 names its rows ``~p{r}.{j}``, draws seeds after round r - 1's)
-        given_names = set(given_rows.names)
-        polished = []
-        for rnd in range(plan.polish_rounds):
-            best = _best_of(rows, K, np.array([nm not in given_names for nm in rows.names],
-                                              dtype=bool))
-            okp = np.flatnonzero((best >= 0) & rows.ok[np.maximum(best, 0)])
-            if not okp.size:
-                break
-            b = best[okp]
-            tag = "" if rnd == 0 else f"{rnd}."
-            curves = np.stack([perturbed_batch(m, rows.points[b], 1, plan.polish_scale,
-                                               plan.seed + 1000 + rnd * plan.polish + j)[:, 0]
-                               for j in range(plan.polish)], 1)
-            extra = run.solve(Rows(np.repeat(okp, plan.polish),
-                                   [f"{rows.names[i].split('~')[0]}~p{tag}{j}" for i in b
-                                    for j in range(plan.polish)],
-                                   curves.reshape(-1, n + 1, m.dim)),
-                              plan.drop_after, plan.drop_factor)
-            polished.append(extra)
-            rows = Rows.cat([rows, extra])
-        extra = Rows.cat(polished) if polished else \
-            Rows(np.zeros(0, dtype=np.int64), [], np.zeros((0, n + 1, m.dim)))
-        levels.append(_level(extra, K, n, polish=True))
-        stats["levels"].append({"segments": n, "rows": len(extra), "polish": True,
-                                "wall_time": time.perf_counter() - t1})
+        def perturbed(points: np.ndarray, rnd: int) -> np.ndarray:
+            return np.stack([perturbed_batch(m, points, 1, plan.polish_scale,
+                                             plan.seed + 1000 + rnd * plan.polish + j)[:, 0]
+                             for j in range(plan.polish)], 1)
+
+        rows = _hop(run, rows, K, given_names, plan, plan.polish_rounds, plan.polish, "p",
+                    perturbed, levels, stats)
     if global_seeds and plan.warps:
-        t1 = time.perf_counter()
-        # reparametrised copies of the best of the plan's own rows (as the polish):
-        # the same curve with its points slid along it, which moves the segments where
-        # a kinked metric's path changes phase (round r > 0 names its rows ``~w{r}.{j}``)
-        given_names = set(given_rows.names)
-        warped = []
-        for rnd in range(plan.warp_rounds):
-            best = _best_of(rows, K, np.array([nm not in given_names for nm in rows.names],
-                                              dtype=bool))
-            okp = np.flatnonzero((best >= 0) & rows.ok[np.maximum(best, 0)])
-            if not okp.size:
-                break
-            b = best[okp]
-            tag = "" if rnd == 0 else f"{rnd}."
-            curves = warped_batch(m, rows.points[b], plan.warps, plan.warp_scale)
-            extra = run.solve(Rows(np.repeat(okp, plan.warps),
-                                   [f"{rows.names[i].split('~')[0]}~w{tag}{j}" for i in b
-                                    for j in range(plan.warps)],
-                                   curves.reshape(-1, n + 1, m.dim)),
-                              plan.drop_after, plan.drop_factor)
-            warped.append(extra)
-            rows = Rows.cat([rows, extra])
-        extra = Rows.cat(warped) if warped else \
-            Rows(np.zeros(0, dtype=np.int64), [], np.zeros((0, n + 1, m.dim)))
-        levels.append({**_level(extra, K, n, polish=True), "warp": True})
-        stats["levels"].append({"segments": n, "rows": len(extra), "polish": True,
-                                "warp": True, "wall_time": time.perf_counter() - t1})
+        # reparametrised copies of the best row so far: the same curve with its points
+        # slid along it, which moves the segments where a kinked metric's path changes
+        # phase (round r > 0 names its rows ``~w{r}.{j}``)
+        rows = _hop(run, rows, K, given_names, plan, plan.warp_rounds, plan.warps, "w",
+                    lambda points, rnd: warped_batch(m, points, plan.warps, plan.warp_scale),
+                    levels, stats)
     if not global_seeds:
         agree = _agreeing(rows, K)
     stats["evaluations"] = run.evaluations
     stats["value_evaluations"] = run.value_evaluations
     return BatchSolution(rows, _best(rows, K), tried, agree, run.iterations, levels, stats,
                          first)
+
+
+def _hop(run: Any, rows: Rows, K: int, given_names: set[str], plan: SeedPlan, rounds: int,
+         count: int, letter: str, curves_of: Any, levels: list[dict[str, Any]],
+         stats: dict[str, Any]) -> Rows:
+    """``rounds`` rounds of ``count`` rows per pair at the final size, each round from the
+    best of the plan's own rows so far (a caller-given row, e.g. a learned warm start, is
+    one more candidate beside them and changes nothing they do, so the result is never
+    worse than without it: issue 47): ``curves_of(points (P, n+1, dim), round)`` ->
+    ``(P, count, n+1, dim)``, rows named ``<best>~<letter>[<round>.]<j>``. Returns every
+    row; appends one level (``polish``; ``warp`` for letter ``w``) to ``levels`` and
+    ``stats``."""
+    t1 = time.perf_counter()
+    n1, dim = rows.points.shape[1], rows.points.shape[2]
+    new = []
+    for rnd in range(rounds):
+        best = _best_of(rows, K, np.array([nm not in given_names for nm in rows.names],
+                                          dtype=bool))
+        okp = np.flatnonzero((best >= 0) & rows.ok[np.maximum(best, 0)])
+        if not okp.size:
+            break
+        b = best[okp]
+        tag = "" if rnd == 0 else f"{rnd}."
+        curves = curves_of(rows.points[b], rnd)
+        extra = run.solve(Rows(np.repeat(okp, count),
+                               [f"{rows.names[i].split('~')[0]}~{letter}{tag}{j}" for i in b
+                                for j in range(count)],
+                               curves.reshape(-1, n1, dim)),
+                          plan.drop_after, plan.drop_factor)
+        new.append(extra)
+        rows = Rows.cat([rows, extra])
+    extra = Rows.cat(new) if new else \
+        Rows(np.zeros(0, dtype=np.int64), [], np.zeros((0, n1, dim)))
+    warp = {"warp": True} if letter == "w" else {}
+    levels.append({**_level(extra, K, n1 - 1, polish=True), **warp})
+    stats["levels"].append({"segments": n1 - 1, "rows": len(extra), "polish": True, **warp,
+                            "wall_time": time.perf_counter() - t1})
+    return rows
 
 
 def residuals(m: Metric, points: np.ndarray) -> np.ndarray:
