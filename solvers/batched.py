@@ -19,7 +19,7 @@ path (:func:`solvers.newton.energy_residual`; the KKT residual where ``F`` is no
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -206,18 +206,22 @@ class _Runner:
         self.evaluations = 0
         self.value_evaluations = 0
 
-    def solve(self, rows: Rows, drop_after: int = 0, drop_factor: float = 1.3) -> Rows:
+    def solve(self, rows: Rows, drop_after: int = 0, drop_factor: float = 1.3,
+              barrier: float = 1.0) -> Rows:
         """Newton-solve ``rows`` (all of one size); from iteration ``drop_after`` on
         (``0``: never) a running row above ``drop_factor`` times its pair's best
         converged energy stops (smooth metrics; the interior point of a metric that is not
-        smooth runs every row to its end: no early drop)."""
+        smooth runs every row to its end: no early drop). ``barrier``: the interior point's
+        first barrier parameter times this (``InteriorOptions.mu0``)."""
         if not len(rows):
             return rows
         if not self.m.smooth:
             # the slack reformulation by the batched interior point; the reported residual
             # is left unknown (NaN) so that the results compute the KKT residual of the
             # points themselves (solvers.nonsmooth.kkt_residual), not the method's own
-            res = interior_energy(self.m, rows.points, self.opts.interior, scale=self.scale,
+            opt = self.opts.interior if barrier == 1.0 else \
+                replace(self.opts.interior, mu0=self.opts.interior.mu0 * barrier)
+            res = interior_energy(self.m, rows.points, opt, scale=self.scale,
                                   groups=rows.pair)
             self.evaluations += res.evaluations
             self.value_evaluations += res.value_evaluations
@@ -336,7 +340,17 @@ def solve_pairs_batched(m: Metric, pairs: np.ndarray, n: int, plan: SeedPlan,
                 tried += np.asarray([len(g) for g in gs], dtype=np.int64)
         if len(sizes) == 1:
             parts.append(given_rows)
-        rows = run.solve(Rows.cat(parts), plan.drop_after, plan.drop_factor)
+        first_rows = Rows.cat(parts)
+        rows = run.solve(first_rows, plan.drop_after, plan.drop_factor)
+        if plan.barriers and not m.smooth:
+            # the same seeds again from other first barrier parameters: the interior
+            # point's barrier path picks the basin, and each start picks other ones
+            given = set(given_rows.names)
+            own = first_rows.take([i for i, nm in enumerate(first_rows.names)
+                                   if nm not in given])
+            rows = Rows.cat([rows] + [
+                run.solve(Rows(own.pair, [f"{nm}%mu{f:g}" for nm in own.names], own.points),
+                          barrier=f) for f in plan.barriers])
         given_names = set(given_rows.names)
         if plan.restarts:  # of the best of the plan's own rows (see the polish below)
             best = _best_of(rows, K, np.array([nm not in given_names for nm in rows.names],

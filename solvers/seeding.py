@@ -80,6 +80,11 @@ class SeedPlan:
     A metric with kinks has a discrete minimum for each segment at which the path
     changes phase (car-like: where the heading reaches its bound or the turn becomes
     tight); sliding the points moves those switches, which perturbing them does not.
+    ``barriers`` (batched interior point, metrics that are not smooth; ``()``: none): the
+    plan's own seeds of the first size solved again once per factor, the interior
+    point's first barrier parameter (``InteriorOptions.mu0``) times it (rows named
+    ``<seed>%mu<factor>``): its barrier path decides which basin a seed ends in, and
+    other starting barriers end in other basins.
     """
 
     bulges: tuple[float, ...] = (0.3,)
@@ -105,6 +110,7 @@ class SeedPlan:
     warps: int = field(default=0, repr=False)
     warp_scale: float = field(default=0.06, repr=False)
     warp_rounds: int = field(default=1, repr=False)
+    barriers: tuple[float, ...] = field(default=(), repr=False)
 
     def __post_init__(self) -> None:
         from finsler.errors import InputError
@@ -127,6 +133,11 @@ class SeedPlan:
                 and 0 < self.warp_scale <= 0.1):
             raise InputError(f"warp_scale must be in (0, 0.1] (the largest warp, 2.5x it, "
                              f"must keep the parameter increasing), got {self.warp_scale!r}")
+        if not isinstance(self.barriers, tuple) or any(
+                isinstance(f, bool) or not isinstance(f, (int, float))
+                or not (np.isfinite(f) and f > 0) or f == 1 for f in self.barriers):
+            raise InputError(f"barriers must be a tuple of positive finite factors other "
+                             f"than 1 (1 is the plan's own solve), got {self.barriers!r}")
         for name in ("random", "restarts", "polish", "drop_after", "warps"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 0:

@@ -291,3 +291,33 @@ def test_warped_copies_of_the_best_row_reach_a_lower_phase_switch(car: finsler.M
     polished = solve_pairs_batched(car, pairs, n, dataclasses.replace(
         base, polish=6, polish_scale=0.05))
     assert polished.final.energy[polished.best[0]] > e_off * (1 - 1e-3)
+
+
+def test_other_first_barriers_end_in_other_basins(car: finsler.Metric) -> None:
+    """SeedPlan(barriers=(100,)): the plan's own seeds solved again from 100x the interior
+    point's first barrier parameter, named ``<seed>%mu100``, beside the plan's rows (which
+    are unchanged); on this pair (pair 3 of sample_pairs(carlike, 6, 20261240), 32
+    segments) one of them ends more than 1 % below every row of the plan's own barrier,
+    and each is the solve of InteriorOptions(mu0=100) from its seed (a second call)."""
+    from solvers.batched import BatchOptions, solve_pairs_batched
+
+    pairs = np.asarray(finsler.sample_pairs(car, 6, 20261240))[3:4]
+    n = 32
+    base = dataclasses.replace(SeedPlan.default(car, "newton"), graph=False, polish=0,
+                               restarts=0, equalize=0.0, coarse=None, warps=0)
+    off = solve_pairs_batched(car, pairs, n, base).final
+    on = solve_pairs_batched(car, pairs, n, dataclasses.replace(base, barriers=(100.0,))).final
+    k = len(off)
+    assert on.names[:k] == off.names
+    np.testing.assert_array_equal(on.energy[:k], off.energy[:k])
+    assert on.names[k:] == [f"{nm}%mu100" for nm in off.names]
+    e_off = np.where(off.ok, off.energy, np.inf).min()
+    e_on = np.where(on.ok[k:], on.energy[k:], np.inf)
+    assert e_on.min() < e_off * (1 - 1e-2)
+    # the rows are those of the plan's own solve with mu0 = 100 (independent call)
+    ref = solve_pairs_batched(car, pairs, n, base,
+                              opts=BatchOptions(interior=InteriorOptions(mu0=100.0))).final
+    np.testing.assert_array_equal(on.energy[k:], ref.energy)
+    for bad in ((1.0,), (0.0,), (np.inf,), [100.0], (True,)):
+        with pytest.raises(InputError, match="barriers"):
+            SeedPlan(barriers=bad)
