@@ -318,6 +318,7 @@ def solve_pairs_batched(m: Metric, pairs: np.ndarray, n: int, plan: SeedPlan,
     given_rows = Rows(np.array([k for k in range(K) for _ in given[k]], dtype=np.int64),
                       [name for g in given for name, _ in g],
                       np.array([p for g in given for _, p in g]).reshape(-1, n + 1, m.dim))
+    given_names = set(given_rows.names)
     sizes = plan.ladder(n) if global_seeds else [n]
     levels: list[dict[str, Any]] = []
     stats: dict[str, Any] = {"levels": []}
@@ -345,13 +346,11 @@ def solve_pairs_batched(m: Metric, pairs: np.ndarray, n: int, plan: SeedPlan,
         if plan.barriers and not m.smooth:
             # the same seeds again from other first barrier parameters: the interior
             # point's barrier path picks the basin, and each start picks other ones
-            given = set(given_rows.names)
             own = first_rows.take([i for i, nm in enumerate(first_rows.names)
-                                   if nm not in given])
+                                   if nm not in given_names])
             rows = Rows.cat([rows] + [
                 run.solve(Rows(own.pair, [f"{nm}%mu{f:g}" for nm in own.names], own.points),
                           barrier=f) for f in plan.barriers])
-        given_names = set(given_rows.names)
         if plan.restarts:  # of the best of the plan's own rows (see the polish below)
             best = _best_of(rows, K, np.array([nm not in given_names for nm in rows.names],
                                               dtype=bool))
@@ -400,7 +399,6 @@ def solve_pairs_batched(m: Metric, pairs: np.ndarray, n: int, plan: SeedPlan,
         levels.append(_level(rows, K, n))
         agree = _agreeing(rows, K)
         first = rows
-    given_names = set(given_rows.names)
     if global_seeds and plan.polish:
         # ``polish_rounds`` rounds of basin hopping: each perturbs the best row so far
         # (round r > 0 names its rows ``~p{r}.{j}``, draws seeds after round r - 1's)
