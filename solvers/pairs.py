@@ -29,7 +29,14 @@ import numpy as np
 
 from finsler.errors import InputError
 from finsler.metric import Metric
-from solvers.batched import BatchOptions, BatchSolution, covers, covers_opt_in, solve_pairs_batched
+from solvers.batched import (
+    BatchOptions,
+    BatchSolution,
+    covers,
+    covers_opt_in,
+    solve_pairs_batched,
+    warp_answers,
+)
 from solvers.inputs import SHORT_PAIR, as_metric, domain_scale
 from solvers.nonsmooth import optimality_residual
 from solvers.result import GeodesicResult, MinMaxResult, Status
@@ -347,9 +354,12 @@ def solve_pairs(m: Metric, pairs: np.ndarray, n: int, plan: SeedPlan,
         for k, r in zip(long_, _from_batch(m, sol, global_seeds), strict=True):
             out[k] = r
     elif long_:
-        for k in long_:
-            out[k] = _solve_ipopt(m, pairs[k, 0], pairs[k, 1], n, plan, given[k],
-                                  global_seeds, warm)
+        ladders = [_ipopt_solves(m, pairs[k, 0], pairs[k, 1], n, plan, given[k],
+                                 global_seeds, warm) for k in long_]
+        if global_seeds and plan.warps and covers_opt_in(m):
+            _warp_ladders(m, ladders, n, plan, device)
+        for k, lad in zip(long_, ladders, strict=True):
+            out[k] = _ipopt_result(m, lad)
     share = (time.perf_counter() - t0) / max(len(long_), 1)
     for k in long_:
         out[k].wall_time = share
@@ -446,10 +456,25 @@ def _from_batch(m: Metric, sol: BatchSolution, global_seeds: bool
     return out
 
 
-def _solve_ipopt(m: Metric, s: np.ndarray, g: np.ndarray, n: int, plan: SeedPlan,
-                 given: list[tuple[str, np.ndarray]], global_seeds: bool, warm: bool
-                 ) -> GeodesicResult:
-    """One pair by IPOPT alone: the seed plan's ladder (:func:`_ladder`), or only the given
+@dataclasses.dataclass
+class _Ladder:
+    """One pair's solves before its result is assembled (:func:`_ipopt_solves`): every
+    solve, the per-level summaries, seeds tried, seeds agreeing, total iterations, the
+    solves from the seeds (first size) and the chosen one."""
+
+    solved: list[_Solve]
+    levels: list[dict[str, Any]]
+    n_seeds: int
+    agree: int
+    total_iter: int
+    first: list[_Solve]
+    best: _Solve
+
+
+def _ipopt_solves(m: Metric, s: np.ndarray, g: np.ndarray, n: int, plan: SeedPlan,
+                  given: list[tuple[str, np.ndarray]], global_seeds: bool, warm: bool
+                  ) -> _Ladder:
+    """One pair by IPOPT: the seed plan's ladder (:func:`_ladder`), or only the given
     paths (``global_seeds=False``; ``warm``: nearly converged, IPOPT's warm options)."""
     if global_seeds:
         solved, levels, n_seeds, agree, total_iter, first = _ladder(m, s, g, n, plan, given)
@@ -477,19 +502,64 @@ def _solve_ipopt(m: Metric, s: np.ndarray, g: np.ndarray, n: int, plan: SeedPlan
     if not global_seeds:
         agree = sum(1 for r in ok if abs(r.energy - best.energy)
                     <= AGREE_RTOL * max(best.energy, 1e-300))
+    return _Ladder(solved, levels, n_seeds, agree, total_iter, first, best)
+
+
+def _warp_ladders(m: Metric, ladders: list[_Ladder], n: int, plan: SeedPlan,
+                  device: Any) -> None:
+    """The plan's warp rounds (:attr:`SeedPlan.warps`) from every pair's converged IPOPT
+    answer at once, by the batched method (:func:`solvers.batched.warp_answers`; the
+    metric must be covered, :func:`covers_opt_in`): the interior point reaches the
+    discrete minima where a kinked path changes phase one segment earlier or later, which
+    IPOPT's solves from the same warped copies mostly skip. A converged row lower by more
+    than rounding (``1e-12``, relative) becomes the pair's answer (its ``method`` then
+    ``"newton"``)."""
+    todo = [L for L in ladders if L.best.ok]
+    if not todo:
+        return
+    t0 = time.perf_counter()
+    extra, level = warp_answers(m, np.stack([L.best.points for L in todo]),
+                                np.array([L.best.energy for L in todo]),
+                                [L.best.name for L in todo], np.ones(len(todo), bool), plan,
+                                BatchOptions(device=device))
+    share = (time.perf_counter() - t0) / len(todo)
+    pts = np.asarray(m.domain.project(extra.points.reshape(-1, m.dim)),
+                     dtype=np.float64).reshape(extra.points.shape)
+    pts[:, 0], pts[:, -1] = extra.points[:, 0], extra.points[:, -1]
+    energy = np.sum(np.asarray(m.path_costs(pts, check=False)) ** 2, axis=1) \
+        if len(extra) else np.zeros(0)
+    ok = extra.ok
+    for j, L in enumerate(todo):
+        tries = [_Solve(extra.names[i], pts[i],
+                        Status.SUCCESS if ok[i] else Status.MAX_ITERATIONS,
+                        int(extra.iterations[i]), float(energy[i]), True, "newton")
+                 for i in np.flatnonzero(extra.pair == j)]
+        its = int(level["iterations"][j])
+        L.solved += tries
+        L.total_iter += its
+        L.levels.append({"segments": n, "solved": len(tries), "iterations": its,
+                         "wall_time": share, "polish": True, "warp": True})
+        win = min((r for r in tries if r.ok), key=lambda r: r.energy, default=None)
+        if win is not None and win.energy < L.best.energy * (1.0 - 1e-12):
+            L.best = win
+
+
+def _ipopt_result(m: Metric, L: _Ladder) -> GeodesicResult:
+    """The result of one pair's solves (:class:`_Ladder`)."""
+    best, solved, first = L.best, L.solved, L.first
     energies = {r.name: (r.energy if r.status.converged else float("nan")) for r in solved}
     return GeodesicResult(
         metric=m.name,
         points=best.points,
         status=best.status,
-        iterations=total_iter,
+        iterations=L.total_iter,
         wall_time=0.0,
-        seeds_tried=n_seeds,
-        seeds_agreeing=agree,
+        seeds_tried=L.n_seeds,
+        seeds_agreeing=L.agree,
         seed_energies=energies,
         best_seed=best.name,
-        levels=levels,
-        method="ipopt",
+        levels=L.levels,
+        method=best.method,
         seed_families=family_stats([r.name for r in first], np.array([r.energy for r in first]),
                                    np.array([r.ok for r in first], bool), energies,
                                    AGREE_RTOL),

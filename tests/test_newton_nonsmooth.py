@@ -144,7 +144,8 @@ def test_routing_is_opt_in(car: finsler.Metric) -> None:
     assert resolve_method(car, "auto") == "ipopt"
     assert resolve_method(car, "newton") == "newton"
     # the opt-in path has its own plan: every seed at 128 segments, uneven rows solved
-    # again at equal cost spacing, the best 6 to 256, then 2 rounds of 6 warped copies
+    # again at equal cost spacing, the best 6 to 256, then 2 rounds of 6 warped copies;
+    # IPOPT's ends with 3 rounds of 12 (solved by the batched interior point)
     assert SeedPlan.default(car) == SeedPlan.default(car, "ipopt")
     assert SeedPlan.default(car, "ipopt").ladder(256) == [256]
     newton = SeedPlan.default(car, "newton")
@@ -153,8 +154,8 @@ def test_routing_is_opt_in(car: finsler.Metric) -> None:
     assert (newton.warps, newton.warp_rounds) == (6, 2)
     ipopt = SeedPlan.default(car, "ipopt")
     assert dataclasses.replace(newton, coarse=256, factor=ipopt.factor, refine_top=ipopt.refine_top,
-                               drop_rtol=ipopt.drop_rtol, equalize=0.0, warps=0,
-                               warp_rounds=1) == ipopt
+                               drop_rtol=ipopt.drop_rtol, equalize=0.0, warps=12,
+                               warp_rounds=3) == ipopt
 
 
 def test_batched_solve_against_ipopt(car: finsler.Metric) -> None:
@@ -291,6 +292,41 @@ def test_warped_copies_of_the_best_row_reach_a_lower_phase_switch(car: finsler.M
     polished = solve_pairs_batched(car, pairs, n, dataclasses.replace(
         base, polish=6, polish_scale=0.05))
     assert polished.final.energy[polished.best[0]] > e_off * (1 - 1e-3)
+
+
+def test_ipopt_answers_are_warped_by_the_interior_point(car: finsler.Metric) -> None:
+    """The IPOPT path with SeedPlan(warps=6): after IPOPT's solves, six warped copies of
+    each pair's answer are solved by the batched interior point; on this pair (pair 3 of
+    sample_pairs(carlike, 6, 20261240), 32 segments) one ends more than 0.5 % below
+    IPOPT's answer and becomes the result (method "newton", named ``<seed>~w<j>``), its
+    energy the sum of the squared ``path_costs`` of its points (recomputed here), inside
+    the domain; IPOPT's own solves are those of the plan without warps, and the result
+    reports the warp level."""
+    pairs = np.asarray(finsler.sample_pairs(car, 6, 20261240))[3:4]
+    n = 32
+    base = dataclasses.replace(SeedPlan.default(car, "ipopt"), graph=False, polish=0,
+                               restarts=0, coarse=None, warps=0)
+    off = solvers.solve_batch(car, pairs, n, seeds=base, method="ipopt", workers=1,
+                              progress=False)[0]
+    on = solvers.solve_batch(car, pairs, n, seeds=dataclasses.replace(base, warps=6, warp_rounds=1),
+                             method="ipopt", workers=1, progress=False)[0]
+    assert off.method == "ipopt" and not any(lv.get("warp") for lv in off.levels)
+    assert on.converged and on.method == "newton"
+    assert on.energy < off.energy * (1 - 5e-3)
+    assert on.best_seed.startswith(off.best_seed.split("~")[0] + "~w")
+    costs = np.asarray(car.path_costs(on.points[None]))[0]
+    assert on.energy == pytest.approx(float(np.sum(costs ** 2)), rel=1e-12)
+    assert np.all(car.domain.contains(on.points, tol=1e-12))
+    assert on.levels[-1]["warp"] and on.levels[-1]["solved"] == 6
+    def counts(levels: list[dict]) -> list[tuple]:
+        return [(lv["segments"], lv["solved"], lv["iterations"]) for lv in levels]
+
+    assert counts(on.levels[:-1]) == counts(off.levels)
+    for name, e in off.seed_energies.items():
+        assert on.seed_energies[name] == e or (np.isnan(e) and np.isnan(on.seed_energies[name]))
+    warped = {k: v for k, v in on.seed_energies.items() if "~w" in k}
+    assert len(warped) == 6 and min(warped.values()) == on.energy
+    assert on.iterations > off.iterations
 
 
 def test_other_first_barriers_end_in_other_basins(car: finsler.Metric) -> None:
