@@ -460,7 +460,8 @@ def _from_batch(m: Metric, sol: BatchSolution, global_seeds: bool
 class _Ladder:
     """One pair's solves before its result is assembled (:func:`_ipopt_solves`): every
     solve, the per-level summaries, seeds tried, seeds agreeing, total iterations, the
-    solves from the seeds (first size) and the chosen one."""
+    solves from the seeds (first size), the chosen one and the best of the plan's own
+    solves (``own``: caller-given paths excluded, the base of the warps, issue 47)."""
 
     solved: list[_Solve]
     levels: list[dict[str, Any]]
@@ -469,6 +470,7 @@ class _Ladder:
     total_iter: int
     first: list[_Solve]
     best: _Solve
+    own: _Solve | None = None
 
 
 def _ipopt_solves(m: Metric, s: np.ndarray, g: np.ndarray, n: int, plan: SeedPlan,
@@ -502,25 +504,29 @@ def _ipopt_solves(m: Metric, s: np.ndarray, g: np.ndarray, n: int, plan: SeedPla
     if not global_seeds:
         agree = sum(1 for r in ok if abs(r.energy - best.energy)
                     <= AGREE_RTOL * max(best.energy, 1e-300))
-    return _Ladder(solved, levels, n_seeds, agree, total_iter, first, best)
+    given_names = {name for name, _ in given}
+    own = min((r for r in solved if r.ok and r.name not in given_names),
+              key=lambda r: r.energy, default=None)
+    return _Ladder(solved, levels, n_seeds, agree, total_iter, first, best, own)
 
 
 def _warp_ladders(m: Metric, ladders: list[_Ladder], n: int, plan: SeedPlan,
                   device: Any) -> None:
-    """The plan's warp rounds (:attr:`SeedPlan.warps`) from every pair's converged IPOPT
-    answer at once, by the batched method (:func:`solvers.batched.warp_answers`; the
-    metric must be covered, :func:`covers_opt_in`): the interior point reaches the
+    """The plan's warp rounds (:attr:`SeedPlan.warps`) from every pair's best converged
+    IPOPT solve of the plan's own (a caller-given path changes nothing they do) at once,
+    by the batched method (:func:`solvers.batched.warp_answers`; the metric must be
+    covered, :func:`covers_opt_in`): the interior point reaches the
     discrete minima where a kinked path changes phase one segment earlier or later, which
     IPOPT's solves from the same warped copies mostly skip. A converged row lower by more
     than rounding (``1e-12``, relative) becomes the pair's answer (its ``method`` then
     ``"newton"``)."""
-    todo = [L for L in ladders if L.best.ok]
+    todo = [L for L in ladders if L.own is not None]
     if not todo:
         return
     t0 = time.perf_counter()
-    extra, level = warp_answers(m, np.stack([L.best.points for L in todo]),
-                                np.array([L.best.energy for L in todo]),
-                                [L.best.name for L in todo], np.ones(len(todo), bool), plan,
+    extra, level = warp_answers(m, np.stack([L.own.points for L in todo]),
+                                np.array([L.own.energy for L in todo]),
+                                [L.own.name for L in todo], np.ones(len(todo), bool), plan,
                                 BatchOptions(device=device))
     share = (time.perf_counter() - t0) / len(todo)
     pts = np.asarray(m.domain.project(extra.points.reshape(-1, m.dim)),
