@@ -159,11 +159,11 @@ def test_the_run_without_its_warp_rows_is_measured_too(monkeypatch, tmp_path) ->
         "energy": e_def, "converged": [True] * 4, "best_seed": ["straight~w2"] * 4,
         "seeds": [1] * 4, "disagree": [False] * 4, "wall": 0.0, "cpu": 0.0,
         "before_warp": [1.0, 2.0, 1.0 + 1e-6, 1.0], "warp_iterations": [10, 20, 10, 0],
-        "iterations": [100] * 4})
+        "iterations": [100] * 4, "warp_wall": [1.0, 3.0, 0.0, 0.0]})
     r = ground_truth.run_metric("poincare", 4, 5, 20, 5)
     assert r["within_tight"] == 4
     assert r["warp"] == {"within_tight": 3, "within_loose": 3, "worst_gap": 1.0,
-                         "lowered": 1, "share": 0.1}
+                         "lowered": 1, "share": 0.1, "wall": 1.0}
 
 
 def test_before_warp_is_the_best_of_the_other_rows() -> None:
