@@ -470,8 +470,8 @@ def warp_answers(m: Metric, points: np.ndarray, energy: np.ndarray, names: list[
     ``(K, n+1, dim)``, their ``energy`` ``(K,)``, ``names``, ``converged`` ``(K,)``), by the
     batched method (:func:`covers_opt_in`): each round warps the best of the pair's answer
     and the rows so far (a pair whose answer did not converge is left alone). Returns the
-    new rows (``<name>~w<round>.<j>``) and their level (per pair ``solved`` and
-    ``iterations``)."""
+    new rows (``<name>~w<j>``, from the second round on ``<name>~w<round>.<j>``) and their
+    level (per pair ``solved`` and ``iterations``)."""
     K = points.shape[0]
     run = _Runner(m, opts or BatchOptions(), K)
     ok = np.asarray(converged, bool) & np.isfinite(energy)
