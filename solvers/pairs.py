@@ -127,6 +127,15 @@ def _onto_domain(m: Metric, pts: np.ndarray) -> np.ndarray:
     return out
 
 
+def _onto_domain_many(m: Metric, paths: np.ndarray) -> np.ndarray:
+    """:func:`_onto_domain` for paths ``(B, n+1, dim)`` in one call of the projection (the
+    batched methods' points are in the domain up to 1e-12 of its size)."""
+    out = np.asarray(m.domain.project(paths.reshape(-1, m.dim)),
+                     dtype=np.float64).reshape(paths.shape)
+    out[:, 0], out[:, -1] = paths[:, 0], paths[:, -1]
+    return out
+
+
 #: Endpoints of a given initial path may differ from start/goal by this much (relative to
 #: the domain size; float32 paths of a learned policy), then they are replaced exactly.
 INITIAL_END_RTOL = 1e-5
@@ -408,9 +417,7 @@ def _from_batch(m: Metric, sol: BatchSolution, global_seeds: bool
     newton = [k for k in range(K) if picked[k] is None]
     if newton:
         idx = sol.best[newton]
-        pts = np.asarray(m.domain.project(rows.points[idx].reshape(-1, m.dim)),
-                         dtype=np.float64).reshape(len(newton), -1, m.dim)
-        pts[:, 0], pts[:, -1] = rows.points[idx, 0], rows.points[idx, -1]
+        pts = _onto_domain_many(m, rows.points[idx])
         for j, k in enumerate(newton):
             i = idx[j]
             picked[k] = _Solve(rows.names[i], pts[j], Status.SUCCESS if ok[i] else
@@ -529,9 +536,7 @@ def _warp_ladders(m: Metric, ladders: list[_Ladder], n: int, plan: SeedPlan,
                                 [L.own.name for L in todo], np.ones(len(todo), bool), plan,
                                 BatchOptions(device=device))
     share = (time.perf_counter() - t0) / len(todo)
-    pts = np.asarray(m.domain.project(extra.points.reshape(-1, m.dim)),
-                     dtype=np.float64).reshape(extra.points.shape)
-    pts[:, 0], pts[:, -1] = extra.points[:, 0], extra.points[:, -1]
+    pts = _onto_domain_many(m, extra.points)
     energy = np.sum(np.asarray(m.path_costs(pts, check=False)) ** 2, axis=1) \
         if len(extra) else np.zeros(0)
     ok = extra.ok
