@@ -122,9 +122,7 @@ def _onto_domain(m: Metric, pts: np.ndarray) -> np.ndarray:
     """Project IPOPT's points into the domain: IPOPT relaxes constraints by ~1e-8
     (``bound_relax_factor``); the projection moves points by at most that much, and every
     reported figure is computed from the projected points."""
-    out = np.asarray(m.domain.project(pts), dtype=np.float64)
-    out[0], out[-1] = pts[0], pts[-1]
-    return out
+    return _onto_domain_many(m, np.asarray(pts)[None])[0]
 
 
 def _onto_domain_many(m: Metric, paths: np.ndarray) -> np.ndarray:
