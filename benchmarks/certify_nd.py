@@ -40,6 +40,8 @@ def main() -> None:
     ap.add_argument("--h-path", type=float, default=None)
     ap.add_argument("--max-rounds", type=int, default=None)
     ap.add_argument("--target-gap", type=float, default=None)
+    ap.add_argument("--lp-rounds", type=int, default=None,
+                    help="LP solves per mesh (default: the preset's)")
     ap.add_argument("--segments", type=int, default=None,
                     help="segments of the solver's path (default: 4 x the task's)")
     ap.add_argument("--element", default=None, choices=("P1", "P2", "auto"),
@@ -55,6 +57,7 @@ def main() -> None:
     spec = NDSpec.preset(args.preset)
     changes = {k: v for k, v in (("h_path", args.h_path), ("max_rounds", args.max_rounds),
                                  ("target_gap", args.target_gap),
+                                 ("lp_rounds", args.lp_rounds),
                                  ("segments", args.segments),
                                  ("element", args.element)) if v is not None}
     spec = dataclasses.replace(spec, **changes)
