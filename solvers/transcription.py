@@ -123,7 +123,14 @@ def ipopt_options(tol: float = 1e-10, max_iter: int = 1000, **extra: object) -> 
     # 2.15 s against 3.72 s (Hessian evaluations 0.11 against 0.92 s); Matsumoto at 64
     # 0.063 against 0.082 s, Panda at 32 0.019 against 0.058 s per solve; at 4096 car-like
     # segments 1.25 s to build against 0.39 s, 15.1 s to solve against 27.9 s. A function
-    # CasADi cannot write in SX (a Python callback) stays a call in the expanded graph
+    # CasADi cannot write in SX (a Python callback) stays a call in the expanded graph.
+    # Not adopted (car-like, 256 segments, seeds of sample_pairs(carlike, 4, 20261208)):
+    # CasADi 3.8.2's Fatrop (the structure-exploiting interior point, the path written as
+    # an optimal control problem, points as states, steps and slacks as controls,
+    # structure_detection "auto") converged on none of 12 seeds in 1000 iterations (its
+    # Hessian regularisation rose to 1e18 at mu 1e-7) at 1.35 ms per iteration against
+    # IPOPT's 2; IPOPT's mu_init 1e-1 / 1e-2 / 1e-4 took 1092 / 858 / 1014 iterations
+    # against 852 with 1e-3, nlp_scaling_method "none" the same 852.
     return {"print_time": False, "expand": True, "ipopt": ipopt, "error_on_fail": False}
 
 
