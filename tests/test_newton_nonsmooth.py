@@ -244,9 +244,10 @@ def test_uneven_rows_are_solved_again_at_equal_cost_spacing(car: finsler.Metric)
 
     The pair: pair 1 of sample_pairs(carlike, 4, 20261236), whose 28 uneven rows (energies
     1.56 to 4.8 x length**2 / n) converge in 39-205 of the 300 iterations. The test first
-    ran on sample_pairs(carlike, 2, 20261236). On another CPU (OpenBLAS picks its kernels by
-    processor), two of that data's three uneven rows stopped at the 300-iteration cap, so
-    the test checked the iteration cap and not the plan."""
+    ran on sample_pairs(carlike, 2, 20261236). On a later machine (same packages; likely
+    the processor, since OpenBLAS picks its kernels by processor), two of that data's three
+    uneven rows stopped at the 300-iteration cap, so the test checked the iteration cap and
+    not the plan."""
     from solvers.batched import solve_pairs_batched
 
     pairs = np.asarray(finsler.sample_pairs(car, 4, 20261236))[1:2]
