@@ -1,8 +1,8 @@
 """finsler: Finsler metrics defined once, symbolically in CasADi, with every numeric
 evaluator (numpy, torch, IPOPT) derived from that single expression.
 
-A metric's optional capabilities are declared in :mod:`finsler.hooks`; its identity (name
-or class, parameters) as a :class:`MetricSpec` in :mod:`finsler.spec`."""
+A metric's optional capabilities are declared in `finsler.hooks`; its identity (name
+or class, parameters) as a [`MetricSpec`][finsler.MetricSpec] in `finsler.spec`."""
 
 from __future__ import annotations
 

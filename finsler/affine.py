@@ -1,10 +1,10 @@
 """Affine-arithmetic enclosures of lowered CasADi programs over boxes (numpy float64).
 
-:func:`enclose_affine` runs a lowered program (:mod:`finsler.lowering`) on boxes
+`enclose_affine` runs a lowered program (`finsler.lowering`) on boxes
 ``[lo, hi]`` with every scalar an affine form ``c + sum_k a_k eps_k + [-e, e]``: the noise
 symbols ``eps_k in [-1, 1]`` are the box's inputs (``q_k = mid_k + rad_k eps_k``), ``e``
 collects what is not linear. Beside it runs the natural interval extension
-(:class:`finsler.intervals.Interval`); each value's interval is the intersection of both.
+(`finsler.intervals.Interval`); each value's interval is the intersection of both.
 Correlations between the inputs survive through the program, so a chain of rotations (robot
 kinematics) is enclosed to second order in the box's width, where the natural extension
 loses first order to wrapping: on the Panda pole factor, boxes of 0.1 rad, the lower
@@ -30,7 +30,7 @@ Rules (``rad = sum |a_k| + e``):
 Every float64 operation on the forms adds ``8 ulp`` of the magnitudes it combined to ``e``
 (16 for the elementary functions, whose numpy errors are documented at <= 4 ulp), so the
 enclosure holds in exact arithmetic. Operations without an affine rule raise
-:class:`NotImplementedError`: callers fall back to :func:`finsler.intervals.enclose`.
+`NotImplementedError`: callers fall back to `finsler.intervals.enclose`.
 """
 
 from __future__ import annotations
@@ -302,11 +302,11 @@ _BACKEND = _AffineBackend()
 
 def enclose_affine(fn: LoweredFunction, lo: Any, hi: Any) -> list[Interval]:
     """Enclosures of the outputs of a one-input ``fn`` over boxes ``[lo, hi]`` ``(N, n)``:
-    one :class:`Interval` of shape ``(N,)`` per output coordinate (all outputs, in order),
+    one `Interval` of shape ``(N,)`` per output coordinate (all outputs, in order),
     each the intersection of the affine and the natural interval enclosures.
 
-    Raises :class:`NotImplementedError` for a program with an operation that has no affine
-    rule (callers then use :func:`finsler.intervals.enclose`), ``ValueError`` for bad
+    Raises `NotImplementedError` for a program with an operation that has no affine
+    rule (callers then use `finsler.intervals.enclose`), ``ValueError`` for bad
     shapes."""
     return [v.iv for v in _run(fn, np.asarray(lo, np.float64), np.asarray(hi, np.float64))[2]]
 
@@ -319,7 +319,7 @@ def affine_forms(fn: LoweredFunction, lo: Any, hi: Any) -> tuple[
     ``c + a . eps + [-e, e]`` (``c`` ``(N,)``, ``a`` ``(N, n)``, ``e`` ``(N,)``, the float
     errors of the forms' own arithmetic included) and in the interval ``iv``. Callers
     maximise the linear part over sets smaller than the box (a simplex inside it). Same
-    errors as :func:`enclose_affine`."""
+    errors as `enclose_affine`."""
     lo = np.asarray(lo, np.float64)
     hi = np.asarray(hi, np.float64)
     mid, rad, outs = _run(fn, lo, hi)

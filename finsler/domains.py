@@ -54,7 +54,7 @@ class Domain(ABC):
 
     @property
     def is_box(self) -> bool:
-        """True if the domain is exactly its bounding box (:meth:`bounds`): every
+        """True if the domain is exactly its bounding box (`bounds`): every
         coordinate bounded on its own, so a solver may treat the constraints coordinate by
         coordinate (projected Newton); False for the disk."""
         return False
@@ -83,7 +83,7 @@ class Domain(ABC):
         return type(self).__name__
 
     def check(self, x: Any, name: str = "point", tol: float = 1e-9) -> np.ndarray:
-        """Validate shape and finiteness, and raise :class:`DomainError` if outside."""
+        """Validate shape and finiteness, and raise `DomainError` if outside."""
         xb = _as_batch(x, self.dim, name)
         xn = xb.detach().cpu().numpy() if is_torch(xb) else xb
         with np.errstate(over="ignore", invalid="ignore"):  # huge coordinates are outside
@@ -160,7 +160,7 @@ class Box(Domain):
 
 @dataclass(frozen=True)
 class JointBox(Box):
-    """Joint-limit box of a robot arm (a :class:`Box` with joint names)."""
+    """Joint-limit box of a robot arm (a [`Box`][finsler.domains.Box] with joint names)."""
 
     def describe(self) -> str:
         return f"joint-limit box ({self.dim} joints)"

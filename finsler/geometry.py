@@ -1,18 +1,18 @@
 """The geodesic equation of a metric (its spray), derived once from ``F`` on the metric.
 
 With the energy ``E = F**2 / 2`` and the fundamental tensor ``g_ij = d2E / dv_i dv_j``
-(:attr:`finsler.Metric.casadi_hessian`), the Euler-Lagrange equation
+(`finsler.Metric.casadi_hessian`), the Euler-Lagrange equation
 ``d/dt (dE/dv) = dE/dx`` of a curve ``x(t)`` reads::
 
     g(x, x') x'' = dE/dx - (d2E / dv dx) x'      i.e.  x''^i + 2 G^i(x, x') = 0
 
-with the spray ``G = -1/2 g^{-1} (dE/dx - (d2E / dv dx) v)``. :class:`Spray` holds CasADi
+with the spray ``G = -1/2 g^{-1} (dE/dx - (d2E / dv dx) v)``. `Spray` holds CasADi
 functions of ``g`` and of the right-hand side ``b`` and their derivatives in ``(x, v)``,
 exact; the linear solve with ``g`` is numeric (a 7-D metric needs no symbolic inverse).
 The equation describes shortest curves only where ``g`` is positive definite (``F``
-strongly convex): :meth:`Spray.pd_ratio` measures it. :func:`spray` builds it once per
-metric (:meth:`finsler.Metric.derived`) and refuses a metric whose ``F`` is not smooth.
-The exp/log maps of :mod:`solvers.expmap` integrate it.
+strongly convex): `Spray.pd_ratio` measures it. `spray` builds it once per
+metric (`finsler.Metric.derived`) and refuses a metric whose ``F`` is not smooth.
+The exp/log maps of `solvers.expmap` integrate it.
 """
 
 from __future__ import annotations
@@ -30,11 +30,11 @@ class Spray:
     """CasADi functions of the geodesic equation of ``metric``.
 
     ``parts(x, v) -> (F, g (dim, dim), b (dim,))`` with ``g x'' = b`` the geodesic equation
-    (``g`` is the metric's fundamental tensor, :attr:`Metric.casadi_hessian`, not derived a
+    (``g`` is the metric's fundamental tensor, `Metric.casadi_hessian`, not derived a
     second time); ``parts_jac(x, v) -> (dg/dz (dim*dim, 2 dim), db/dz (dim, 2 dim))`` with
     ``z = (x, v)`` (``g`` flattened column-major, as CasADi stores it); ``margin(x)`` the
     domain's constraints as values that are ``>= 0`` inside (``n_margin`` of them). Build it
-    with :func:`spray` (once per metric).
+    with `spray` (once per metric).
     """
 
     def __init__(self, metric: Metric) -> None:
@@ -77,9 +77,9 @@ class Spray:
 
 
 def spray(metric: Metric) -> Spray:
-    """The :class:`Spray` of ``metric``, built once per metric (``metric.derived``).
+    """The `Spray` of ``metric``, built once per metric (``metric.derived``).
 
-    Raises :class:`InputError` if ``F`` is not smooth (``metric.smooth`` False): the
+    Raises `InputError` if ``F`` is not smooth (``metric.smooth`` False): the
     geodesic equation differentiates ``F**2`` twice and is not defined there."""
     if not metric.smooth:
         raise InputError(f"{metric.name}: F is not smooth ({metric.convexity_note}); the "

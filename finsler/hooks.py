@@ -1,7 +1,7 @@
 """The optional capabilities of a metric ("hooks"), declared in one place.
 
-A metric must give ``F_sx(x, v)`` and a ``domain`` (:class:`finsler.Metric`). Everything
-below is optional. :class:`MetricHooks` (a base of :class:`finsler.Metric`) declares each
+A metric must give ``F_sx(x, v)`` and a ``domain`` ([`finsler.Metric`][finsler.Metric]). Everything
+below is optional. `MetricHooks` (a base of `finsler.Metric`) declares each
 hook with its meaning and a default that says "not provided"; a metric provides a hook by
 overriding it. The toolkit asks the metric: ``metric.provides("height_map")`` (or calls an
 advice hook, whose default ``None`` means "no advice"), never ``getattr`` on a metric nor
@@ -57,20 +57,20 @@ HOOKS: tuple[str, ...] = ("smooth_square_sx", "seed_plan", "seed_curves", "conve
 
 
 class MetricHooks:
-    """The optional hooks of :class:`finsler.Metric` (see the module docstring): each one's
+    """The optional hooks of `finsler.Metric` (see the module docstring): each one's
     default here means "not provided"."""
 
     HOOKS: ClassVar[tuple[str, ...]] = HOOKS
 
     def provides(self, hook: str) -> bool:
-        """True if this metric provides the optional ``hook`` (one of :data:`HOOKS`), i.e.
+        """True if this metric provides the optional ``hook`` (one of `HOOKS`), i.e.
         its class overrides the default declared here."""
         if hook not in HOOKS:
             raise InputError(f"unknown metric hook {hook!r}; the hooks are: {', '.join(HOOKS)}")
         return getattr(type(self), hook) is not getattr(MetricHooks, hook)
 
     def hooks(self) -> tuple[str, ...]:
-        """The optional hooks this metric provides, in the order of :data:`HOOKS`."""
+        """The optional hooks this metric provides, in the order of `HOOKS`."""
         return tuple(h for h in HOOKS if self.provides(h))
 
     def _missing(self, hook: str) -> InputError:
@@ -128,7 +128,7 @@ class MetricHooks:
         raise self._missing("frame_positions")
 
     def landmarks(self) -> dict[str, tuple[float, ...]]:
-        """Named points of the world frame of :meth:`frame_positions`
+        """Named points of the world frame of `frame_positions`
         ``{name: (x, y[, z])}``, e.g. an obstacle, drawn with the frames. Default: none."""
         return {}
 

@@ -1,7 +1,7 @@
 """Interval enclosures of CasADi expressions, vectorised over boxes (numpy float64).
 
-:func:`enclose` runs the straight-line program of a lowered CasADi function
-(:mod:`finsler.lowering`) with every scalar replaced by an :class:`Interval` ``[lo, hi]``
+`enclose` runs the straight-line program of a lowered CasADi function
+(`finsler.lowering`) with every scalar replaced by an `Interval` ``[lo, hi]``
 of arrays: the result encloses every value the function takes on the input boxes, one box
 per array element. Rounding is outward: every operation widens its result by a few units
 in the last place (two for the correctly rounded ``+ - * /`` and ``sqrt``, sixteen for
@@ -223,7 +223,7 @@ def _certainly(x: Any) -> tuple[np.ndarray, np.ndarray]:
 
 
 class _IntervalBackend:
-    """Operations of the lowered programs on :class:`Interval` values."""
+    """Operations of the lowered programs on `Interval` values."""
 
     @staticmethod
     def exp(x: Any) -> Interval:
@@ -422,7 +422,7 @@ def isqrt(x: Interval) -> Interval:
 def enclose(fn: LoweredFunction, *boxes: Sequence[Interval] | Interval) -> tuple[Interval, ...]:
     """Enclosures of the outputs of ``fn`` over input boxes.
 
-    Each input is either an :class:`Interval` whose ``lo`` / ``hi`` have shape
+    Each input is either an `Interval` whose ``lo`` / ``hi`` have shape
     ``(N, n_i)`` (``N`` boxes; broadcastable along ``N``) or a sequence of ``n_i``
     intervals (one per coordinate). Returns one list of intervals per output, one interval
     per output coordinate, each of shape ``(N,)`` (broadcast).

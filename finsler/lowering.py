@@ -4,7 +4,7 @@ A CasADi ``SXFunction`` is a straight-line program over scalars (its
 *instruction list*). Executing the same instruction list with every scalar
 replaced by a batch array gives a vectorised evaluator: one array operation per
 instruction, no Python loop over points. The program is generated as Python
-source once per function and compiled with :func:`compile`, then cached.
+source once per function and compiled with `compile`, then cached.
 
 The generated program is batch-first: every input is an array of shape
 ``(N, n_i)`` (or ``(n_i,)`` for a single point), every output of shape
@@ -282,7 +282,7 @@ class LoweredFunction:
         """Run the program on a caller's backend (the operations ``B.exp``, ``B.sqrt``,
         ... and the arithmetic operators of its values): ``columns[i][j]`` is coordinate
         ``j`` of input ``i``; returns one list of values per output coordinate. Used by
-        :func:`finsler.intervals.enclose`."""
+        `finsler.intervals.enclose`."""
         return self._program(backend, columns)
 
 

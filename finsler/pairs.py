@@ -32,7 +32,7 @@ def sample_pairs(metric: Metric, k: int, seed: int | np.random.Generator) -> np.
     """``k`` start/goal pairs, both endpoints uniform on the domain -> ``(k, 2, dim)``.
 
     Deterministic for a given seed (numpy's PCG64 stream is stable across versions). A
-    :class:`numpy.random.Generator` is drawn from in place (a training run's own stream:
+    `numpy.random.Generator` is drawn from in place (a training run's own stream:
     fresh pairs for its trees and actor terms).
 
     Pair ``i`` of a seed depends on ``k`` wherever the domain draws one block of numbers
@@ -56,7 +56,7 @@ def default_pairs(metric: Metric, k: int = 100) -> np.ndarray:
 
 def validation_pairs(metric: Metric, k: int = 100) -> np.ndarray:
     """The environment's validation set (checkpoint selection during training): ``k``
-    uniform pairs drawn with :data:`VALIDATION_SEED`, disjoint in seed from the default
+    uniform pairs drawn with `VALIDATION_SEED`, disjoint in seed from the default
     evaluation set."""
     return sample_pairs(metric, k, VALIDATION_SEED)
 
@@ -65,7 +65,7 @@ def load_pairs(path: str | os.PathLike[str], metric: Metric,
                what: str = "pairs file") -> np.ndarray:
     """Read a ``.npy`` file of start/goal pairs for ``metric`` -> float64 ``(K, 2, dim)``.
 
-    Raises :class:`InputError` (or :class:`DomainError`) naming the problem if the file is
+    Raises `InputError` (or `DomainError`) naming the problem if the file is
     missing or unreadable, is not a numeric array of that shape, holds NaN/inf, or holds a
     point outside the metric's domain; messages start with ``what`` (a command passes its
     option, ``--pairs``).

@@ -1,6 +1,6 @@
 """Registry of metrics by name: ``get_metric(name, **params)``, ``list_metrics()``,
 ``metric_class(name)``. A metric's identity (name or class, parameters) turned into a spec
-and back lives beside it, in :mod:`finsler.spec`."""
+and back lives beside it, in `finsler.spec`."""
 
 from __future__ import annotations
 
@@ -31,7 +31,7 @@ _REGISTRY: dict[str, type[Metric]] = {}
 
 
 def register_metric(cls: type[Metric]) -> type[Metric]:
-    """Register a metric class (a frozen dataclass subclass of :class:`Metric`) by its
+    """Register a metric class (a frozen dataclass subclass of `Metric`) by its
     ``name``. Usable as a decorator; re-registering a name replaces it."""
     if not (isinstance(cls, type) and issubclass(cls, Metric) and dataclasses.is_dataclass(cls)):
         raise InputError("register_metric needs a dataclass subclass of finsler.Metric")
@@ -51,7 +51,7 @@ def unregister_metric(name: str) -> type[Metric] | None:
 
 
 def metric_class(name: str) -> type[Metric]:
-    """The class registered as ``name`` (:class:`UnknownMetricError` with a did-you-mean
+    """The class registered as ``name`` (`UnknownMetricError` with a did-you-mean
     otherwise)."""
     return _REGISTRY[check_name(name)]
 
@@ -60,7 +60,7 @@ def list_metrics(*, provides: str | None = None, dim: int | None = None,
                  convex_everywhere: bool | None = None) -> list[str]:
     """Names of the registered metrics, in registration order; the keywords keep those whose
     default-parameter instance answers as asked: ``provides`` a hook (e.g. ``"distance"``:
-    a closed form, :mod:`finsler.hooks`), has dimension ``dim``, is strongly convex on its
+    a closed form, `finsler.hooks`), has dimension ``dim``, is strongly convex on its
     whole domain (``convex_everywhere``). Code that needs "the metrics with a closed form"
     asks here instead of keeping a list of names."""
     names = list(_REGISTRY)
@@ -80,7 +80,7 @@ def list_metrics(*, provides: str | None = None, dim: int | None = None,
 
 
 def check_name(name: str, what: str = "metric") -> str:
-    """``name`` if a metric is registered under it; otherwise :class:`UnknownMetricError`
+    """``name`` if a metric is registered under it; otherwise `UnknownMetricError`
     naming the closest registered name (``what``: how the caller calls it, e.g.
     ``environment``)."""
     if name in _REGISTRY:
@@ -96,7 +96,7 @@ def check_name(name: str, what: str = "metric") -> str:
 def get_metric(name: str, **params: float) -> Metric:
     """The metric registered as ``name`` with its parameters overridden by ``params``.
 
-    Raises :class:`UnknownMetricError` for an unknown name or parameter.
+    Raises `UnknownMetricError` for an unknown name or parameter.
     """
     if isinstance(name, Metric):
         if params:
@@ -114,7 +114,7 @@ def get_metric(name: str, **params: float) -> Metric:
     return shared_instance(cls, params)
 
 
-#: How many (class, parameters) instances :func:`shared_instance` keeps.
+#: How many (class, parameters) instances `shared_instance` keeps.
 SHARED_INSTANCES = 128
 
 _SHARED: OrderedDict[tuple, Metric] = OrderedDict()
@@ -123,8 +123,8 @@ _SHARED_LOCK = threading.Lock()
 
 def shared_instance(cls: type[Metric], params: dict[str, Any]) -> Metric:
     """``cls(**params)``, the same object for the same class and full parameter set (the
-    last :data:`SHARED_INSTANCES` of them): metrics are frozen, and what they derive
-    (lowered programs, NLPs, the spray: :meth:`Metric.derived`) lives on the instance, so a
+    last `SHARED_INSTANCES` of them): metrics are frozen, and what they derive
+    (lowered programs, NLPs, the spray: `Metric.derived`) lives on the instance, so a
     metric asked for again, by name or by spec, reuses it instead of building it again.
     A metric with unhashable parameter values is not shared."""
     metric = cls(**params)

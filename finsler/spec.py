@@ -2,18 +2,18 @@
 
 The one way, for every package, to turn a metric into a spec and back and to compare two:
 
-* :meth:`MetricSpec.of` ``(metric)``: the spec of a metric object;
-* :meth:`MetricSpec.resolve` ``(name, params, metric_class)``: the spec of a registered name
+* [`MetricSpec.of`][finsler.spec.MetricSpec.of] ``(metric)``: the spec of a metric object;
+* `MetricSpec.resolve` ``(name, params, metric_class)``: the spec of a registered name
   with some of its parameters, checked (unknown names and ill-typed values raise
-  :class:`InputError` naming the allowed parameters; the metric's own checks run) and
+  `InputError` naming the allowed parameters; the metric's own checks run) and
   completed to the FULL parameter set, so that a saved spec pins the metric even if a
   default changes later;
-* :meth:`MetricSpec.build`: the metric; :meth:`MetricSpec.to_dict` /
-  :meth:`MetricSpec.from_dict`: its JSON form;
-* ``spec == other`` and :meth:`MetricSpec.param_differences`.
+* `MetricSpec.build`: the metric; `MetricSpec.to_dict` /
+  [`MetricSpec.from_dict`][finsler.spec.MetricSpec.from_dict]: its JSON form;
+* ``spec == other`` and [`MetricSpec.param_differences`][finsler.spec.MetricSpec.param_differences].
 
-A metric class defined outside :mod:`finsler` is named by ``module:qualname``
-(:func:`class_path`); :func:`ensure_registered` imports that module when the name is not
+A metric class defined outside `finsler` is named by ``module:qualname``
+(`class_path`); `ensure_registered` imports that module when the name is not
 registered (a run saved in one process, loaded in another). Nothing here imports torch.
 """
 
@@ -38,7 +38,7 @@ _PARAM_KINDS: dict[str, tuple[type, ...]] = {
 
 
 def class_path(cls: type) -> str | None:
-    """``module:qualname`` of a metric class defined outside :mod:`finsler` (None for the
+    """``module:qualname`` of a metric class defined outside `finsler` (None for the
     toolkit's own metrics)."""
     if cls.__module__ == "finsler" or cls.__module__.startswith("finsler."):
         return None
@@ -77,7 +77,7 @@ def _import_metric_class(name: str, path: str) -> None:
 def ensure_registered(name: str, metric_class: str | None = None,
                       what: str = "environment") -> None:
     """Make sure metric ``name`` is registered: import ``metric_class``
-    (``module:qualname``) if it is not; :class:`InputError` (with a did-you-mean) if it
+    (``module:qualname``) if it is not; `InputError` (with a did-you-mean) if it
     still is not (``what``: how the caller calls the name in that message)."""
     if metric_class is not None and isinstance(name, str) and \
             name not in registry.list_metrics():
@@ -124,7 +124,7 @@ def _param_fields(cls: type) -> dict[str, str]:
 @dataclass(frozen=True)
 class MetricSpec:
     """A metric's identity: ``name`` (as registered), the FULL parameter set ``params``
-    (JSON values: tuples as lists) and, for a class defined outside :mod:`finsler`,
+    (JSON values: tuples as lists) and, for a class defined outside `finsler`,
     ``class_path`` (``module:qualname``, re-imported where the name is not registered).
     Two specs are equal iff they name the same metric with the same parameters."""
 
@@ -158,7 +158,7 @@ class MetricSpec:
         defaults), checked and completed to its full parameter set. If ``name`` is not
         registered and ``metric_class`` (``module:qualname``) is given, that module is
         imported first (user metrics); a ``metric_class`` that is not the registered class's
-        is an error. Raises :class:`InputError` naming the problem."""
+        is an error. Raises [`InputError`][finsler.spec.InputError] naming the problem."""
         if not isinstance(name, str):
             raise InputError(f"{what} must be a registered metric name, got {name!r}")
         if metric_class is not None and not isinstance(metric_class, str):
@@ -188,7 +188,7 @@ class MetricSpec:
     # -- spec -> metric -------------------------------------------------------------------
     def build(self) -> Metric:
         """The metric (JSON lists become tuples); a metric's own refusal of its parameters
-        is an :class:`InputError`."""
+        is an [`InputError`][finsler.spec.InputError]."""
         mcls = self.cls
         if mcls is None:
             ensure_registered(self.name, self.class_path, "metric")
@@ -209,7 +209,7 @@ class MetricSpec:
 
     @classmethod
     def from_dict(cls, doc: Mapping[str, Any]) -> MetricSpec:
-        """The spec of :meth:`to_dict`'s form, checked (:meth:`resolve`)."""
+        """The spec of `to_dict`'s form, checked (`resolve`)."""
         if not isinstance(doc, Mapping) or "name" not in doc:
             raise InputError(f"a metric spec is a dict with 'name', 'params', 'class'; got "
                              f"{doc!r}")
@@ -226,7 +226,7 @@ class MetricSpec:
 
 def metric_spec(metric: Metric | str, params: Mapping[str, Any] | None = None,
                 metric_class: str | None = None) -> MetricSpec:
-    """:meth:`MetricSpec.of` a metric object, or :meth:`MetricSpec.resolve` a name."""
+    """`MetricSpec.of` a metric object, or `MetricSpec.resolve` a name."""
     if isinstance(metric, Metric):
         if params is not None or metric_class is not None:
             raise InputError("parameters can only be given with a metric name")

@@ -2,8 +2,8 @@
 
 Every solve, distance, exp, log, certificate, batched Newton problem, property check and
 learning run ends with a member of an enum of this module, all subclasses of
-:class:`Outcome` (``solvers``, ``learn`` and ``validation`` import them from here;
-:mod:`solvers.status` re-exports the solver families). They share one vocabulary:
+`Outcome` (``solvers``, ``learn`` and ``validation`` import them from here;
+`solvers.status` re-exports the solver families). They share one vocabulary:
 
 - ``status.label`` is the toolkit's name of the outcome (``Status.SUCCESS`` ->
   ``"success"``), what JSON results, reports and the command line print; ``str(status)`` is
@@ -13,17 +13,17 @@ learning run ends with a member of an enum of this module, all subclasses of
   asked for; a result's own ``converged`` is its status's.
 - A computation that fails (IPOPT stops, an integrator underflows, an LP solver fails, a
   bound cannot be refined within its budget) returns its status; exceptions are for bad
-  input (:class:`finsler.InputError`) and, with ``strict=True``, for asking that a
-  non-converged status be raised (:class:`SolverError`).
+  input ([`finsler.InputError`][finsler.InputError]) and, with ``strict=True``, for asking that a
+  non-converged status be raised ([`SolverError`][finsler.status.SolverError]).
 
-Every public result type derives from :class:`Result`: ``status``, ``converged``,
+Every public result type derives from [`Result`][finsler.status.Result]: ``status``, ``converged``,
 ``wall_time``, ``to_dict()`` (JSON-ready: no NaN or infinity, enums as labels) and
-``strict()`` (raise :class:`SolverError` unless converged, else return the result). To add
+``strict()`` (raise `SolverError` unless converged, else return the result). To add
 a field to a result: add it to the result's dataclass (the base's ``to_dict`` picks it up;
 results with a documented JSON schema, e.g. ``GeodesicResult``, list it in their own
 ``to_dict``).
 
-:func:`families` lists the status enums (the property suite and the CLI read it).
+`families` lists the status enums (the property suite and the CLI read it).
 """
 
 from __future__ import annotations
@@ -76,7 +76,7 @@ class Outcome(enum.Enum):
 class Status(Outcome):
     """IPOPT's return status (``return_status`` of CasADi's ``nlpsol`` stats), plus the
     toolkit's own ``TRIVIAL`` (start == goal: nothing to solve) and ``SHORT`` (start and goal
-    closer than :data:`solvers.inputs.SHORT_PAIR` times the domain's size: the straight
+    closer than `solvers.inputs.SHORT_PAIR` times the domain's size: the straight
     segment, equally divided, is the geodesic to within ``O(|g - s|**2)`` ~ 1e-14 in
     coordinates, below what IPOPT resolves, and ``F**2`` is not differentiable at zero
     velocity, so no NLP is solved)."""
@@ -118,7 +118,7 @@ class Status(Outcome):
 
     @classmethod
     def from_label(cls, label: str | Status) -> Status:
-        """The member whose :attr:`label` is ``label`` (``"success"`` -> ``SUCCESS``; a
+        """The member whose `label` is ``label`` (``"success"`` -> ``SUCCESS``; a
         member is returned as it is; ``UNKNOWN`` if unrecognised)."""
         if isinstance(label, Status):
             return label
@@ -136,7 +136,7 @@ class Status(Outcome):
 
 
 class DistanceStatus(Outcome):
-    """Outcome of :func:`solvers.distance`."""
+    """Outcome of [`solvers.distance`][solvers.distance]."""
 
     CONVERGED = "converged"
     """The error estimate is below ``rtol * distance``."""
@@ -157,7 +157,7 @@ class DistanceStatus(Outcome):
 
 
 class ExpStatus(Outcome):
-    """Outcome of :func:`exp_map`."""
+    """Outcome of `exp_map`."""
 
     SUCCESS = "success"
     """Integrated to ``t``."""
@@ -175,7 +175,7 @@ class ExpStatus(Outcome):
 
 
 class LogStatus(Outcome):
-    """Outcome of :func:`log_map`."""
+    """Outcome of `log_map`."""
 
     SUCCESS = "success"
     """``|exp(x, v) - y| <= tol`` and ``F(x, v)`` agrees with the solver's distance."""
@@ -185,7 +185,7 @@ class LogStatus(Outcome):
     """Shooting stopped above the tolerance (``residual`` says by how much)."""
     OTHER_GEODESIC = "other_geodesic"
     """Shooting converged to a geodesic longer than the shortest path found by the solver
-    (relative gap above :data:`OTHER_GEODESIC_RTOL`): ``v`` is not the log."""
+    (relative gap above `OTHER_GEODESIC_RTOL`): ``v`` is not the log."""
 
     @property
     def converged(self) -> bool:
@@ -193,7 +193,7 @@ class LogStatus(Outcome):
 
 
 class NewtonStatus(int, Outcome):
-    """Outcome of one problem of :func:`newton_energy`."""
+    """Outcome of one problem of `newton_energy`."""
 
     RUNNING = 0
     CONVERGED = 1
@@ -214,14 +214,14 @@ class NewtonStatus(int, Outcome):
 
 
 class CertifyStatus(Outcome):
-    """Outcome of :func:`solvers.certify` (``CertifyResult.status``). The interval
+    """Outcome of `solvers.certify` (``CertifyResult.status``). The interval
     ``[lower, upper]`` it comes with is proven in every case; the status says whether the
     refinement reached its target gap."""
 
     CERTIFIED = "certified"
     """The gap reached ``MeshSpec.target_gap``."""
     BUDGET_REACHED = "budget_reached"
-    """A work budget of :class:`solvers.MeshSpec` ended the refinement above the target gap
+    """A work budget of `solvers.MeshSpec` ended the refinement above the target gap
     (``max_rounds``, ``max_triangles``, or no triangle left to refine: ``stopped_by``)."""
     TIME_LIMIT = "time_limit"
     """The caller's wall-clock limit ended the refinement (only then can the interval
@@ -238,21 +238,21 @@ class CertifyStatus(Outcome):
 
 
 class CertifyStop(str, Outcome):
-    """What ended :func:`solvers.certify`'s refinement (``CertifyResult.stopped_by``);
+    """What ended `solvers.certify`'s refinement (``CertifyResult.stopped_by``);
     a ``str`` enum, so ``result.stopped_by == "max_rounds"`` keeps working."""
 
     TARGET_GAP = "target_gap"
     """The gap reached ``MeshSpec.target_gap``."""
     MAX_ROUNDS = "max_rounds"
-    """The ``max_rounds`` budget of :class:`solvers.MeshSpec`."""
+    """The ``max_rounds`` budget of [`solvers.MeshSpec`][solvers.MeshSpec]."""
     MAX_TRIANGLES = "max_triangles"
-    """The ``max_triangles`` budget of :class:`solvers.MeshSpec`."""
+    """The ``max_triangles`` budget of [`solvers.MeshSpec`][solvers.MeshSpec]."""
     NO_REFINEMENT = "no_refinement"
     """No triangle (cell, box) left to refine."""
     LP_ROUNDS = "lp_rounds"
-    """:func:`solvers.certify_nd`: the LP rounds of the last mesh found no verified bound."""
+    """`solvers.certify_nd`: the LP rounds of the last mesh found no verified bound."""
     MAX_CELLS = "max_cells"
-    """:func:`solvers.certify_nd`: the ``max_cells`` budget of its mesh."""
+    """`solvers.certify_nd`: the ``max_cells`` budget of its mesh."""
     MAX_BOXES = "max_boxes"
     """The conformal certificate's ``max_boxes`` budget."""
     MAX_LIVE = "max_live"
@@ -260,9 +260,9 @@ class CertifyStop(str, Outcome):
     TIME_LIMIT = "time_limit"
     """The caller's wall-clock limit."""
     CORRECTIONS_TOO_LARGE = "corrections_too_large"
-    """As :attr:`CertifyStatus.CORRECTIONS_TOO_LARGE`."""
+    """As `CertifyStatus.CORRECTIONS_TOO_LARGE`."""
     LP_FAILED = "lp_failed"
-    """As :attr:`CertifyStatus.LP_FAILED`."""
+    """As [`CertifyStatus.LP_FAILED`][finsler.status.CertifyStatus.LP_FAILED]."""
 
     __hash__ = str.__hash__  # a dict keyed by the old string finds the member
 
@@ -273,8 +273,8 @@ class CertifyStop(str, Outcome):
 
 class PropertyOutcome(str, Outcome):
     """Outcome of one property of the property suite (``PropertyResult.status`` of
-    :mod:`validation.testing`). A ``str`` enum whose values are the suite's JSON words
-    (``"not-run"`` keeps its hyphen: :attr:`label` is the value here), so
+    `validation.testing`). A ``str`` enum whose values are the suite's JSON words
+    (``"not-run"`` keeps its hyphen: `label` is the value here), so
     ``result.status == "passed"`` keeps working. ``converged``: the property holds where
     it applies (passed, or failed only in the region the metric documents as excluded)."""
 
@@ -304,7 +304,7 @@ class PropertyOutcome(str, Outcome):
 
 
 class RunStop(str, Outcome):
-    """What ended a learning run (``result.json``'s ``stopped_by``, :mod:`learn.loop`); a
+    """What ended a learning run (``result.json``'s ``stopped_by``, `learn.loop`); a
     ``str`` enum, so ``stopped_by == "timesteps"`` keeps working. ``converged``: the run is
     finished (``result.json`` written)."""
 
@@ -323,7 +323,7 @@ class RunStop(str, Outcome):
 
 
 class RunStatus(str, Outcome):
-    """The state of a run directory (:func:`learn.runs.run_status`); a ``str`` enum whose
+    """The state of a run directory (`learn.runs.run_status`); a ``str`` enum whose
     values are the words it always returned. ``converged``: the run is finished."""
 
     FINISHED = "finished"
@@ -341,7 +341,7 @@ class RunStatus(str, Outcome):
 
 
 class RunAction(str, Outcome):
-    """What a sweep did with one run (:func:`learn.runs.run_one`, the ``action`` of
+    """What a sweep did with one run (`learn.runs.run_one`, the ``action`` of
     ``sweep.json``); a ``str`` enum of the words it always wrote. ``converged``: this
     sweep trained the run to its end (a ``skipped`` run was finished before, as a
     ``skipped`` property was not judged: nothing was computed here)."""
@@ -402,7 +402,7 @@ class LPStatus(str, Outcome):
 
 class EvalStatus(str, Outcome):
     """Outcome of evaluating paths on a pair set (``EvalResult.status`` of
-    :func:`learn.policy.evaluate_paths`). ``converged``: every path met the test."""
+    `learn.policy.evaluate_paths`). ``converged``: every path met the test."""
 
     SUCCESS = "success"
     """Every pair's path has every segment cost ``<= eps``."""
@@ -419,7 +419,7 @@ class EvalStatus(str, Outcome):
 
 
 class SearchStatus(str, Outcome):
-    """Outcome of the midpoint search (``SearchResult.status`` of :mod:`learn.search`)."""
+    """Outcome of the midpoint search (``SearchResult.status`` of `learn.search`)."""
 
     COMPLETED = "completed"
     """Every path was built to its depth with finite points."""
@@ -435,7 +435,7 @@ class SearchStatus(str, Outcome):
 
 class SweepStatus(str, Outcome):
     """Outcome of a sweep of learning runs (``SweepResult.status`` of
-    :func:`learn.sweep.run_sweep`), from its runs' :class:`RunAction`."""
+    `learn.sweep.run_sweep`), from its runs' `RunAction`."""
 
     COMPLETED = "completed"
     """Every run is finished (trained here, resumed, or finished before)."""
@@ -462,7 +462,7 @@ def families() -> tuple[type[Outcome], ...]:
 # the one shape of a result
 # ----------------------------------------------------------------------------------------
 class SolverError(RuntimeError):
-    """Raised by ``strict=True`` solves (and :meth:`Result.strict`) that did not converge
+    """Raised by ``strict=True`` solves (and `Result.strict`) that did not converge
     (the result is attached as ``.result``)."""
 
     def __init__(self, message: str, result: Any = None) -> None:
@@ -500,9 +500,9 @@ class Result:
     """Base of every public result type of the toolkit (a mixin of the result dataclasses:
     it declares no dataclass fields).
 
-    A result has a ``status`` (a member of :func:`families`) and ``wall_time`` (seconds);
-    ``converged`` is its status's. :meth:`to_dict` is JSON-ready; :meth:`strict` raises
-    :class:`SolverError` on a non-converged result and returns the result otherwise, so
+    A result has a ``status`` (a member of `families`) and ``wall_time`` (seconds);
+    ``converged`` is its status's. `to_dict` is JSON-ready; `strict` raises
+    `SolverError` on a non-converged result and returns the result otherwise, so
     ``solve_geodesic(...).strict()`` equals ``solve_geodesic(..., strict=True)``.
     """
 
@@ -515,7 +515,7 @@ class Result:
         return bool(self.status.converged)
 
     def strict(self: _R) -> _R:
-        """This result, or :class:`SolverError` (with the result attached) if it did not
+        """This result, or `SolverError` (with the result attached) if it did not
         converge."""
         if not self.converged:
             raise SolverError(f"{type(self).__name__} did not converge: status "

@@ -1,17 +1,17 @@
 """learn: the midpoint-tree actor-critic of the paper (Algorithm 1) and its variants.
 
-Train any method's config with :func:`train_run` (a :class:`TrainConfig` for the midpoint
-learner: :func:`default_config` gives the documented per-environment defaults; every
-method's config extends :class:`RunConfig`); load a trained or shipped policy with
-:func:`load_policy` and generate paths with ``policy.generate(starts, goals)``, or with
-the policy-guided route search ``policy.search(starts, goals)`` (:mod:`learn.search`).
-The paper's baselines sit beside the midpoint learner (:mod:`learn.seq` with its
-gymnasium environment in :mod:`learn.env`, :mod:`learn.pg`). Every method is a plug-in on
-one run loop (:class:`learn.loop.RunLoop`) registered in :mod:`learn.registry`, which the
-CLI, sweeps and :func:`load_policy` read; :mod:`learn.runs` trains and loads any method
-and names the paper's variants, and :mod:`learn.methods` holds the actor losses and extra
-terms of the midpoint learner. A loaded policy of any method is a :class:`PathPolicy`
-(:class:`MidpointPolicy` if it predicts midpoints); :mod:`learn.examples.toy_method` is a
+Train any method's config with `train_run` (a `TrainConfig` for the midpoint
+learner: `default_config` gives the documented per-environment defaults; every
+method's config extends [`RunConfig`][learn.RunConfig]); load a trained or shipped policy with
+`load_policy` and generate paths with ``policy.generate(starts, goals)``, or with
+the policy-guided route search ``policy.search(starts, goals)`` (`learn.search`).
+The paper's baselines sit beside the midpoint learner (`learn.seq` with its
+gymnasium environment in `learn.env`, `learn.pg`). Every method is a plug-in on
+one run loop ([`learn.loop.RunLoop`][learn.loop.RunLoop]) registered in `learn.registry`, which the
+CLI, sweeps and [`load_policy`][learn.load_policy] read; `learn.runs` trains and loads any method
+and names the paper's variants, and `learn.methods` holds the actor losses and extra
+terms of the midpoint learner. A loaded policy of any method is a [`PathPolicy`][learn.PathPolicy]
+(`MidpointPolicy` if it predicts midpoints); `learn.examples.toy_method` is a
 whole method in one file, to copy.
 """
 

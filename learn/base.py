@@ -1,11 +1,11 @@
 """What every learning method shares: the loaded policy, the end of a run, the signals.
 
-:class:`LoadedPolicy` is the base of every method's trained policy (its config, metric,
-depth, eps and source). The config every method extends, :class:`RunConfig`, is in
-:mod:`learn.run_config` (re-exported here). :func:`finish_run` marks a run finished
-(``result.json``) and builds its :class:`TrainResult`. :class:`StopOnSignal` lets every
+`LoadedPolicy` is the base of every method's trained policy (its config, metric,
+depth, eps and source). The config every method extends, [`RunConfig`][learn.base.RunConfig], is in
+`learn.run_config` (re-exported here). `finish_run` marks a run finished
+(``result.json``) and builds its `TrainResult`. `StopOnSignal` lets every
 training loop end cleanly on SIGINT / SIGTERM: it finishes the iteration it is in, saves a
-resumable checkpoint and raises :class:`TrainingInterrupted`.
+resumable checkpoint and raises `TrainingInterrupted`.
 """
 
 from __future__ import annotations
@@ -36,8 +36,8 @@ __all__ = [
 
 @dataclass
 class LoadedPolicy:
-    """What every trained policy a method loads holds (:class:`learn.policy.Policy`,
-    :class:`learn.pg.PGPolicy`, :class:`learn.seq.SeqPolicy`, a plug-in's): its run config,
+    """What every trained policy a method loads holds ([`learn.policy.Policy`][learn.policy.Policy],
+    `learn.pg.PGPolicy`, `learn.seq.SeqPolicy`, a plug-in's): its run config,
     metric, evaluation depth and eps, the run it came from and the checkpoint file."""
 
     def __init__(self, config: Any, source: str = "", checkpoint: str = "") -> None:
@@ -68,8 +68,8 @@ class LoadedPolicy:
 @dataclass
 class TrainResult(Result):
     """Summary of a finished (or time-limited) run of any method: a
-    :class:`finsler.status.Result` whose ``status`` is ``stopped_by`` (a
-    :class:`finsler.status.RunStop`: ``timesteps`` or ``minutes``, both finished runs)
+    [`finsler.status.Result`][finsler.status.Result] whose ``status`` is ``stopped_by`` (a
+    `finsler.status.RunStop`: ``timesteps`` or ``minutes``, both finished runs)
     and ``wall_time`` its ``wall_seconds``."""
 
     run_dir: Path
@@ -105,10 +105,10 @@ def finish_run(run_dir: Path, history: list[dict[str, Any]], best: dict[str, Any
                extra_final: tuple[str, ...] = (),
                extra_result: dict[str, Any] | None = None,
                signal_name: str | None = None) -> TrainResult:
-    """Write ``result.json`` (the run is finished) and return its :class:`TrainResult`
+    """Write ``result.json`` (the run is finished) and return its `TrainResult`
     (``final``: the last metrics row's success, lengths, throughput and ``extra_final``).
-    ``stopped_by`` :attr:`RunStop.INTERRUPTED` (or, as before issue 49, a signal's name):
-    the run is NOT finished; raise :class:`TrainingInterrupted` naming ``signal_name``
+    ``stopped_by`` `RunStop.INTERRUPTED` (or, as before issue 49, a signal's name):
+    the run is NOT finished; raise `TrainingInterrupted` naming ``signal_name``
     instead (the caller saved its checkpoint)."""
     if stopped_by not in (RunStop.TIMESTEPS, RunStop.MINUTES):
         name = signal_name or (stopped_by if stopped_by != RunStop.INTERRUPTED

@@ -1,10 +1,10 @@
 """Training configuration: one typed dataclass, per-environment defaults, the paper's settings.
 
-A :class:`TrainConfig` is saved as ``config.json`` in every run directory and loaded back
-to evaluate or resume. :func:`default_config` gives the per-environment defaults shipped
+A `TrainConfig` is saved as ``config.json`` in every run directory and loaded back
+to evaluate or resume. `default_config` gives the per-environment defaults shipped
 with the toolkit (chosen to reach the issue's bars on a 2-core CPU);
-:func:`paper_config` gives the settings of the paper's appendix B.1, and
-:func:`beyond_paper` lists every field where a config departs from them.
+`paper_config` gives the settings of the paper's appendix B.1, and
+`beyond_paper` lists every field where a config departs from them.
 """
 
 from __future__ import annotations
@@ -62,7 +62,7 @@ _ACTIVATIONS = ("relu", "tanh")
 _ENERGY_SCALES = ("none", "straight")
 _ENERGY_SCHEDULES = ("constant", "lr")
 
-#: The base of the method configs before issue 49, now :class:`learn.run_config.RunConfig`
+#: The base of the method configs before issue 49, now `learn.run_config.RunConfig`
 #: (which holds the run's metric and every run field); kept as a name.
 MetricConfig = RunConfig
 
@@ -70,7 +70,7 @@ MetricConfig = RunConfig
 @dataclass
 class TrainConfig(RunConfig):
     """Every setting of one training run of Algorithm 1 (saved as ``config.json``): the
-    run fields of :class:`learn.run_config.RunConfig` (``method``: the actor loss,
+    run fields of `learn.run_config.RunConfig` (``method``: the actor loss,
     ``midpoint`` (eq. 6), ``inter`` (eq. 17) or ``two-to-one`` (eq. 18); ``timesteps``:
     the budget T of evaluations of C, all-inclusive: the collected trees (the paper's
     timesteps) and every evaluation an extra actor term makes, in every epoch; also the
@@ -247,8 +247,8 @@ class TrainConfig(RunConfig):
     """Add the searched sub-paths' costs to the critic's data."""
     # ------------------------------------------------------------------------------------
     def validate(self) -> None:
-        """Raise :class:`finsler.InputError` naming the first impossible option of the
-        learner (the run fields are :class:`RunConfig`'s to check)."""
+        """Raise `finsler.InputError` naming the first impossible option of the
+        learner (the run fields are [`RunConfig`][learn.config.RunConfig]'s to check)."""
         check_choice("targets", self.targets, _TARGETS)
         check_choice("depth_schedule", self.depth_schedule, _SCHEDULES)
         check_choice("lr_schedule", self.lr_schedule, _LR_SCHEDULES)
@@ -329,7 +329,7 @@ class TrainConfig(RunConfig):
     @property
     def model_free(self) -> bool:
         """True if training uses values of C only (like the paper); False if a term
-        differentiates C (see :mod:`learn.methods`)."""
+        differentiates C (see `learn.methods`)."""
         return not derivative_terms(self)
 
 

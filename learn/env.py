@@ -11,18 +11,18 @@ The agent walks from a start ``s`` to a goal ``g`` in steps of local cost ``eps`
 * the episode terminates (success) when ``C(q, g) < eps`` and is truncated after
   ``n = 2**D`` steps (D: the task's depth).
 
-:class:`GeodesicEnv` is that environment (gymnasium API); :class:`GeodesicVecEnv` steps
+`GeodesicEnv` is that environment (gymnasium API); `GeodesicVecEnv` steps
 ``n_envs`` copies at once with one vectorised evaluation of ``F`` per quantity (a
 stable-baselines3 ``VecEnv`` with exactly the transitions of ``DummyVecEnv`` over
-:class:`GeodesicEnv`). :func:`move` (eq. 57) and :func:`observation` also serve the
-deterministic rollouts of :mod:`learn.seq`.
+`GeodesicEnv`). `move` (eq. 57) and `observation` also serve the
+deterministic rollouts of `learn.seq`.
 
 **Counting.** Every evaluation of ``F`` or ``C`` the environment makes is counted
-(:attr:`GeodesicEnv.evaluations`), whatever for: per step with a non-zero action exactly 3
+(`GeodesicEnv.evaluations`), whatever for: per step with a non-zero action exactly 3
 (``F(p, v)`` of eq. (57), ``F(g, g - q)`` of eq. (14) and ``C(q, g)`` of the termination
 test; ``F(g, g - p)`` is carried over from the previous step), 0 for a zero action
 (nothing changes), and 2 per sampled start/goal candidate at a reset (``F(g, g - s)`` and
-``C(s, g)``; 1 for a reset to given points). :attr:`GeodesicEnv.env_steps` counts steps
+``C(s, g)``; 1 for a reset to given points). `GeodesicEnv.env_steps` counts steps
 (the paper's count).
 """
 
@@ -54,7 +54,7 @@ __all__ = [
 #: Reward of a zero action (appendix B.2); the point does not move.
 ZERO_ACTION_REWARD = -100.0
 TIME_LIMITS = ("truncate", "terminate")
-"""How the step limit may end an episode (see :class:`SeqConfig`.time_limit)."""
+"""How the step limit may end an episode (see `SeqConfig`.time_limit)."""
 _MAX_RESAMPLE_ROUNDS = 1000
 
 
@@ -160,7 +160,7 @@ def observation(p: np.ndarray, g: np.ndarray) -> np.ndarray:
 
 
 def _check_action(a: Any, n: int, dim: int) -> np.ndarray:
-    """Actions as float64 ``(n, dim)``; :class:`InputError` for a wrong size or NaN/inf."""
+    """Actions as float64 ``(n, dim)``; `InputError` for a wrong size or NaN/inf."""
     if np.size(a) != n * dim:
         raise InputError(f"action must have {dim} components per environment ({n}), got "
                          f"shape {np.shape(a)}")
@@ -176,15 +176,15 @@ def _check_action(a: Any, n: int, dim: int) -> np.ndarray:
 class GeodesicEnv(gymnasium.Env):
     """Goal-conditioned walk of eqs. (57) and (14) on any metric (gymnasium API).
 
-    Parameters: ``metric`` (a :class:`finsler.Metric` or a registered name), ``eps``
+    Parameters: ``metric`` (a [`finsler.Metric`][finsler.Metric] or a registered name), ``eps``
     (step cost and success threshold; default the task's), ``depth`` (the episode lasts at
     most ``2**depth`` steps; default the task's), ``reject_solved`` (redraw start/goal
     pairs with ``C(s, g) < eps``, as the authors' code does).
 
     ``reset(seed=..., options={"start": s, "goal": g})`` starts from given points (no
     redraw). The state is float64; observations are float32 ``(2 * dim,)``. Counters:
-    :attr:`evaluations` (every evaluation of F or C, see the module docstring) and
-    :attr:`env_steps` (steps taken, the paper's count). ``info["is_success"]`` marks the
+    `evaluations` (every evaluation of F or C, see the module docstring) and
+    `env_steps` (steps taken, the paper's count). ``info["is_success"]`` marks the
     terminating step, ``info["evaluations"]`` the evaluations of this call.
     """
 
@@ -261,16 +261,16 @@ class GeodesicEnv(gymnasium.Env):
 
 
 class GeodesicVecEnv(VecEnv):
-    """``n_envs`` copies of :class:`GeodesicEnv` stepped together: one vectorised call of
+    """``n_envs`` copies of `GeodesicEnv` stepped together: one vectorised call of
     ``F`` per quantity for all copies instead of one per copy.
 
     Same transitions, rewards, infos and random streams as
     ``DummyVecEnv([lambda: GeodesicEnv(...)] * n_envs)``: copy ``i`` has its own
-    generator, seeded with ``seed + i`` at the first :meth:`reset` after :meth:`seed`;
+    generator, seeded with ``seed + i`` at the first `reset` after `seed`;
     finished copies are reset automatically and their last observation is in
     ``info["terminal_observation"]`` (SB3's convention). Rewards are float32 as in
-    ``DummyVecEnv``. Counters: :attr:`evaluations` (all copies, all-inclusive),
-    :attr:`env_steps` (steps of all copies), :attr:`episodes` and :attr:`successes`
+    ``DummyVecEnv``. Counters: `evaluations` (all copies, all-inclusive),
+    `env_steps` (steps of all copies), `episodes` and `successes`
     (finished and terminated training episodes).
     """
 

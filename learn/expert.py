@@ -1,8 +1,8 @@
 """Expert iteration: the policy learns what the route search finds (beyond the paper).
 
-Every searched path of :func:`learn.search.search_paths` is a better answer than the
-policy's own, found with values of C only: a free teacher. :class:`SearchImitation` is an
-actor term (:class:`learn.methods.ActorTerm`) that, every ``every`` collections, draws
+Every searched path of `learn.search.search_paths` is a better answer than the
+policy's own, found with values of C only: a free teacher. `SearchImitation` is an
+actor term (`learn.methods.ActorTerm`) that, every ``every`` collections, draws
 ``pairs`` fresh uniform pairs, lets the search (with the policy's current deterministic
 midpoints as its generator) improve the policy's paths between them, and turns each searched
 path ``P`` (``2**D + 1`` points) into training data for both networks:
@@ -140,7 +140,7 @@ class SearchImitation(ActorTerm):
 
 
 def search_spec(kind: str) -> SearchSpec:
-    """The search used as the teacher: ``full`` (:class:`SearchSpec` defaults) or ``local``
+    """The search used as the teacher: ``full`` (`SearchSpec` defaults) or ``local``
     (windows and equalizing only: ~13x fewer evaluations of C on Matsumoto)."""
     if kind == "local":
         return SearchSpec(levels=0, polish=0)

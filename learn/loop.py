@@ -1,39 +1,39 @@
 """The one run loop every learning method uses, and the loading of a run's checkpoint.
 
-A method is a subclass of :class:`RunLoop` that supplies what only it knows:
+A method is a subclass of [`RunLoop`][learn.loop.RunLoop] that supplies what only it knows:
 
-* ``config_class`` (its config dataclass on :class:`learn.run_config.RunConfig`, which
+* ``config_class`` (its config dataclass on `learn.run_config.RunConfig`, which
   holds every run field), ``label`` (the progress bar's), ``free_on_resume`` (the config
   fields a resume may change) and ``recorded_on_resume`` (those of them that a resume
-  writes into ``config.json``), and :meth:`RunLoop.check_resume` (a method's own rule
+  writes into ``config.json``), and `RunLoop.check_resume` (a method's own rule
   about what a resume may change);
-* :meth:`RunLoop.setup`: networks, optimisers, generators for ``self.cfg`` (and
-  :meth:`RunLoop.start`: what a NEW run does once before its first row). Before it the
+* `RunLoop.setup`: networks, optimisers, generators for ``self.cfg`` (and
+  `RunLoop.start`: what a NEW run does once before its first row). Before it the
   loop has set what every method needs: ``self.device`` (``cfg.device`` resolved), the
   torch threads (``cfg.threads``), ``self.metric``, ``self.dim``, ``self.depth_max`` and
   ``self.validation_pairs`` (``finsler.validation_pairs(metric, cfg.eval_pairs)``);
-  :meth:`RunLoop.seeded` and :meth:`RunLoop.generators` give the seeded initialisation
+  `RunLoop.seeded` and `RunLoop.generators` give the seeded initialisation
   and generators;
-* :meth:`RunLoop.iterate`: one iteration, adding the evaluations of C it made to
+* `RunLoop.iterate`: one iteration, adding the evaluations of C it made to
   ``timesteps`` (all-inclusive; ``timesteps_paper``, ``timesteps_derivative`` as they
   apply) and 1 to ``iteration``;
-* :meth:`RunLoop.evaluation`: the method's columns of a metrics row and its candidate
+* `RunLoop.evaluation`: the method's columns of a metrics row and its candidate
   record for ``checkpoint_best.pt`` (``success_rate``, ``mean_max_segment_cost``, ...);
-* :meth:`RunLoop.state_dict` / :meth:`RunLoop.load_state_dict`: everything it needs to
-  resume exactly; :meth:`RunLoop.policy_state`: the weights ``checkpoint_best.pt`` keeps;
-* :meth:`RunLoop.run_document`: ``config.json``'s sections about the method.
+* `RunLoop.state_dict` / `RunLoop.load_state_dict`: everything it needs to
+  resume exactly; `RunLoop.policy_state`: the weights ``checkpoint_best.pt`` keeps;
+* `RunLoop.run_document`: ``config.json``'s sections about the method.
 
 The loop does the rest, the same way for every method: the run directory (refused if not
 empty, unless resumed), the resume check (only ``free_on_resume`` may differ from the saved
-config), the budget (``timesteps``, or :meth:`RunLoop.has_budget`), the wall-clock limit
+config), the budget (``timesteps``, or `RunLoop.has_budget`), the wall-clock limit
 (``minutes``, cumulative across resumes), SIGINT / SIGTERM (finish the iteration, save,
-:class:`learn.base.TrainingInterrupted`), a metrics row and the latest checkpoint every
-:meth:`RunLoop.evaluation_due` (first row at iteration 0, last row at the end), the best
+`learn.base.TrainingInterrupted`), a metrics row and the latest checkpoint every
+`RunLoop.evaluation_due` (first row at iteration 0, last row at the end), the best
 checkpoint (highest validation success, ties by lower mean max segment cost) and
-``result.json`` (:func:`learn.base.finish_run`). The loop is the only place that knows
-about runs. Register the method with :func:`learn.registry.register_method`.
+``result.json`` (`learn.base.finish_run`). The loop is the only place that knows
+about runs. Register the method with `learn.registry.register_method`.
 
-:func:`load_run` opens a run directory (or a shipped policy's folder) for a policy loader.
+`load_run` opens a run directory (or a shipped policy's folder) for a policy loader.
 """
 
 from __future__ import annotations
@@ -92,7 +92,7 @@ _LOAD_ERRORS = (KeyError, RuntimeError, TypeError, ValueError, IndexError)
 
 def read_config_section(run_dir: str | Path) -> dict[str, Any]:
     """The ``config`` section of a run directory's ``config.json``
-    (:class:`CorruptFileError` if there is none)."""
+    (`CorruptFileError` if there is none)."""
     path = Path(run_dir) / CONFIG_FILE
     doc = read_json(path)
     if not isinstance(doc.get("config"), dict):
@@ -101,7 +101,7 @@ def read_config_section(run_dir: str | Path) -> dict[str, Any]:
 
 
 def eval_columns(ev: Any, suffix: str = "") -> dict[str, Any]:
-    """The metrics-row columns of an evaluation (:class:`learn.policy.EvalResult`):
+    """The metrics-row columns of an evaluation (`learn.policy.EvalResult`):
     ``success_rate``, ``mean_length`` and ``mean_max_segment_cost`` (+ ``suffix``)."""
     return {f"success_rate{suffix}": ev.success_rate,
             f"mean_length{suffix}": round(ev.mean_length, 8),
@@ -125,7 +125,7 @@ def _selection_key(record: dict[str, Any]) -> tuple[float, float, float]:
 class RunLoop(ABC):
     """Train one method's config into a run directory (see the module docstring).
 
-    Counters the loop owns and every method advances in :meth:`iterate`: ``iteration``,
+    Counters the loop owns and every method advances in `iterate`: ``iteration``,
     ``timesteps`` (all-inclusive evaluations of C: the budget), ``timesteps_paper`` (the
     paper's count) and ``timesteps_derivative`` (evaluations whose derivative was used).
     """
@@ -142,7 +142,7 @@ class RunLoop(ABC):
     (the midpoint learner's polish settings). Changes of the others (``minutes``,
     ``device``, ...) leave ``config.json`` as the run began."""
     final_columns: ClassVar[tuple[str, ...]] = ()
-    """Columns of the last metrics row copied into :attr:`TrainResult.final` besides the
+    """Columns of the last metrics row copied into `TrainResult.final` besides the
     success rate, lengths and throughput."""
 
     def __init__(self, cfg: RunConfig, run_dir: str | Path, resume: bool = False,
@@ -193,10 +193,10 @@ class RunLoop(ABC):
         ``self.depth_max`` and ``self.validation_pairs`` are set already."""
 
     def check_resume(self, saved: RunConfig, resumed: RunConfig) -> None:  # noqa: B027
-        """A method's own rule about resuming (called before :meth:`setup`, after the
+        """A method's own rule about resuming (called before `setup`, after the
         loop's check that only ``free_on_resume`` fields differ): ``saved`` is the run's
         ``config.json``, ``resumed`` the config the run continues with; raise
-        :class:`InputError` to refuse (default: nothing more to check)."""
+        `InputError` to refuse (default: nothing more to check)."""
 
     def start(self) -> None:  # noqa: B027 (optional hook)
         """What a new run does once, before its config is written (not on resume)."""
@@ -220,7 +220,7 @@ class RunLoop(ABC):
 
     @abstractmethod
     def load_state_dict(self, state: dict[str, Any]) -> None:
-        """Restore :meth:`state_dict` (a ``KeyError`` / ``RuntimeError`` / ``TypeError`` /
+        """Restore `state_dict` (a ``KeyError`` / ``RuntimeError`` / ``TypeError`` /
         ``ValueError`` / ``IndexError`` means the checkpoint does not fit the run)."""
 
     @abstractmethod
@@ -243,7 +243,7 @@ class RunLoop(ABC):
         return self.iteration % self.cfg.eval_every == 0
 
     def begin(self) -> None:  # noqa: B027 (optional hook)
-        """Called when :meth:`run` starts (also on resume), before the first row."""
+        """Called when `run` starts (also on resume), before the first row."""
 
     def rates(self, wall: float) -> dict[str, Any]:
         """Throughput columns after ``evaluations_per_second``."""
@@ -268,7 +268,7 @@ class RunLoop(ABC):
 
     def generators(self) -> tuple[np.random.Generator, torch.Generator]:
         """A numpy generator seeded with ``cfg.seed`` and a torch generator on the device
-        seeded with ``cfg.seed + 1`` (a method saves their states in :meth:`state_dict`)."""
+        seeded with ``cfg.seed + 1`` (a method saves their states in `state_dict`)."""
         gen = torch.Generator(device=self.device)
         gen.manual_seed(self.cfg.seed + 1)
         return np.random.default_rng(self.cfg.seed), gen
@@ -356,7 +356,7 @@ class RunLoop(ABC):
 
     def run(self) -> TrainResult:
         """Train until the budget or ``minutes`` is spent; returns the summary (a signal:
-        the checkpoint is saved and :class:`learn.base.TrainingInterrupted` raised)."""
+        the checkpoint is saved and `learn.base.TrainingInterrupted` raised)."""
         from tqdm.auto import tqdm
 
         cfg = self.cfg
@@ -408,7 +408,7 @@ def load_run(run: str | Path, checkpoint: str, config_class: type[RunConfig],
     name loaded)``. ``checkpoint``: ``best`` (``checkpoint_best.pt``, else a shipped
     ``policy.pt``, else the latest) or ``latest``; the run's ``method`` must be one of
     ``methods``; ``env`` / ``metric_params``, if given, must be the run's
-    (:func:`learn.config.check_run_metric`). :class:`InputError` / :class:`CorruptFileError`
+    (`learn.config.check_run_metric`). `InputError` / `CorruptFileError`
     name the problem."""
     path = Path(run)
     if not path.is_dir():
@@ -430,7 +430,7 @@ def load_run(run: str | Path, checkpoint: str, config_class: type[RunConfig],
 
 
 def load_weights(module: Any, state: Any, path: Path) -> None:
-    """``module.load_state_dict(state)``; a mismatch is a :class:`CorruptFileError`."""
+    """``module.load_state_dict(state)``; a mismatch is a `CorruptFileError`."""
     try:
         module.load_state_dict(state)
     except _LOAD_ERRORS as err:

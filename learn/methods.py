@@ -1,13 +1,13 @@
 """The midpoint learner's losses and extra terms as small named objects.
 
-:class:`learn.Trainer` reads as Algorithm 1: a critic step of eq. (5), an actor step of
-the :class:`ActorLoss` chosen by ``TrainConfig.method`` (eq. 6, 17 or 18), plus a list of
-named :class:`ActorTerm` objects added to the actor's loss. Each term states whether it
+`learn.Trainer` reads as Algorithm 1: a critic step of eq. (5), an actor step of
+the `ActorLoss` chosen by ``TrainConfig.method`` (eq. 6, 17 or 18), plus a list of
+named `ActorTerm` objects added to the actor's loss. Each term states whether it
 differentiates C (not model-free: the paper's method uses values of C only) and returns
 the number of evaluations of C it made, so that the trainer's ``timesteps`` count every
 evaluation whatever it is for.
 
-The paper's baselines live beside this learner, in :mod:`learn.seq` and :mod:`learn.pg`.
+The paper's baselines live beside this learner, in `learn.seq` and `learn.pg`.
 """
 
 from __future__ import annotations
@@ -26,7 +26,7 @@ from learn.tree import build_tree
 
 
 class TrainConfig(Protocol):
-    """The fields of :class:`learn.TrainConfig` that choose the loss and the terms."""
+    """The fields of [`learn.TrainConfig`][learn.TrainConfig] that choose the loss and the terms."""
 
     method: str
     actor_loss_power: float
@@ -115,7 +115,7 @@ def _p_energy(c: torch.Tensor, p: float) -> torch.Tensor:
 @dataclass
 class PathEnergy(ActorTerm):
     """Beyond the paper: ``weight * n * sum_i C(x_i, x_i+1)**2`` (with ``power`` p: the
-    p-energy of :func:`_p_energy`), the discrete energy of the actor's own deterministic
+    p-energy of `_p_energy`), the discrete energy of the actor's own deterministic
     depth-D path between ``pairs`` fresh uniform pairs,
     differentiated through every level of the tree with the lowered torch cost (float64).
     Smallest for a shortest path with equal segment costs: the recursive geodesic midpoints.
@@ -140,7 +140,7 @@ class PathEnergy(ActorTerm):
 
     def energy(self, trainer: Trainer) -> torch.Tensor:
         """Energies ``(pairs,)`` of the actor's paths between fresh pairs drawn from the
-        run's generator (scaled per :attr:`scale`), differentiable in the actor's
+        run's generator (scaled per `scale`), differentiable in the actor's
         parameters."""
         k, depth = self.pairs, trainer.depth_max
         ends = finsler.sample_pairs(trainer.metric, k, trainer.np_rng)
@@ -254,8 +254,8 @@ def _midpoint_power(p: float) -> ActorLoss:
 
 
 def actor_loss_of(method: str, power: float = 2.0) -> ActorLoss:
-    """The :class:`ActorLoss` of a method name (``midpoint``, ``inter``, ``two-to-one``);
-    ``power`` != 2 (``midpoint`` only): :func:`_midpoint_power`."""
+    """The `ActorLoss` of a method name (``midpoint``, ``inter``, ``two-to-one``);
+    ``power`` != 2 (``midpoint`` only): `_midpoint_power`."""
     if method not in ACTOR_LOSSES:
         raise InputError(f"unknown method {method!r}; known: {', '.join(ACTOR_LOSSES)}")
     if power == 2:

@@ -1,11 +1,11 @@
 """Actor and critic networks of the midpoint actor-critic (section 4.2, appendix B.1).
 
-* :class:`Actor`: MLP on ``(s, g)`` -> diagonal Gaussian (mean, log-std) over coordinates,
+* `Actor`: MLP on ``(s, g)`` -> diagonal Gaussian (mean, log-std) over coordinates,
   reparametrised sampling, output projected into the domain with the domain's
   differentiable torch projection. Evaluation uses the mean.
-* :class:`Critic`: MLP on ``(s, g)`` -> distance estimate ``V(s, g)``, optionally through a
+* `Critic`: MLP on ``(s, g)`` -> distance estimate ``V(s, g)``, optionally through a
   target transform (``log1p``: the network regresses ``log(1 + c)``).
-* :func:`predictor`: the actor as ``predict(s, g)`` -> float64 projected midpoints, the one
+* `predictor`: the actor as ``predict(s, g)`` -> float64 projected midpoints, the one
   form generation, the route search, warm starts and the expert term call it in.
 
 Networks work in float32; callers cast to float64 for costs and success checks.
@@ -26,7 +26,7 @@ __all__ = ["PREDICT_ROWS", "Actor", "Critic", "mlp", "predictor", "resolve_devic
 
 
 def resolve_device(name: str) -> torch.device:
-    """``cpu`` or ``cuda[:k]``; a clear :class:`InputError` if CUDA is unavailable."""
+    """``cpu`` or ``cuda[:k]``; a clear `InputError` if CUDA is unavailable."""
     if name == "cpu":
         return torch.device("cpu")
     if name == "cuda" or name.startswith("cuda:"):
@@ -78,7 +78,7 @@ class Actor(nn.Module):
     With ``explore_std > 0`` the standard deviation is at least ``explore_std * |g - s|``
     (the learned one otherwise collapses to its clamp and exploration stops). With
     ``heads > 1`` the network gives that many Gaussians and a score each
-    (:meth:`candidates`); the policy is the best-scored head's. Samples and means are
+    (`candidates`); the policy is the best-scored head's. Samples and means are
     projected into the domain.
     """
 
@@ -182,8 +182,8 @@ class Actor(nn.Module):
 class Critic(nn.Module):
     """Distance estimate ``V(s, g)``: ``(N, dim), (N, dim)`` -> ``(N,)``.
 
-    :meth:`raw` returns the network output on the regression scale (``log(1 + c)`` for the
-    ``log1p`` transform); :meth:`forward` returns the distance estimate. With
+    `raw` returns the network output on the regression scale (``log(1 + c)`` for the
+    ``log1p`` transform); `forward` returns the distance estimate. With
     ``symmetric`` the output is ``(net(s, g) + net(g, s)) / 2`` (reversible metrics).
 
     The ``relative`` transform (beyond the paper) is the critic's counterpart of the
@@ -247,7 +247,7 @@ class Critic(nn.Module):
         return torch.expm1(z) if self.transform == "log1p" else z
 
 
-#: Rows per actor call in :func:`predictor` on a CPU. One call for 1e5 pairs allocates
+#: Rows per actor call in `predictor` on a CPU. One call for 1e5 pairs allocates
 #: each layer's activations (1e5 x width floats, tens of MB) afresh, which the allocator
 #: maps page by page (about half of such a call's CPU time is system time) and which do
 #: not stay in cache; calls of 4096 rows were 2.6x faster for the 128-128-128 Matsumoto

@@ -1,6 +1,6 @@
 """The paper's policy-gradient baseline "PG" (section 5.2, eqs. (15)-(16), appendix B.3).
 
-Per-depth stochastic policies ``pi_1 .. pi_Dmax`` (:class:`DepthPolicy`, MLPs 64-64 tanh on
+Per-depth stochastic policies ``pi_1 .. pi_Dmax`` (`DepthPolicy`, MLPs 64-64 tanh on
 ``(s, g)``): ``pi_D`` predicts the midpoint of a depth-``D`` tree's endpoints, the lower
 policies ``pi_{D-1} .. pi_1`` fill the halves with their means. Training goes in ascending
 depth; while ``pi_D`` is trained (only its parameters change), each **cycle**
@@ -11,10 +11,10 @@ depth; while ``pi_D`` is trained (only its parameters change), each **cycle**
    float64 with the metric's lowered torch program (``30 * 10 * 2**D`` evaluations: the
    paper's count, appendix B.3);
 2. scores each path by ``c_tau`` of eq. (15), the sum of the squared costs of its two halves
-   (:func:`c_tau`), and subtracts the baseline ``b(p_0, p_{2^D})`` of eq. (16), the mean of
-   the pair's 10 samples (:func:`pair_baseline`);
+   (`c_tau`), and subtracts the baseline ``b(p_0, p_{2^D})`` of eq. (16), the mean of
+   the pair's 10 samples (`pair_baseline`);
 3. takes ``epochs`` (1) Adam steps (lr 5e-3) on the PPO-style clipped surrogate with an
-   entropy bonus (:func:`pg_loss`: clip 0.2, entropy coefficient 1).
+   entropy bonus (`pg_loss`: clip 0.2, entropy coefficient 1).
 
 ``pi_1`` is trained for ``cycles_first`` (1000) cycles, every other ``pi_D`` for
 ``cycles_other`` (538; Panda: 1077 for every level), so the default budget is the paper's
@@ -101,9 +101,9 @@ _ACTIVATIONS = ("tanh", "relu")
 @dataclass
 class PGConfig(RunConfig):
     """Every setting of one PG training run (saved as ``config.json``): the run fields of
-    :class:`learn.run_config.RunConfig` (``timesteps``: the budget of evaluations of C,
+    `learn.run_config.RunConfig` (``timesteps``: the budget of evaluations of C,
     all-inclusive, here equal to the paper's count; None = the schedule's total,
-    :func:`schedule_total`, the paper's total for the environment; ``depth``: the number
+    `schedule_total`, the paper's total for the environment; ``depth``: the number
     of policies D_max; ``eval_every``: cycles between evaluations, and every level's last
     cycle is evaluated too), then PG's own."""
 
@@ -164,8 +164,8 @@ class PGConfig(RunConfig):
             self.timesteps = schedule_total(self)
 
     def validate(self) -> None:
-        """Raise :class:`InputError` naming the first impossible field of PG's own (the run
-        fields are :class:`RunConfig`'s to check)."""
+        """Raise `InputError` naming the first impossible field of PG's own (the run
+        fields are [`RunConfig`][learn.pg.RunConfig]'s to check)."""
         check_choice("activation", self.activation, _ACTIVATIONS)
         check_choice("objective", self.objective, _OBJECTIVES)
         check_choice("surrogate", self.surrogate, _SURROGATES)
@@ -278,7 +278,7 @@ def _build_policies(cfg: PGConfig, metric: finsler.Metric) -> nn.ModuleList:
 def _means_predictor(
     levels: Sequence[DepthPolicy], project: Callable[[torch.Tensor], torch.Tensor]
 ) -> Callable[[torch.Tensor, torch.Tensor], torch.Tensor]:
-    """A ``predict(s, g)`` for :func:`learn.tree.build_tree` that uses ``levels[0]`` on its
+    """A ``predict(s, g)`` for `learn.tree.build_tree` that uses ``levels[0]`` on its
     first call, ``levels[1]`` on the second, ... (build_tree calls it once per level, top
     down): projected means."""
     it = iter(levels)
@@ -429,8 +429,8 @@ def _run_document(cfg: PGConfig) -> dict[str, Any]:
 
 
 class PGTrainer(RunLoop):
-    """Train the per-depth policies of a :class:`PGConfig` into a run directory (the
-    loop: :class:`learn.loop.RunLoop`). One iteration is one cycle; a cycle is only
+    """Train the per-depth policies of a `PGConfig` into a run directory (the
+    loop: [`learn.loop.RunLoop`][learn.loop.RunLoop]). One iteration is one cycle; a cycle is only
     started if it fits the budget; every level's last cycle is also evaluated."""
 
     config_class = PGConfig
@@ -507,8 +507,8 @@ class PGTrainer(RunLoop):
         return self.iteration % self.cfg.eval_every == 0 or self._level_ends
 
     def cycle(self) -> dict[str, float]:
-        """One training cycle of ``pi_D`` (D = :attr:`level`): collect, eq. (15) costs,
-        eq. (16) baseline, ``epochs`` Adam steps on :func:`pg_loss`. Adds the evaluations
+        """One training cycle of ``pi_D`` (D = `level`): collect, eq. (15) costs,
+        eq. (16) baseline, ``epochs`` Adam steps on `pg_loss`. Adds the evaluations
         of C to the counters; returns statistics for the log."""
         cfg, d = self.cfg, self.level
         pi, opt = self.policies[d - 1], self.opts[d - 1]
@@ -583,7 +583,7 @@ class PGTrainer(RunLoop):
 
 def train_pg(cfg: PGConfig, out: str | Path, resume: bool = False,
              progress: bool = True) -> TrainResult:
-    """Deprecated: :func:`learn.train_run` (the one entry point for every method) trains
+    """Deprecated: `learn.train_run` (the one entry point for every method) trains
     ``cfg`` the same way. Train PG with ``cfg`` into run directory ``out`` (``resume``
     continues the run saved there exactly as an uninterrupted run would; a non-empty
     ``out`` without ``resume`` is refused)."""
@@ -643,7 +643,7 @@ def load_pg_policy(run_dir: str | Path, checkpoint: str = "best",
     """Load the PG policies of a run directory. ``checkpoint``: ``best`` (best success at
     the task's depth on the validation set; falls back to the latest) or ``latest``;
     ``env`` / ``metric_params``, if given, must be the run's
-    (:func:`learn.config.check_run_metric`)."""
+    (`learn.config.check_run_metric`)."""
     path, cfg, ckpt, loaded = load_run(run_dir, checkpoint, PGConfig, ("pg",), env,
                                        metric_params)
     policies = _build_policies(cfg, cfg.metric)

@@ -1,22 +1,22 @@
 """The registry of learning methods: what the CLI, sweeps and ``load_policy`` read.
 
 A method registers itself once, in the module that defines it, with
-:func:`register_method` and a :class:`Method`: its config class, its trainer (a
-:class:`learn.loop.RunLoop` subclass), its policy loader, its default config and, for
-sweeps, its named :class:`Variant` s. Nothing else names it: ``geodesics train --method``,
-``geodesics sweep --methods``, ``geodesics evaluate --run`` and :func:`learn.load_policy`
-find it here. The toolkit's own methods (:mod:`learn.train`: midpoint / inter /
-two-to-one, :mod:`learn.pg`, :mod:`learn.seq`) are imported on first need; a method in a
-user's file is imported with ``--method-module FILE.py`` (:func:`import_method_modules`)
+`register_method` and a `Method`: its config class, its trainer (a
+[`learn.loop.RunLoop`][learn.loop.RunLoop] subclass), its policy loader, its default config and, for
+sweeps, its named `Variant` s. Nothing else names it: ``geodesics train --method``,
+``geodesics sweep --methods``, ``geodesics evaluate --run`` and `learn.load_policy`
+find it here. The toolkit's own methods (`learn.train`: midpoint / inter /
+two-to-one, `learn.pg`, `learn.seq`) are imported on first need; a method in a
+user's file is imported with ``--method-module FILE.py`` (`import_method_modules`)
 and its module is recorded in each run's ``config.json`` (``method_module``, and the file
 in ``method_file``) so that loading the run re-imports it (when it is importable; else the
 error names the file to pass with ``--method-module``). The shipped example
-:mod:`learn.examples.toy_method` is such a method (``--method-module
+`learn.examples.toy_method` is such a method (``--method-module
 learn.examples.toy_method``).
 
-What a loaded policy offers every command is the protocol :class:`PathPolicy` (and
-:class:`MidpointPolicy` for a policy that predicts midpoints); :func:`learn.train_run`
-trains any registered method's config (:meth:`Method.train`).
+What a loaded policy offers every command is the protocol `PathPolicy` (and
+`MidpointPolicy` for a policy that predicts midpoints); `learn.train_run`
+trains any registered method's config ([`Method.train`][learn.registry.Method.train]).
 """
 
 from __future__ import annotations
@@ -61,7 +61,7 @@ BUILTIN_MODULES = ("learn.train", "learn.seq", "learn.pg")
 
 @runtime_checkable
 class PathPolicy(Protocol):
-    """What a method's ``load_policy`` returns (a :class:`learn.base.LoadedPolicy` has the
+    """What a method's ``load_policy`` returns (a `learn.base.LoadedPolicy` has the
     attributes): the policy of a run, which every command that reads runs (``geodesics
     evaluate``, ``report``, ``check --run``, ``solve --warm-start``) uses through these
     names only. ``isinstance(policy, PathPolicy)`` checks that they are there."""
@@ -69,7 +69,7 @@ class PathPolicy(Protocol):
     metric: finsler.Metric
     """The metric the policy was trained on (with the run's parameters)."""
     config: Any
-    """The run's config (a :class:`learn.run_config.RunConfig`)."""
+    """The run's config (a [`learn.run_config.RunConfig`][learn.run_config.RunConfig])."""
     depth: int
     """The depth D of its paths (``2**D`` segments) unless asked otherwise."""
     eps: float
@@ -87,13 +87,13 @@ class PathPolicy(Protocol):
     def evaluate(self, pairs: Any = None, eps: float | None = None,
                  depth: int | None = None) -> Any:
         """Section 5.1 evaluation on ``pairs`` ``(K, 2, dim)`` (default:
-        ``finsler.default_pairs``): a :class:`learn.policy.EvalResult`."""
+        ``finsler.default_pairs``): a `learn.policy.EvalResult`."""
         ...
 
 
 @runtime_checkable
 class MidpointPolicy(PathPolicy, Protocol):
-    """A :class:`PathPolicy` that predicts midpoints (every midpoint-tree method: the
+    """A `PathPolicy` that predicts midpoints (every midpoint-tree method: the
     midpoint learner, PG, the example; Seq walks step by step and has none): the midpoint
     checks of ``geodesics check`` and the reports' midpoint errors use it."""
 
@@ -127,10 +127,10 @@ class Method:
     summary: str
     config_class: type
     trainer: type
-    """A :class:`learn.loop.RunLoop` subclass: ``trainer(cfg, out, resume=, progress=)``."""
+    """A `learn.loop.RunLoop` subclass: ``trainer(cfg, out, resume=, progress=)``."""
     load_policy: Callable[..., Any]
     """``load_policy(run_dir, checkpoint=, device=, env=, metric_params=)`` -> a
-    :class:`PathPolicy` (a :class:`MidpointPolicy` if it predicts midpoints)."""
+    `PathPolicy` (a `MidpointPolicy` if it predicts midpoints)."""
     default_config: Callable[..., Any]
     """``default_config(env, **fields)`` -> the method's config."""
     config_methods: tuple[str, ...] = ()
@@ -152,14 +152,14 @@ class Method:
     @property
     def builtin(self) -> bool:
         """True for the toolkit's own methods (imported on first need); a method of any
-        other module (the shipped example :mod:`learn.examples.toy_method` too) is
+        other module (the shipped example `learn.examples.toy_method` too) is
         imported by name in sweep workers and recorded in its runs' ``config.json``."""
         return self.module in BUILTIN_MODULES
 
     def train(self, cfg: Any, out: str | Path, resume: bool = False,
               progress: bool = True) -> Any:
-        """Train ``cfg`` into run directory ``out``: the :class:`learn.base.TrainResult`
-        (what :func:`learn.train_run` calls for ``cfg.method``)."""
+        """Train ``cfg`` into run directory ``out``: the `learn.base.TrainResult`
+        (what [`learn.train_run`][learn.train_run] calls for ``cfg.method``)."""
         return self.trainer(cfg, out, resume=resume, progress=progress).run()
 
 
@@ -167,9 +167,9 @@ _METHODS: dict[str, Method] = {}
 
 
 def deprecated_entry(name: str) -> None:
-    """Warn (:class:`DeprecationWarning`, at the caller's line) that ``name()``, one
+    """Warn (`DeprecationWarning`, at the caller's line) that ``name()``, one
     method's own training function, is deprecated for the one entry point
-    :func:`learn.train_run`."""
+    [`learn.train_run`][learn.train_run]."""
     warnings.warn(f"{name}() is deprecated: use learn.train_run(cfg, out, resume=..., "
                   "progress=...), the one entry point that trains every method's config",
                   DeprecationWarning, stacklevel=3)
@@ -195,7 +195,7 @@ def register_method(method: Method) -> Method:
 
 def unregister_method(name: str) -> None:
     """Remove the method registered under ``name`` (all of its ``config_methods``), e.g.
-    after a test; an unknown name is an :class:`InputError`."""
+    after a test; an unknown name is an `InputError`."""
     if name not in _METHODS:
         raise InputError(f"method {name!r} is not registered")
     method = _METHODS[name]
@@ -213,7 +213,7 @@ def _import_builtins(until: str | None = None) -> None:
 
 
 def get_method(name: str) -> Method:
-    """The method whose config ``method`` value is ``name`` (:class:`InputError` with the
+    """The method whose config ``method`` value is ``name`` (`InputError` with the
     registered names otherwise)."""
     if not isinstance(name, str):
         raise InputError(f"method must be a name, got {name!r}")
@@ -250,12 +250,12 @@ def _entries() -> Iterator[Method]:
 
 
 def variants() -> dict[str, Variant]:
-    """Every registered variant (name -> :class:`Variant`), method by method."""
+    """Every registered variant (name -> `Variant`), method by method."""
     return {name: v for m in _entries() for name, v in m.variants.items()}
 
 
 def find_variant(name: str) -> tuple[Method, Variant]:
-    """The method and :class:`Variant` called ``name`` (:class:`InputError` otherwise)."""
+    """The method and `Variant` called ``name`` (`InputError` otherwise)."""
     for m in _distinct_methods():
         if name in m.variants:
             return m, m.variants[name]
@@ -294,7 +294,7 @@ def import_method_modules(items: Iterable[str] | None) -> list[str]:
     folder is put first on ``sys.path`` and which is imported by its stem, so that worker
     processes and later loads import it by that name too); returns the module names.
     A module that registers no method (none registered while importing it, none whose
-    trainer it defines) is an :class:`InputError`."""
+    trainer it defines) is an `InputError`."""
     names = []
     for item in items or []:
         before = dict(_METHODS)

@@ -1,8 +1,8 @@
-"""The fields every learning run has, declared and checked once: :class:`RunConfig`.
+"""The fields every learning run has, declared and checked once: `RunConfig`.
 
-Every method's config is a dataclass on :class:`RunConfig` (the midpoint learner's
-:class:`learn.TrainConfig`, :class:`learn.pg.PGConfig`, :class:`learn.seq.SeqConfig`, the
-shipped example :class:`learn.examples.toy_method.ToyConfig`, a method of your own). The
+Every method's config is a dataclass on `RunConfig` (the midpoint learner's
+[`learn.TrainConfig`][learn.TrainConfig], `learn.pg.PGConfig`, `learn.seq.SeqConfig`, the
+shipped example `learn.examples.toy_method.ToyConfig`, a method of your own). The
 base holds the run's metric (``env``, ``metric_params``, ``metric_class``) and its run
 control (``method``, ``seed``, ``timesteps``, ``minutes``, ``device``, ``threads``,
 ``depth``, ``eps``, ``eval_every``, ``eval_pairs``) and checks them, one way, when a config
@@ -11,17 +11,17 @@ is built. A method adds its own fields and says only what differs for it:
 * ``config_methods``: the values its ``method`` field may take (the first is the default);
 * ``run_defaults``: other defaults of the base's fields (e.g. ``{"eval_every": 10}``); a
   method never declares a base field again (that is an error when its class is made);
-* :meth:`RunConfig.validate`: the checks of its own fields, and :meth:`RunConfig.complete`
+* `RunConfig.validate`: the checks of its own fields, and `RunConfig.complete`
   for fields filled in from others (PG's schedule fills ``timesteps``).
 
-Configs also come from JSON files and ``--set FIELD=VALUE``, so :meth:`RunConfig.check_types`
+Configs also come from JSON files and ``--set FIELD=VALUE``, so `RunConfig.check_types`
 checks the type of every field annotated ``str``, ``int``, ``float``, ``bool`` or
 ``tuple[int, ...]`` (each maybe ``| None``) for every method.
 
 The module also holds what a run directory says about its metric and software
-(:func:`run_header`, :func:`metric_info`, :func:`package_versions`) and the check that a
-loaded run is on the metric asked for (:func:`check_run_metric`). It imports nothing of
-:mod:`learn`: the run loop (:mod:`learn.loop`) stands on it, below every method.
+(`run_header`, `metric_info`, `package_versions`) and the check that a
+loaded run is on the metric asked for (`check_run_metric`). It imports nothing of
+`learn`: the run loop (`learn.loop`) stands on it, below every method.
 """
 
 from __future__ import annotations
@@ -62,15 +62,15 @@ _KINDS = {"str": (str,), "int": (int,), "float": (int, float), "bool": (bool,)}
 
 
 def check_choice(name: str, value: str, allowed: tuple[str, ...]) -> None:
-    """Raise :class:`InputError` unless ``value`` is one of ``allowed``."""
+    """Raise `InputError` unless ``value`` is one of ``allowed``."""
     if value not in allowed:
         raise InputError(f"{name} must be one of {', '.join(allowed)}; got {value!r}")
 
 
 def check_hidden(hidden: tuple[int, ...], dim: int = 8, name: str = "hidden") -> None:
-    """Raise :class:`InputError` unless ``hidden`` (the config field ``name``) are positive
+    """Raise `InputError` unless ``hidden`` (the config field ``name``) are positive
     layer widths whose MLPs (inputs ~ ``2 * dim`` + a few) fit in memory
-    (:func:`finsler.infra.limits.check_memory`, before any network is built)."""
+    (`finsler.infra.limits.check_memory`, before any network is built)."""
     if not hidden or any(h < 1 for h in hidden):
         raise InputError(f"{name} sizes must be positive, got {hidden!r}")
     widths = [2 * dim + 4, *hidden, 2 * dim]
@@ -94,23 +94,23 @@ def _positive_finite(name: str, value: Any) -> None:
 # The run's metric: registered name + parameters (+ the class of a user metric). Its
 # identity is finsler's (finsler.MetricSpec).
 # ----------------------------------------------------------------------------------------
-#: ``module:qualname`` of a metric class defined outside :mod:`finsler` (None for the
-#: toolkit's own metrics): :func:`finsler.spec.class_path`.
+#: ``module:qualname`` of a metric class defined outside `finsler` (None for the
+#: toolkit's own metrics): `finsler.spec.class_path`.
 metric_class_path = class_path
 
 
 def resolve_metric(env: str, params: Any = None,
                    metric_class: str | None = None) -> tuple[dict[str, Any], str | None]:
     """Check a run's metric and return ``(full parameters, class path)``: the parts of
-    :meth:`finsler.MetricSpec.resolve` (unknown names and ill-typed values raise
-    :class:`InputError` naming the allowed parameters; a user metric's module is imported
+    `finsler.MetricSpec.resolve` (unknown names and ill-typed values raise
+    `InputError` naming the allowed parameters; a user metric's module is imported
     from ``metric_class`` if ``env`` is not registered)."""
     spec = MetricSpec.resolve(env, params, metric_class)
     return dict(spec.params), spec.class_path
 
 
 def build_metric(env: str, params: dict[str, Any] | None = None) -> finsler.Metric:
-    """The registered metric ``env`` with ``params`` (:meth:`finsler.MetricSpec.build`)."""
+    """The registered metric ``env`` with ``params`` (`finsler.MetricSpec.build`)."""
     return MetricSpec(env, dict(params or {})).build()
 
 
@@ -132,7 +132,7 @@ class RunConfig:
     """``module:qualname`` of a metric class registered outside the toolkit (filled in
     automatically; re-imported when the run is loaded in another process)."""
     method: str = ""
-    """The method's name in :mod:`learn.registry` (one of the config's
+    """The method's name in `learn.registry` (one of the config's
     ``config_methods``; the first is the default)."""
     seed: int = 0
     """Seed of the run's generators and of the network initialisation (>= 0)."""
@@ -167,7 +167,7 @@ class RunConfig:
     def __init_subclass__(cls, **kwargs: Any) -> None:
         """Give the base's fields the subclass's defaults (``run_defaults``, ``method`` =
         ``config_methods[0]``) without declaring them again; declaring one again is a
-        :class:`TypeError` (they are declared and checked here only)."""
+        `TypeError` (they are declared and checked here only)."""
         super().__init_subclass__(**kwargs)
         own = dict(inspect.get_annotations(cls))
         again = sorted(set(own) & set(RUN_FIELDS))
@@ -199,7 +199,7 @@ class RunConfig:
 
     # -- the checks -----------------------------------------------------------------------
     def check_types(self) -> None:
-        """Raise :class:`InputError` naming the first field of the wrong type (fields
+        """Raise `InputError` naming the first field of the wrong type (fields
         annotated ``str``, ``int``, ``float``, ``bool``, ``tuple[int, ...]``, each maybe
         ``| None``, with or without ``from __future__ import annotations``; fields of other
         types are left to the config's own checks). A ``tuple[int, ...]`` given as a list
@@ -227,8 +227,8 @@ class RunConfig:
             self.env, self.metric_params, self.metric_class)
 
     def check_run(self) -> None:
-        """Raise :class:`InputError` naming the first impossible run field (after
-        :meth:`check_types`): every method's run fields are checked here, the same way."""
+        """Raise `InputError` naming the first impossible run field (after
+        `check_types`): every method's run fields are checked here, the same way."""
         finsler.registry.check_name(self.env, "environment")
         if self.config_methods:
             check_choice("method", self.method, self.config_methods)
@@ -249,11 +249,11 @@ class RunConfig:
             raise InputError(f"device must be 'cpu' or 'cuda', got {self.device!r}")
 
     def validate(self) -> None:
-        """The method's checks of its own fields (raise :class:`InputError` naming the
+        """The method's checks of its own fields (raise `InputError` naming the
         first impossible one); the run fields are checked already."""
 
     def complete(self) -> None:
-        """Fill in fields derived from others (after :meth:`validate`)."""
+        """Fill in fields derived from others (after `validate`)."""
 
     # the names before issue 49 (a method's config called them from its __post_init__)
     def _check_types(self) -> None:
@@ -265,7 +265,7 @@ class RunConfig:
     # -- what the config gives ------------------------------------------------------------
     @property
     def metric_spec(self) -> MetricSpec:
-        """The run's metric as a :class:`finsler.MetricSpec`."""
+        """The run's metric as a [`finsler.MetricSpec`][finsler.MetricSpec]."""
         return MetricSpec(self.env, dict(self.metric_params or {}), self.metric_class)
 
     @property
@@ -312,7 +312,7 @@ class RunConfig:
         return dataclasses.replace(self, **changes)
 
 
-#: The fields of :class:`RunConfig` and their annotations (the run fields).
+#: The fields of [`RunConfig`][learn.run_config.RunConfig] and their annotations (the run fields).
 RUN_FIELDS: dict[str, Any] = {f.name: f.type for f in dataclasses.fields(RunConfig)}
 
 
@@ -320,7 +320,7 @@ RUN_FIELDS: dict[str, Any] = {f.name: f.type for f in dataclasses.fields(RunConf
 # What a run directory says about its metric and software
 # ----------------------------------------------------------------------------------------
 def metric_info(cfg: Any) -> dict[str, Any]:
-    """``config.json``'s ``metric`` section: :meth:`finsler.Metric.info` plus the full
+    """``config.json``'s ``metric`` section: `finsler.Metric.info` plus the full
     parameters and, for a user metric, its class (``module:qualname``)."""
     return {**cfg.metric.info(), "params": dict(cfg.metric_params or {}),
             "class": cfg.metric_class}
@@ -328,7 +328,7 @@ def metric_info(cfg: Any) -> dict[str, Any]:
 
 def check_run_metric(cfg: Any, source: str, env: str | None = None,
                      metric_params: dict[str, Any] | None = None) -> None:
-    """Raise :class:`InputError` unless the run ``cfg`` (loaded from ``source``) is on
+    """Raise `InputError` unless the run ``cfg`` (loaded from ``source``) is on
     metric ``env`` (if given) with ``metric_params`` (if given; compared after completing
     them to the full set, so ``{"a": 0.2}`` equals the run's ``{"a": 0.2}`` and unnamed
     parameters must have their defaults)."""

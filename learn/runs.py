@@ -1,25 +1,25 @@
 """One entry point for every learning method: named variants, training, status, loading.
 
-Every method (the midpoint learner of :mod:`learn.train`, the paper's baselines
-:mod:`learn.seq` and :mod:`learn.pg`, and any method registered from a user's file)
+Every method (the midpoint learner of `learn.train`, the paper's baselines
+`learn.seq` and `learn.pg`, and any method registered from a user's file)
 writes run directories of the same layout (``config.json``, ``metrics.csv``,
 ``checkpoint_latest.pt``, ``checkpoint_best.pt`` and, once finished, ``result.json``:
-:class:`learn.loop.RunLoop`). This module finds a run's method in :mod:`learn.registry`,
+[`learn.loop.RunLoop`][learn.loop.RunLoop]). This module finds a run's method in `learn.registry`,
 so that the CLI, sweeps and reports never branch on it themselves.
 
-Variants (:data:`VARIANTS`, read from the registry) are the configurations compared in the
+Variants (`VARIANTS`, read from the registry) are the configurations compared in the
 paper's experiment:
 
-* ``midpoint``: the toolkit's defaults (:func:`learn.default_config`); for some
+* ``midpoint``: the toolkit's defaults ([`learn.default_config`][learn.default_config]); for some
   environments they differentiate C (the path-energy term): not model-free;
 * ``midpoint-free``: the model-free defaults: every term that uses the derivative of C
   switched off (values of C only, like the paper's method), with the passes per collection
   Algorithm 1 alone was measured best with (``learn.config.model_free_overrides``);
-* ``paper``: appendix B.1's settings (:func:`learn.paper_config`);
+* ``paper``: appendix B.1's settings (`learn.paper_config`);
 * ``inter`` / ``two-to-one``: ``midpoint-free`` with the actor loss of eq. (17) / (18);
 * ``seq``: goal-conditioned PPO (section 5.2, appendix B.2);
 * ``pg``: per-depth policy gradient (section 5.2, appendix B.3);
-* and the variants of every method registered with :func:`learn.registry.register_method`.
+* and the variants of every method registered with `learn.registry.register_method`.
 """
 
 from __future__ import annotations
@@ -59,7 +59,7 @@ __all__ = [
 
 
 class _Variants(Mapping[str, str]):
-    """Variant name -> summary, read from :mod:`learn.registry` (live: a method
+    """Variant name -> summary, read from `learn.registry` (live: a method
     registered later appears)."""
 
     def __getitem__(self, name: str) -> str:
@@ -81,7 +81,7 @@ VARIANTS: Mapping[str, str] = _Variants()
 def make_config(env: str, variant: str, seed: int = 0, timesteps: int | None = None,
                 minutes: float | None = None, device: str = "cpu",
                 **overrides: Any) -> Any:
-    """The config of ``variant`` (a key of :data:`VARIANTS`) for ``env``; ``timesteps`` and
+    """The config of ``variant`` (a key of `VARIANTS`) for ``env``; ``timesteps`` and
     ``minutes`` bound the run (all-inclusive evaluations of C / wall minutes)."""
     _, var = find_variant(variant)
     common: dict[str, Any] = {"seed": seed, "minutes": minutes, "device": device}
@@ -108,7 +108,7 @@ def load_any_policy(run: str | Path, checkpoint: str = "best", device: str = "cp
                     env: str | None = None,
                     metric_params: dict[str, Any] | None = None) -> Any:
     """Load the policy of any method from a run directory (or a shipped policy's name):
-    :func:`learn.load_policy`. ``env`` and ``metric_params``, if given, must be the run's
+    `learn.load_policy`. ``env`` and ``metric_params``, if given, must be the run's
     metric and parameters (the run's own parameters are always used: a policy is loaded
     for the metric it learned)."""
     from learn.policy import load_policy
@@ -122,10 +122,10 @@ def warm_start_paths(source: str | Path, metric: Any, pairs: Any,
     """Learned paths to seed exact solves: ``(paths (K, 2**D + 1, dim) float64, policy)``.
 
     ``source`` is a run directory (any method) or the name of an environment with a shipped
-    policy; ``metric`` (a :class:`finsler.Metric`) is the metric of the solve and must be
+    policy; ``metric`` (a [`finsler.Metric`][finsler.Metric]) is the metric of the solve and must be
     the policy's: the same registered metric with the same parameters, else
-    :class:`InputError` naming the difference. ``pairs`` ``(K, 2, dim)``. ``search``: the
-    route search's paths (:meth:`learn.Policy.search`) instead of the plain generation.
+    `InputError` naming the difference. ``pairs`` ``(K, 2, dim)``. ``search``: the
+    route search's paths (`learn.Policy.search`) instead of the plain generation.
     """
     from finsler import MetricSpec
 
@@ -167,7 +167,7 @@ def warm_start_paths(source: str | Path, metric: Any, pairs: Any,
 def run_status(out: str | Path) -> RunStatus:
     """``finished`` (result.json present), ``unfinished`` (a resumable checkpoint, no
     result) or ``absent`` (nothing to resume: no run there, or one that stopped before
-    its first checkpoint): a :class:`finsler.status.RunStatus` (a ``str`` enum of these
+    its first checkpoint): a `finsler.status.RunStatus` (a ``str`` enum of these
     words)."""
     p = Path(out)
     if (p / RESULT_FILE).is_file():
@@ -240,7 +240,7 @@ def run_one(env: str, variant: str, seed: int, out: str | Path, timesteps: int |
             **overrides: Any) -> dict[str, Any]:
     """Make sure the run ``(env, variant, seed)`` in ``out`` is finished: skip it if it is,
     resume it if it started, start it otherwise. Returns ``result.json``'s content plus
-    ``"action"``: a :class:`finsler.status.RunAction`, ``skipped``, ``resumed`` or
+    ``"action"``: a `finsler.status.RunAction`, ``skipped``, ``resumed`` or
     ``started``."""
     cfg = make_config(env, variant, seed=seed, timesteps=timesteps, minutes=minutes,
                       **overrides)

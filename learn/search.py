@@ -1,10 +1,10 @@
 """Policy-guided route search at generation time: values of C only, never worse than the
 policy's own path.
 
-The recursive generation (:meth:`learn.Policy.generate`) commits to the actor's midpoint at
+The recursive generation (`learn.Policy.generate`) commits to the actor's midpoint at
 every level. Where the policy learned a locally shortest route (round the wrong side of
 a hill, a detour on a short pair near the rim of the Matsumoto disk), no later level can
-undo that choice. :func:`search_paths` keeps the actor as the generator and lets C decide
+undo that choice. `search_paths` keeps the actor as the generator and lets C decide
 between routes:
 
 * at each of the top ``levels`` levels, every sub-pair ``(a, b)`` gets candidate midpoints:
@@ -25,7 +25,7 @@ between routes:
   segment above ``eps``. The tree was built from fixed anchors; a window whose ends sit
   elsewhere gets a fresh, often shorter completion (car-like: length ratio on tuning
   pairs 1.088 -> 1.064 for 1e4 more evaluations of C per path);
-* then ``equalize`` rounds of :func:`equalize_paths` move the interior points along the
+* then ``equalize`` rounds of `equalize_paths` move the interior points along the
   path so that its segments cost the same: the success criterion bounds the *largest*
   segment cost, and a recursive tree that is off by a little at every level splits the
   path unevenly (Panda: the largest segment 1.5x the mean on tuning pairs, 1.02x after).
@@ -37,7 +37,7 @@ C``) than the policy's own path, pair by pair, and succeeds (every segment cost 
 (so success at any threshold is never lost) nor its discrete energy ``n * sum C**2``, so
 its length stays at most ``sqrt(n * sum C**2)`` of the path it started from (measured:
 mean length slightly lower, at most 3.4% longer on one Panda pair in 200). The search
-evaluates C (values only, no derivatives: model-free) and the actor; :class:`SearchResult`
+evaluates C (values only, no derivatives: model-free) and the actor; `SearchResult`
 counts the evaluations of C per path.
 """
 
@@ -67,7 +67,7 @@ CHUNK_FLOATS = 20_000_000
 
 @dataclass(frozen=True)
 class SearchSpec:
-    """Settings of :func:`search_paths`. The defaults were chosen on 300 tuning pairs
+    """Settings of `search_paths`. The defaults were chosen on 300 tuning pairs
     (``finsler.sample_pairs(matsumoto, 300, 4242)``, never a reporting set) with two
     policies: against 8 directions and 4 radii they cut the worst length ratio from 1.054
     to 1.026 (shipped policy) and from 1.115 to 1.031 (a default run) for 1.8x the
@@ -90,7 +90,7 @@ class SearchSpec:
     sweeps (20 ms per path more for 3), Matsumoto 1.0016 -> 1.0012, Panda paths 0.7%
     shorter (one pair in 200 fewer within eps 5)."""
     equalize: int = 3
-    """Rounds of :func:`equalize_paths` after the polish (0: none). Chosen on tuning pairs
+    """Rounds of `equalize_paths` after the polish (0: none). Chosen on tuning pairs
     (seed 4242; shipped policies with the search): Panda's share of paths within eps 5
     0.56 -> 0.88 / 0.895 / 0.895 after 1 / 3 / 8 rounds (eps 10: 0.92 -> 1.0), car-like
     within its eps 0.97 -> 1.0, Matsumoto's length ratios unchanged or lower."""
@@ -124,7 +124,7 @@ class SearchSpec:
 @dataclass
 class SearchResult(Result):
     """Paths ``(K, 2**D + 1, dim)`` float64 and the evaluations of C the search made (a
-    :class:`finsler.status.Result`: ``status`` is a :class:`finsler.status.SearchStatus`,
+    [`finsler.status.Result`][finsler.status.Result]: ``status`` is a `finsler.status.SearchStatus`,
     ``completed`` when every point is finite)."""
 
     paths: np.ndarray
@@ -234,7 +234,7 @@ def equalize_paths(metric: finsler.Metric, paths: Any,
 
 def _equalize(metric: finsler.Metric, p: torch.Tensor, c: torch.Tensor,
               rounds: int) -> tuple[torch.Tensor, int]:
-    """:func:`equalize_paths` on float64 CPU paths ``p`` whose segment costs ``c`` are
+    """`equalize_paths` on float64 CPU paths ``p`` whose segment costs ``c`` are
     known; returns the paths and the evaluations of C made (``K * n * rounds``)."""
     k, n1, dim = p.shape
     n = n1 - 1

@@ -1,17 +1,17 @@
 """The paper's sequential RL baseline "Seq" (section 5.2, appendix B.2): goal-conditioned PPO.
 
 stable-baselines3's PPO, with the paper's hyperparameters, on the goal-conditioned walk of
-eqs. (57) and (14) (:mod:`learn.env`: :class:`GeodesicEnv`, and :class:`GeodesicVecEnv`
+eqs. (57) and (14) (`learn.env`: `GeodesicEnv`, and `GeodesicVecEnv`
 that steps ``n_envs`` copies with one vectorised evaluation of ``F`` per quantity).
-:class:`SeqTrainer` trains it into a run directory of the shared contract
+`SeqTrainer` trains it into a run directory of the shared contract
 (``config.json``, ``metrics.csv``, ``checkpoint_latest.pt``, ``checkpoint_best.pt``,
-``result.json``; the loop is :class:`learn.loop.RunLoop`'s); :func:`load_seq_policy`
-loads a :class:`SeqPolicy` that generates and evaluates paths like
-:class:`learn.policy.Policy`.
+``result.json``; the loop is [`learn.loop.RunLoop`][learn.loop.RunLoop]'s); `load_seq_policy`
+loads a `SeqPolicy` that generates and evaluates paths like
+[`learn.policy.Policy`][learn.policy.Policy].
 
 **Counting.** ``timesteps`` (the budget) counts every evaluation of ``F`` or ``C`` the
 environments make, whatever for (3 per step with a non-zero action, 0 for a zero action,
-2 per sampled start/goal candidate at a reset: :mod:`learn.env`); ``timesteps_paper``
+2 per sampled start/goal candidate at a reset: `learn.env`); ``timesteps_paper``
 counts environment steps (the paper's count, section 5.2), so ``timesteps`` is about 3x
 ``timesteps_paper``. The validation rollouts are not training and are not counted.
 
@@ -77,7 +77,7 @@ __all__ = [
 
 #: Relative tolerance on the segment test ``C(p_i, p_i+1) <= eps`` of Seq's paths: every
 #: step of eq. (57) has ``C = eps`` exactly in exact arithmetic, ``eps * (1 +- 1e-16)`` in
-#: float64 (see :func:`evaluate_seq`).
+#: float64 (see `evaluate_seq`).
 SEGMENT_RTOL = 1e-9
 
 
@@ -96,7 +96,7 @@ _PAPER_ROLLOUT = 2048
 @dataclass
 class SeqConfig(RunConfig):
     """Every setting of one Seq run (saved as ``config.json``): the run fields of
-    :class:`learn.run_config.RunConfig` (``seed`` also seeds SB3's global generators and
+    `learn.run_config.RunConfig` (``seed`` also seeds SB3's global generators and
     the environments, copy ``i`` with ``seed + i``; ``timesteps``: the budget of
     ALL-INCLUSIVE evaluations of F or C made by the environments, 3 per step and 2 per
     reset candidate; paper: 2e7 (Matsumoto, Panda), 8e7 (car-like) env steps; ``device``
@@ -143,8 +143,8 @@ class SeqConfig(RunConfig):
     activation: str = "tanh"
     """``tanh`` (paper, SB3's default) or ``relu``."""
     def validate(self) -> None:
-        """Raise :class:`finsler.InputError` naming the first impossible field of Seq's
-        own (the run fields are :class:`RunConfig`'s to check)."""
+        """Raise `finsler.InputError` naming the first impossible field of Seq's
+        own (the run fields are [`RunConfig`][learn.seq.RunConfig]'s to check)."""
         for name in ("batch_size", "n_envs", "n_steps", "n_epochs"):
             v = getattr(self, name)
             if v < 1:
@@ -185,7 +185,7 @@ class SeqConfig(RunConfig):
 def default_seq_config(env: str, **overrides: Any) -> SeqConfig:
     """The paper's Seq settings for ``env`` (appendix B.2; budget 2e7, car-like 8e7) with
     this toolkit's batched environments (``n_envs`` x ``n_steps`` = SB3's 2048-step
-    rollout); ``overrides`` replace fields (unknown ones raise :class:`InputError`)."""
+    rollout); ``overrides`` replace fields (unknown ones raise `InputError`)."""
     ensure_registered(env, overrides.get("metric_class"))
     # the paper's budget for the metric's task (Metric.training.paper_timesteps)
     settings: dict[str, Any] = {"env": env,
@@ -277,7 +277,7 @@ def rollout(act: Any, metric: finsler.Metric, starts: np.ndarray, goals: np.ndar
 
 @dataclass
 class SeqEvalResult(EvalResult):
-    """:class:`learn.policy.EvalResult` of Seq paths, plus the paper's episode success."""
+    """`learn.policy.EvalResult` of Seq paths, plus the paper's episode success."""
 
     reached: np.ndarray = dataclasses.field(repr=False)
     """(K,) bool: ``C(p_j, g) < eps`` for some ``j <= 2**D`` (the paper's success for Seq,
@@ -285,7 +285,7 @@ class SeqEvalResult(EvalResult):
     steps: np.ndarray = dataclasses.field(repr=False)
     """(K,) int: steps taken until reaching (``2**D`` if never reached)."""
     strict_success: np.ndarray = dataclasses.field(repr=False)
-    """(K,) bool: :func:`learn.policy.evaluate_paths`' test without any tolerance."""
+    """(K,) bool: `learn.policy.evaluate_paths`' test without any tolerance."""
 
     @property
     def reached_rate(self) -> float:
@@ -330,7 +330,7 @@ def evaluate_seq(act: Any, metric: finsler.Metric, pairs: np.ndarray, eps: float
     * ``success``: reached at ``j <= n - 1`` AND every segment ``C(p_i, p_i+1) <=
       eps * (1 + SEGMENT_RTOL)``. A step of eq. (57) has ``C = eps`` exactly in exact
       arithmetic; in float64 ``F(p, (p + eps/F(p,v) v) - p)`` is ``eps (1 +- 1e-16)``, so
-      :func:`learn.policy.evaluate_paths`' ``C <= eps`` would fail about half of the steps
+      `learn.policy.evaluate_paths`' ``C <= eps`` would fail about half of the steps
       by rounding alone. The tolerance (1e-9 relative, 10^7 times the rounding, far below
       any change of the path) accepts exactly those; a step whose projection into the
       domain really raised its cost above eps still fails. The last segment is ``< eps``
@@ -391,7 +391,7 @@ def _policy_kwargs(cfg: SeqConfig) -> dict[str, Any]:
 
 class SeqPolicy(LoadedPolicy):
     """A trained Seq policy (deterministic mean actions) for one metric; generates paths
-    like :class:`learn.policy.Policy`."""
+    like [`learn.policy.Policy`][learn.policy.Policy]."""
 
     def __init__(self, policy: Any, config: SeqConfig, source: str = "",
                  checkpoint: str = "") -> None:
@@ -418,8 +418,8 @@ class SeqPolicy(LoadedPolicy):
                  depth: int | None = None) -> SeqEvalResult:
         """Section 5.1 evaluation on ``pairs`` ``(K, 2, dim)`` (default:
         ``finsler.default_pairs``); ``eps`` is both the step cost of the walk and the
-        success threshold. See :func:`evaluate_seq` for how success relates to
-        :func:`learn.policy.evaluate_paths`."""
+        success threshold. See `evaluate_seq` for how success relates to
+        `learn.policy.evaluate_paths`."""
         p = finsler.default_pairs(self.metric) if pairs is None else check_pairs(
             self.metric, pairs)
         e = self.eps if eps is None else eps
@@ -432,7 +432,7 @@ def load_seq_policy(run_dir: str | Path, checkpoint: str = "best",
                     metric_params: dict[str, Any] | None = None) -> SeqPolicy:
     """Load the Seq policy of a run directory: ``checkpoint`` ``best`` (best validation
     success; falls back to the latest) or ``latest``; ``env`` / ``metric_params``, if
-    given, must be the run's (:func:`learn.config.check_run_metric`)."""
+    given, must be the run's (`learn.config.check_run_metric`)."""
     path, cfg, ckpt, name = load_run(run_dir, checkpoint, SeqConfig, ("seq",), env,
                                      metric_params)
     policy = _build_policy(cfg, device)
@@ -457,8 +457,8 @@ WALL_COLUMNS = ("wall_seconds", "evaluations_per_second", "steps_per_second")
 
 
 class SeqTrainer(RunLoop):
-    """PPO (stable-baselines3) on :class:`GeodesicVecEnv` into a run directory (the loop:
-    :class:`learn.loop.RunLoop`).
+    """PPO (stable-baselines3) on `GeodesicVecEnv` into a run directory (the loop:
+    [`learn.loop.RunLoop`][learn.loop.RunLoop]).
 
     One iteration = one SB3 rollout of ``n_envs * n_steps`` steps and its PPO update
     (``model.learn`` for exactly one rollout, ``reset_num_timesteps=False``: SB3's own
@@ -620,7 +620,7 @@ class SeqTrainer(RunLoop):
 
 def train_seq(cfg: SeqConfig, out: str | Path, resume: bool = False,
               progress: bool = True) -> TrainResult:
-    """Deprecated: :func:`learn.train_run` (the one entry point for every method) trains
+    """Deprecated: `learn.train_run` (the one entry point for every method) trains
     ``cfg`` the same way. Train Seq (PPO, appendix B.2) with ``cfg`` into run directory
     ``out``.
 

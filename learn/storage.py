@@ -52,7 +52,7 @@ class CorruptFileError(InputError):
 def check_run_dir(run_dir: Path, resume: bool) -> Path:
     """The run directory of a training, checked before any work: to start a run it must be
     absent or an empty folder (its parent a folder); to resume, a folder. Raises
-    :class:`InputError` naming the problem."""
+    `InputError` naming the problem."""
     p = Path(run_dir)
     # names that fit, a folder that takes files; checked here, created once the work starts
     files.check_output_dir(p, "run directory")
@@ -68,7 +68,7 @@ def check_run_dir(run_dir: Path, resume: bool) -> Path:
 
 def atomic_write_bytes(path: Path, data: bytes) -> None:
     """Write ``data`` to ``path`` so that readers see either the old or the new file
-    (:func:`finsler.infra.files.atomic_write_bytes`: symlinks written through, special files
+    (`finsler.infra.files.atomic_write_bytes`: symlinks written through, special files
     refused, failed writes leave the old file)."""
     files.atomic_write_bytes(path, data)
 
@@ -79,7 +79,7 @@ def atomic_write_text(path: Path, text: str) -> None:
 
 def save_checkpoint(path: Path, obj: dict[str, Any]) -> None:
     """``torch.save`` to memory, then atomic write. The file holds the serialised ``obj``
-    and its SHA-256, so that :func:`load_checkpoint` detects any damaged byte (a torch
+    and its SHA-256, so that `load_checkpoint` detects any damaged byte (a torch
     archive alone loads bit-flipped tensors without complaint)."""
     buf = io.BytesIO()
     torch.save(obj, buf)
@@ -91,10 +91,10 @@ def save_checkpoint(path: Path, obj: dict[str, Any]) -> None:
 
 
 def load_checkpoint(path: Path) -> dict[str, Any]:
-    """Load a checkpoint written by :func:`save_checkpoint` (tensors and plain data only;
+    """Load a checkpoint written by `save_checkpoint` (tensors and plain data only;
     files of the earlier unsealed format, such as shipped policies, load too).
 
-    Raises :class:`InputError` if missing and :class:`CorruptFileError` if unreadable,
+    Raises `InputError` if missing and `CorruptFileError` if unreadable,
     truncated or damaged (checksum mismatch).
     """
     path = Path(path)

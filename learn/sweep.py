@@ -1,7 +1,7 @@
 """Sweeps: many runs ``(env, variant, seed)`` on a local process pool or on a Ray cluster.
 
 Every run is its own run directory ``OUT/<env>/<variant>/seed-<s>/`` (the layout that the
-learning-curve plots read) and is made by :func:`learn.runs.run_one`: a finished run is
+learning-curve plots read) and is made by `learn.runs.run_one`: a finished run is
 skipped, an unfinished one resumed, an absent one started. So a sweep that was killed is
 finished by running the same sweep again, and only the unfinished runs do any work.
 
@@ -156,10 +156,10 @@ def _config_dict(cfg: Any) -> dict[str, Any]:
 def plan_sweep(envs: Iterable[str], variants: Iterable[str], seeds: int,
                timesteps: int | None = None, minutes: float | None = None,
                overrides: Mapping[str, Any] | None = None) -> SweepPlan:
-    """Check and build a sweep's plan; raises :class:`InputError` naming the first problem.
+    """Check and build a sweep's plan; raises `InputError` naming the first problem.
 
     ``overrides`` (field -> value) go to every variant whose config class has the field
-    (the midpoint family's :class:`learn.TrainConfig`, or the seq / pg configs); a field
+    (the midpoint family's `learn.TrainConfig`, or the seq / pg configs); a field
     that no selected variant has is an error. Every run's config is built once here, so
     impossible values fail before any work.
     """
@@ -204,7 +204,7 @@ def plan_sweep(envs: Iterable[str], variants: Iterable[str], seeds: int,
 
 
 def check_existing(plan: SweepPlan, out: str | os.PathLike[str]) -> None:
-    """Raise :class:`InputError` if a run directory in ``out`` was made with settings other
+    """Raise `InputError` if a run directory in ``out`` was made with settings other
     than the plan's (only the fields its method lets a resume change may differ, e.g.
     ``minutes``, ``device``, ``eval_pairs``)."""
     for spec in plan.runs():
@@ -230,7 +230,7 @@ def check_existing(plan: SweepPlan, out: str | os.PathLike[str]) -> None:
 # ----------------------------------------------------------------------------------------
 @dataclass
 class RunOutcome:
-    """What happened to one run: ``action`` is a :class:`finsler.status.RunAction`,
+    """What happened to one run: ``action`` is a `finsler.status.RunAction`,
     ``skipped``, ``resumed``, ``started``, ``failed`` or ``pending`` (not reached, e.g.
     interrupted); ``result`` is the run's ``result.json`` (None unless finished)."""
 
@@ -261,8 +261,8 @@ class RunOutcome:
 
 @dataclass
 class SweepResult(Result):
-    """All outcomes of :func:`run_sweep`, in the plan's order (a
-    :class:`finsler.status.Result`: ``status`` is a :class:`finsler.status.SweepStatus`
+    """All outcomes of `run_sweep`, in the plan's order (a
+    [`finsler.status.Result`][finsler.status.Result]: ``status`` is a `finsler.status.SweepStatus`
     from the runs' actions, ``wall_time`` is ``seconds``)."""
 
     plan: SweepPlan
@@ -295,7 +295,7 @@ class SweepResult(Result):
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dict: out, backend, status, converged, wall_time and one row per run
-        (:meth:`RunOutcome.row`)."""
+        (`RunOutcome.row`)."""
         return json_ready({"out": str(self.out), "backend": self.backend,
                            "status": self.status.label, "converged": self.converged,
                            "wall_time": self.wall_time, "runs": self.rows()})

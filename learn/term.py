@@ -1,5 +1,5 @@
-"""The contract of an extra actor term of the midpoint learner (:mod:`learn.methods`,
-:mod:`learn.expert`): what it reads of the trainer and what one actor step returns."""
+"""The contract of an extra actor term of the midpoint learner (`learn.methods`,
+`learn.expert`): what it reads of the trainer and what one actor step returns."""
 
 from __future__ import annotations
 
@@ -16,7 +16,7 @@ __all__ = ["ActorTerm", "TermOutput", "Trainer"]
 
 
 class Trainer(Protocol):
-    """What a term reads of the trainer running it (:class:`learn.Trainer`)."""
+    """What a term reads of the trainer running it (`learn.Trainer`)."""
 
     actor: Actor
     metric: finsler.Metric
@@ -41,10 +41,10 @@ class TermOutput:
 
 
 class ActorTerm:
-    """An extra actor term: :meth:`prepare` runs once per collection, :meth:`step` once
+    """An extra actor term: `prepare` runs once per collection, `step` once
     per actor step; both return the evaluations of C they made. A term may also give the
-    critic data of its own (:meth:`critic_data`) and keep state across collections
-    (:meth:`state` / :meth:`load`, saved in the checkpoints so that a resumed run replays
+    critic data of its own (`critic_data`) and keep state across collections
+    (`state` / `load`, saved in the checkpoints so that a resumed run replays
     the same steps)."""
 
     name: ClassVar[str] = ""
@@ -66,4 +66,4 @@ class ActorTerm:
         return None
 
     def load(self, st: dict[str, Any], device: Any) -> None:
-        """Restore :meth:`state`."""
+        """Restore `state`."""

@@ -1,6 +1,6 @@
 """Algorithm 1 (actor-critic midpoint learning), vectorised, with run directories.
 
-One iteration of :class:`Trainer` reads like Algorithm 1:
+One iteration of `Trainer` reads like Algorithm 1:
 
 1. **collect**: sample pairs uniformly, build whole midpoint trees with the stochastic
    actor (one batched actor call per level), leaf costs with the lowered torch ``cost``
@@ -11,7 +11,7 @@ One iteration of :class:`Trainer` reads like Algorithm 1:
 
 ``timesteps`` count **every** evaluation of C the learner makes during training: the
 collected trees (the paper's count, 2**D per tree of depth D, kept as ``timesteps_paper``)
-and whatever the extra actor terms of :mod:`learn.methods` evaluate (path energy, route
+and whatever the extra actor terms of `learn.methods` evaluate (path energy, route
 search); ``timesteps_derivative`` counts the evaluations whose derivative the learner
 used. The ``timesteps`` budget binds the all-inclusive count.
 Every ``eval_every`` iterations the deterministic policy is evaluated on the
@@ -19,9 +19,9 @@ Every ``eval_every`` iterations the deterministic policy is evaluated on the
 that ``evaluate`` and ``report`` use), a metrics row is written, the best checkpoint is
 chosen there and the latest checkpoint saved atomically; resuming from it replays the run
 exactly (all RNG and optimiser states are in the checkpoint). The run directory, budget,
-limits, signals, rows and checkpoints are :class:`learn.loop.RunLoop`'s, as for every
+limits, signals, rows and checkpoints are [`learn.loop.RunLoop`][learn.loop.RunLoop]'s, as for every
 method; this module registers the midpoint family (``midpoint``, ``inter``,
-``two-to-one`` and their sweep variants) in :mod:`learn.registry`.
+``two-to-one`` and their sweep variants) in `learn.registry`.
 """
 
 from __future__ import annotations
@@ -68,7 +68,7 @@ _LOG = logging.getLogger(__name__)
 
 def actor_loss(method: str, v_first: torch.Tensor, v_second: torch.Tensor) -> torch.Tensor:
     """Per-pair actor loss from ``V(s, m)`` and ``V(m, g)`` ``(N,)``: eq. (6) ``midpoint``,
-    eq. (17) ``inter``, eq. (18) ``two-to-one`` (see :data:`learn.methods.ACTOR_LOSSES`)."""
+    eq. (17) ``inter``, eq. (18) ``two-to-one`` (see `learn.methods.ACTOR_LOSSES`)."""
     return actor_loss_of(method)(v_first, v_second)
 
 
@@ -79,21 +79,21 @@ def paper_depth(trees_before: int, total_timesteps: int, max_depth: int) -> int:
     return min(trees_before // c_d, max_depth)
 
 
-#: The polish settings (:class:`learn.config.TrainConfig`): free on resume until the polish
+#: The polish settings (`learn.config.TrainConfig`): free on resume until the polish
 #: begins; after that only ``polish_steps`` (where it stops) may change.
 _POLISH_FIELDS = ("polish_steps", "polish_lr", "polish_pairs", "polish_eval_every")
 
 
 class Trainer(RunLoop):
-    """Run Algorithm 1 for a :class:`TrainConfig` into a run directory (the loop:
-    :class:`learn.loop.RunLoop`)."""
+    """Run Algorithm 1 for a `TrainConfig` into a run directory (the loop:
+    [`learn.loop.RunLoop`][learn.loop.RunLoop])."""
 
     config_class = TrainConfig
     label = "train"
     free_on_resume = (*RunLoop.free_on_resume, *_POLISH_FIELDS)
     """A finished run may be resumed with polish settings (the polish starts after the
     budget, so it is the polish a new run with them would make); once the polish has
-    begun only ``polish_steps`` may change (:meth:`check_resume`)."""
+    begun only ``polish_steps`` may change (`check_resume`)."""
     recorded_on_resume = _POLISH_FIELDS
     """New polish settings are written into ``config.json`` when the resumed run starts."""
 
@@ -205,7 +205,7 @@ class Trainer(RunLoop):
 
     def update(self, s: torch.Tensor, g: torch.Tensor, c: torch.Tensor) -> tuple[float, float]:
         """``epochs`` passes of minibatch updates: critic (eq. 5), then actor (the method's
-        loss, eq. 6 / 17 / 18, plus the extra terms of :mod:`learn.methods`). Adds the
+        loss, eq. 6 / 17 / 18, plus the extra terms of `learn.methods`). Adds the
         terms' evaluations of C to the counters."""
         for term in self.terms:
             self.timesteps += term.prepare(self)
@@ -380,8 +380,8 @@ class Trainer(RunLoop):
         self.lr = self._set_lr()
 
     def iterate(self) -> None:
-        """Collect a batch of trees (the paper's timesteps), then :meth:`update`; after
-        the budget, one :meth:`polish_step`."""
+        """Collect a batch of trees (the paper's timesteps), then `update`; after
+        the budget, one `polish_step`."""
         if self._polishing():
             self.lr = self.cfg.polish_lr
             self._losses.append((float("nan"), self.polish_step()))
@@ -423,7 +423,7 @@ class Trainer(RunLoop):
 
 def train(cfg: TrainConfig, out: str | Path, resume: bool = False,
           progress: bool = True) -> TrainResult:
-    """Deprecated: :func:`learn.train_run` (the one entry point for every method) trains
+    """Deprecated: `learn.train_run` (the one entry point for every method) trains
     ``cfg`` the same way. Train a midpoint policy with ``cfg`` into run directory ``out``
     (``resume`` continues the run saved there, replaying exactly what an uninterrupted
     run does)."""
@@ -432,7 +432,7 @@ def train(cfg: TrainConfig, out: str | Path, resume: bool = False,
 
 
 def read_run_config(run_dir: str | Path) -> TrainConfig:
-    """The :class:`TrainConfig` saved in a run directory."""
+    """The [`TrainConfig`][learn.train.TrainConfig] saved in a run directory."""
     return TrainConfig.from_dict(read_config_section(run_dir))
 
 

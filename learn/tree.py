@@ -85,7 +85,7 @@ def td_lambda_targets(
     ``c_{i,j} = (1 - lam) (V(p_{i+1,2j}, p_{i+1,2j+1}) + V(p_{i+1,2j+1}, p_{i+1,2j+2}))
     + lam (c_{i+1,2j} + c_{i+1,2j+1})``
     (the children of pair ``(i, j)`` are the level-``i+1`` pairs ``2j`` and ``2j+1``).
-    ``lam = 1`` gives :func:`mc_targets`.
+    ``lam = 1`` gives `mc_targets`.
     """
     n = leaf_costs.shape[1]
     depth = n.bit_length() - 1

@@ -14,7 +14,7 @@ Public API::
     exp_map(metric, x, v, t=1.0, return_curve=False) -> ExpResult
     log_map(metric, x, y) -> LogResult
 
-Every result carries a status of one family (:mod:`solvers.status`): ``status.label`` is
+Every result carries a status of one family (`solvers.status`): ``status.label`` is
 what the API, JSON and the command line print.
 """
 

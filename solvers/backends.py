@@ -1,11 +1,11 @@
 """Array backends of the batched Newton solver: the few array operations it needs, on
 numpy (float64, CPU) and on torch tensors on any device.
 
-:func:`backend_for` maps a device (``None``: numpy; ``"cpu"``, ``"cuda"``, a
+`backend_for` maps a device (``None``: numpy; ``"cpu"``, ``"cuda"``, a
 ``torch.device``: torch float64 there) to a backend object; the solver
-(:mod:`solvers.newton`) and the block-tridiagonal linear algebra
-(:mod:`solvers.block_tridiagonal`) call only its methods (``asarray``, ``zeros``,
-``where``, ``cat``, ...) and the lowering it carries (:mod:`finsler.lowering`), so one
+(`solvers.newton`) and the block-tridiagonal linear algebra
+(`solvers.block_tridiagonal`) call only its methods (``asarray``, ``zeros``,
+``where``, ``cat``, ...) and the lowering it carries (`finsler.lowering`), so one
 code runs on both.
 """
 

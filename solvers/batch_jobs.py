@@ -1,12 +1,12 @@
-"""Many pairs in one call (:func:`solve_batch`): the pairs cut into chunks, the chunks solved
+"""Many pairs in one call (`solve_batch`): the pairs cut into chunks, the chunks solved
 in this process, in worker processes or as Ray tasks, every finished pair saved at once
 so an interrupted batch resumes.
 
-A chunk is one batched solve of its pairs (:func:`solvers.pairs.solve_pairs`; with
-``tol`` each pair refined on its own, :func:`solvers.tolerance.solve_to_tol`); a worker
-process rebuilds the metric from its :class:`~finsler.spec.MetricSpec` once
+A chunk is one batched solve of its pairs (`solvers.pairs.solve_pairs`; with
+``tol`` each pair refined on its own, `solvers.tolerance.solve_to_tol`); a worker
+process rebuilds the metric from its [`MetricSpec`][finsler.spec.MetricSpec] once
 (``spec.build()`` returns the registry's shared instance, with what it derived). The
-one vectorised Newton solve of many (pair, seed) problems is :mod:`solvers.batched`; this
+one vectorised Newton solve of many (pair, seed) problems is `solvers.batched`; this
 module only schedules and stores.
 """
 
@@ -56,7 +56,7 @@ def _solve_chunk(m: Metric, ks: Sequence[int], pairs: np.ndarray, n: int, plan: 
                  minmax: bool, inits: np.ndarray | None, global_seeds: bool,
                  tol: float | None, method: str, device: Any
                  ) -> list[tuple[int, GeodesicResult]]:
-    """The pairs of a chunk (checked by :func:`solve_batch`): one batched solve (each pair
+    """The pairs of a chunk (checked by `solve_batch`): one batched solve (each pair
     refined on its own with ``tol``)."""
     if tol is not None:
         return [(k, solve_to_tol(m, p[0], p[1], n, tol, TOL_MAX_SEGMENTS,
@@ -71,7 +71,7 @@ def _solve_chunk(m: Metric, ks: Sequence[int], pairs: np.ndarray, n: int, plan: 
     return list(zip(ks, res, strict=True))
 
 
-#: Rows (pair x seed problems) per batched Newton solve of :func:`solve_batch`: enough
+#: Rows (pair x seed problems) per batched Newton solve of `solve_batch`: enough
 #: that array operations dominate Python overhead (measured with ``benchmarks/peers.py
 #: --throughput``: Randers, 3 seeds per pair, 0.53 / 0.35 / 0.27 ms per pair with 192 /
 #: 384 / 1536 rows); the pairs of a chunk are saved together.
@@ -79,7 +79,7 @@ NEWTON_ROWS = 16384
 
 
 def _chunk_pairs(plan: SeedPlan, global_seeds: bool) -> int:
-    """Pairs per batched chunk: :data:`NEWTON_ROWS` over the plan's seeds per pair."""
+    """Pairs per batched chunk: `NEWTON_ROWS` over the plan's seeds per pair."""
     seeds = (1 + 2 * len(plan.bulges) + plan.random + int(plan.graph) + plan.restarts
              if global_seeds else 1)
     return int(np.clip(NEWTON_ROWS // max(seeds, 1), 16, 4096))
@@ -91,7 +91,7 @@ NEWTON_POOL_MIN = 1024
 
 
 class _BatchStore:
-    """Per-pair result files of a resumable :func:`solve_batch` (pickle, atomic rename)."""
+    """Per-pair result files of a resumable `solve_batch` (pickle, atomic rename)."""
 
     def __init__(self, folder: Any, metric: Metric, n: int, plan: SeedPlan, minmax: bool,
                  global_seeds: bool = True, tol: float | None = None):
@@ -173,7 +173,7 @@ def solve_batch(
     With ``ray_address`` (``"local"`` starts a local Ray instance of ``workers`` CPUs;
     ``"auto"`` or ``"HOST:6379"`` joins a running cluster) the pairs are solved as Ray
     tasks of ``chunk_size`` pairs (default: about four chunks per CPU of the cluster, at
-    most 64 pairs) by :mod:`solvers.distributed`; every finished chunk's pairs are saved
+    most 64 pairs) by `solvers.distributed`; every finished chunk's pairs are saved
     as the same parts as above, and the results equal the local ones.
 
     ``initial_paths`` ``(K, m+1, dim)``: one caller-given initial path per pair (e.g. a
@@ -186,20 +186,20 @@ def solve_batch(
     than the global seeds and worse on 8 of 100 Matsumoto pairs:
     ``benchmarks/results/warm_start-2026-11-28.md``).
     ``tol``: every pair solved to that relative accuracy of its length
-    (:func:`~solvers.geodesic.solve_geodesic`).
+    ([`solve_geodesic`][solvers.geodesic.solve_geodesic]).
 
-    ``method`` / ``device``: as in :func:`~solvers.geodesic.solve_geodesic`. With the
+    ``method`` / ``device``: as in [`solve_geodesic`][solvers.geodesic.solve_geodesic]. With the
     batched Newton method (the default where it covers the metric) the pairs are solved in
-    chunks of about :data:`NEWTON_ROWS` (pair, seed) problems, every problem of a chunk in
-    one batch; the default ``workers`` is then 1 below :data:`NEWTON_POOL_MIN` pairs (the
+    chunks of about `NEWTON_ROWS` (pair, seed) problems, every problem of a chunk in
+    one batch; the default ``workers`` is then 1 below `NEWTON_POOL_MIN` pairs (the
     batch is vectorised; processes pay off only for many chunks), else the CPU count.
 
-    ``strict=True`` raises :class:`SolverError` (the list of results attached) if a pair
+    ``strict=True`` raises `SolverError` (the list of results attached) if a pair
     did not converge (min-max included), after every pair was solved and saved; the default
     (``False``, as before) returns every result with its status. ``names``: how error
     messages name the starts and goals (the command line names ``--start`` / ``--goal``).
 
-    The input is checked here, once (:func:`_check_batch`); the chunks trust it.
+    The input is checked here, once (`_check_batch`); the chunks trust it.
     """
     job = check_batch(metric, pairs, segments, seeds=seeds, minmax=minmax, workers=workers,
                       ray_address=ray_address, chunk_size=chunk_size,
@@ -211,7 +211,7 @@ def solve_batch(
 def run_batch(job: BatchJob, *, progress: bool = True,
               checkpoint_dir: str | os.PathLike[str] | None = None,
               strict: bool = False) -> list[GeodesicResult]:
-    """:func:`solve_batch` of a checked :class:`BatchJob` (:func:`check_batch`): nothing
+    """`solve_batch` of a checked `BatchJob` (`check_batch`): nothing
     is checked again. A caller that must do something between the checks and the first
     solve (the command line checks its ``--out`` path there) calls the two steps."""
     if not isinstance(job, BatchJob):
@@ -231,7 +231,7 @@ def run_batch(job: BatchJob, *, progress: bool = True,
 
 @dataclass(frozen=True)
 class BatchJob:
-    """A batch's checked input (:func:`check_batch`): what :func:`run_batch` and the
+    """A batch's checked input (`check_batch`): what `run_batch` and the
     chunks take without checking again. ``pairs`` is read-only."""
 
     m: Metric
@@ -252,7 +252,7 @@ class BatchJob:
         return None if self.inits is None else self.inits[ks]
 
     def args(self, spec: MetricSpec, ks: list[int]) -> tuple:
-        """The arguments of :func:`_chunk_worker` for the pairs ``ks``."""
+        """The arguments of `_chunk_worker` for the pairs ``ks``."""
         return (spec, ks, self.pairs[ks], self.n, self.plan, self.minmax, self.inits_of(ks),
                 self.global_seeds, self.tol, self.method, self.device)
 
@@ -270,8 +270,8 @@ def check_batch(metric: Metric | str, pairs: Any, segments: int | None = None, *
                 device: Any = None,
                 names: tuple[str, str] = ("pairs[:, 0] (starts)", "pairs[:, 1] (goals)")
                 ) -> BatchJob:
-    """Step 1 of :func:`solve_batch` (same arguments): every input checked once, before any
-    work (and, with Ray, before any file is made); :func:`run_batch` solves the job."""
+    """Step 1 of `solve_batch` (same arguments): every input checked once, before any
+    work (and, with Ray, before any file is made); `run_batch` solves the job."""
     m = as_metric(metric)
     arr = check_pairs(m, pairs, names)
     n = check_segments(m, segments)
@@ -307,7 +307,7 @@ def check_batch(metric: Metric | str, pairs: Any, segments: int | None = None, *
 
 
 #: Pairs per chunk solved by IPOPT when the plan ends with warp rounds solved by the batched
-#: method (:attr:`SeedPlan.warps`): the pairs' IPOPT solves one after the other, then one warp
+#: method (`SeedPlan.warps`): the pairs' IPOPT solves one after the other, then one warp
 #: pass for all of them (a pair's rows never depend on the others'). Measured on 8 car-like
 #: tuning pairs at 256 segments, one thread: the warp pass 3.0 s per pair together against
 #: 4.1 s one pair at a time; the default on the first 20 tuning pairs (sample_pairs(carlike,
@@ -319,8 +319,8 @@ IPOPT_WARP_PAIRS = 8
 
 def _chunks(job: BatchJob, todo: list[int]) -> list[list[int]]:
     """Step 2: the pairs still to solve cut into chunks (one batched Newton solve each, of
-    about :data:`NEWTON_ROWS` problems; by IPOPT one pair each, or
-    :data:`IPOPT_WARP_PAIRS` when the plan's warps are batched; several per worker so
+    about `NEWTON_ROWS` problems; by IPOPT one pair each, or
+    `IPOPT_WARP_PAIRS` when the plan's warps are batched; several per worker so
     finished work is kept)."""
     size = 1
     if job.method == "newton":

@@ -1,10 +1,10 @@
 """Symmetric block-tridiagonal linear systems, vectorised over many systems at once: the
-Hessian solves of the batched Newton method (:mod:`solvers.newton`).
+Hessian solves of the batched Newton method (`solvers.newton`).
 
 Fields of small blocks are kept "structure of arrays": a vector field is a list of ``d``
 arrays, a matrix field a ``d x d`` list of arrays, every array ``(B, M)`` (``B`` systems
 of ``M`` blocks), so every block operation is a few elementwise array operations on a
-backend (:mod:`solvers.backends`). :func:`block_tridiagonal_solve` factorises by block
+backend (`solvers.backends`). `block_tridiagonal_solve` factorises by block
 Thomas elimination (short systems; blocks larger than 2 x 2 as dense ``(B, d, d)``
 stacks, LAPACK's Cholesky where every block is definite) or block cyclic reduction (long
 ones: ``log2 M`` levels), optionally shifting pivot blocks that are not positive definite
@@ -169,7 +169,7 @@ def block_tridiagonal_solve(ops: Any, diag: Mat, off: Mat, rhs: Vec, scale: Any 
     system of ``M`` blocks takes ``log2 M`` levels of vectorised block operations. It is
     block Gaussian elimination in an odd-even order: a system is positive definite
     exactly when every pivot block met is. With ``local`` a pivot block that is not
-    definite is shifted (:func:`_chol`): that solves ``(H + E) x = rhs`` with ``E`` block
+    definite is shifted (`_chol`): that solves ``(H + E) x = rhs`` with ``E`` block
     diagonal, non-zero only where ``H`` needed it, and positive definite.
     """
     b, m = rhs[0].shape
@@ -204,7 +204,7 @@ def _cyclic_padded(ops: Any, diag: Mat, off: Mat, rhs: Vec, scale: Any, local: b
 def _inv_sym(ops: Any, a: Mat, scale: Any, local: bool) -> tuple[Mat, Any]:
     """Inverses of a field of symmetric 2 x 2 blocks (every entry ``(K,)``) -> (inverses,
     definite). With ``local``, blocks that are not positive definite are first shifted by
-    ``tau I`` (Gershgorin bound; see :func:`_chol`)."""
+    ``tau I`` (Gershgorin bound; see `_chol`)."""
     p, q, r = a[0][0], a[0][1], a[1][1]
     det = p * r - q * q
     tiny = 1e-13 * scale
@@ -222,7 +222,7 @@ def _inv_sym(ops: Any, a: Mat, scale: Any, local: bool) -> tuple[Mat, Any]:
 
 def _chol_dense(ops: Any, a: Any, tiny: Any) -> tuple[Any, Any]:
     """Cholesky factors of dense symmetric blocks ``(K, d, d)`` -> (lower factors,
-    definite ``(K,)``): the pivots of :func:`_chol_plain` (not positive relative to
+    definite ``(K,)``): the pivots of `_chol_plain` (not positive relative to
     ``tiny`` ``(K,)``: not definite, replaced by 1), one column at a time over all blocks."""
     d = a.shape[-1]
     low = a * 0.0
@@ -243,7 +243,7 @@ def _inv_dense(ops: Any, a: Any, scale: Any, local: bool) -> tuple[Any, Any]:
     """Inverses of dense symmetric blocks ``(K, d, d)`` -> (inverses, definite ``(K,)``),
     by the Cholesky factor; with ``local`` the blocks that are not positive definite are
     shifted by ``tau I`` first, ``tau`` from Gershgorin's bound of the smallest eigenvalue
-    (as :func:`_chol`). Every block by the same arithmetic, whatever the others are: a
+    (as `_chol`). Every block by the same arithmetic, whatever the others are: a
     block's inverse never depends on the stack it is in (LAPACK where the whole stack was
     definite, pivot by pivot otherwise, sent one car-like path to another basin when a
     pair was solved beside others). Pivot by pivot is also the faster one from ~1000
@@ -312,11 +312,11 @@ def _thomas(ops: Any, a: Mat, off: Mat, r: Vec, scale: Any, local: bool) -> tupl
 
 def _thomas2(ops: Any, a: Mat, off: Mat, r: Vec, scale: Any, local: bool
              ) -> tuple[Vec, Any]:
-    """:func:`_thomas` written out for 2 x 2 blocks (the 2-D metrics: the common case,
+    """`_thomas` written out for 2 x 2 blocks (the 2-D metrics: the common case,
     where the generic loops' Python overhead is a third of the solve). The same
-    arithmetic as :func:`_inv_sym` and the generic elimination, entry by entry; the pivot
+    arithmetic as `_inv_sym` and the generic elimination, entry by entry; the pivot
     blocks are inverted in closed form, and only where one of them is not definite (rare)
-    does :func:`_inv_sym` shift them block by block (a step is ~45 array operations on
+    does `_inv_sym` shift them block by block (a step is ~45 array operations on
     ``B`` entries instead of ~70)."""
     m = r[0].shape[1]
     if ops.name == "numpy" and r[0].shape[0] <= THOMAS_ROWS_MAX:
@@ -393,8 +393,8 @@ def _back_substitute2(zs: list, gs: list, x0: list, x1: list) -> tuple[list, lis
     return x0, x1
 
 
-#: Up to this many systems of 2 x 2 blocks (numpy), :func:`_thomas2` runs system by system
-#: on Python floats (:func:`_thomas2_rows`): the same IEEE operations in the same order, so
+#: Up to this many systems of 2 x 2 blocks (numpy), `_thomas2` runs system by system
+#: on Python floats (`_thomas2_rows`): the same IEEE operations in the same order, so
 #: bitwise the same solutions, without the ~1 us per array operation that makes the
 #: vectorised elimination cost about the same for 1 system as for 20 (63 blocks: ~0.08
 #: ms per system against ~1.3 ms per call; the last iterations of a batched Newton solve
@@ -403,8 +403,8 @@ THOMAS_ROWS_MAX = 16
 
 
 def _thomas2_rows(a: Mat, off: Mat, r: Vec, scale: Any, local: bool) -> tuple[Vec, Any]:
-    """:func:`_thomas2` on numpy arrays, one system at a time in Python floats (a few
-    systems): every operation is the vectorised one's (:func:`_inv_sym` where a pivot
+    """`_thomas2` on numpy arrays, one system at a time in Python floats (a few
+    systems): every operation is the vectorised one's (`_inv_sym` where a pivot
     block is not definite), element by element, so the results are identical."""
     d00, d01, d11 = a[0][0].tolist(), a[0][1].tolist(), a[1][1].tolist()
     o00, o01, o10, o11 = (x.tolist() for x in (off[0][0], off[0][1], off[1][0], off[1][1]))
@@ -492,11 +492,11 @@ def _cyclic_reduction(ops: Any, a: Mat, off: Mat, r: Vec, scale: Any, local: boo
 def block_tridiagonal_solve_dense(diag: np.ndarray, off: np.ndarray, rhs: np.ndarray,
                                   scale: np.ndarray, local: bool = False
                                   ) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`block_tridiagonal_solve` by cyclic reduction on dense stacks (numpy): ``diag``
+    """`block_tridiagonal_solve` by cyclic reduction on dense stacks (numpy): ``diag``
     and ``off`` ``(B, M, d, d)`` (``off[:, j]`` the block of rows ``j``, columns ``j + 1``;
     ``off[:, M - 1]`` ignored), ``rhs`` ``(B, M, d)``, ``scale`` ``(B,)``. The same
     elimination order and pivot shifts as the structure-of-arrays cyclic reduction
-    (:func:`_inv_dense`: Gershgorin's bound, as :func:`_chol`), equal to rounding, every
+    (`_inv_dense`: Gershgorin's bound, as `_chol`), equal to rounding, every
     block operation one batched matrix product: fewer array operations (a level ~15
     instead of ~400), each on more data, so faster for a few systems and slower for many.
     Returns (solution ``(B, M, d)``, definite ``(B,)``)."""

@@ -3,7 +3,7 @@
 Lower bound by convex duality. If a potential ``phi`` satisfies ``dphi_z(v) <= F(z, v)`` for
 every point ``z`` and every vector ``v`` (the dual norm ``F*(z, dphi_z) <= 1``), then for
 every curve ``gamma`` from ``x`` to ``y``, ``phi(y) - phi(x) = int dphi(gamma') <=
-int F(gamma, gamma')``, hence ``d(x, y) >= phi(y) - phi(x)``. :func:`certify` maximises
+int F(gamma, gamma')``, hence ``d(x, y) >= phi(y) - phi(x)``. `certify` maximises
 ``phi(goal) - phi(start)`` over continuous piecewise-quadratic (P2) potentials on a Delaunay
 triangulation that covers the whole domain (a convex polygon containing it), a linear
 program solved with cvxpy (Clarabel).
@@ -21,7 +21,7 @@ its linear interpolant by at most ``Hz R**2 / 2`` (``Hz`` >= the largest eigenva
 and along a chord ``F(z, w(t))`` lies above the chord's linear interpolant minus
 ``Ht / 8`` (``Ht`` >= ``d2/dt2 F(z, w(t))`` on ``T`` x the arc). Neither bound needs
 ``F(z, .)`` to be convex. ``Hz`` and ``Ht`` are PROVEN upper bounds: interval enclosures
-(:mod:`finsler.intervals`, outward rounding) of the CasADi Hessians of the metric's own
+(`finsler.intervals`, outward rounding) of the CasADi Hessians of the metric's own
 ``F`` over the triangle's bounding box (x the chord's box for ``Ht``), the tighter of the
 natural extension and the mean-value form (third derivatives over the box); where a
 direction's correction is above ``SPLIT_FRACTION`` of F and its enclosure overestimates
@@ -36,15 +36,15 @@ sampled rows themselves, adding violated directions in rounds; every round's pot
 checked against ALL rows and divided by the largest ratio ``(grad phi . v_k) / bound``, so
 the returned lower bound satisfies every row exactly whatever the LP solver's tolerance
 (a round short of the target only by a few broken rows is first mended locally,
-:mod:`solvers.certify_repair`, and checked the same way).
+`solvers.certify_repair`, and checked the same way).
 
 Convexity: where ``F(z, .)`` is not convex (Matsumoto outside ``|p| = 1/(2 sqrt 3)``) the
 condition ``dphi(v) <= F(z, v)`` for all ``v`` is the same as for the convexification
 ``F**(z, .)``; the lower bound is valid for the distance (an infimum of lengths, which the
 convexification does not change), and the result says which case applies.
 
-Upper bound: the length of the solver's path (:func:`solvers.solve_geodesic`), PROVEN by
-interval arithmetic (:meth:`finsler.Metric.path_length_bounds`: midpoint rule plus an
+Upper bound: the length of the solver's path (`solvers.solve_geodesic`), PROVEN by
+interval arithmetic (`finsler.Metric.path_length_bounds`: midpoint rule plus an
 enclosure of the second derivative along each piece); ``length`` / ``length_error`` also
 give the adaptive-quadrature estimate of the same length.
 
@@ -55,14 +55,14 @@ starting from a mesh graded around the solver's path, until the gap reaches
 
 Region: the rows are needed only on the triangles a curve no longer than the upper bound
 can reach (a proven speed floor ``F >= m |v|`` bounds the region by an ellipse around start
-and goal, :mod:`solvers.certify_reach`); the others are dropped from the mesh, and the bound
+and goal, `solvers.certify_reach`); the others are dropped from the mesh, and the bound
 is then ``min(phi(goal) - phi(start), upper)``.
 
 Layout: this module holds the refinement loop; the bound code (values of F, enclosures
 of its second derivatives, bounded first over groups of directions and then direction by
 direction where the LP needs it, the corrections and rows) is in
-:mod:`solvers.certify_bounds`, the meshes in :mod:`solvers.certify_mesh`, the LPs in
-:mod:`solvers.certify_lp`.
+`solvers.certify_bounds`, the meshes in `solvers.certify_mesh`, the LPs in
+`solvers.certify_lp`.
 """
 
 from __future__ import annotations
@@ -111,7 +111,7 @@ _LOG = logging.getLogger(__name__)
 
 #: Refinements of triangles whose corrections exceed half of F, before the first LP.
 MAX_PRE_REFINE = 8
-#: Goal-oriented marking (:func:`_marked`): refine only what brings the dual-weighted
+#: Goal-oriented marking (`_marked`): refine only what brings the dual-weighted
 #: corrections to ``GOAL_SAFETY`` x the target, assuming a refined triangle's weight falls
 #: by ``GOAL_RHO`` (measured 3.3-4.3 on tuning pairs), never less than ``GOAL_FLOOR``.
 GOAL_MARKING = True
@@ -122,7 +122,7 @@ GOAL_FLOOR = 0.3
 
 @dataclass(frozen=True)
 class MeshSpec:
-    """Mesh and refinement settings of :func:`certify`.
+    """Mesh and refinement settings of [`certify`][solvers.certify.certify].
 
     Lengths are in coordinates. The first mesh has spacing ``h_path`` within ``corridor`` of
     the solver's path, growing by ``grade`` per unit distance beyond, up to ``h_far``.
@@ -149,7 +149,7 @@ class MeshSpec:
     (seed 20261210, pairs 9 and 11) stop at 1.65e-2 after 8 and reach 1e-2 after 10."""
     mark_fraction: float = 0.9
     """Refine the triangles that carry this fraction of the dual-weighted corrections (less
-    once they are near the target: only what the target needs, :data:`GOAL_MARKING`)."""
+    once they are near the target: only what the target needs, `GOAL_MARKING`)."""
     segments: int | None = None
     """Segments of the solver's path (the upper bound); default: 4 x the task's 2**D."""
 
@@ -218,24 +218,24 @@ def certify(
 ) -> CertifyResult:
     """Certified interval ``lower <= d(start, goal) <= upper`` on a 2-D metric (a
     conformal metric of dimension > 3, hook ``conformal_factor_sx``, goes to
-    :func:`solvers.certify_conformal_split.certify_conformal_best`: a
+    `solvers.certify_conformal_split.certify_conformal_best`: a
     ``SplitCertifyResult``, the best of its bounds).
 
-    ``start``, ``goal``: points ``(2,)`` in the domain. ``mesh``: a :class:`MeshSpec` or a
+    ``start``, ``goal``: points ``(2,)`` in the domain. ``mesh``: a `MeshSpec` or a
     preset name (``"coarse"``, ``"default"`` (also for None), ``"fine"``). ``path``
     ``(n+1, 2)``: a curve
     from start to goal for the upper bound and the first mesh (default: solved with
-    :func:`solvers.solve_geodesic` at ``mesh.segments`` segments). ``time_limit``
+    `solvers.solve_geodesic` at ``mesh.segments`` segments). ``time_limit``
     (seconds): no new refinement round starts after it. The upper bound is the path's
     length plus its quadrature error estimate; the lower bound is the dual bound
-    described in the module docstring. Raises :class:`InputError` for a metric that is
+    described in the module docstring. Raises `InputError` for a metric that is
     not 2-D (or whose domain is not a box or a disk), points outside the domain, or bad
-    options. ``strict=True`` raises :class:`SolverError` unless the status is
+    options. ``strict=True`` raises [`SolverError`][solvers.SolverError] unless the status is
     ``CERTIFIED`` (the interval is proven either way).
 
-    The input is checked here, once (:func:`_check_request`); the steps below trust it:
-    :func:`_upper_bound` (the solve, or the given path), :func:`_lower_bound` (the
-    refinement rounds), :func:`_outcome` (status and message) and :func:`_result`.
+    The input is checked here, once (`_check_request`); the steps below trust it:
+    `_upper_bound` (the solve, or the given path), `_lower_bound` (the
+    refinement rounds), `_outcome` (status and message) and `_result`.
     """
     t_start = time.perf_counter()
     m = as_metric(metric)
@@ -360,7 +360,7 @@ class _Lower:
     t_lp: float
     data: _PointData
     reach: tuple[float, float] = (0.0, math.inf)
-    """The proven speed floor ``m`` and the reach ``upper / m`` (:mod:`certify_reach`)."""
+    """The proven speed floor ``m`` and the reach ``upper / m`` (`certify_reach`)."""
 
 
 def _pre_refine(msh: _Mesh, data: _PointData, spec: MeshSpec,
@@ -368,7 +368,7 @@ def _pre_refine(msh: _Mesh, data: _PointData, spec: MeshSpec,
                 ) -> tuple[_Mesh, _RowBounds, tuple[CertifyStatus, str] | None, float]:
     """Row bounds of ``msh``; triangles whose corrections eat half of F somewhere (after
     tightening those rows direction by direction) are refined before any LP (at most
-    :data:`MAX_PRE_REFINE` times) -> the mesh, its rows, a failure if the corrections do
+    `MAX_PRE_REFINE` times) -> the mesh, its rows, a failure if the corrections do
     not shrink, the meshing seconds."""
     t_mesh = 0.0
     failure: tuple[CertifyStatus, str] | None = None
@@ -438,7 +438,7 @@ def _marked(lp: dict[str, Any], corr: np.ndarray, n_tri: int, spec: MeshSpec,
 def _last_round(lp: dict[str, Any], corr: np.ndarray, msh: _Mesh, spec: MeshSpec,
                 upper: float) -> bool:
     """Whether the refinement would stop after this LP (nothing to mark, or too many
-    triangles): then its rounds go on to the end (:func:`_solve_lp` without ``settle``)."""
+    triangles): then its rounds go on to the end (`_solve_lp` without ``settle``)."""
     marked = _marked(lp, corr, msh.n_tri, spec, upper)
     return marked is None or msh.n_tri + 3 * len(marked) > spec.max_triangles
 
@@ -530,7 +530,7 @@ def _outcome(low: _Lower) -> tuple[str, CertifyStatus, str]:
 
 def _result(m: Metric, s: np.ndarray, g: np.ndarray, spec: MeshSpec, poly: np.ndarray,
             up: _Upper, low: _Lower, t_start: float) -> CertifyResult:
-    """The :class:`CertifyResult` of the bounds found (the trivial lower bound 0 if the
+    """The `CertifyResult` of the bounds found (the trivial lower bound 0 if the
     first round failed)."""
     stopped_by, status, message = _outcome(low)
     best = low.best

@@ -1,8 +1,8 @@
-"""The bounds behind the rows of :func:`solvers.certify.certify` (2-D): values of F at the
+"""The bounds behind the rows of `solvers.certify.certify` (2-D): values of F at the
 mesh points, interval enclosures of F's second derivatives over each triangle, the
 second-order corrections, and the rows ``b = F - corr`` themselves.
 
-Split out of :mod:`solvers.certify` (below 800 lines; one home per idea). The rule each
+Split out of `solvers.certify` (below 800 lines; one home per idea). The rule each
 bound follows is stated in that module's docstring: ``Hz`` >= the largest eigenvalue of
 ``Hess_z F(., v_k)`` on a triangle, ``Ht`` >= ``d2/dt2 F(z, w(t))`` along the chord from
 ``v_k`` to ``v_{k+1}``, both interval enclosures (outward rounding) over the triangle's
@@ -10,14 +10,14 @@ bounding box, split into sub-boxes where they are loose.
 
 Groups of directions. With many sampled directions (the fine preset's 512), one enclosure
 per triangle and direction is most of a certificate's bound time, yet only about one row
-in ten is ever tight or nearly so. :class:`_PointData` therefore first bounds each triangle
-over GROUPS of consecutive directions (arcs of at most :data:`GROUP_ARC`; the enclosure
+in ten is ever tight or nearly so. `_PointData` therefore first bounds each triangle
+over GROUPS of consecutive directions (arcs of at most `GROUP_ARC`; the enclosure
 takes ``v`` over the box of the group's directions and the chord points and vectors over
-the boxes of its chords, :func:`_chord_boxes`), a proven bound for every direction of the
-group, and :meth:`_PointData.tighten` bounds single directions on demand, keeping the
-smaller of the two proven bounds. :class:`_RowBounds` holds a mesh's rows and tightens in
+the boxes of its chords, `_chord_boxes`), a proven bound for every direction of the
+group, and `_PointData.tighten` bounds single directions on demand, keeping the
+smaller of the two proven bounds. `_RowBounds` holds a mesh's rows and tightens in
 place the rows the LP uses and those a potential nearly fills
-(:func:`solvers.certify_lp._solve_lp` calls it), so the LP sees the same bounds as
+(`solvers.certify_lp._solve_lp` calls it), so the LP sees the same bounds as
 direction-by-direction enclosures wherever they matter. A row left at its group's bound
 is only harder to satisfy: every bound the certificate reports stays proven.
 """
@@ -54,7 +54,7 @@ GROUP_ARC = 2 * math.pi / 128
 
 def direction_group(k: int) -> int:
     """The largest divisor ``g`` of ``k`` whose arc ``2 pi g / k`` is at most
-    :data:`GROUP_ARC` (1, one direction at a time, where directions are sparser)."""
+    `GROUP_ARC` (1, one direction at a time, where directions are sparser)."""
     return max([1] + [g for g in range(2, k + 1) if k % g == 0
                       and g * 2 * math.pi / k <= GROUP_ARC * (1 + 1e-12)])
 
@@ -71,16 +71,16 @@ def _second_derivatives(metric: Metric) -> tuple[LoweredFunction, ...]:
       along a chord of direction ``d``) and its gradient in ``(x, v)``;
     * ``(x, v) -> h`` and ``(x, v, d) -> q`` alone (the centres of the mean-value forms).
 
-    Built once per metric, in :meth:`finsler.Metric.derived` (the metric's one cache of
+    Built once per metric, in `finsler.Metric.derived` (the metric's one cache of
     derived geometry). The values of F themselves are the metric's
-    :attr:`~finsler.Metric.lowered_F`.
+    `lowered_F`.
     """
     return metric.derived("certify.second_derivatives",
                           lambda: _lower_second_derivatives(metric))
 
 
 def _lower_second_derivatives(metric: Metric) -> tuple[LoweredFunction, ...]:
-    """Build :func:`_second_derivatives` (CasADi Hessians of the metric's own ``F``)."""
+    """Build `_second_derivatives` (CasADi Hessians of the metric's own ``F``)."""
     x = ca.SX.sym("x", 2)
     v = ca.SX.sym("v", 2)
     d = ca.SX.sym("d", 2)
@@ -138,7 +138,7 @@ def _bounds_on_boxes(metric: Metric, lo: np.ndarray, hi: np.ndarray, v: np.ndarr
     ``z`` in the box and ``u`` on the chord from ``v`` to ``w`` (``d = w - v``), both >= 0
     (``inf`` where an enclosure is not finite). Each is the tighter of the natural interval
     extension and the mean-value form (interval arithmetic with outward rounding,
-    :mod:`finsler.intervals`). ``with_centre``: also the same two quantities at the box's
+    `finsler.intervals`). ``with_centre``: also the same two quantities at the box's
     centre (what the bounds would be without any variation over the box)."""
     return _bounds_on_dir_boxes(metric, lo, hi, _chord_boxes(v[None], w[None]), with_centre)
 
@@ -157,9 +157,9 @@ def _chord_boxes(v: np.ndarray, w: np.ndarray) -> np.ndarray:
 
 def _bounds_on_dir_boxes(metric: Metric, lo: np.ndarray, hi: np.ndarray, db: np.ndarray,
                          with_centre: bool = False) -> tuple[np.ndarray, ...]:
-    """:func:`_bounds_on_boxes` over boxes of directions too: ``Hz`` for every ``v`` of
+    """`_bounds_on_boxes` over boxes of directions too: ``Hz`` for every ``v`` of
     ``db[:, 0:2]``, ``Ht`` for every chord point ``u`` in ``db[:, 2:4]`` and chord vector
-    ``d`` in ``db[:, 4:6]`` (:func:`_chord_boxes`)."""
+    ``d`` in ``db[:, 4:6]`` (`_chord_boxes`)."""
     fz, ft, fz_centre, ft_centre = _second_derivatives(metric)
     xbox = Interval(lo, hi)
     centre = 0.5 * (lo + hi)
@@ -219,14 +219,14 @@ def _index_new(keys: list[bytes], index: dict[bytes, int]) -> list[int]:
 class _PointData:
     """Per-point values ``F(p, v_k)`` ``(K,)`` (lowered by a few ulp), computed once per
     point and reused across refinement rounds, and per-triangle second-order bounds
-    (:func:`_bounds_on_boxes` on the triangle's bounding box; where a direction's
+    (`_bounds_on_boxes` on the triangle's bounding box; where a direction's
     correction is above ``SPLIT_FRACTION`` of F and its enclosure above
     ``SPLIT_OVERESTIMATE`` times its centre value (or infinite), on the 2 x 2 sub-boxes
     that meet the triangle, down to ``SPLIT_DEPTH`` levels), cached by the triangle's
     vertices. ``group``: the bounds are first taken over groups of that many consecutive
-    directions (:func:`_chord_boxes`; ``tight`` marks the elements since bounded one
-    direction at a time by :meth:`tighten`). A group's chord boxes must stay clear of the
-    origin (arcs well below 90 degrees): :func:`direction_group` keeps them at most 2.8
+    directions (`_chord_boxes`; ``tight`` marks the elements since bounded one
+    direction at a time by `tighten`). A group's chord boxes must stay clear of the
+    origin (arcs well below 90 degrees): `direction_group` keeps them at most 2.8
     degrees."""
 
     def __init__(self, metric: Metric, k: int, group: int = 1) -> None:
@@ -385,7 +385,7 @@ def _row_bounds(mesh: _Mesh, data: _PointData) -> tuple[np.ndarray, np.ndarray]:
 
 class _RowBounds:
     """The rows of a mesh: ``b`` ``(T, 3, K)`` and ``corr`` ``(T, K)`` from the data's
-    bounds (by groups of directions), tightened in place by :meth:`tighten`."""
+    bounds (by groups of directions), tightened in place by `tighten`."""
 
     def __init__(self, mesh: _Mesh, data: _PointData) -> None:
         vert_rows = data.rows(mesh.points)

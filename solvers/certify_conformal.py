@@ -1,10 +1,10 @@
 """Sound lower bounds of distances for conformal metrics in any dimension (issue 46, item 3).
 
 For a conformal metric ``F(q, v) = f(q) |v|`` (the hook ``conformal_factor_sx``; the Panda
-pole metric, eq. 60, is one in 7-D) :func:`certify_conformal` proves ``lower <= d(x, y) <=
+pole metric, eq. 60, is one in 7-D) `certify_conformal` proves ``lower <= d(x, y) <=
 upper``. The upper bound is the solver's path length, proven by interval arithmetic
-(:meth:`finsler.Metric.path_length_bounds`). The lower bound needs only enclosures of ``f``
-over boxes (:func:`finsler.intervals.enclose`, outward rounding) and three facts:
+(`finsler.Metric.path_length_bounds`). The lower bound needs only enclosures of ``f``
+over boxes (`finsler.intervals.enclose`, outward rounding) and three facts:
 
 1. **The region.** A path of length at most ``U`` (the upper bound) on which ``f >= m`` has
    Euclidean length at most ``U / m``, so it lies in the ellipsoid ``E = {q : |q - x| +
@@ -44,13 +44,13 @@ region's smallest bound ``m`` down, are bisected along their widest side each ro
 the work budget ``max_boxes`` (boxes enclosed in all): budgets, never wall clock, decide
 the result.
 
-Parts and projections (``part``, used by :mod:`solvers.certify_conformal_split`): the same
+Parts and projections (``part``, used by `solvers.certify_conformal_split`): the same
 machinery bounds the length of a part ``a <= f`` of the factor over the paths of ``F``-length
 at most ``U``, and can take coordinates over their whole range (the factor's minimum over
 them: fewer dimensions, those coordinates then free with the momentum).
 
 Limits: the bound is only as good as the enclosures of ``f`` over boxes (affine arithmetic,
-:mod:`finsler.affine`: about 1 % below the true minimum on 0.1-rad Panda boxes, 3 % on
+`finsler.affine`: about 1 % below the true minimum on 0.1-rad Panda boxes, 3 % on
 0.2-rad ones) and as the ``(s, r)`` reduction, which keeps only the distance to the chord's
 line: two regions at the same ``(s, r)`` share one bound. In 6-D the cells next to the
 chord meet boxes whose ``(s, r)`` range spills over them: on Panda tuning pair 3 of seed
@@ -58,7 +58,7 @@ chord meet boxes whose ``(s, r)`` range spills over them: on Panda tuning pair 3
 (14-16, where the factor's true minimum within 0.4 rad of the chord's middle is about 33),
 and the bound stays near the trivial one's ceiling (0.560 of the upper bound at 3e5 and at
 1e6 boxes with ``r`` ranges of centre -+ half-diagonal; 0.54 with the tighter ranges of
-:func:`_box_sr` and ``SPLIT_ALIGN``, which lift nearly straight pairs instead: tuning pair
+`_box_sr` and ``SPLIT_ALIGN``, which lift nearly straight pairs instead: tuning pair
 0, 0.888 -> 0.930 at 1.5e5 boxes). Boxes aligned with the
 chord (exact ``(s, r)`` ranges) were tried and did worse (0.455 at 3e5: the rotated boxes
 are larger in the joints). It proves a lower bound, not a tight interval; the ratio also
@@ -114,13 +114,13 @@ MIN_SPLIT = 2000
 #: with 10, 83.3 (pair 1) with 100.
 SPLIT_ALIGN = 10.0
 #: Box enclosures of the ``"coarse"`` preset (all runs of
-#: :func:`solvers.certify_conformal_split.certify_conformal_best` together).
+#: `solvers.certify_conformal_split.certify_conformal_best` together).
 COARSE_BOXES = 100_000
 
 
 @dataclass(frozen=True)
 class ConformalSpec:
-    """Work budgets and resolution of :func:`certify_conformal`."""
+    """Work budgets and resolution of `certify_conformal`."""
 
     max_boxes: int = 2_000_000
     """Budget: boxes enclosed in all (each split encloses two)."""
@@ -163,7 +163,7 @@ class ConformalSpec:
 
     @classmethod
     def preset(cls, name: str) -> ConformalSpec:
-        """The presets by name, as :class:`solvers.certify.MeshSpec`'s: ``"coarse"`` (a
+        """The presets by name, as `solvers.certify.MeshSpec`'s: ``"coarse"`` (a
         work budget of ``COARSE_BOXES`` box enclosures for all runs together: the quick
         report's), ``"default"`` (the defaults above) or ``"fine"`` (4 x their boxes)."""
         presets = {"coarse": cls(max_boxes=COARSE_BOXES), "default": cls(),
@@ -383,11 +383,11 @@ def certify_conformal(metric: Metric | str, start: Any, goal: Any,
     """Proven interval ``lower <= d(start, goal) <= upper`` on a conformal metric of any
     dimension (one providing the hook ``conformal_factor_sx``); see the module docstring
     for the method. ``path`` ``(n+1, dim)``: a curve from start to goal for the upper
-    bound (default: :func:`solvers.solve_geodesic` at ``spec.segments`` segments).
-    Raises :class:`InputError` for a metric without the hook, points outside the domain,
+    bound (default: `solvers.solve_geodesic` at ``spec.segments`` segments).
+    Raises `InputError` for a metric without the hook, points outside the domain,
     start == goal, or a domain that is unbounded.
 
-    ``part`` ``(factor, key, euclid, project)``, for :mod:`solvers.certify_conformal_split`: bound
+    ``part`` ``(factor, key, euclid, project)``, for `solvers.certify_conformal_split`: bound
     the length ``int a(q) |q'|`` of the part ``a = factor(q) <= f`` (a callable ``SX ->
     SX``, cached under ``key``) over the paths whose full Euclidean length is at most
     ``euclid`` (those of ``F``-length at most ``upper``: the region is that ellipsoid);

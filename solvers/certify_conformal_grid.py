@@ -1,12 +1,12 @@
-"""The plane step of :mod:`solvers.certify_conformal`: a verified piecewise-linear potential
+"""The plane step of `solvers.certify_conformal`: a verified piecewise-linear potential
 on a grid of ``(s, r)`` cells (``s`` along the chord, ``r`` the distance from its line).
 
-Given a lower bound ``g`` of the conformal factor per cell, :func:`potential` maximises
+Given a lower bound ``g`` of the conformal factor per cell, `potential` maximises
 ``Phi(goal) - Phi(start)`` subject to ``|grad Phi| <= g`` on every triangle (a second-order
 cone program through cvxpy), checks every gradient of the float64 solution exactly and
 divides ``Phi`` by the largest ratio, so the bound never rests on the solver's tolerance;
-:func:`best_potential` adds the free (cyclic) coordinates' momentum (Clairaut). See
-:mod:`solvers.certify_conformal` for why ``Phi(goal) - Phi(start)`` bounds the distance.
+`best_potential` adds the free (cyclic) coordinates' momentum (Clairaut). See
+`solvers.certify_conformal` for why ``Phi(goal) - Phi(start)`` bounds the distance.
 """
 
 from __future__ import annotations

@@ -4,7 +4,7 @@ When the factor is a sum ``f = sum_k a_k`` of nonnegative parts, a path's length
 same way, ``int f |q'| = sum_k int a_k |q'|``, so ``d(x, y) >= sum_k lower_k`` where
 ``lower_k`` bounds the ``a_k``-length of every path that can matter (those of ``F``-length
 at most the upper bound ``U``). A part depending on fewer coordinates is bounded in fewer
-dimensions, where the boxes of :func:`solvers.certify_conformal.certify_conformal` resolve
+dimensions, where the boxes of `solvers.certify_conformal.certify_conformal` resolve
 it: its other coordinates are cyclic for it (Clairaut's momentum), and its region is the
 ellipsoid of paths whose Euclidean length is at most ``U / m`` (``m`` the smallest ``f``
 the full run proved over its region). A constant part ``c`` contributes exactly ``c |y - x|``.
@@ -41,9 +41,9 @@ Grouping (default): parts whose coordinates are nested (Panda: ``q1, q2`` in ``q
 and they no longer disagree. Tuning pair 3 of seed 20261150, 1.5e5 boxes per part: the
 four parts 0.642 of the upper bound (7.5e4 each), the two groups 0.684.
 
-Front door: :func:`certify_conformal_best` (what :func:`solvers.certify` and ``geodesics
+Front door: `certify_conformal_best` (what `solvers.certify` and ``geodesics
 certify`` run on a conformal metric of dimension > 3) shares one work budget among the
-runs and returns a :class:`SplitCertifyResult` (a :class:`ConformalCertifyResult` whose
+runs and returns a `SplitCertifyResult` (a `ConformalCertifyResult` whose
 bound is the best of the three) whether or not the factor has parts.
 """
 
@@ -74,7 +74,7 @@ _SLACK = 1e-9
 
 @dataclass
 class SplitCertifyResult(ConformalCertifyResult):
-    """A :class:`ConformalCertifyResult` (its fields those of the full run, except the
+    """A `ConformalCertifyResult` (its fields those of the full run, except the
     bound and the work, which are the combination's) with the runs it combines: ``full``
     (the whole factor in all its coordinates), the split bound ``split_lower`` (the sum of
     the parts' bounds ``parts``, part ``k`` in ``part_dims[k]`` coordinates with the share
@@ -338,9 +338,9 @@ def certify_conformal_best(metric: Metric | str, start: Any, goal: Any,
                            spec: ConformalSpec | None = None, *, path: Any = None
                            ) -> SplitCertifyResult:
     """The best sound lower bound this toolkit has for a conformal metric
-    (:func:`solvers.certify` and ``geodesics certify`` use it): the split bound where the
+    (`solvers.certify` and ``geodesics certify`` use it): the split bound where the
     factor is a sum of parts or depends on more than 4 coordinates, else the full run
-    alone, always as a :class:`SplitCertifyResult`. ``spec.max_boxes`` is the work budget
+    alone, always as a `SplitCertifyResult`. ``spec.max_boxes`` is the work budget
     of all runs together, shared as ``BUDGET_WEIGHTS`` (full run : each part : whole
     factor projected); the other settings apply to every run."""
     m = as_metric(metric)

@@ -1,7 +1,7 @@
 """The domain's constraints over boxes, for the certificates: a box that certainly misses
 the domain holds no point of any path, so no potential needs to be verified on it.
 
-Used by :mod:`solvers.certify_conformal` (2-D) and :mod:`solvers.certify_nd_parts` (3-D
+Used by `solvers.certify_conformal` (2-D) and `solvers.certify_nd_parts` (3-D
 and up); imports neither.
 """
 
@@ -43,7 +43,7 @@ def domain_constraints(metric: Metric, active: np.ndarray | None = None
 def outside_domain(cons: Any, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     """True where a box ``[lo, hi]`` ``(N, n)`` certainly misses the domain (a constraint's
     enclosure lies outside its bounds, or the box is empty: ``lo > hi`` somewhere);
-    ``cons`` from :func:`domain_constraints`."""
+    ``cons`` from `domain_constraints`."""
     out = np.any(lo > hi, axis=1)
     if cons is None:
         return out

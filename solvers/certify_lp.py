@@ -1,17 +1,17 @@
-"""The linear programs of :func:`solvers.certify.certify`: the best P2 potential on a mesh.
+"""The linear programs of `solvers.certify.certify`: the best P2 potential on a mesh.
 
-Split out of :mod:`solvers.certify` (issue 23: below 800 lines, one home per idea). Given
+Split out of `solvers.certify` (issue 23: below 800 lines, one home per idea). Given
 the rows ``grad phi_T(z_m) . v_k <= b[T, m, k]`` that module proves (values of F minus the
-second-order corrections), :func:`_solve_lp` maximises ``phi(goal) - phi(start)`` with
+second-order corrections), `_solve_lp` maximises ``phi(goal) - phi(start)`` with
 cvxpy (Clarabel) in rounds: vertices away from the path are kept inside inner polygons of
-their rows' sets (:class:`_Rays`, never violated), vertices near it get the sampled rows
+their rows' sets (`_Rays`, never violated), vertices near it get the sampled rows
 themselves, grown by the violated directions; every round's potential is checked against
 ALL rows and scaled down by its largest row ratio, so the bound it gives is valid whatever
-the LP solver's tolerance. :func:`_initial_modes` chooses the first exact vertices and
+the LP solver's tolerance. `_initial_modes` chooses the first exact vertices and
 directions of a mesh (near the path, or inherited from the previous mesh's LP).
 
-A failed LP raises :class:`LPFailure`, which :func:`solvers.certify.certify` turns into
-:attr:`solvers.CertifyStatus.LP_FAILED`. Nothing here imports :mod:`solvers.certify`
+A failed LP raises `LPFailure`, which `solvers.certify.certify` turns into
+`solvers.CertifyStatus.LP_FAILED`. Nothing here imports `solvers.certify`
 (which imports these names, and re-exports them for code that reaches them as
 ``solvers.certify._solve_lp``).
 """
@@ -35,7 +35,7 @@ _LOG = logging.getLogger(__name__)
 LP_SOLVER = "CLARABEL"
 #: Clarabel settings of the LPs. Every potential is checked against ALL rows and scaled
 #: (its bound never depends on the LP's accuracy), so 1e-5 instead of Clarabel's 1e-8 is
-#: enough; with :data:`TIGHT_DUAL` at 1e-4 the rounds are unchanged (with 1e-7 a loose
+#: enough; with `TIGHT_DUAL` at 1e-4 the rounds are unchanged (with 1e-7 a loose
 #: solve promotes many more vertices).
 #: Iterative refinement of Clarabel's linear solves off: it doubled the time of each
 #: iteration on the fine mesh's LPs (140k rows: 6.1 s against 3.1 s) for the same iterations
@@ -43,7 +43,7 @@ LP_SOLVER = "CLARABEL"
 LP_OPTIONS: dict[str, Any] = {"tol_gap_abs": 1e-5, "tol_gap_rel": 1e-5, "tol_feas": 1e-5,
                               "tol_ktratio": 1e-3, "iterative_refinement_enable": False}
 #: Rows whose dual exceeds this fraction of the largest dual count as tight (refined).
-#: 1e-4: the duals of an interior-point solve to :data:`LP_OPTIONS`' tolerance.
+#: 1e-4: the duals of an interior-point solve to `LP_OPTIONS`' tolerance.
 TIGHT_DUAL = 1e-4
 #: Evenly spaced rays of the inner polygons that keep the vertices away from the path safe.
 INITIAL_DIRECTIONS = 8
@@ -68,11 +68,11 @@ NEAR_PER_TARGET = 6.0
 #: ``1 - near``, not every row the host's rounds ever added.
 INHERIT_NEAR_ONLY = True
 #: Mend a round's potential that would reach the target but for a few broken rows
-#: (:mod:`solvers.certify_repair`) instead of solving another round.
+#: (`solvers.certify_repair`) instead of solving another round.
 REPAIR = True
 #: Evenly spaced directions an exact vertex always has (first mesh, promotion, inheritance).
 COARSE_DIRECTIONS = 16
-#: A promoted vertex gets this many windows (:func:`_window`) of directions each side of
+#: A promoted vertex gets this many windows (`_window`) of directions each side of
 #: its tight facet's normal (3: its gradient moves out along that normal; on tuning pairs
 #: of seed 20261217 one LP round fewer on some meshes, 1 before).
 PROMOTE_WINDOW = 3
@@ -80,7 +80,7 @@ WORST_WINDOW = 2
 
 
 class LPFailure(RuntimeError):
-    """The LP solver failed on one round (turned into :attr:`CertifyStatus.LP_FAILED`)."""
+    """The LP solver failed on one round (turned into `CertifyStatus.LP_FAILED`)."""
 
 
 def _window(k: int) -> int:
@@ -98,7 +98,7 @@ class _Rays:
     triangles ``0, g_i, g_{i+1}``, each inside the convex ``P``), and so does the
     intersection of its edges' half-planes. The LP uses those edges as rows: every
     potential it returns satisfies every sampled row by construction (used for the vertices
-    away from the path; see :func:`_solve_lp`).
+    away from the path; see `_solve_lp`).
     """
 
     def __init__(self, n_vertices: int, rays: int = INITIAL_DIRECTIONS) -> None:
@@ -134,9 +134,9 @@ def _solve_lp(mesh: _Mesh, b: np.ndarray, dirs: np.ndarray, s_idx: int, g_idx: i
     triangle vertex, in rounds.
 
     A vertex is either SAFE: its gradient is kept in the inner polygon of 8 rays
-    (:class:`_Rays`), inside the rows' set, so it can never violate a row; or EXACT: it
+    (`_Rays`), inside the rows' set, so it can never violate a row; or EXACT: it
     has sampled rows ``g . v_k <= b_k`` directly, a set of directions grown in rounds by the
-    near-tight ones (ratio above ``1 - near``, :data:`NEAR_TIGHT`) and ``WORST_WINDOW``
+    near-tight ones (ratio above ``1 - near``, `NEAR_TIGHT`) and ``WORST_WINDOW``
     each side of a violated vertex's worst row. A safe vertex whose polygon edge is tight
     (positive dual) becomes exact, with the directions near that edge's normal, 16 evenly
     spaced ones and its near-tight ones. Each round's

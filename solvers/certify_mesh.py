@@ -1,19 +1,19 @@
-"""The meshes :func:`solvers.certify.certify` computes its bound on, and a zigzag curve.
+"""The meshes `solvers.certify.certify` computes its bound on, and a zigzag curve.
 
-Split out of :mod:`solvers.certify` (issue 23: below 800 lines, one home per idea) so that
+Split out of `solvers.certify` (issue 23: below 800 lines, one home per idea) so that
 module keeps the bound code (values of F, interval enclosures of its second derivatives,
 the corrections, which also inflate for the rounding of the circumradii computed here)
 and this one the plain geometry:
 
-* the convex polygon covering the domain (:func:`_outline`) and point-in-polygon tests;
+* the convex polygon covering the domain (`_outline`) and point-in-polygon tests;
 * the first point set, a hexagonal lattice graded around the solver's path
-  (:func:`_initial_points`; spacing ``h_path`` near the path growing to ``h_far``);
-* :class:`_Mesh`, the Delaunay triangulation with P2 unknowns (vertices and edge
+  (`_initial_points`; spacing ``h_path`` near the path growing to ``h_far``);
+* `_Mesh`, the Delaunay triangulation with P2 unknowns (vertices and edge
   midpoints): the gradient of the potential at each triangle's vertices as a linear map
   of its six unknowns, the circumradii, point location and refinement by edge midpoints;
-* :func:`_zigzag`, a candidate curve for the upper bound where ``F(z, .)`` is not convex.
+* `_zigzag`, a candidate curve for the upper bound where ``F(z, .)`` is not convex.
 
-Nothing here imports :mod:`solvers.certify` (which imports these names, and re-exports
+Nothing here imports `solvers.certify` (which imports these names, and re-exports
 them for code that reaches them as ``solvers.certify._Mesh``).
 """
 
@@ -31,7 +31,7 @@ from finsler.metric import Metric
 
 
 class _Grading(Protocol):
-    """The spacing settings of :class:`solvers.certify.MeshSpec` used here (read-only, as
+    """The spacing settings of `solvers.certify.MeshSpec` used here (read-only, as
     in the frozen dataclass)."""
 
     @property

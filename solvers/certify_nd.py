@@ -9,12 +9,12 @@ piecewise linear on the Delaunay cells of a point cloud graded around the solver
 
 1. the region: a cell is left out when ``m (|start - Z_T| + |Z_T - goal|) > upper``, ``Z_T``
    its box and ``m`` a proven lower bound of ``F(z, v) / |v|`` over the domain
-   (:func:`~solvers.certify_nd_parts.scale_lower_bound`);
+   (`scale_lower_bound`);
 2. the LP (cvxpy, Clarabel) maximises ``phi(goal) - phi(start)`` under rows ``g_T . w <=
    Flo(Z_T, w)`` at directions ``w`` of a grid on the cube's surface, ``Flo`` a proven
    lower bound of F over the cell's box (interval enclosure of the metric's own F), rows
    added in rounds where violated (row generation);
-3. the verification (:func:`~solvers.certify_nd_parts.verify`) proves, cell by cell with
+3. the verification (`verify`) proves, cell by cell with
    interval arithmetic, the ``R`` for EVERY direction and every point of the cell (branch
    and bound over the cube's surface with a mean-value form in ``v``, enclosures of F and
    of its gradient in ``v``); the boxes it could not close become new rows (cuts) and the
@@ -29,7 +29,7 @@ convex (the metrics' ``convex_everywhere``): step 3 needs no convexity, but with
 bound is that of the convexified metric and the rows' directions would not suffice.
 
 Upper bound: the length of the solver's path with its proven error
-(:meth:`finsler.Metric.path_length_bounds`), as in :func:`solvers.certify`.
+(`finsler.Metric.path_length_bounds`), as in `solvers.certify`.
 
 Results are decided by work budgets (cells, rounds, LP rounds, verification depth), never
 by the clock: the same input gives the same interval on any machine.
@@ -75,7 +75,7 @@ __all__ = ["NDResult", "NDSpec", "certify_nd"]
 
 @dataclass(frozen=True)
 class NDSpec:
-    """Settings of :func:`certify_nd` (lengths in coordinates). Every budget is a count."""
+    """Settings of `certify_nd` (lengths in coordinates). Every budget is a count."""
 
     h_path: float = 0.08
     """Spacing of the finest lattice, around the solver's path."""
@@ -106,7 +106,7 @@ class NDSpec:
     element: str = "P1"
     """The potential: ``"P1"`` (piecewise linear), ``"P2"`` (piecewise quadratic: loses
     second order in the cell's width instead of first; F must have affine rules, see
-    :mod:`solvers.certify_nd_p2`) or ``"auto"`` (P2 where F allows it)."""
+    `solvers.certify_nd_p2`) or ``"auto"`` (P2 where F allows it)."""
 
     def __post_init__(self) -> None:
         for name in ("h_path", "corridor", "h_far", "target_gap", "verify_tol",
@@ -146,10 +146,10 @@ class NDSpec:
 
 @dataclass
 class NDResult(MeshCertificate):
-    """A certified interval from :func:`certify_nd`. ``gap = (upper - lower) / upper``.
+    """A certified interval from `certify_nd`. ``gap = (upper - lower) / upper``.
     ``rigour`` says what each part rests on; ``rounds`` lists per mesh the cells, LP rows,
     the LP's value, the verified ``R`` and the bound; ``status`` is in the toolkit's family
-    (:class:`solvers.CertifyStatus`): ``certified`` (target gap reached),
+    ([`solvers.CertifyStatus`][solvers.CertifyStatus]): ``certified`` (target gap reached),
     ``budget_reached`` (a work budget ended it), ``lp_failed``."""
 
     metric: str
@@ -211,9 +211,9 @@ def _check(m: Metric, start: Any, goal: Any) -> tuple[np.ndarray, np.ndarray]:
 def certify_nd(metric: Metric | str, start: Any, goal: Any, mesh: NDSpec | str | None = None,
                *, path: Any = None) -> NDResult:
     """Certified interval ``lower <= d(start, goal) <= upper`` on a metric of any dimension
-    whose ``F(x, .)`` is convex (see the module docstring). ``mesh``: an :class:`NDSpec` or
+    whose ``F(x, .)`` is convex (see the module docstring). ``mesh``: an `NDSpec` or
     a preset name. ``path`` ``(m+1, dim)``: a curve from start to goal for the upper bound
-    (default: :func:`solvers.solve_geodesic`). Raises :class:`InputError` for bad input."""
+    (default: `solvers.solve_geodesic`). Raises `InputError` for bad input."""
     t_start = time.perf_counter()
     m = as_metric(metric)
     spec = NDSpec.preset(mesh) if isinstance(mesh, str) else (mesh or NDSpec())

@@ -1,4 +1,4 @@
-"""Quadratic (P2) potentials for :func:`solvers.certify_nd.certify_nd` (issue 46, 3-D bar).
+"""Quadratic (P2) potentials for `solvers.certify_nd.certify_nd` (issue 46, 3-D bar).
 
 A piecewise-linear potential has one gradient per cell, which must satisfy the dual
 condition where F is smallest over the cell: the bound loses about ``h |grad log F| / 2``
@@ -11,24 +11,24 @@ order. The pieces:
    ``g_T(z_k) . w <= F(z_k, w)`` at the cell's P2 nodes ``z_k`` and directions ``w`` of a
    grid on the cube's surface (row generation), plus the points and directions the
    verification could not close (cuts);
-2. the verification (:func:`verify_p2`) proves ``g_T(z) . w <= R F(z, w)`` for every ``z``
+2. the verification (`verify_p2`) proves ``g_T(z) . w <= R F(z, w)`` for every ``z``
    of every cell of the region and every ``w``: ``H = g_T(z) . w - R F(z, w)`` is bounded
-   by ONE affine-arithmetic form over a box of ``(z, w)`` (:func:`finsler.affine.affine_forms`;
+   by ONE affine-arithmetic form over a box of ``(z, w)`` (`finsler.affine.affine_forms`;
    the affine gradient and F share the noise symbols of ``z``, so their first-order
    variations cancel), its linear part in ``z`` maximised over the cell's (sub)simplex (its
    vertices), not the whole box (where the quadratic would be extrapolated); branch and
    bound splits the direction boxes and bisects the simplices;
 3. the gradient ``(g_c, G)`` of each cell is computed in float64 with an a-posteriori bound
-   of its error (:meth:`P2Cells.affine_gradients`), added to ``g . w`` in step 2.
+   of its error (`P2Cells.affine_gradients`), added to ``g . w`` in step 2.
 
 F must have affine rules for every operation of its program (``sqrt``, powers, ``sin``,
 ``cos``, the arithmetic, ``abs``, ``max``/``min`` through ``abs``, signs and truth values:
-:mod:`finsler.affine`); where it has not (``exp``, say) :func:`affine_missing` names the
+`finsler.affine`); where it has not (``exp``, say) `affine_missing` names the
 operation and the caller keeps the P1 element. ``max`` and ``min`` are written through
-``abs`` before F is differentiated (:func:`finsler.lowering.max_through_abs`), so the
+``abs`` before F is differentiated (`finsler.lowering.max_through_abs`), so the
 enclosure of ``grad_w F`` stays bounded across a kink (car-like's).
 
-Nothing here imports :mod:`solvers.certify_nd`.
+Nothing here imports `solvers.certify_nd`.
 """
 
 from __future__ import annotations
@@ -108,8 +108,8 @@ def nodes(n: int) -> np.ndarray:
 
 
 class P2Cells:
-    """The P2 unknowns of :class:`~solvers.certify_nd_parts.Cells`: one per vertex, then
-    one per edge (its midpoint's value); ``dof`` ``(T, K)`` in the order of :func:`nodes`."""
+    """The P2 unknowns of `Cells`: one per vertex, then
+    one per edge (its midpoint's value); ``dof`` ``(T, K)`` in the order of `nodes`."""
 
     def __init__(self, cells: Cells) -> None:
         simp = cells.simp
@@ -216,7 +216,7 @@ def verify_p2(fj: LoweredFunction, fg: LoweredFunction, x: np.ndarray, gc: np.nd
     """A proven ``R`` with ``g_T(z) . v <= R F(z, v)`` for every cell ``T`` (vertices ``x``
     ``(T, n+1, n)``, gradient ``gc + hess (z - centroid)`` with error ``gerr``), every ``z``
     of the cell inside the box ``[blo, bhi]`` and the domain (``cons`` from
-    :func:`solvers.certify_domain.domain_constraints`; None: the box) and every ``v``.
+    `solvers.certify_domain.domain_constraints`; None: the box) and every ``v``.
     ``fj``: ``(z, w) -> F`` as one input; ``fg``: ``(z, w) -> (F, grad_w F)``.
 
     Items are (cell, simplex inside it, box of directions on the cube's surface). On each,
@@ -382,7 +382,7 @@ def run_p2(m: Metric, f_fn: LoweredFunction, s: np.ndarray, g: np.ndarray, upper
            cap: float, spec: Any, blo: np.ndarray, bhi: np.ndarray, scale: float,
            rng: np.random.Generator, points: np.ndarray, dirs: np.ndarray,
            times: dict[str, float], t_start: float) -> dict[str, Any]:
-    """The mesh rounds of :func:`solvers.certify_nd.certify_nd` with the P2 element (see
+    """The mesh rounds of `solvers.certify_nd.certify_nd` with the P2 element (see
     the module docstring); ``spec`` an ``NDSpec``. Returns the best round's figures, the
     rounds and how it stopped."""
     from solvers.certify_nd_parts import (
@@ -637,12 +637,12 @@ def _bounds_moving(fj: LoweredFunction, fg: LoweredFunction, cell: np.ndarray,
                    whi: np.ndarray, centroid: np.ndarray, gc: np.ndarray, hess: np.ndarray,
                    gerr: np.ndarray, w_map: np.ndarray, r: float, chunk: int = 100_000,
                    oriented: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """As :func:`_bounds` with the direction box moving with z: ``w = u + W (z - c_T)``,
+    """As `_bounds` with the direction box moving with z: ``w = u + W (z - c_T)``,
     ``u`` in the box. Mean value in ``u``: ``H(z, c_u) + sum_i max|g_i(z) - r dF/dw_i| r_i``
     with both terms affine forms over (z, u), so the cross terms cancel near the tangency.
 
     The noise symbols of ``z`` span the box ``[zlo, zhi]``, or with ``oriented`` a box along
-    the simplex's principal axes that holds it (:func:`oriented_frames`; sound only for
+    the simplex's principal axes that holds it (`oriented_frames`; sound only for
     simplices inside ``[zlo, zhi]``, which the caller checks). A sliver across the axes
     fills a small part of its axis box: there the products ``g(z) . w`` and ``F(z, w)`` are
     enclosed over much more than the simplex (a proof ran out of items on two such cells,

@@ -1,16 +1,16 @@
-"""The pieces of :func:`solvers.certify_nd.certify_nd` (issue 46): the sampled directions,
+"""The pieces of `solvers.certify_nd.certify_nd` (issue 46): the sampled directions,
 the graded point cloud and its Delaunay cells, the rigorous lower bounds of F over a cell,
 the cell-by-cell verification of a potential, and the LP.
 
 Directions are points ``w`` of the surface of the cube ``[-1, 1]**n`` (every nonzero
 vector is a positive multiple of one; both sides of ``g . v <= F(z, v)`` are 1-homogeneous
-in ``v``). Enclosures are :func:`finsler.intervals.enclose` of the metric's own ``F`` and of
+in ``v``). Enclosures are `finsler.intervals.enclose` of the metric's own ``F`` and of
 its gradient in ``v`` (lowered CasADi, outward rounding): where ``F`` is not smooth (the
 car-like metric's ``max`` and ``abs``) the interval programs of the derivative take the
 hull of both branches where the branch is uncertain on the box, which contains Clarke's
 generalised gradient, so the mean-value form below stays valid.
 
-Nothing here imports :mod:`solvers.certify_nd`.
+Nothing here imports `solvers.certify_nd`.
 """
 
 from __future__ import annotations
@@ -33,7 +33,7 @@ _EPS = float(np.finfo(float).eps)
 
 
 class LPFailure(RuntimeError):
-    """The LP solver failed (turned into :attr:`solvers.CertifyStatus.LP_FAILED`)."""
+    """The LP solver failed (turned into `solvers.CertifyStatus.LP_FAILED`)."""
 
 
 # ----------------------------------------------------------------------------------------
@@ -189,7 +189,7 @@ def round_record(result: dict[str, Any], upper: float, t_start: float) -> dict[s
 
 def build_cells(points: np.ndarray, blo: np.ndarray, bhi: np.ndarray,
                 rng: np.random.Generator, h: float) -> Cells:
-    """:class:`Cells` of ``points`` whose last two (start and goal) stay put; flat cells
+    """`Cells` of ``points`` whose last two (start and goal) stay put; flat cells
     inside the box (degenerate positions) are removed by moving the others by up to
     ``1e-6 h`` (up to three tries)."""
     cells = Cells(points, blo, bhi)
@@ -206,7 +206,7 @@ def build_cells(points: np.ndarray, blo: np.ndarray, bhi: np.ndarray,
 
 def add_points(points: np.ndarray, new: np.ndarray) -> np.ndarray:
     """``points`` with ``new`` inserted before the last two (start and goal), which
-    :func:`build_cells` keeps in place."""
+    `build_cells` keeps in place."""
     return np.concatenate([points[:-2], new, points[-2:]])
 
 
@@ -215,7 +215,7 @@ def add_points(points: np.ndarray, new: np.ndarray) -> np.ndarray:
 # ----------------------------------------------------------------------------------------
 def lowered_f_grad(metric: Metric) -> tuple[LoweredFunction, LoweredFunction]:
     """``(x, v) -> F`` and ``(x, v) -> (F, grad_v F)`` lowered once per metric, with
-    ``max``/``min`` written through ``abs`` (:func:`finsler.lowering.max_through_abs`: the
+    ``max``/``min`` written through ``abs`` (`finsler.lowering.max_through_abs`: the
     enclosure of the gradient across a kink stays bounded)."""
     def build() -> tuple[LoweredFunction, LoweredFunction]:
         x = ca.SX.sym("x", metric.dim)
@@ -458,7 +458,7 @@ def solve_rows_lp(coef: np.ndarray, cols: np.ndarray, n_vars: int, rows_b: np.nd
     """Maximise ``x(goal) - x(start)`` (``(indices, weights)`` ``s_w``, ``g_w``) over
     ``n_vars`` unknowns under the rows ``sum_k coef[r, k] x[cols[r, k]] <= rows_b[r]``,
     ``x(start) = 0`` and ``|x| <= bound``. Returns ``x``, the rows' duals and cvxpy's
-    status; raises :class:`LPFailure`."""
+    status; raises `LPFailure`."""
     import warnings
 
     import cvxpy as cp

@@ -1,4 +1,4 @@
-"""The region a short path can reach, for :func:`solvers.certify.certify` (issue 46, item 4).
+"""The region a short path can reach, for `solvers.certify.certify` (issue 46, item 4).
 
 The dual bound needs ``dphi(v) <= F(z, v)`` only where a curve from ``x`` to ``y`` no
 longer than the upper bound ``U`` can go. With a PROVEN speed floor ``F(z, v) >= m |v|``
@@ -9,10 +9,10 @@ every triangle that meets the ellipse ``|z - x| + |y - z| <= U / m`` proves
 longer than ``U`` and so would stay in those triangles, where ``phi`` grows along it by at
 most its length. The triangles outside need no rows and no enclosures.
 
-The floor ``m`` is the smallest lower end of interval enclosures (:mod:`finsler.intervals`,
+The floor ``m`` is the smallest lower end of interval enclosures (`finsler.intervals`,
 outward rounding) of ``F(z, u)`` over a grid of boxes covering the domain's outline times
 boxes of arcs of unit directions ``u`` (any unit ``u`` lies in one), built once per metric
-(:meth:`finsler.Metric.derived`). Where an enclosure is not finite or not positive the
+(`finsler.Metric.derived`). Where an enclosure is not finite or not positive the
 floor is 0 and nothing is pruned.
 """
 

@@ -1,10 +1,10 @@
-"""Local repair of an LP round's potential (:func:`solvers.certify_lp._solve_lp`).
+"""Local repair of an LP round's potential (`solvers.certify_lp._solve_lp`).
 
 A round's LP sees only some of the sampled rows ``grad phi_T(z_m) . v_k <= b[T, m, k]``; its
 potential may break a few unsampled ones, at a few triangle vertices, and the round's bound
 is then the LP's value divided by the largest row ratio: one vertex at ratio 1.03 costs 3 %
 of the bound and another LP round (on Matsumoto pairs the last rounds of a mesh fix 1-20
-such vertices while the value no longer moves). :func:`repair` instead moves only the
+such vertices while the value no longer moves). `repair` instead moves only the
 unknowns of the triangles that break a row (start and goal held, so the value is kept) to
 minimise the largest ratio ``tau`` over EVERY row of the triangles those unknowns touch
 (all K directions at their three vertices), a small LP (HiGHS through scipy). The other
@@ -37,9 +37,9 @@ def repair(mesh: Any, b_flat: np.ndarray, dirs: np.ndarray, phi: np.ndarray,
            ratio: np.ndarray, fixed: tuple[int, ...]) -> np.ndarray | None:
     """A potential equal to ``phi`` except on the unknowns of the triangles whose rows
     ``ratio`` ``(3 T, K)`` exceed 1 (not the unknowns ``fixed``), chosen to minimise the
-    largest row ratio of the triangles they touch, in up to :data:`REPAIR_PASSES` passes
+    largest row ratio of the triangles they touch, in up to `REPAIR_PASSES` passes
     (each from the last one's potential and its broken rows); None if nothing breaks a
-    row, too many triangles do (:data:`REPAIR_MAX_TRIANGLES`) or the first LP fails."""
+    row, too many triangles do (`REPAIR_MAX_TRIANGLES`) or the first LP fails."""
     out = None
     worst = float(ratio.max())
     for _ in range(REPAIR_PASSES):
@@ -69,7 +69,7 @@ def repair(mesh: Any, b_flat: np.ndarray, dirs: np.ndarray, phi: np.ndarray,
 
 def _mend(mesh: Any, b_flat: np.ndarray, dirs: np.ndarray, phi: np.ndarray,
           bad_tri: np.ndarray, fixed: tuple[int, ...]) -> tuple[np.ndarray, float] | None:
-    """:func:`repair` moving the unknowns of the triangles ``bad_tri`` -> (the potential,
+    """`repair` moving the unknowns of the triangles ``bad_tri`` -> (the potential,
     its largest ratio on the rows touched), None if there is nothing to move or the LP
     fails."""
     from scipy.optimize import linprog

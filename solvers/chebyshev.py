@@ -1,5 +1,5 @@
 """Chebyshev-Gauss-Lobatto nodes, barycentric interpolation and differentiation matrices
-(plain numpy; used by the pseudospectral transcription and by :class:`DistanceResult`)."""
+(plain numpy; used by the pseudospectral transcription and by `DistanceResult`)."""
 
 from __future__ import annotations
 

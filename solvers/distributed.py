@@ -6,8 +6,8 @@ results, which the driver saves as the same per-pair parts as the local path, so
 interrupted cluster batch resumes without redoing finished chunks, on the cluster or
 locally. What crosses the network: the metric's class and parameters, the chunk's pairs
 (and initial paths, if any), the segments, seed plan, ``minmax`` / ``global_seeds`` /
-``tol`` / method settings; back: the :class:`GeodesicResult` objects. A chunk is one
-batched solve (:mod:`solvers.batched`) where the batched method covers the metric.
+``tol`` / method settings; back: the `GeodesicResult` objects. A chunk is one
+batched solve (`solvers.batched`) where the batched method covers the metric.
 Ray is imported only here, and only when a batch asks for it.
 """
 

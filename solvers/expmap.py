@@ -3,16 +3,16 @@ and its inverse.
 
 The geodesic equation ``g(x, x') x'' = b(x, x')`` (the spray) is derived symbolically
 from the metric's one SX expression ``F(x, v)`` and its fundamental tensor, once per
-metric, on the metric side: :class:`finsler.geometry.Spray` / :func:`finsler.geometry.spray`
+metric, on the metric side: `finsler.geometry.Spray` / `finsler.geometry.spray`
 (re-exported here as ``solvers.expmap.Spray`` / ``spray``). The equation is meaningful only
 where ``g(x, x')`` is positive definite (``F`` strongly convex, i.e. Finsler):
-:func:`exp_map` refuses a start where ``F(x, .)`` is not strongly convex and stops with
+`exp_map` refuses a start where ``F(x, .)`` is not strongly convex and stops with
 status ``NOT_CONVEX`` when the curve reaches such a region.
 
-:func:`exp_map` integrates the first-order system ``(x, v)' = (v, -2 G(x, v))`` with
+`exp_map` integrates the first-order system ``(x, v)' = (v, -2 G(x, v))`` with
 scipy's DOP853 (8th-order Runge-Kutta) at tight tolerances, stopping at the boundary of
-the domain (status ``LEFT_DOMAIN``). :func:`log_map` starts from the solved shortest path
-(:func:`solvers.distance`: the initial tangent of its polynomial curve, whose parameter is
+the domain (status ``LEFT_DOMAIN``). `log_map` starts from the solved shortest path
+(`solvers.distance`: the initial tangent of its polynomial curve, whose parameter is
 proportional to arc length, already has ``F(x, v) ~ d(x, y)``) and polishes ``v`` by
 Newton shooting on ``exp(x, v) = y`` with the Jacobian ``d exp / dv`` from the variational
 equation, integrated alongside.
@@ -50,7 +50,7 @@ ATOL = 1e-13
 #: fraction of its largest.
 PD_RATIO = 1e-9
 
-#: Default tolerance of :func:`log_map` on ``|exp(x, v) - y|`` (max norm, coordinates).
+#: Default tolerance of `log_map` on ``|exp(x, v) - y|`` (max norm, coordinates).
 LOG_TOL = 1e-11
 
 #: Relative gap between ``F(x, log(x, y))`` and the solver's distance above which the
@@ -68,7 +68,7 @@ class ExpResult(Result):
     ``F(gamma, gamma')`` over the integrator's steps (0 in exact arithmetic: a check of the
     integration). ``times`` ``(T,)`` / ``curve`` ``(T, dim)`` sample the curve when it was
     requested (``return_curve``), else they are empty. ``jacobian`` ``(dim, dim)`` is
-    ``d gamma(t_end) / d velocity`` when computed (by :func:`log_map`).
+    ``d gamma(t_end) / d velocity`` when computed (by [`log_map`][solvers.expmap.log_map]).
     """
 
     metric: str
@@ -121,7 +121,7 @@ class LogResult(Result):
     ``F(start, velocity) = d(start, goal)``.
 
     ``length`` is ``F(start, velocity)``; ``distance`` the solver's length of the shortest
-    path (:func:`solvers.distance`) that seeded the shooting, ``distance_error_estimate`` its
+    path (`solvers.distance`) that seeded the shooting, ``distance_error_estimate`` its
     error estimate; ``residual`` the max-norm of ``exp(start, velocity) - goal``;
     ``iterations`` Newton steps, ``integrations`` geodesic integrations (each with its
     variational equation). ``exp`` is the final integration.
@@ -337,9 +337,9 @@ def exp_map(
     being positive definite or (for metrics not convex everywhere) ``F(x, .)`` stops being
     strongly convex (``NOT_CONVEX``). ``return_curve``: ``True`` for 129 samples of the curve
     on ``[0, t_end]`` (``result.times``, ``result.curve`` ``(T, dim)``) or an integer number
-    of samples (>= 2). ``rtol``/``atol``: DOP853 tolerances. Raises :class:`InputError` for
+    of samples (>= 2). ``rtol``/``atol``: DOP853 tolerances. Raises `InputError` for
     bad input, a non-smooth metric or a start where ``F(x, .)`` is not strongly convex;
-    ``strict=True`` raises :class:`SolverError` unless the status is ``SUCCESS``.
+    ``strict=True`` raises `SolverError` unless the status is ``SUCCESS``.
     ``names``: how error messages call ``x`` and ``v`` (a command line passes its options).
     """
     m = as_metric(metric)
@@ -407,13 +407,13 @@ def log_map(
     ``F(x, v) = d(x, y)`` (the shortest geodesic from ``x`` to ``y``, each ``(dim,)``, on
     ``[0, 1]``).
 
-    The guess is the initial tangent of :func:`solvers.distance`'s curve (globally seeded,
+    The guess is the initial tangent of `solvers.distance`'s curve (globally seeded,
     so the shortest of the geodesics joining the points); Newton's method on
     ``exp(x, v) - y`` with ``d exp / dv`` from the variational equation and a halving line
-    search polishes it until ``|exp(x, v) - y|_max <= tol``. Raises :class:`InputError` for
+    search polishes it until ``|exp(x, v) - y|_max <= tol``. Raises `InputError` for
     bad input, a non-smooth metric, or where ``F(x, .)`` is not strongly convex at ``x``,
     ``y`` or along the shortest path (e.g. Matsumoto outside ``|p| ~ 0.289``);
-    ``strict=True`` raises :class:`SolverError` unless converged. ``names``: how error
+    ``strict=True`` raises `SolverError` unless converged. ``names``: how error
     messages call ``x`` and ``y`` (a command line passes its options).
     """
     t0 = time.perf_counter()

@@ -1,15 +1,15 @@
-"""Discrete geodesics of the task: the public entry points :func:`solve_geodesic` and
-:func:`midpoint`.
+"""Discrete geodesics of the task: the public entry points `solve_geodesic` and
+[`midpoint`][solvers.geodesic.midpoint].
 
 ``solve_geodesic`` solves the task discretisation (eq. 7's energy ``sum C(p_i, p_{i+1})**2``
-over ``n`` segments) from every seed of a :class:`~solvers.seeding.SeedPlan` and keeps the
-lowest energy among the converged solves (:mod:`solvers.pairs`: seeding, the batched
+over ``n`` segments) from every seed of a [`SeedPlan`][solvers.seeding.SeedPlan] and keeps the
+lowest energy among the converged solves (`solvers.pairs`: seeding, the batched
 Newton method or IPOPT, selection, figures). The seeds are solved at the plan's coarse
 size and only the best few distinct optima are carried up a ladder of sizes to ``n``
 (multiresolution: time about linear in ``n``). ``refine_minmax`` then minimises the
 largest segment cost: the exact ceiling of the paper's task. ``tol`` refines the size
-until the continuum length is known to that relative accuracy (:mod:`solvers.tolerance`,
-Richardson extrapolation). Many pairs: :func:`solve_batch` (:mod:`solvers.batch_jobs`).
+until the continuum length is known to that relative accuracy (`solvers.tolerance`,
+Richardson extrapolation). Many pairs: `solve_batch` (`solvers.batch_jobs`).
 Those names are re-exported here, as before the split.
 """
 
@@ -63,13 +63,13 @@ def solve_geodesic(
 
     Minimises ``sum_i C(p_i, p_{i+1})**2`` over the interior points of an ``n``-segment path
     (default ``n = 2**D`` of the metric's task) from every seed of ``seeds`` (default
-    :meth:`SeedPlan.default`) plus the given ``initial`` paths ``(m+1, dim)`` (e.g. a
+    `SeedPlan.default`) plus the given ``initial`` paths ``(m+1, dim)`` (e.g. a
     learned path or an exact path of another size; resampled to ``n + 1`` points at equal
     parameter spacing when ``m != n``); with ``global_seeds=False`` only the ``initial``
     paths are solved (a warm start: no seed plan, no graph); returns the lowest energy
     among IPOPT-converged solves, with
     ``seeds_tried`` / ``seeds_agreeing``. With ``minmax=True`` the min-max refinement is
-    attached (``result.minmax``). ``strict=True`` raises :class:`SolverError` unless
+    attached (``result.minmax``). ``strict=True`` raises `SolverError` unless
     converged.
 
     ``tol`` (relative, e.g. ``1e-7``): accuracy on request. The size is doubled from ``n``
@@ -81,7 +81,7 @@ def solve_geodesic(
     the final size.
 
     ``method``: ``"auto"`` (default) solves with the batched Newton method of
-    :mod:`solvers.batched` where it covers the metric (``F`` smooth), IPOPT otherwise;
+    `solvers.batched` where it covers the metric (``F`` smooth), IPOPT otherwise;
     ``"newton"`` / ``"ipopt"`` ask for one. IPOPT also finishes what the Newton method
     cannot (an active domain constraint, a stall); ``result.method`` says which produced
     the path and ``result.residual`` its first-order optimality residual. ``device``: a
@@ -120,7 +120,7 @@ def midpoint(
     **kwargs: Any,
 ) -> MidpointResult:
     """Midpoint ``p_{n/2}`` of the discrete geodesic (``n`` even; default ``2**D``); keyword
-    arguments go to :func:`solve_geodesic`."""
+    arguments go to [`solve_geodesic`][solvers.geodesic.solve_geodesic]."""
     m = as_metric(metric)
     n = m.task.segments if segments is None else segments  # checked by solve_geodesic
     if isinstance(n, (int, np.integer)) and not isinstance(n, bool) and n % 2:

@@ -1,13 +1,13 @@
 """Batched primal-dual interior point for the slack reformulation of a non-smooth energy.
 
 A metric whose ``F`` is not smooth (declares ``smooth = False``) and provides the
-``smooth_square_sx`` hook (:mod:`finsler.hooks`; the car-like metric's ``max`` of its
+``smooth_square_sx`` hook (`finsler.hooks`; the car-like metric's ``max`` of its
 turning rate) has a smooth reformulated problem, the one IPOPT solves
-(:mod:`solvers.transcription`): minimise ``sum_i f2(p_i, p_{i+1}, w_i)`` over the interior
+(`solvers.transcription`): minimise ``sum_i f2(p_i, p_{i+1}, w_i)`` over the interior
 points and one slack block ``w_i`` per segment, subject to the hook's slack constraints
-and the domain's constraints on every interior point. :func:`interior_energy` solves it
+and the domain's constraints on every interior point. `interior_energy` solves it
 for a batch of paths at once, every path its own problem (the same role as
-:func:`solvers.newton.newton_energy` for a smooth ``F``).
+`solvers.newton.newton_energy` for a smooth ``F``).
 
 Every constraint is written ``c >= 0`` and kept strictly positive (a feasible interior
 point). An iteration is one Newton step of the primal-dual barrier equations
@@ -18,7 +18,7 @@ are block diagonal (a segment's slack constraints touch its two points and its s
 a point's domain constraints only that point), so the slacks are eliminated segment by
 segment (a Schur complement of the segment's positive definite slack block) and the
 system in the points stays block tridiagonal: it is solved by
-:func:`~solvers.block_tridiagonal.block_tridiagonal_solve` (pivot blocks that are not
+`block_tridiagonal_solve` (pivot blocks that are not
 definite shifted, a descent direction of the barrier function). The step length: the
 fraction-to-boundary rule (``tau = max(0.99, 1 - mu)``) on the linearised constraints and
 on the multipliers, then Armijo backtracking on the barrier function with every
@@ -53,8 +53,8 @@ __all__ = ["InteriorOptions", "covers_interior", "interior_energy"]
 
 
 #: Up to this many blocks in a group's systems (its running rows times interior points;
-#: a group is one pair's rows, see :func:`interior_energy`) the block-tridiagonal solve
-#: runs on dense stacks (:func:`block_tridiagonal_solve_dense`, fewer and larger array
+#: a group is one pair's rows, see `interior_energy`) the block-tridiagonal solve
+#: runs on dense stacks (`block_tridiagonal_solve_dense`, fewer and larger array
 #: operations), above it on fields (the smooth Newton method's solve): the same
 #: elimination, equal only to rounding, so the choice is the group's own (a row's path
 #: never depends on rows of other groups: chosen by the whole batch's count, one car-like
@@ -66,14 +66,14 @@ DENSE_BLOCKS_MAX = 1500
 
 
 def covers_interior(metric: Metric) -> bool:
-    """True if :func:`interior_energy` solves ``metric``: ``F`` declared not smooth and the
+    """True if `interior_energy` solves ``metric``: ``F`` declared not smooth and the
     metric provides the ``smooth_square_sx`` hook (its slack reformulation)."""
     return (not metric.smooth) and metric.provides("smooth_square_sx")
 
 
 @dataclass(frozen=True)
 class InteriorOptions:
-    """Settings of :func:`interior_energy`. ``tol``: KKT error at convergence (scaled
+    """Settings of `interior_energy`. ``tol``: KKT error at convergence (scaled
     objective); ``mu_min``: the barrier parameter's floor; ``mu0``: its first value times
     ``0.1 / (number of constraints per path)``; ``max_iter``: iterations per row;
     ``line_steps``: step lengths tried (halving); ``kappa_eps``: a barrier problem counts as
@@ -166,7 +166,7 @@ def _mv(a: np.ndarray, v: np.ndarray) -> np.ndarray:
 
 
 def _mtv(a: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """Transposed: ``a[..., j, i] v[..., j]`` (as :func:`_mv`)."""
+    """Transposed: ``a[..., j, i] v[..., j]`` (as `_mv`)."""
     out = a[..., 0, :] * v[..., 0, None]
     for j in range(1, a.shape[-2]):
         out += a[..., j, :] * v[..., j, None]
@@ -441,13 +441,13 @@ class _State:
 def interior_energy(metric: Metric, paths: Any, options: InteriorOptions | None = None, *,
                     scale: float = 1.0, groups: Any = None) -> NewtonBatch:
     """Minimise the discrete energy of every path of ``paths`` ``(B, n+1, d)`` (ends fixed)
-    for a metric that :func:`covers_interior`, through its slack reformulation, all rows at
+    for a metric that `covers_interior`, through its slack reformulation, all rows at
     once (numpy); ``scale``: the domain's size. Interior points are first moved strictly
     inside the domain (by ``1e-6`` of their distance from the bounds' centre). Returns a
-    :class:`~solvers.newton.NewtonBatch`: ``energy`` the energy ``sum C**2`` of the points
+    `NewtonBatch`: ``energy`` the energy ``sum C**2`` of the points
     (exact slacks), ``residual`` the final KKT error (see the module docstring).
     ``groups`` ``(B,)`` (e.g. each row's pair): a row's result depends only on the rows of
-    its group (the block solve is chosen per group, :data:`DENSE_BLOCKS_MAX`); default one
+    its group (the block solve is chosen per group, `DENSE_BLOCKS_MAX`); default one
     group."""
     if not covers_interior(metric):
         raise InputError(f"{metric.name}: the interior-point method needs a metric that is "

@@ -7,20 +7,20 @@ and its Hessian is block tridiagonal: the diagonal block of point ``j`` is ``phi
 segment ``j - 1`` plus ``phi_xx`` of segment ``j``, the block coupling points ``j`` and
 ``j + 1`` is ``phi_xy`` of segment ``j``. ``phi`` with its gradient and Hessian in ``(x, y)``
 is ONE CasADi function derived symbolically from the metric's ``F_sx``
-(:attr:`finsler.Metric.segment_derivatives`), evaluated for every segment of every problem
+(`finsler.Metric.segment_derivatives`), evaluated for every segment of every problem
 at once through the lowering: no second formula.
 
-:func:`newton_energy` minimises ``E`` for a batch of paths ``(B, n+1, dim)``, each problem
-with its own step, damping and convergence test (:class:`NewtonState`); the Hessian is
+`newton_energy` minimises ``E`` for a batch of paths ``(B, n+1, dim)``, each problem
+with its own step, damping and convergence test (`NewtonState`); the Hessian is
 factorised by block Thomas elimination or block cyclic reduction
-(:func:`~solvers.block_tridiagonal.block_tridiagonal_solve`), vectorised over problems and
+(`block_tridiagonal_solve`), vectorised over problems and
 blocks. Arrays are kept "structure of arrays": a field of ``d x d`` blocks is a ``d x d``
 list of arrays ``(B, M)``, so every block operation is a few elementwise array operations
 (no tiny matrix products).
 
 The same code runs on numpy (float64, CPU) and on torch tensors on any device
 (``device="cuda"``); every array operation it needs goes through a small backend
-(:func:`~solvers.backends.backend_for`). This module holds the energy terms, the
+(`backend_for`). This module holds the energy terms, the
 iteration and its line search; ``backend_for`` and ``block_tridiagonal_solve`` are
 re-exported from here.
 """
@@ -54,13 +54,13 @@ __all__ = [
 
 @dataclass(frozen=True)
 class NewtonOptions:
-    """Settings of :func:`newton_energy`.
+    """Settings of `newton_energy`.
 
     ``gtol``: convergence when ``residual = |grad E|_inf * scale / E <= gtol`` (``scale``:
     the domain's size; a dimensionless first-order residual, the same measure as IPOPT's
     dual infeasibility on the energy scaled to 1 that this package's IPOPT solves use).
     ``max_iter``: iterations per problem. ``delta0`` / ``delta_max``: first and largest
-    shift of the Hessian (relative to its mean diagonal; see :class:`NewtonState`).
+    shift of the Hessian (relative to its mean diagonal; see `NewtonState`).
     ``armijo``: sufficient decrease of the line search; ``line_steps``: step lengths
     ``2**-k``, ``k < line_steps``, tried at once. ``boundary_hits``: consecutive
     iterations whose full step left the domain without progress before a problem stops
@@ -132,7 +132,7 @@ def _rows(ops: Any, shape: tuple[int, int], c: Any) -> Any:
 
 def energy_terms(metric: Metric, ops: Any, points: Vec, chunk: int = 16384,
                  hessian: bool = True) -> EnergyTerms:
-    """:class:`EnergyTerms` of paths given as a field ``points`` (``d`` arrays
+    """`EnergyTerms` of paths given as a field ``points`` (``d`` arrays
     ``(B, n+1)``) on the backend ``ops``."""
     fn = metric.segment_derivatives
     d = len(points)
@@ -218,9 +218,9 @@ def energy_residual(metric: Metric, points: np.ndarray, scale: float) -> np.ndar
 # ----------------------------------------------------------------------------------------
 @dataclass
 class NewtonBatch:
-    """Result of :func:`newton_energy` (numpy): ``points`` ``(B, n+1, d)``, ``energy``
-    ``(B,)`` (``sum C**2``), ``residual`` ``(B,)`` (see :class:`NewtonOptions`),
-    ``iterations`` ``(B,)``, ``status`` ``(B,)`` of :class:`NewtonStatus` values;
+    """Result of `newton_energy` (numpy): ``points`` ``(B, n+1, d)``, ``energy``
+    ``(B,)`` (``sum C**2``), ``residual`` ``(B,)`` (see `NewtonOptions`),
+    ``iterations`` ``(B,)``, ``status`` ``(B,)`` of `NewtonStatus` values;
     ``evaluations``: segments evaluated with their derivatives, ``value_evaluations``:
     segments evaluated for their cost only (line searches)."""
 
@@ -234,13 +234,13 @@ class NewtonBatch:
 
 
 class NewtonState:
-    """A running batch of :func:`newton_energy` problems, stepped one iteration at a time
-    by :meth:`step` (callers may stop problems between steps with :meth:`drop`).
+    """A running batch of `newton_energy` problems, stepped one iteration at a time
+    by `step` (callers may stop problems between steps with `drop`).
 
     An iteration of a problem: a Newton direction of its Hessian made positive definite,
     then a line search on the Armijo condition. With ``local`` (the default) only the
     pivot blocks that are not definite are shifted (block-wise modified Cholesky, see
-    :func:`block_tridiagonal_solve`); otherwise, as IPOPT's inertia correction, the whole
+    `block_tridiagonal_solve`); otherwise, as IPOPT's inertia correction, the whole
     Hessian by the smallest tried multiple ``delta`` of its mean diagonal (0 if possible,
     else the last shift / 3, raised x8 until it factorises). A problem whose last step
     was a full one tries the full step first, with the derivatives at the trial point
@@ -557,7 +557,7 @@ def newton_energy(metric: Metric, paths: Any, options: NewtonOptions | None = No
     """Minimise the discrete energy of every path of ``paths`` ``(B, n+1, d)`` (ends fixed,
     points in the domain) by Newton steps, all problems at once; ``device``: ``None`` for
     numpy, or a torch device; ``scale``: the domain's size (for the residual). Returns a
-    :class:`NewtonBatch` (numpy)."""
+    `NewtonBatch` (numpy)."""
     opt = options or NewtonOptions()
     ops = backend_for(device)
     shape = tuple(paths.shape) if hasattr(paths, "shape") else np.shape(paths)

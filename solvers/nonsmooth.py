@@ -1,16 +1,16 @@
 """The optimality residual of a path for a metric whose ``F`` is not smooth: the KKT
 residual of the reformulated (slack) problem that the metric's ``smooth_square_sx`` hook
-defines (:mod:`finsler.hooks`; e.g. the car-like metric's ``max`` of its turning rate).
+defines (`finsler.hooks`; e.g. the car-like metric's ``max`` of its turning rate).
 
-The reformulated problem (the one IPOPT solves, :mod:`solvers.transcription`): minimise
+The reformulated problem (the one IPOPT solves, `solvers.transcription`): minimise
 ``sum_i f2(p_i, p_{i+1}, w_i)`` over the interior points and one slack block ``w_i`` per
 segment, subject to the hook's slack constraints and bounds on ``w``, and the domain's
 constraints on every point. For a smooth metric the gradient of the energy is the
-measure (:func:`solvers.newton.energy_residual`); for a non-smooth one the energy's
+measure (`solvers.newton.energy_residual`); for a non-smooth one the energy's
 gradient is not an optimality measure (at a kink it is one arbitrary element of the
 subdifferential: 0.2 to 4 measured at car-like optima that IPOPT solved to 1e-13 where
-the path reverses without turning), so :func:`optimality_residual` gives
-:func:`kkt_residual` there. Both are computed from the points alone, independently of
+the path reverses without turning), so `optimality_residual` gives
+`kkt_residual` there. Both are computed from the points alone, independently of
 how they were found.
 """
 
@@ -54,7 +54,7 @@ class _Functions:
 
 
 def uses_kkt(metric: Metric) -> bool:
-    """True if the residual of ``metric``'s paths is :func:`kkt_residual`: ``F`` declared
+    """True if the residual of ``metric``'s paths is `kkt_residual`: ``F`` declared
     not smooth and the metric provides the ``smooth_square_sx`` hook."""
     return (not metric.smooth) and metric.provides("smooth_square_sx")
 
@@ -92,7 +92,7 @@ def _build(metric: Metric) -> _Functions:
 
 def kkt_residual(metric: Metric, points: np.ndarray, scale: float) -> np.ndarray:
     """KKT residual of paths ``(B, n+1, d)`` for the reformulated (slack) problem of a
-    metric with ``smooth_square_sx`` (:func:`uses_kkt`), at the exact slacks -> ``(B,)``.
+    metric with ``smooth_square_sx`` (`uses_kkt`), at the exact slacks -> ``(B,)``.
 
     Each segment's slacks take their exact values (the hook's ``w_value``: then ``F**2``
     is exact and every slack constraint holds). Every constraint is written ``c >= 0``
@@ -104,11 +104,11 @@ def kkt_residual(metric: Metric, points: np.ndarray, scale: float) -> np.ndarray
     ``grad f - sum_j lambda_j grad c_j`` in the interior points and the slacks together
     with the complementarity ``lambda_j c_j / scale``, the slack rows weighted by
     ``SLACK_WEIGHT`` (a bounded least-squares problem per
-    path, :func:`scipy.optimize.lsq_linear`; at a kink of ``F`` two slack constraints are
+    path, `scipy.optimize.lsq_linear`; at a kink of ``F`` two slack constraints are
     active and the split between them is free: the Clarke subdifferential).
 
     Returns the largest of: that gradient's largest entry in the points times ``scale``
-    over the energy (stationarity, as :func:`solvers.newton.energy_residual` for a smooth
+    over the energy (stationarity, as `solvers.newton.energy_residual` for a smooth
     ``F``), its largest entry in the slacks times ``scale`` over the energy, the largest
     ``lambda_j c_j`` over the energy (complementarity), and the largest violation of a
     domain constraint over ``scale`` (feasibility; the slack constraints hold exactly).
@@ -189,9 +189,9 @@ def kkt_residual(metric: Metric, points: np.ndarray, scale: float) -> np.ndarray
 
 
 def optimality_residual(metric: Metric, points: np.ndarray, scale: float) -> np.ndarray:
-    """The residual reported with paths ``(B, n+1, d)``: :func:`kkt_residual` for a metric
-    that :func:`uses_kkt`, else the energy's projected gradient
-    (:func:`solvers.newton.energy_residual`) -> ``(B,)``."""
+    """The residual reported with paths ``(B, n+1, d)``: `kkt_residual` for a metric
+    that `uses_kkt`, else the energy's projected gradient
+    (`solvers.newton.energy_residual`) -> ``(B,)``."""
     if uses_kkt(metric):
         return kkt_residual(metric, points, scale)
     return energy_residual(metric, points, scale)

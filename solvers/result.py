@@ -1,8 +1,8 @@
 """Result objects of the solvers: every solve returns one, with its status.
 
-Non-convergence is a :class:`Status`, never a silent number; ``strict=True`` in the API
-(or ``result.strict()``) turns a non-converged status into a :class:`SolverError`. Every
-result derives from :class:`finsler.status.Result` (``status``, ``converged``, ``wall_time``,
+Non-convergence is a `Status`, never a silent number; ``strict=True`` in the API
+(or ``result.strict()``) turns a non-converged status into a `SolverError`. Every
+result derives from `finsler.status.Result` (``status``, ``converged``, ``wall_time``,
 ``to_dict``, ``strict``).
 """
 
@@ -83,17 +83,17 @@ class GeodesicResult(Result):
     plain difference of the last two sizes), ``tol_reached`` and ``tol_levels`` (one
     dict per size: ``segments``, ``length``, ``quadrature_error``, ...). ``method`` names
     what produced ``points``: ``"newton"`` (the batched Newton solve of
-    :mod:`solvers.batched`), ``"ipopt"``, or ``"none"`` (trivial and short pairs);
+    `solvers.batched`), ``"ipopt"``, or ``"none"`` (trivial and short pairs);
     ``residual`` is the path's first-order optimality residual: the largest entry of the
     projected gradient of ``sum C**2`` in the interior points, times the domain's size,
-    over ``sum C**2`` (:func:`solvers.newton.energy_residual`; ``1e-10`` is this package's
+    over ``sum C**2`` (`solvers.newton.energy_residual`; ``1e-10`` is this package's
     convergence tolerance) where ``F`` is smooth (``metric.smooth``). For a metric whose
     ``F`` has kinks and that provides ``smooth_square_sx`` (car-like's ``max``) the
     energy's gradient need not vanish at a minimiser, so ``residual`` is instead the KKT
     residual of the reformulated (slack) problem at the path's exact slacks:
     stationarity with the least-norm multipliers of the active constraints, slack
     stationarity, complementarity and domain feasibility, scaled the same way
-    (:func:`solvers.nonsmooth.kkt_residual`); 0 exactly at a KKT point. Measured on
+    (`solvers.nonsmooth.kkt_residual`); 0 exactly at a KKT point. Measured on
     IPOPT's car-like optima: 2e-8 to 1e-5 at 32 segments (the energy's gradient there:
     up to 4); on 4 fresh pairs at 256 (``benchmarks/nonsmooth_residual.py``) 1e-7 to
     2e-6 and one 1.5e-3 (IPOPT's slack can sit off its exact value within IPOPT's
@@ -101,7 +101,7 @@ class GeodesicResult(Result):
     For a batch, ``wall_time`` is the batch's time over its pairs.
 
     Evidence of global optimality (agreement within one seed family is no evidence):
-    ``seed_families`` breaks the seeds down by family (:func:`solvers.seeding.seed_family`:
+    ``seed_families`` breaks the seeds down by family (`solvers.seeding.seed_family`:
     ``straight``, ``bulge``, ``random``, ``graph``, the metric's own ``seed_curves``
     families, ``restart``, ``polish``, ``warp``, ``initial``): ``{family: {"tried",
     "agreeing", "best_energy"}}``, ``tried`` / ``agreeing`` counted on the candidates solved from
@@ -165,7 +165,7 @@ class GeodesicResult(Result):
         """JSON-ready summary (the schema of ``geodesics solve``): ``length`` is always the
         sum of the costs C; a solve with ``tol`` adds ``length_estimate`` (the continuum
         length) and ``error_estimate`` (None where no estimate exists, e.g. a single
-        size). ``status`` is :attr:`Status.label`, ``ipopt_status`` IPOPT's own word;
+        size). ``status`` is `Status.label`, ``ipopt_status`` IPOPT's own word;
         non-finite numbers (a failed solve's energy) are ``None``."""
         est = self.error_estimate
         out: dict[str, Any] = {
@@ -237,7 +237,7 @@ class DistanceResult(Result):
     ``|distance - d|`` valid in the regime of spectral convergence (smooth metric, no active
     domain constraint). ``degrees`` and ``lengths`` list every level. ``nodes`` ``(N+1, dim)``
     are the curve's values at the Chebyshev-Gauss-Lobatto nodes of ``[0, 1]``;
-    :meth:`curve` evaluates the polynomial at parameters ``t`` in ``[0, 1]`` (proportional
+    `curve` evaluates the polynomial at parameters ``t`` in ``[0, 1]`` (proportional
     to arc length at the optimum). ``upper_bound`` is the eq. (58) quadrature length of the
     globally seeded discrete path (``discrete``), an independent upper bound of the distance
     where the metric is Finsler; a ``distance`` above it means the transcription has not
@@ -278,7 +278,7 @@ class DistanceResult(Result):
 
 
 class MeshCertificate(Result):
-    """What the mesh certificates share (:class:`CertifyResult` in 2-D,
+    """What the mesh certificates share ([`CertifyResult`][solvers.result.CertifyResult] in 2-D,
     ``solvers.certify_nd.NDResult`` beyond): the outcome fields as members of the status
     family (words are accepted and converted), ``wall_time`` from ``times["total"]``,
     ``certified`` and a field-by-field ``to_dict``. Subclasses are dataclasses with
@@ -318,7 +318,7 @@ class CertifyResult(MeshCertificate):
     """A certified interval ``lower <= d(start, goal) <= upper``.
 
     ``gap = (upper - lower) / upper``. ``upper`` is a proven upper bound of the length of
-    ``path`` ``(n+1, 2)`` (:meth:`finsler.Metric.path_length_bounds`; ``length`` and
+    ``path`` ``(n+1, 2)`` (`finsler.Metric.path_length_bounds`; ``length`` and
     ``length_error`` are the adaptive-quadrature estimate of it): the solver's (or the
     given) path
     (``upper_source == "path"``) or, where ``F(z, .)`` is not convex, the same path with
@@ -338,15 +338,15 @@ class CertifyResult(MeshCertificate):
     the rows of the last LP (edges of the inner polygons), ``lp_rows_total`` the sampled
     rows they imply (3 x triangles x directions). ``stopped_by`` says what ended the
     refinement: ``target_gap`` (reached), ``max_rounds`` or ``max_triangles`` (the work
-    budgets of :class:`MeshSpec`), ``no_refinement`` (no triangle left to refine), or
+    budgets of [`MeshSpec`][solvers.MeshSpec]), ``no_refinement`` (no triangle left to refine), or
     ``time_limit`` (the caller's wall-clock limit: only then can the result depend on the
-    machine's speed), or the failure's label. ``status`` (:class:`solvers.CertifyStatus`)
+    machine's speed), or the failure's label. ``status`` (`solvers.CertifyStatus`)
     says the same in the toolkit's one family of statuses: a failure of the refinement (an
     LP solver failure, corrections that do not shrink) is a status with the best interval
     proven so far (lower bound 0 if none) and ``message``, never an exception.
-    ``solver_status`` is the upper-bound solve's :class:`solvers.Status` (``Status.GIVEN``
+    ``solver_status`` is the upper-bound solve's `solvers.Status` (``Status.GIVEN``
     for a given path; its label, e.g. ``"success"``, in JSON) and ``lp_status`` the last
-    LP's :class:`finsler.status.LPStatus` (a ``str`` enum of cvxpy's words).
+    LP's `finsler.status.LPStatus` (a ``str`` enum of cvxpy's words).
     """
 
     rigour: ClassVar[dict[str, str]] = {

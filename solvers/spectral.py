@@ -10,8 +10,8 @@ its length ``L_N = sum_q w_q F(gamma(tau_q), gamma'(tau_q))`` converges to the d
 spectrally (faster than any power of ``1/N``) where the metric is smooth along an analytic
 geodesic and no domain constraint is active.
 
-:func:`distance` seeds the lowest degree with the globally seeded task solution
-(:func:`solvers.solve_geodesic`), doubles ``N`` (warm start: the previous polynomial is
+`distance` seeds the lowest degree with the globally seeded task solution
+(`solvers.solve_geodesic`), doubles ``N`` (warm start: the previous polynomial is
 exactly representable) and stops when ``|L_N - L_{N/2}| <= rtol * L_N``. Under spectral
 convergence ``|L_N - L_{N/2}| ~ |L_{N/2} - d| >> |L_N - d|``, so the difference is a
 conservative estimate of the error of ``L_N``; a small rounding floor is added.
@@ -43,7 +43,7 @@ __all__ = [
     "spectral_nlp",
 ]
 
-#: Degrees tried by :func:`distance` (doubling), by metric dimension.
+#: Degrees tried by [`distance`][solvers.spectral.distance] (doubling), by metric dimension.
 DEGREES_LOW_DIM = (8, 16, 32, 64, 128)
 DEGREES_HIGH_DIM = (8, 16, 32, 64)
 
@@ -162,7 +162,7 @@ def distance(
     not convex everywhere) ``F(x, .)`` is convex at every quadrature point of the curve; a
     curve through a non-convex region gets ``NOT_CONVEX`` (its length is that of a smooth
     local minimiser, not the continuum infimum). ``strict=True`` raises
-    :class:`SolverError` unless converged.
+    [`SolverError`][solvers.spectral.SolverError] unless converged.
     """
     t0 = time.perf_counter()
     m = as_metric(metric)

@@ -1,6 +1,6 @@
-"""The solvers' statuses: re-exported from :mod:`finsler.status`, the toolkit's one family
+"""The solvers' statuses: re-exported from `finsler.status`, the toolkit's one family
 of statuses in the ground layer (the same objects; ``learn`` and ``validation`` import them
-from there). Read :mod:`finsler.status` for what ``label`` and ``converged`` mean."""
+from there). Read `finsler.status` for what ``label`` and ``converged`` mean."""
 
 from __future__ import annotations
 

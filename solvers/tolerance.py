@@ -2,9 +2,9 @@
 is known to a relative tolerance (``solve_geodesic(..., tol=...)``).
 
 Each size is warm started from the previous path; the polyline lengths of the sizes
-solved so far are extrapolated by :func:`richardson` (order 2 when it is observed), and
+solved so far are extrapolated by `richardson` (order 2 when it is observed), and
 the refinement stops when the estimated error is below ``tol`` times the length or at
-``max_segments`` (:func:`solve_to_tol`).
+``max_segments`` (`solve_to_tol`).
 """
 
 from __future__ import annotations
@@ -24,7 +24,7 @@ from solvers.seeding import SeedPlan, resample
 
 __all__ = ["EXPECTED_ORDER", "TOL_MAX_SEGMENTS", "check_tol", "richardson", "solve_to_tol"]
 
-#: Largest size :func:`~solvers.geodesic.solve_geodesic` doubles to for ``tol``.
+#: Largest size [`solve_geodesic`][solvers.geodesic.solve_geodesic] doubles to for ``tol``.
 TOL_MAX_SEGMENTS = 16384
 #: Order of the polyline length of a smooth geodesic: chords lose O(h**2) per unit length.
 EXPECTED_ORDER = 2.0
@@ -65,7 +65,7 @@ def richardson(sizes: Sequence[int], lengths: Sequence[float], quad_errors: Sequ
 
 
 def _tol_estimate(levels: list[dict[str, Any]], nonconvex: bool) -> dict[str, Any]:
-    """:func:`richardson` over the sizes solved so far; through non-convex regions of ``F``
+    """`richardson` over the sizes solved so far; through non-convex regions of ``F``
     (where discrete minimisers may chatter and the order can change with the size) the
     order must be seen on the last two triples of sizes before it is used."""
     args = ([lv["segments"] for lv in levels], [lv["length"] for lv in levels],
@@ -82,7 +82,7 @@ def _tol_estimate(levels: list[dict[str, Any]], nonconvex: bool) -> dict[str, An
 
 def check_tol(m: Metric, n: int, tol: Any, max_segments: Any) -> tuple[float, int]:
     """``tol`` (a relative tolerance in ``(0, 1)``) and ``max_segments`` (a size ``>= n``)
-    checked, as ``(float, int)``: what :func:`solve_to_tol` takes."""
+    checked, as ``(float, int)``: what `solve_to_tol` takes."""
     if isinstance(tol, bool) or not isinstance(tol, (int, float, np.floating)) or not (
             np.isfinite(tol) and 0 < tol < 1):
         raise InputError(f"tol must be a relative tolerance in (0, 1), got {tol!r}")
@@ -97,10 +97,10 @@ def solve_to_tol(m: Metric, s: np.ndarray, g: np.ndarray, n: int, tol: float,
                  max_segments: int, t0: float, *, minmax: bool, strict: bool, method: str,
                  device: Any, **kw: Any) -> GeodesicResult:
     """``solve_geodesic(..., tol=tol)`` from checked input (``m`` a metric, ``s`` / ``g``
-    points in its domain, ``n`` checked, ``tol`` / ``max_segments`` by :func:`check_tol`,
+    points in its domain, ``n`` checked, ``tol`` / ``max_segments`` by `check_tol`,
     ``method`` resolved): the pair solved at ``n`` (``kw``: ``seeds``, ``initial``,
     ``global_seeds``), then at doubled sizes, each warm started from the last, until
-    :func:`_tol_estimate` is within ``tol`` or ``max_segments`` is reached; ``t0``: the
+    `_tol_estimate` is within ``tol`` or ``max_segments`` is reached; ``t0``: the
     caller's start time (for ``wall_time``)."""
     res = first = solve_pair(m, s, g, n, method=method, device=device, **kw)
     iterations = first.iterations

@@ -6,11 +6,11 @@ reformulation, then (min-max problem only) the epigraph variable ``t``. Start an
 the parameters ``p = [s; g]``, so one compiled solver serves every pair (warm started from a
 seed curve).
 
-Smooth reformulation (:func:`smooth_square`): IPOPT needs twice continuously differentiable
+Smooth reformulation (`smooth_square`): IPOPT needs twice continuously differentiable
 functions. The objective uses ``F**2`` rather than ``F`` (CasADi simplifies
 ``sq(sqrt(q))`` to ``q``, so for metrics of the form ``sqrt(q)`` no square root remains);
 a metric whose ``F`` is not C^2 may provide the hook ``smooth_square_sx``
-(:mod:`finsler.hooks`; the car-like metric does: its ``max(r|v_th| - u, 0)`` becomes a
+(`finsler.hooks`; the car-like metric does: its ``max(r|v_th| - u, 0)`` becomes a
 slack with two linear constraints, exact at a minimiser), and the transcription uses it:
 the formula lives only in the metric.
 """
@@ -58,7 +58,7 @@ class SmoothSquare:
 
 def smooth_square(metric: Metric, x: ca.SX, v: ca.SX, tag: str = "") -> SmoothSquare:
     """Smooth form of ``F(x, v)**2`` for ``metric``: the metric's own
-    ``smooth_square_sx(x, v, tag)`` hook (:mod:`finsler.hooks`) where it gives one
+    ``smooth_square_sx(x, v, tag)`` hook (`finsler.hooks`) where it gives one
     (metrics whose ``F`` is not C^2, e.g. the car-like metric's ``max``; the formula stays
     in the metric), else ``F_sx(x, v)**2``."""
     hook = metric.smooth_square_sx(x, v, tag)
@@ -337,7 +337,7 @@ class MinMaxNLP(_NLPBase):
     ~1e-8 relative.
 
     Solved from the energy solution in up to three attempts, each limited to
-    :meth:`wall_budget` seconds (IPOPT's ``max_wall_time``, so a size that cannot be
+    `wall_budget` seconds (IPOPT's ``max_wall_time``, so a size that cannot be
     solved returns its status in bounded time, never hangs): a warm start (barrier and
     bound push 1e-6 / 1e-8: the start is feasible and nearly optimal), then IPOPT's
     default barrier start, then the default start without the cap on ``t``.

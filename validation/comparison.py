@@ -4,7 +4,7 @@
 task's resolution ``n = 2**D`` and threshold ``eps`` (section 5.1):
 
 * the **learned** policy (recursive midpoint insertion, deterministic means);
-* the **exact** discrete geodesics from :mod:`solvers` (globally seeded energy minimisers;
+* the **exact** discrete geodesics from `solvers` (globally seeded energy minimisers;
   their min-max refinement gives the success *ceiling* of the task);
 * the **straight** baseline: the coordinate segment cut into ``n`` equal pieces.
 
@@ -14,7 +14,7 @@ time per path. ``midpoint_error(policy, metric, pairs)`` is the midpoint part al
 
 A *policy* is any object with ``generate(starts (K, dim), goals (K, dim), depth=None) ->
 (K, 2**D + 1, dim)`` and ``midpoint(starts, goals) -> (K, dim)`` (e.g.
-``learn.load_policy(...)``, :class:`StraightLine`, :class:`ExactPolicy`).
+``learn.load_policy(...)``, `StraightLine`, `ExactPolicy`).
 """
 
 from __future__ import annotations
@@ -163,7 +163,7 @@ class ExactSet(PathSet):
 
     ``minmax_max_segment_cost (K,)``: largest segment cost after the min-max refinement;
     ``ceiling (K,)``: the task is solvable at this resolution (that cost ``<= eps``);
-    ``status``: solver status per pair (:attr:`solvers.Status.label`); ``converged (K,)``;
+    ``status``: solver status per pair (`solvers.Status.label`); ``converged (K,)``;
     ``seeds_tried``/``seeds_agreeing``.
     """
 
@@ -188,7 +188,7 @@ def exact_reference(
     workers: int | None = None,
     progress: bool = True,
 ) -> ExactSet:
-    """Solve every pair with :func:`solvers.solve_batch` (min-max refinement on) at
+    """Solve every pair with [`solvers.solve_batch`][solvers.solve_batch] (min-max refinement on) at
     ``segments`` (default ``2**D``) and evaluate the paths; ``eps`` defaults to the task's."""
     arr = solvers.check_pairs(metric, pairs)
     n = solvers.check_segments(metric, segments)
@@ -240,7 +240,7 @@ class MidpointErrors:
     midpoint ``p_{n/2}`` they add up to ``d_sg`` and the error is 0).
     ``err_start = |d_sm - d_sg/2| / d_sg``, ``err_goal = |d_mg - d_sg/2| / d_sg`` (all
     ``(K,)``). ``ok (K,)``: all three solves converged (statistics use these pairs).
-    ``continuum_*``: the same with :func:`solvers.distance` where it converged (the
+    ``continuum_*``: the same with [`solvers.distance`][solvers.distance] where it converged (the
     metric is Finsler along the path), NaN elsewhere; ``continuum_status`` per pair.
     """
 
@@ -322,7 +322,7 @@ def midpoint_error(
     ``pairs (K, 2, dim)`` (default: the environment's evaluation set), against exact
     discrete geodesic lengths (``exact`` may supply ``d(s, g)`` already solved at
     ``segments``). ``continuum=True`` adds the continuum distances of
-    :func:`solvers.distance` where they converge."""
+    [`solvers.distance`][solvers.distance] where they converge."""
     m = finsler.get_metric(metric)
     arr = solvers.check_pairs(m, finsler.default_pairs(m) if pairs is None else pairs)
     n = solvers.check_segments(m, segments)
@@ -379,7 +379,7 @@ def midpoint_error(
 # ----------------------------------------------------------------------------------------
 @dataclass
 class Comparison:
-    """Everything :func:`compare` measured; :meth:`to_dict` is the ``report.json`` body."""
+    """Everything `compare` measured; `to_dict` is the ``report.json`` body."""
 
     metric: str
     eps: float
@@ -392,7 +392,7 @@ class Comparison:
     policy_source: str = ""
     timing: dict[str, float] = field(default_factory=dict)
     searched: PathSet | None = None
-    """The policy's paths with the route search (:meth:`learn.Policy.search`), if asked."""
+    """The policy's paths with the route search (`learn.Policy.search`), if asked."""
     search: dict[str, Any] | None = None
     """The search's settings and its evaluations of C per path."""
 
@@ -522,7 +522,7 @@ def compare(
     policy's, else the task's) and threshold ``eps`` (default: the policy's, else the
     task's). ``exact`` reuses solved references; ``midpoint`` adds the first-level midpoint
     error; ``continuum`` adds continuum distances where the metric is Finsler. ``search``
-    (a :class:`learn.SearchSpec`, for a policy with a ``search`` method) adds the paths
+    (a [`learn.SearchSpec`][learn.SearchSpec], for a policy with a ``search`` method) adds the paths
     of the policy-guided route search as a fourth set, ``searched``."""
     m = finsler.get_metric(metric if metric is not None else policy.metric)
     arr = solvers.check_pairs(m, finsler.default_pairs(m) if pairs is None else pairs)

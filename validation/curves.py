@@ -9,7 +9,7 @@ Environment and variant names are opaque strings (``midpoint``, ``paper``, ``seq
 ordered by sorting. Only directories named ``seed-<integer>`` two levels below an
 environment directory are runs; files and other directories are ignored.
 
-Conventions of :func:`learning_curves` (each seed's log is a step function of ``x``):
+Conventions of `learning_curves` (each seed's log is a step function of ``x``):
 
 * the value of a seed at ``x`` is its **last evaluation at or before** ``x`` (for equal
   ``x``, the later row of the log);
@@ -24,7 +24,7 @@ Conventions of :func:`learning_curves` (each seed's log is a step function of ``
   seed that stops before the longest one, so the mean between grid points is exactly the
   value at the grid point on the left.
 
-:func:`running_mean_threshold` is the "first time the running mean of 5 consecutive
+`running_mean_threshold` is the "first time the running mean of 5 consecutive
 evaluations reaches a threshold" used in reports.
 """
 
@@ -187,7 +187,7 @@ def read_sweep(directory: str | Path) -> Sweep:
 
     Raises InputError (naming the path) if ``directory`` does not exist or holds no run,
     if a directory is named ``seed-`` without an integer, or if a run's ``metrics.csv`` is
-    missing or corrupt (see :func:`read_run_metrics`)."""
+    missing or corrupt (see `read_run_metrics`)."""
     root = Path(directory)
     if not root.exists():
         raise InputError(f"sweep directory {root} does not exist")
@@ -357,7 +357,7 @@ def running_mean_threshold(
     consecutive evaluations (this one and the ``window - 1`` before it) is ``>=
     threshold``; None if that never happens (or there are fewer than ``window`` rows).
 
-    ``rows``: metrics rows in log order (:attr:`Run.rows` or
+    ``rows``: metrics rows in log order (`Run.rows` or
     ``learn.storage.read_metrics``), each with ``column``, ``timesteps`` and
     ``wall_seconds``. The comparison allows a relative 1e-12 for rounding (five
     evaluations at 0.9 reach 0.9)."""

@@ -1,14 +1,14 @@
 """Every matplotlib figure of the project, in one module.
 
-Each drawing function returns a :class:`matplotlib.figure.Figure` built with the
+Each drawing function returns a `matplotlib.figure.Figure` built with the
 object-oriented API on an Agg canvas: no pyplot, no backend switch, no global state, at
-import or later (figures are garbage-collected, nothing to close). :func:`save_figure`
+import or later (figures are garbage-collected, nothing to close). `save_figure`
 writes one atomically (rendered in memory, then ``learn.storage.atomic_write_bytes``).
 
-Report figures (:mod:`validation.report`): :func:`learning_curve`, :func:`paths_2d`,
-:func:`carlike_headings`, :func:`panda_motion`, :func:`length_ratios`,
-:func:`midpoint_errors`. Sweep figure (Fig. 2 of the paper, ``geodesics plot-curves``):
-:func:`sweep_curves`.
+Report figures (`validation.report`): `learning_curve`, `paths_2d`,
+`carlike_headings`, `panda_motion`, `length_ratios`,
+`midpoint_errors`. Sweep figure (Fig. 2 of the paper, ``geodesics plot-curves``):
+`sweep_curves`.
 """
 
 from __future__ import annotations
@@ -108,7 +108,7 @@ def learning_curve(rows: Sequence[Mapping[str, Any]], cmp: Comparison,
     ``timesteps``. A log without ``timesteps_paper`` predates the run-directory contract:
     its ``timesteps`` axis is labelled as such, not as all-inclusive. ``pairs``: the pair
     set the rows were evaluated on (``validation`` or ``default``, see
-    :func:`validation.report.curve_set`), named in the legend. None if the rows hold no
+    `validation.report.curve_set`), named in the legend. None if the rows hold no
     (timesteps, success_rate)."""
     rows = [r for r in rows if "timesteps" in r and "success_rate" in r]
     if not rows:
@@ -191,7 +191,7 @@ def _finsler_background(ax: Any, metric: Metric, res: int = 160) -> None:
 
 def height_map(metric: Metric) -> Any:
     """The height function ``(N, 2) -> (N,)`` drawn as contours under 2-D paths: the
-    metric's ``height_map`` hook (:mod:`finsler.hooks`; Matsumoto's slope of eq. 21
+    metric's ``height_map`` hook (`finsler.hooks`; Matsumoto's slope of eq. 21
     provides it) if it provides one, else None."""
     return metric.height_map if metric.provides("height_map") else None
 
@@ -205,7 +205,7 @@ def is_planar_pose(metric: Metric) -> bool:
 
 def has_kinematics(metric: Metric) -> bool:
     """True for a metric that provides the ``frame_positions(q) -> (N, frames, 3)`` hook
-    (:mod:`finsler.hooks`: a robot arm's forward kinematics, like the Panda metric)."""
+    (`finsler.hooks`: a robot arm's forward kinematics, like the Panda metric)."""
     return metric.provides("frame_positions")
 
 
@@ -266,7 +266,7 @@ def paths_2d(cmp: Comparison, metric: Metric) -> Figure:
 
 
 def carlike_headings(cmp: Comparison, metric: Metric) -> Figure:
-    """Planar pose metrics (:func:`is_planar_pose`, e.g. car-like): positions with heading
+    """Planar pose metrics (`is_planar_pose`, e.g. car-like): positions with heading
     arrows (top row) and the heading along the path."""
     sel = _select_pairs(cmp, 4)
     fig = new_figure((3.6 * len(sel), 7))
@@ -313,7 +313,7 @@ def carlike_headings(cmp: Comparison, metric: Metric) -> Figure:
 
 
 def panda_motion(cmp: Comparison, metric: Metric) -> Figure:
-    """Arms (:func:`has_kinematics`, e.g. Panda): joint angles along one path, and link
+    """Arms (`has_kinematics`, e.g. Panda): joint angles along one path, and link
     positions seen from above (with the metric's ``landmarks``, e.g. Panda's pole)."""
     r = cmp.ratios("learned")
     i = int(_select_pairs(cmp, 3)[-1]) if len(cmp.pairs) > 1 else 0
@@ -466,8 +466,8 @@ def sweep_curves(curves: Mapping[str, Mapping[tuple[str, str], Curve]],
                  column: str = "success_rate") -> Figure:
     """Fig. 2: one column of panels per environment, one row per x axis (``curves`` maps
     an x kind, ``"timesteps"`` and/or ``"wall_seconds"``, to the output of
-    :func:`validation.curves.learning_curves`). One line per variant (step function of the
-    seed mean, exact on the default grid of :func:`~validation.curves.learning_curves`; a dot
+    `validation.curves.learning_curves`). One line per variant (step function of the
+    seed mean, exact on the default grid of `learning_curves`; a dot
     marks its last value), shaded band = mean +- standard error (absent where one seed
     only); colours
     are fixed per variant across panels. Axes: ``fig.axes`` is row-major,

@@ -13,7 +13,7 @@ cannot be split keeps its value.
 A grid has only approximate midpoints, so the continuum statements are checked in their
 grid form: Lemma 1 item 3 holds verbatim on any finite set; item 4's induction step
 holds with the grid's best approximate midpoint in place of the true one (see
-:func:`check_lemma1`).
+`check_lemma1`).
 """
 
 from __future__ import annotations
@@ -157,7 +157,7 @@ def run_grid_dp(
 ) -> GridDP:
     """Iterate eqs. (9)-(11) (or (13) with ``rule="sum"``) exactly on a grid.
 
-    Either ``metric`` and ``n`` (the lattice of :func:`grid_points`, ``V_0 = C`` of eq. 4),
+    Either ``metric`` and ``n`` (the lattice of `grid_points`, ``V_0 = C`` of eq. 4),
     or ``points (G, 2)`` and a custom ``cost (G, G)`` for ``V_0`` (e.g. Remark 3's
     ``f o d``). Returns ``iterations + 1`` value matrices and ``iterations`` policies.
     """
@@ -235,7 +235,7 @@ def proposition2_table(
     the largest grid distance, the same absolute threshold on every grid).
 
     Each row: ``n``, ``G`` (points), ``h`` (spacing), ``i``, ``V_err_max``/``V_err_mean``
-    (``|V_i - d| / d``), ``mid_err_max``/``mid_err_mean`` (:func:`midpoint_errors`,
+    (``|V_i - d| / d``), ``mid_err_max``/``mid_err_mean`` (`midpoint_errors`,
     ``i < iterations``), ``mid_floor_max`` (the best any grid point can do), and
     ``mid_coord_max``: coordinate distance from ``pi_i(x, y)`` to the exact midpoint.
     """
@@ -285,8 +285,8 @@ def proposition2_table(
 @dataclass
 class Lemma1Report(Result):
     """Worst slack of Lemma 1's bounds over all iterations and thresholds (<= 0: holds).
-    A :class:`finsler.status.Result`: ``status`` is ``passed`` if :attr:`holds`, else
-    ``failed`` (:class:`finsler.status.PropertyOutcome`).
+    A [`finsler.status.Result`][finsler.status.Result]: ``status`` is ``passed`` if `holds`, else
+    ``failed`` ([`finsler.status.PropertyOutcome`][finsler.status.PropertyOutcome]).
 
     ``item3[i][k]``: ``max_{V_i < delta_k} (d/V_i - 1) - eps_0(delta_k)``, where
     ``eps_0(delta) = max_{V_0 < delta} (d/V_0 - 1)`` (eq. 34 -> 35).
@@ -371,7 +371,7 @@ def remark3_f(h: np.ndarray) -> np.ndarray:
 
 @dataclass
 class Remark3Result(Result):
-    """Remark 3 on a grid with ``C = f o d`` (a :class:`finsler.status.Result`: ``status``
+    """Remark 3 on a grid with ``C = f o d`` (a `finsler.status.Result`: ``status``
     is ``passed`` if the remark's claim ``stays`` holds, else ``failed``).
 
     ``sum_rule``: the eq.-(13) DP; ``stays``: ``V_i == C`` and ``pi_i(x, y) == x`` for all
@@ -478,7 +478,7 @@ def two_segment_distance(
 @dataclass
 class Prop1Result(Result):
     """``C(x, x + t u) / d(x, x + t u)`` for shrinking ``t`` (a
-    :class:`finsler.status.Result`: ``status`` is ``passed`` if every ratio is finite and
+    `finsler.status.Result`: ``status`` is ``passed`` if every ratio is finite and
     the ratio at the smallest ``t`` is no farther from ``limit`` than at the largest,
     ``failed`` if it is farther, ``inconclusive`` if a ratio is not finite).
 
@@ -525,7 +525,7 @@ def proposition1_rate(
     distance: Callable[[np.ndarray, np.ndarray], float] | None = None,
 ) -> Prop1Result:
     """Measure ``C(x, y)/d(x, y) -> 1`` along ``y = x + t u``. ``d`` is the closed form if the
-    metric has one, else ``distance(x, y)`` (default: :func:`polygon_distance`)."""
+    metric has one, else ``distance(x, y)`` (default: `polygon_distance`)."""
     t0 = time.perf_counter()
     x = np.asarray(x, float).reshape(-1)
     u = np.asarray(u, float).reshape(-1)
@@ -578,7 +578,7 @@ def nonconvex_direction(
 def proposition1_nonconvex(metric: Metric, x: np.ndarray, ts: np.ndarray) -> Prop1Result:
     """Proposition 1 where ``F(x, .)`` is not convex: along the direction ``u`` where ``F``
     exceeds its convexification most, ``C/d`` does not tend to 1 but to ``F/F** > 1``. ``d`` is
-    bounded above by the best two-segment zig-zag (:func:`two_segment_distance`), so the
+    bounded above by the best two-segment zig-zag (`two_segment_distance`), so the
     reported ``ratio`` is a lower bound of ``C/d``; ``limit`` is the predicted ``F/F**``."""
     t0 = time.perf_counter()
     u, lim = nonconvex_direction(metric, x)

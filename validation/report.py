@@ -2,9 +2,9 @@
 
 ``build_report(env, out, ...)`` loads a policy (a run directory, or the shipped policy of
 the environment; ``quick=True`` trains a small Matsumoto policy in a few minutes if none is
-shipped), runs :func:`validation.compare` on the evaluation pairs and writes
+shipped), runs `validation.compare` on the evaluation pairs and writes
 
-* ``report.json``: every number (the body of :meth:`Comparison.to_dict` plus the
+* ``report.json``: every number (the body of `Comparison.to_dict` plus the
   exact solver's own midpoint error floor);
 * ``report.md``: the same numbers as tables, with the figures;
 * ``learning_curve.png`` (Fig. 2 style, from the run's ``metrics.csv``: success rate
@@ -17,7 +17,7 @@ shipped), runs :func:`validation.compare` on the evaluation pairs and writes
   ``coordinates.png`` (every coordinate along the path) for any other metric;
 * ``length_ratio.png`` (histograms) and ``midpoint_error.png``.
 
-The figures are drawn by :mod:`validation.figures`; files are written atomically.
+The figures are drawn by `validation.figures`; files are written atomically.
 """
 
 from __future__ import annotations
@@ -169,7 +169,7 @@ CURVE_SETS = {"validation": "the validation pairs (finsler.validation_pairs)",
 # ----------------------------------------------------------------------------------------
 def write_figures(cmp: Comparison, metric: Metric, out: Path, curve: list[dict[str, Any]],
                   floor: Any = None, curve_pairs: str = "validation") -> list[str]:
-    """Write the report's PNG figures (drawn by :mod:`validation.figures`) into ``out``,
+    """Write the report's PNG figures (drawn by `validation.figures`) into ``out``,
     atomically; returns their file names."""
     from validation import figures as fg
 
@@ -208,7 +208,7 @@ def _pct(x: float) -> str:
 
 
 def _params(metric: Metric) -> dict[str, Any]:
-    """The metric's parameters (its :class:`finsler.MetricSpec`'s)."""
+    """The metric's parameters (its [`finsler.MetricSpec`][finsler.MetricSpec]'s)."""
     return dict(finsler.MetricSpec.of(metric).params)
 
 
@@ -451,18 +451,18 @@ def build_report(
 ) -> dict[str, Any]:
     """Write the report for ``env`` (or the run's environment) into ``out``; returns the
     ``report.json`` document. ``policy`` overrides the loaded policy (any object with the
-    policy interface, e.g. :class:`validation.StraightLine`). ``continuum`` (default: on
+    policy interface, e.g. `validation.StraightLine`). ``continuum`` (default: on
     unless ``quick``) adds continuum distances to the midpoint error, where
-    :func:`solvers.distance` converges (the metric is Finsler along the path).
+    [`solvers.distance`][solvers.distance] converges (the metric is Finsler along the path).
     ``checkpoint``: ``best`` (selected on the validation set) or ``latest``.
     ``metric_params``: the metric's parameters; a loaded policy must have been trained
     with them (its run's own parameters are always the ones reported). ``search``: also
-    report the policy-guided route search (:meth:`learn.Policy.search`; True = the default
-    :class:`learn.SearchSpec`, or a spec, or False/None for none), for policies that have
+    report the policy-guided route search (`learn.Policy.search`; True = the default
+    `learn.SearchSpec`, or a spec, or False/None for none), for policies that have
     it. ``certify``: certified intervals for this many pairs, in any dimension
-    :func:`solvers.certify` accepts (:mod:`validation.report_certify`; default:
-    :func:`~validation.report_certify.default_count` pairs with the preset
-    :func:`~validation.report_certify.preset_for` picks; 0: none)."""
+    `solvers.certify` accepts (`validation.report_certify`; default:
+    `default_count` pairs with the preset
+    `preset_for` picks; 0: none)."""
     if certify is not None and (isinstance(certify, bool) or not isinstance(certify, int)
                                 or certify < 0):
         raise InputError(f"certify must be a number of pairs >= 0, got {certify!r}")

@@ -1,5 +1,5 @@
 """The certificates of a report (issue 46, item 5): ``lower <= d(s, g) <= upper`` for the
-first pairs of a comparison, by :func:`solvers.certify` in any dimension it accepts.
+first pairs of a comparison, by `solvers.certify` in any dimension it accepts.
 
 Every row is built from what the certificate carries, never from the metric's name: the
 2-D mesh certificate (``CertifyResult``: triangles), the verified potential of 3-D and up
@@ -62,7 +62,7 @@ def default_count(metric: Metric, quick: bool) -> int:
 
 def certificate_row(c: Any) -> dict[str, Any]:
     """The fields of a report row common to every certificate ``c`` (any result of
-    :func:`solvers.certify`), chosen by what ``c`` carries."""
+    `solvers.certify`), chosen by what ``c`` carries."""
     work = {k: int(getattr(c, k)) for k in WORK_FIELDS if isinstance(
         getattr(c, k, None), (int, float))}
     method = getattr(c, "method", None) or next(
@@ -88,16 +88,16 @@ def certificate_row(c: Any) -> dict[str, Any]:
 
 def certified_intervals(cmp: Comparison, metric: Metric, count: int, quick: bool
                         ) -> dict[str, Any] | None:
-    """Certified intervals ``lower <= d <= upper`` (:func:`solvers.certify`) for the first
+    """Certified intervals ``lower <= d <= upper`` (`solvers.certify`) for the first
     ``count`` pairs of a comparison, with the exact path as the curve of the upper bound (no
     second solve), and per pair a PROVEN bound on how much longer than the distance the
     learned path (and the route search's) is: its proven length
-    (:meth:`Metric.path_length_bounds`) over the certified lower bound. The preset is
-    :func:`preset_for`'s; its work budgets (rounds, triangles, cells, boxes) decide the
+    (`Metric.path_length_bounds`) over the certified lower bound. The preset is
+    `preset_for`'s; its work budgets (rounds, triangles, cells, boxes) decide the
     refinement, never a wall-clock limit, so the same report gives the same intervals on
-    any machine under any load. Each row (:func:`certificate_row`, plus ``pair``,
+    any machine under any load. Each row (`certificate_row`, plus ``pair``,
     ``seconds`` (wall) and ``cpu_seconds``) has the certificate's ``status``
-    (:class:`solvers.CertifyStatus`; a failed refinement keeps the best interval proven,
+    (`solvers.CertifyStatus`; a failed refinement keeps the best interval proven,
     lower bound 0 if none, and an infinite excess bound); a pair that cannot be certified
     (bad input, e.g. start and goal too close, or a metric the certifiers do not accept)
     is listed with its ``error``. None where ``count`` is 0."""

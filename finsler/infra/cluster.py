@@ -26,7 +26,7 @@ unreachable."""
 
 
 def require_ray() -> Any:
-    """The ``ray`` module, or :class:`InputError` saying how to install it."""
+    """The ``ray`` module, or `InputError` saying how to install it."""
     try:
         import ray
     except ImportError as err:
@@ -36,7 +36,7 @@ def require_ray() -> Any:
 
 def _host_port(address: str) -> tuple[str, int] | None:
     """``(host, port)`` of ``HOST:PORT`` or ``ray://HOST:PORT``; None for ``auto``/``local``.
-    A malformed address raises :class:`InputError`."""
+    A malformed address raises `InputError`."""
     if address in ("auto", "local"):
         return None
     rest = address.removeprefix("ray://")
@@ -49,7 +49,7 @@ def _host_port(address: str) -> tuple[str, int] | None:
 
 
 def probe_address(address: str, seconds: float = PROBE_SECONDS) -> None:
-    """Raise :class:`InputError` unless a TCP connection to ``address``'s host and port
+    """Raise `InputError` unless a TCP connection to ``address``'s host and port
     opens within ``seconds`` (no-op for ``auto`` and ``local``)."""
     hp = _host_port(address)
     if hp is None:
@@ -71,7 +71,7 @@ def connect_ray(address: str, num_cpus: int | None = None) -> bool:
     on the driver, no dashboard for a local instance). Returns False if Ray was already
     initialised in this process (it is then used as it is and left running), True if this
     call connected (the caller shuts it down). An unreachable address fails within
-    :data:`PROBE_SECONDS`."""
+    `PROBE_SECONDS`."""
     ray = require_ray()
     if not isinstance(address, str) or not address.strip():
         raise InputError("--ray needs an address: HOST:PORT, auto, or local")

@@ -2,26 +2,26 @@
 reader of the files a user hands in (``.npy`` arrays, JSON and text files).
 
 Every file the toolkit writes (run directories, policies, solver results and their
-resumable parts, reports, figures) goes through :func:`atomic_write_bytes`: the data is
+resumable parts, reports, figures) goes through `atomic_write_bytes`: the data is
 written to a temporary file in the target's folder and renamed over the target, so a
 reader sees the old file or the new one, never half of one. A symbolic link is written
 THROUGH (its target gets the new content; the link stays a link); an existing target that
 is not a regular file (a directory, a device such as ``/dev/full`` or ``/dev/stdout``, a
 pipe, a socket) is refused, never replaced. A write that fails (a full disk, no
 permission) leaves the target as it was, removes the temporary file and raises
-:class:`OutputError` naming the path.
+`OutputError` naming the path.
 
-:func:`check_output_path` runs the same checks without writing, so that commands can
+`check_output_path` runs the same checks without writing, so that commands can
 refuse a bad output path before they do any work: every name of the path fits the file
-system (:data:`NAME_MAX` bytes a name, :data:`PATH_MAX` in all), and the folder it goes to
+system (`NAME_MAX` bytes a name, `PATH_MAX` in all), and the folder it goes to
 takes a new file (a probe file is created and removed at once: a read-only file system or a
-folder without write permission is refused, also for root). :func:`check_output_dir` does
+folder without write permission is refused, also for root). `check_output_dir` does
 the same for an output folder (``report``, ``sweep``, ``train``), without creating it.
 
-Reading: :func:`read_npy` checks a ``.npy`` file's header (dtype, shape, and the memory the
-array needs, :func:`finsler.infra.limits.check_memory`) before it allocates anything, so a file
+Reading: `read_npy` checks a ``.npy`` file's header (dtype, shape, and the memory the
+array needs, `finsler.infra.limits.check_memory`) before it allocates anything, so a file
 whose header claims 10**12 rows is a clear error, not a machine out of memory;
-:func:`read_text` reads a text file of bounded size. Both raise :class:`InputError` naming
+`read_text` reads a text file of bounded size. Both raise `InputError` naming
 the file and the problem (missing, a folder, unreadable, too large, not the format).
 """
 
@@ -122,7 +122,7 @@ def _existing_folder(folder: Path, path: str | os.PathLike[str], what: str) -> P
 def check_output_dir(path: str | os.PathLike[str], what: str = "output folder") -> Path:
     """The output folder ``path``, checked without creating it: its names fit, it is a
     folder if it exists, and it (or, if absent, its nearest existing ancestor) takes new
-    files. Returns ``Path(path)``; raises :class:`OutputError` naming the problem."""
+    files. Returns ``Path(path)``; raises `OutputError` naming the problem."""
     if os.fspath(path) == "":
         raise OutputError(f"{what} '' is not a folder name")
     _check_names(path, what)
@@ -160,7 +160,7 @@ def check_output_path(path: str | os.PathLike[str], what: str = "output file",
     """The path to write ``what`` to, checked: its names fit the file system; a symbolic
     link resolves to its target; an existing target must be a regular file; its folder
     must exist or (``create_parent``) be creatable, be a folder and take new files.
-    Returns the resolved path; raises :class:`OutputError` naming the problem."""
+    Returns the resolved path; raises `OutputError` naming the problem."""
     p = Path(path)
     if os.fspath(path) == "" or p.name in ("", ".", ".."):
         raise OutputError(f"{what} {short(str(path))!r} is not a file name")
@@ -222,7 +222,7 @@ def atomic_write_bytes(path: str | os.PathLike[str], data: bytes,
 
 def atomic_write_text(path: str | os.PathLike[str], text: str,
                       what: str = "output file") -> Path:
-    """:func:`atomic_write_bytes` of UTF-8 text."""
+    """`atomic_write_bytes` of UTF-8 text."""
     return atomic_write_bytes(path, text.encode("utf-8"), what)
 
 
@@ -230,7 +230,7 @@ def atomic_write_text(path: str | os.PathLike[str], text: str,
 # reading the files a user hands in
 # ----------------------------------------------------------------------------------------
 def check_input_dir(path: str | os.PathLike[str], what: str = "input folder") -> Path:
-    """``path`` as an existing folder that can be read, else :class:`InputError` naming
+    """``path`` as an existing folder that can be read, else `InputError` naming
     the problem (missing, a file, no permission, a name too long)."""
     p, st = _stat_input(path, what)
     if not stat.S_ISDIR(st.st_mode):
@@ -254,7 +254,7 @@ def _stat_input(path: str | os.PathLike[str], what: str) -> tuple[Path, os.stat_
 
 
 def check_input_file(path: str | os.PathLike[str], what: str = "input file") -> Path:
-    """``path`` as an existing regular file that can be opened, else :class:`InputError`
+    """``path`` as an existing regular file that can be opened, else `InputError`
     naming the problem (missing, a folder, a special file, no permission, bad name)."""
     p, st = _stat_input(path, what)
     if stat.S_ISDIR(st.st_mode):
@@ -270,7 +270,7 @@ def check_input_file(path: str | os.PathLike[str], what: str = "input file") -> 
 def read_text(path: str | os.PathLike[str], what: str = "input file",
               max_bytes: int = 64 * 1024**2) -> str:
     """The UTF-8 text of a user's file of at most ``max_bytes`` bytes (checked before
-    reading), else :class:`InputError` naming the problem."""
+    reading), else `InputError` naming the problem."""
     p = check_input_file(path, what)
     size = p.stat().st_size
     if size > max_bytes:
@@ -287,9 +287,9 @@ def read_text(path: str | os.PathLike[str], what: str = "input file",
 
 def read_npy(path: str | os.PathLike[str], what: str = "array file") -> Any:
     """The array of a ``.npy`` file, its header checked before any allocation: numeric
-    dtype (no pickled objects), a shape whose array fits :data:`~finsler.infra.limits.MAX_BYTES`
-    (:func:`finsler.infra.limits.check_memory`) and a file long enough to hold it. Raises
-    :class:`InputError` naming the file and the problem."""
+    dtype (no pickled objects), a shape whose array fits `MAX_BYTES`
+    (`finsler.infra.limits.check_memory`) and a file long enough to hold it. Raises
+    `InputError` naming the file and the problem."""
     import numpy as np
 
     p = check_input_file(path, what)

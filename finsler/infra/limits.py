@@ -17,8 +17,8 @@ MAX_BYTES = 4 * 1024**3
 
 def check_memory(shape: Sequence[int], what: str, hint: str = "", itemsize: int = 8,
                  copies: int = 1) -> int:
-    """Raise :class:`InputError` if ``copies`` arrays of ``shape`` and ``itemsize`` bytes
-    per element would exceed :data:`MAX_BYTES`; returns the bytes needed otherwise."""
+    """Raise `InputError` if ``copies`` arrays of ``shape`` and ``itemsize`` bytes
+    per element would exceed `MAX_BYTES`; returns the bytes needed otherwise."""
     need = math.prod(int(s) for s in shape) * itemsize * copies
     if need > MAX_BYTES:
         raise InputError(f"{what} would need about {need / 1024**3:.3g} GiB (arrays of shape "
@@ -30,8 +30,8 @@ def check_memory(shape: Sequence[int], what: str, hint: str = "", itemsize: int 
 def rows_that_fit(row_shape: Sequence[int], what: str, hint: str = "", itemsize: int = 8,
                   copies: int = 1) -> int:
     """How many independent rows of ``row_shape`` (``copies`` arrays of ``itemsize`` bytes
-    per element) fit :data:`MAX_BYTES` at once, at least 1: the part size of work that is
-    split into rows. Raises :class:`InputError` (:func:`check_memory`) if one row does not
+    per element) fit `MAX_BYTES` at once, at least 1: the part size of work that is
+    split into rows. Raises `InputError` (`check_memory`) if one row does not
     fit."""
     need = check_memory((1, *row_shape), what, hint, itemsize, copies)
     return max(1, MAX_BYTES // max(need, 1))

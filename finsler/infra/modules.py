@@ -1,8 +1,8 @@
 """The toolkit's one loader of a user's Python modules (``--metric-module``, the recorded
 ``module:qualname`` of a user metric in a run's config).
 
-:func:`import_user_module` imports a dotted module name or a ``.py`` file and turns every
-way that can fail into one :class:`~finsler.errors.InputError` line naming the option and
+`import_user_module` imports a dotted module name or a ``.py`` file and turns every
+way that can fail into one [`InputError`][finsler.errors.InputError] line naming the option and
 the cause: a missing file or folder, a name that is not a module name (``..``, ``a/b``),
 a syntax error, NUL bytes, an exception raised (or ``sys.exit`` called) while the module
 runs. It never writes: no ``__pycache__/`` is left beside the user's file, also not by the
@@ -74,7 +74,7 @@ def import_user_module(item: str, what: str = "--metric-module") -> ModuleType:
     """Import ``item``: a dotted module name, or a ``.py`` file (its folder is put first on
     ``sys.path`` and it is imported by its stem, so that the recorded ``module:qualname``
     of its metrics imports again, also in worker processes). Any failure is an
-    :class:`InputError` of one line starting with ``what``."""
+    `InputError` of one line starting with ``what``."""
     if not isinstance(item, str):
         raise InputError(f"{what} must be a module name or a FILE.py, got "
                          f"{type(item).__name__}")

@@ -1,4 +1,4 @@
-"""The modules that moved into :mod:`finsler.infra` stay importable by their old paths
+"""The modules that moved into `finsler.infra` stay importable by their old paths
 (``import finsler.pool``, ``from finsler.files import atomic_write_text``): a finder on
 ``sys.meta_path`` answers the old name with the new module itself (one module object, so
 state and monkeypatching are shared) and warns ``DeprecationWarning`` once per name."""

@@ -4,7 +4,7 @@ ends cleanly on SIGINT and SIGTERM: no worker outlives the command.
 ``with ProcessPool(workers) as pool: for r in pool.map_unordered(func, jobs): ...`` yields
 ``func(job)`` as workers finish (spawned processes, so threads and CUDA are safe). Inside
 the block SIGTERM in the parent is the same interruption as Ctrl-C; on either the workers
-are stopped, waited for, and :class:`PoolInterrupted` is raised. Workers ignore SIGINT, so
+are stopped, waited for, and `PoolInterrupted` is raised. Workers ignore SIGINT, so
 a Ctrl-C in a terminal reaches them only through the parent.
 
 * Short jobs (``graceful=False``, one geodesic each): a ``multiprocessing.Pool``; on an

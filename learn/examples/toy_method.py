@@ -1,7 +1,7 @@
 """A learning method in one file: the straight-line midpoint plus a learned offset.
 
 An example to copy for a method of your own (docs/guides/methods.md, "Adding a learning
-method"); it uses public names of :mod:`learn` only. Import it with ``--method-module
+method"); it uses public names of `learn` only. Import it with ``--method-module
 learn.examples.toy_method`` (or a copy of this file with ``--method-module
 path/to/my_method.py``); ``geodesics train --method toy``, ``evaluate --run`` and ``sweep
 --methods toy`` then use it like a built-in method.
@@ -11,9 +11,9 @@ is the tree of recursive midpoint insertion to the task's depth D (``2**D`` segm
 Training lowers the mean path length ``sum_i C(p_i, p_{i+1})`` of sampled pairs by random
 search on the weights (values of C only: model-free); every evaluation of C made is
 counted in ``timesteps``. The run fields (env, seed, budget, minutes, device, threads,
-depth, eps, evaluation cadence) and their checks are :class:`learn.run_config.RunConfig`'s;
+depth, eps, evaluation cadence) and their checks are `learn.run_config.RunConfig`'s;
 the run directory, resume, budget, minutes, signals, metrics rows and checkpoints are the
-run loop's (:class:`learn.loop.RunLoop`).
+run loop's ([`learn.loop.RunLoop`][learn.loop.RunLoop]).
 """
 
 from __future__ import annotations
@@ -87,7 +87,7 @@ def toy_paths(net: nn.Module, metric: finsler.Metric, s: torch.Tensor, g: torch.
 
 class ToyPolicy(LoadedPolicy):
     """A trained toy policy: ``generate``, ``midpoint`` and ``evaluate`` as the built-in
-    policies (a :class:`learn.MidpointPolicy`; ``config``, ``metric``, ``depth``, ``eps``,
+    policies (a `learn.MidpointPolicy`; ``config``, ``metric``, ``depth``, ``eps``,
     ``source``, ``checkpoint``: LoadedPolicy's)."""
 
     def __init__(self, net: nn.Module, config: ToyConfig, source: str = "",

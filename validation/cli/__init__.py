@@ -2,8 +2,8 @@
 
 One module per command group (``solve``, ``learn``, ``report``, ``plot``, ``sweep``,
 ``expmap``, ``certify``, ``check``), the options and input parsing they share in
-:mod:`validation.cli.common`, and the root application with its console-script entry point
-in :mod:`validation.cli.entry`. Every command calls public functions of ``finsler``,
+`validation.cli.common`, and the root application with its console-script entry point
+in `validation.cli.entry`. Every command calls public functions of ``finsler``,
 ``solvers``, ``learn`` or ``validation``; nothing is reachable only from here.
 
 It lives inside ``validation/`` because the design card fixes the top-level packages

@@ -1,5 +1,5 @@
 """``geodesics certify``: a certified interval ``lower <= d(start, goal) <= upper`` on a 2-D
-metric (:func:`solvers.certify`).
+metric (`solvers.certify`).
 
 JSON keys (``--json``): ``lower``, ``upper``, ``gap`` ((upper - lower) / upper), then
 ``length``, ``length_error`` (the quadrature estimate of the path's length; ``upper`` is
@@ -9,13 +9,13 @@ the proven bound of it by interval arithmetic), ``upper_source`` (``path`` |
 ``convexity`` (``convex`` | ``convexified``), ``convexity_note``, ``solver_status``,
 ``mesh`` (the settings), ``times`` (seconds: solve, mesh, bounds, lp, total), ``rounds``,
 ``stopped_by`` (target_gap | max_rounds | max_triangles | no_refinement | time_limit |
-a failure's label), ``status`` (:class:`solvers.CertifyStatus` label: certified |
+a failure's label), ``status`` ([`solvers.CertifyStatus`][solvers.CertifyStatus] label: certified |
 budget_reached | time_limit | corrections_too_large | lp_failed), ``message``.
 
 A conformal metric of dimension > 3 (hook ``conformal_factor_sx``, e.g. ``panda-pole``)
 gets a proven lower bound instead, the best of the full run, the factor split into its parts
 and the whole factor in 4 coordinates
-(:func:`solvers.certify_conformal_split.certify_conformal_best`; JSON: ``lower``, ``upper``,
+(`solvers.certify_conformal_split.certify_conformal_best`; JSON: ``lower``, ``upper``,
 ``ratio``, ``gap``, ``trivial``, ``potential_lower``, ``min_factor``, ``boxes``,
 ``enclosures``, ``cells``, ``momentum``, ``status``, ``bound_by`` (full | split | merged),
 ``split_lower``, ``constant``, ``shares``, ``part_dims``, ``full``, ``parts``, ``merged``
@@ -167,7 +167,7 @@ def _run_and_write(m: Any, start: str, goal: str, out: Path | None, as_json: boo
 def _certify_conformal(m: Any, start: str, goal: str, target_gap: float | None,
                        max_boxes: int | None, out: Path | None, as_json: bool) -> None:
     """``geodesics certify`` on a conformal metric of dimension > 3: a proven lower bound
-    (:func:`solvers.certify_conformal_split.certify_conformal_best`)."""
+    (`solvers.certify_conformal_split.certify_conformal_best`)."""
     import dataclasses
 
     from solvers.certify_conformal import ConformalSpec
@@ -212,7 +212,7 @@ def _certify_conformal(m: Any, start: str, goal: str, target_gap: float | None,
 def _certify_nd(m: Any, start: str, goal: str, mesh: str, h: float | None,
                 target_gap: float | None, out: Path | None, as_json: bool) -> None:
     """``geodesics certify`` in dimension 3 and up: a verified piecewise-linear (or, with
-    ``--mesh p2``, piecewise-quadratic) potential (:func:`solvers.certify_nd.certify_nd`)."""
+    ``--mesh p2``, piecewise-quadratic) potential (`solvers.certify_nd.certify_nd`)."""
     import dataclasses
 
     from solvers.certify_nd import NDSpec, certify_nd

@@ -1,4 +1,4 @@
-"""``geodesics check``: the property suite of :mod:`validation.testing` on a metric (and a
+"""``geodesics check``: the property suite of `validation.testing` on a metric (and a
 policy), as a table of property, examples tried, passed, result and counterexample.
 
 Each property ends ``passed``; ``failed`` (a counterexample, with both sides' values);
@@ -9,7 +9,7 @@ metric documents); ``skipped`` (does not apply: e.g. distance symmetry on a metr
 declared not reversible); or ``not-run`` (a property it needs failed: once F itself fails
 -- domain, finite-positive, homogeneity, subadditivity, strong convexity, lowered forms,
 smoothness -- the properties that need a valid F say "needs X" instead of failing as a
-consequence; :data:`validation.testing.suite.NEEDS`). The last line names the root cause
+consequence; `validation.testing.suite.NEEDS`). The last line names the root cause
 (the first failed property) first.
 
 Exit status 0 when no property fails (inconclusive, mapped, skipped and not-run results
@@ -19,7 +19,7 @@ results. Nothing is written: hypothesis's caches go to a temporary folder, remov
 end. Warnings raised while checking (numpy's RuntimeWarnings on invalid values) are caught
 and summarised per property, not printed as they come.
 
-``--json`` prints :meth:`validation.testing.CheckReport.to_dict`: ``metric``, ``params``,
+``--json`` prints `validation.testing.CheckReport.to_dict`: ``metric``, ``params``,
 ``policy``, ``seed``, ``examples``, ``ok`` (no property failed), ``failed``,
 ``inconclusive`` and ``not_run`` (names, in the order checked: the first failed is the
 root cause), ``summary`` (the last line of the table), ``seconds`` and ``properties``, one

@@ -173,7 +173,7 @@ def parse_metric_params(items: list[str] | None) -> dict[str, Any] | None:
 
 
 def import_metric_modules(items: list[str] | None) -> None:
-    """Import every ``--metric-module`` (:func:`finsler.infra.modules.import_user_module`: a
+    """Import every ``--metric-module`` (`finsler.infra.modules.import_user_module`: a
     dotted module name or a ``.py`` file; any failure is a one-line InputError)."""
     for item in items or []:
         import_user_module(item, "--metric-module")

@@ -1,9 +1,9 @@
 """``geodesics exp`` and ``geodesics log``: the exponential and logarithm maps of a metric
-(thin layer over :func:`solvers.exp_map` / :func:`solvers.log_map`).
+(thin layer over [`solvers.exp_map`][solvers.exp_map] / [`solvers.log_map`][solvers.log_map]).
 
-JSON schemas: ``exp`` prints :meth:`solvers.ExpResult.to_dict` (``point``, ``t_end``,
+JSON schemas: ``exp`` prints `solvers.ExpResult.to_dict` (``point``, ``t_end``,
 ``status``, ``speed``, ``length`` = speed x t_end, ``speed_drift``, and ``times``/``curve``
-with ``--samples``); ``log`` prints :meth:`solvers.LogResult.to_dict` (``velocity``,
+with ``--samples``); ``log`` prints `solvers.LogResult.to_dict` (``velocity``,
 ``length`` = F(start, velocity), ``distance`` of the solved path, ``residual``, ``status``).
 Exit code 2 for bad input (including a metric that is not smooth or not strongly convex
 where asked), 1 when the status is not a success.

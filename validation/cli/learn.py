@@ -1,9 +1,9 @@
-"""``geodesics train`` and ``geodesics evaluate``: thin CLI over :mod:`learn`.
+"""``geodesics train`` and ``geodesics evaluate``: thin CLI over `learn`.
 
 Per-environment defaults (``learn.default_config``) are the settings of the shipped
 policies; e.g. the shipped Matsumoto policy is reproduced by
 ``geodesics train --env matsumoto --out runs/matsumoto --seed 0``. Methods come from
-:mod:`learn.registry` (``--method-module FILE.py`` imports a user's method first).
+`learn.registry` (``--method-module FILE.py`` imports a user's method first).
 """
 
 from __future__ import annotations
@@ -205,7 +205,7 @@ def _new_config(env: str, method: str | None, paper: bool, model_free: bool,
 
 def parse_settings(items: list[str], cls: type | None = None) -> dict[str, object]:
     """``["field=value", ...]`` -> overrides of fields of the config class ``cls``
-    (default :class:`learn.TrainConfig`; values parsed as JSON, else kept as strings);
+    (default [`learn.TrainConfig`][learn.TrainConfig]; values parsed as JSON, else kept as strings);
     unknown or run-control fields are an error."""
     import dataclasses
     import difflib

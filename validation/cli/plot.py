@@ -1,5 +1,5 @@
 """``geodesics plot-curves``: Fig. 2 of the paper from a sweep directory (a thin layer over
-:mod:`validation.curves` and :func:`validation.figures.sweep_curves`)."""
+`validation.curves` and `validation.figures.sweep_curves`)."""
 
 from __future__ import annotations
 
@@ -19,7 +19,7 @@ FORMATS = (".png", ".pdf", ".svg")
 
 def plot_curves(sweep_dir: str | Path, out: str | Path,
                 column: str = "success_rate") -> tuple[Any, Path, Path]:
-    """Read the sweep in ``sweep_dir``, draw :func:`validation.figures.sweep_curves`
+    """Read the sweep in ``sweep_dir``, draw `validation.figures.sweep_curves`
     (row 1: against all-inclusive evaluations of C, row 2: against wall time) into
     ``out`` and write the numbers to ``out`` with suffix ``.csv``. Everything is computed
     before anything is written, and each file is written atomically: bad input (InputError)

@@ -1,5 +1,5 @@
 """``geodesics report``: the learned-vs-exact benchmark report (a thin layer over
-:func:`validation.report.build_report`)."""
+[`validation.report.build_report`][validation.report.build_report])."""
 
 from __future__ import annotations
 

@@ -10,7 +10,7 @@ JSON schema (one pair with ``--json``, or ``--pairs``)::
 
 ``length`` is always the sum of the costs C of the returned path. ``status`` is the
 toolkit's name of the solver status (``success``, ``acceptable``, ``max_iterations``, ...:
-:attr:`solvers.Status.label`), ``ipopt_status`` IPOPT's own return status.
+`solvers.Status.label`), ``ipopt_status`` IPOPT's own return status.
 
 With ``--tol`` each result also has ``length_estimate`` (the estimate of the continuum
 length), ``error_estimate`` (absolute; ``null`` where no estimate exists, e.g. when the
@@ -101,7 +101,7 @@ def _warm_start(source: str | None, metric: finsler.Metric, pairs: np.ndarray,
                 search: bool = False) -> tuple[np.ndarray | None, dict[str, Any] | None]:
     """Learned initial paths ``(K, 2**D + 1, dim)`` for ``--warm-start`` (None without it)
     and the payload's ``warm_start`` entry. solvers never imports learn: the joining is
-    done here (:func:`learn.runs.warm_start_paths`)."""
+    done here (`learn.runs.warm_start_paths`)."""
     if source is None:
         return None, None
     from learn.runs import warm_start_paths

@@ -1,5 +1,5 @@
 """``geodesics sweep``: every (environment, variant, seed) as its own run directory, on a
-local process pool or on a Ray cluster; a thin CLI over :mod:`learn.sweep`."""
+local process pool or on a Ray cluster; a thin CLI over `learn.sweep`."""
 
 from __future__ import annotations
 

@@ -12,14 +12,14 @@ three ways:
       class TestWavy(MetricTests, DistanceTests):
           metric = Wavy(a=0.2)       # or a registered name: metric = "wavy"
 
-  and :class:`PolicyTests` with ``policy = learn.load_policy(...)`` (or a run directory);
-* **functions**, one per property, each returning a :class:`PropertyResult`
-  (``result.assert_ok()`` raises with the report), and :func:`check` for all of them;
+  and `PolicyTests` with ``policy = learn.load_policy(...)`` (or a run directory);
+* **functions**, one per property, each returning a `PropertyResult`
+  (``result.assert_ok()`` raises with the report), and `check` for all of them;
 * the command ``geodesics check --metric NAME [--metric-module FILE] [--run DIR]``.
 
 Properties (names as in the table of ``geodesics check``):
 
-* of ``F`` (:mod:`validation.testing.metric`): ``domain`` (projection), ``finite-positive``,
+* of ``F`` (`validation.testing.metric`): ``domain`` (projection), ``finite-positive``,
   ``homogeneity`` (positive 1-homogeneity), ``subadditivity`` (the triangle inequality of
   ``F(x, .)``, i.e. a convex indicatrix), ``strong-convexity`` (the fundamental tensor),
   ``reversibility`` (as declared), ``lowered-forms`` (numpy/torch against the symbolic
@@ -27,14 +27,14 @@ Properties (names as in the table of ``geodesics check``):
   documents where ``F(x, .)`` is not convex (``convex_everywhere = False``) gets that
   region *mapped* (status ``mapped``, with how much of the domain and how near its centre)
   instead of an error, and the claim tested on its convex part;
-* of the solved distance (:mod:`validation.testing.distance`): ``distance-zero``,
+* of the solved distance (`validation.testing.distance`): ``distance-zero``,
   ``distance-positive``, ``triangle-inequality``, ``segment-bound`` (the straight
   segment's length bounds ``d``), ``distance-symmetry`` (reversible metrics),
   ``closed-form-distance`` (a distance or geodesic you supply, or the metric's own,
   against the solver), ``certificate`` (the certified interval contains the solved
   distance: 2-D and 3-D, and conformal metrics beyond), ``midpoint-halves``; all within
   the solver's stated errors;
-* of a policy (:mod:`validation.testing.policy`): ``policy-midpoint`` (against exact
+* of a policy (`validation.testing.policy`): ``policy-midpoint`` (against exact
   midpoints where Proposition 1 holds), ``policy-symmetry`` (reversible metrics),
   ``policy-success`` and ``policy-length-ratio`` on fresh pairs.
 
@@ -45,10 +45,10 @@ are seeded: the same seed gives the same examples and results.
 Outcomes: ``passed``, ``failed`` (a counterexample), ``inconclusive`` (some examples could
 not be judged -- a solve that did not converge is never a counterexample --, no
 counterexample among the others), ``mapped``, ``skipped`` (does not apply) and, in
-:func:`check`, ``not-run``: properties depend on others (:data:`suite.NEEDS`), and once
+`check`, ``not-run``: properties depend on others (`suite.NEEDS`), and once
 one of F's own properties fails, what needs it is not run (the root cause is the first
 failed property). ``domain``, ``finite-positive``, ``strong-convexity`` and
-``smoothness`` add seeded sweeps of many points (:mod:`validation.testing.regions`) to
+``smoothness`` add seeded sweeps of many points (`validation.testing.regions`) to
 hypothesis's draws, so a small bad region is found and its size reported.
 """
 

@@ -8,7 +8,7 @@ class attributes, and pytest runs every property as a test method::
 
 The classes need no pytest import (a property that does not apply calls ``pytest.skip``
 only then). Every test method calls the function of the same property and raises
-:class:`~validation.testing.PropertyFailure` (an ``AssertionError``) on a counterexample,
+`PropertyFailure` (an ``AssertionError``) on a counterexample,
 whose message names the property, the shrunk counterexample and the values on both sides.
 Attributes (all optional but ``metric`` / ``policy``) tune the examples, the seed and the
 regions and tolerances; instance attributes set by a fixture override them (how the
@@ -44,7 +44,7 @@ class _Case:
     """What every suite class knows: the metric, the examples and the seed."""
 
     metric: Any = None
-    """The metric to check: a :class:`finsler.Metric` instance or a registered name."""
+    """The metric to check: a [`finsler.Metric`][finsler.Metric] instance or a registered name."""
     examples: int = 100
     """Hypothesis examples per property of F (and per policy symmetry check)."""
     seed: int = 0
@@ -69,7 +69,7 @@ class _Case:
 
 
 class MetricTests(_Case):
-    """Properties of ``F(x, v)`` (:mod:`validation.testing.metric`)."""
+    """Properties of ``F(x, v)`` (`validation.testing.metric`)."""
 
     def _kw(self) -> dict[str, Any]:
         return {"examples": self.examples, "seed": self.seed}
@@ -103,7 +103,7 @@ class MetricTests(_Case):
 
 def _shared(metric: Metric, key: str, entry: tuple[Any, ...], build: Callable[[], Any]) -> Any:
     """``build()`` once per metric and ``entry``, shared by the test methods of a class
-    (pytest makes one instance per method). Kept on the metric (:meth:`Metric.derived`, the
+    (pytest makes one instance per method). Kept on the metric (`Metric.derived`, the
     toolkit's one cache of things derived from a metric), not in a module dict keyed by
     the metric; ``entry`` is compared by identity for objects (an oracle, a policy) and by
     value for numbers and names, so nothing is keyed by ``id()`` or needs to be hashable."""
@@ -120,27 +120,27 @@ def _shared(metric: Metric, key: str, entry: tuple[Any, ...], build: Callable[[]
 
 
 class DistanceTests(_Case):
-    """Properties of the solved distance (:mod:`validation.testing.distance`)."""
+    """Properties of the solved distance (`validation.testing.distance`)."""
 
     solved_examples: int = 3
     """Triples per distance property (the first one drawn is degenerate)."""
     distance_oracle: Any = None
-    """How distances are solved: a :class:`DiscreteDistance` (the default) or
-    :class:`ContinuumDistance`, or any object with ``solve(metric, x, y) -> Solved``."""
+    """How distances are solved: a `DiscreteDistance` (the default) or
+    `ContinuumDistance`, or any object with ``solve(metric, x, y) -> Solved``."""
     distance_shrink: float | None = None
     """Draw points from the domain scaled by this about its centre; None: the whole domain,
     or for a metric documented not convex everywhere its convex region (as ``geodesics
     check`` does)."""
     closed_form_distance: Callable[..., Any] | None = None
     """A closed-form ``distance(x (N, dim), y (N, dim)) -> (N,)`` to check the solver
-    against (default: the metric's own, for a :class:`finsler.ClosedFormMetric`)."""
+    against (default: the metric's own, for a `finsler.ClosedFormMetric`)."""
     closed_form_geodesic: Callable[..., Any] | None = None
     """A closed-form ``geodesic(x, y, t (T,)) -> (N, T, dim)`` at arc-length fractions."""
     certify_examples: int = 2
     """Pairs for the certificate property (2-D metrics; the first one drawn is x = y)."""
 
     def suite(self) -> _d.DistanceSuite:
-        """The shared :class:`~validation.testing.distance.DistanceSuite` of this
+        """The shared `DistanceSuite` of this
         configuration (solves cached across the test methods)."""
         m = self.get_metric()
         oracle = self.option("distance_oracle") or _d.DiscreteDistance()
@@ -179,10 +179,10 @@ class DistanceTests(_Case):
 
 
 class PolicyTests(_Case):
-    """Properties of a learned midpoint policy (:mod:`validation.testing.policy`).
+    """Properties of a learned midpoint policy (`validation.testing.policy`).
 
     ``policy``: an object with ``midpoint`` and ``generate`` (e.g. ``learn.load_policy``),
-    or a run directory / environment name to load with :func:`learn.load_any_policy`;
+    or a run directory / environment name to load with `learn.load_any_policy`;
     ``metric`` defaults to the policy's."""
 
     policy: Any = None

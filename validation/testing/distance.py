@@ -6,10 +6,10 @@ solved distance (2-D), and the midpoint of a solved geodesic splitting its lengt
 halves -- each within the solver's stated errors.
 
 Distances come from an *oracle*, a strategy object (``solve(metric, x, y) ->``
-:class:`Solved`): :class:`DiscreteDistance` (default: the task's discrete geodesic refined
-to a relative tolerance by :func:`solvers.solve_geodesic` with ``tol``, from few segments,
-fast, valid through non-convex regions) or :class:`ContinuumDistance` (the pseudospectral
-:func:`solvers.distance`, accurate to ``1e-8`` for smooth Finsler metrics; a curve through a
+`Solved`): `DiscreteDistance` (default: the task's discrete geodesic refined
+to a relative tolerance by `solvers.solve_geodesic` with ``tol``, from few segments,
+fast, valid through non-convex regions) or `ContinuumDistance` (the pseudospectral
+`solvers.distance`, accurate to ``1e-8`` for smooth Finsler metrics; a curve through a
 non-convex region is reported ``not_convex`` and its examples are mapped). Every property of
 one check draws its examples from the same seeded stream of triples ``(x, y, z)`` and the
 solves are cached, so the properties share their solves.
@@ -50,7 +50,7 @@ __all__ = [
     "distance_properties",
 ]
 
-#: The mesh of the certificate property: the ``coarse`` preset of :func:`solvers.certify`
+#: The mesh of the certificate property: the ``coarse`` preset of `solvers.certify`
 #: (its work budget: at most 3 LP rounds and 3000 triangles per pair, not a wall-clock
 #: limit, so the result depends on the seed only).
 CERTIFY_MESH = "coarse"
@@ -112,7 +112,7 @@ class DistanceOracle(Protocol):
 
 @dataclass(frozen=True)
 class DiscreteDistance:
-    """The discrete geodesic of :func:`solvers.solve_geodesic`, globally seeded at
+    """The discrete geodesic of `solvers.solve_geodesic`, globally seeded at
     ``segments`` and doubled (warm started) until the estimated error of the continuum
     length is below ``tol`` relative or ``max_segments`` is reached (default 8 to 64 for a
     smooth metric; 64 to 256 for one declared not smooth, whose discrete lengths converge
@@ -182,7 +182,7 @@ class DiscreteDistance:
 
 @dataclass(frozen=True)
 class ContinuumDistance:
-    """The pseudospectral distance of :func:`solvers.distance` (``rtol``: None for its
+    """The pseudospectral distance of [`solvers.distance`][solvers.distance] (``rtol``: None for its
     default, 1e-8 for smooth metrics); converged solves are usable, a curve through a
     non-convex region is mapped, anything else is a failure. The midpoint is the constant
     speed curve at ``t = 1/2``, within the stated error plus ``1e-10 d``."""
@@ -239,8 +239,8 @@ def _vec(x: np.ndarray) -> list[float]:
 
 def closed_form_of(metric: Metric) -> tuple[Callable[..., Any] | None, Callable[..., Any] | None]:
     """The closed-form ``(distance, geodesic)`` a metric provides (its declared hooks
-    ``distance(x, y)`` and ``geodesic(x, y, t)``, :mod:`finsler.hooks`; a
-    :class:`finsler.ClosedFormMetric` has both), each ``None`` where it provides none."""
+    ``distance(x, y)`` and ``geodesic(x, y, t)``, `finsler.hooks`; a
+    `finsler.ClosedFormMetric` has both), each ``None`` where it provides none."""
     return (metric.distance if metric.provides("distance") else None,
             metric.geodesic if metric.provides("geodesic") else None)
 
@@ -378,7 +378,7 @@ def check_closed_form(suite: DistanceSuite, examples: int = 3,
                       geodesic: Callable[..., Any] | None = None) -> PropertyResult:
     """A closed-form distance ``distance(x (N, dim), y (N, dim)) -> (N,)`` (and optionally
     geodesic ``geodesic(x, y, t (T,)) -> (N, T, dim)``, at arc-length fractions) the user
-    supplies -- by default the metric's own, if it is a :class:`finsler.ClosedFormMetric`
+    supplies -- by default the metric's own, if it is a `finsler.ClosedFormMetric`
     -- against the solved one: ``|d_solved - d_closed| <=`` the stated error (plus
     ``1e-12 (1 + d)``), and the solved curve within ``curve_slack + sqrt(error / d)`` (of
     the domain's size) of the closed-form geodesic at ``t = 1/4, 1/2, 3/4``."""
@@ -455,12 +455,12 @@ def check_segment_bound(suite: DistanceSuite, examples: int = 3) -> PropertyResu
 
 def check_certificate(suite: DistanceSuite, examples: int = 2, mesh: Any = CERTIFY_MESH
                       ) -> PropertyResult:
-    """The certified interval of :func:`solvers.certify` (a proven lower bound, and the
+    """The certified interval of `solvers.certify` (a proven lower bound, and the
     proven length of the solved curve as upper bound) contains the solved distance within
     its stated error: ``lower <= d + error`` and ``d - error <= upper``, on pairs at least
     1e-3 of the domain's size apart (the certificate's mesh is far coarser; certify fails
     on near-coincident points, see issue 22). In 2-D the lower bound is the mesh LP's; in
-    3-D a verified potential's (:func:`solvers.certify_nd.certify_nd`, which needs ``F(x,
+    3-D a verified potential's (`solvers.certify_nd.certify_nd`, which needs ``F(x,
     .)`` convex on the whole domain: skipped otherwise); beyond 3-D only a metric providing
     ``conformal_factor_sx`` is certified (a lower bound, the upper one the path's), any
     other is skipped. Beyond the plane at most ``CERTIFY_EXAMPLES_ND`` examples are drawn

@@ -2,10 +2,10 @@
 a budget of evaluations, and the result it reports.
 
 A property is a strategy of examples and a check that judges one example and returns a
-:class:`Verdict` (the two sides compared, and whether the example holds, fails, or lies in
-a region the metric documents, which is *mapped* rather than failed). :func:`search` runs
+`Verdict` (the two sides compared, and whether the example holds, fails, or lies in
+a region the metric documents, which is *mapped* rather than failed). `search` runs
 hypothesis on it (``hypothesis.find``: generation, then shrinking of the first failing
-example) and returns a :class:`PropertyResult`: examples tried and passed, and for a
+example) and returns a `PropertyResult`: examples tried and passed, and for a
 failure the smallest failing example hypothesis reached, with the values on both sides.
 
 Checks can be expensive (a property of solved distances solves geodesics), so every
@@ -51,7 +51,7 @@ __all__ = [
 ]
 
 # The outcomes of a property are members of the toolkit's status family
-# (:class:`finsler.status.PropertyOutcome`, str enums: ``PASSED == "passed"``, and the JSON
+# (`finsler.status.PropertyOutcome`, str enums: ``PASSED == "passed"``, and the JSON
 # words are unchanged).
 PASSED, FAILED, MAPPED, SKIPPED = (PropertyOutcome.PASSED, PropertyOutcome.FAILED,
                                    PropertyOutcome.MAPPED, PropertyOutcome.SKIPPED)
@@ -60,12 +60,12 @@ PASSED, FAILED, MAPPED, SKIPPED = (PropertyOutcome.PASSED, PropertyOutcome.FAILE
 INCONCLUSIVE = PropertyOutcome.INCONCLUSIVE
 #: Not run: a property it needs failed (``needs`` names it); no example was judged.
 NOT_RUN = PropertyOutcome.NOT_RUN
-#: Statuses from the most to the least informative (how :func:`combine` picks one).
+#: Statuses from the most to the least informative (how `combine` picks one).
 ORDER = {FAILED: 0, INCONCLUSIVE: 1, MAPPED: 2, PASSED: 3, SKIPPED: 4, NOT_RUN: 5}
 
 
 class PropertyFailure(AssertionError):
-    """A property does not hold; the message is :meth:`PropertyResult.describe`."""
+    """A property does not hold; the message is `PropertyResult.describe`."""
 
     def __init__(self, result: PropertyResult) -> None:
         super().__init__(result.describe())
@@ -106,7 +106,7 @@ class Verdict:
 
 @dataclass
 class PropertyResult(Result):
-    """What one property found (a :class:`finsler.status.Result`: ``converged`` when the
+    """What one property found (a `finsler.status.Result`: ``converged`` when the
     property holds where it applies, ``passed`` or ``mapped``; ``wall_time`` is
     ``seconds``).
 
@@ -163,7 +163,7 @@ class PropertyResult(Result):
         return self.status != FAILED
 
     def assert_ok(self) -> None:
-        """Raise :class:`PropertyFailure` (an ``AssertionError``) if the property failed."""
+        """Raise `PropertyFailure` (an ``AssertionError``) if the property failed."""
         if not self.ok:
             raise PropertyFailure(self)
 
@@ -224,10 +224,10 @@ class PropertyResult(Result):
 
 @dataclass
 class CheckReport(Result):
-    """Every property checked on one metric (and policy): :meth:`table` for people,
-    :meth:`to_dict` for JSON; ``ok`` is False if any property failed (inconclusive
-    results are not failures: :meth:`exit_code` with ``strict`` counts them).
-    ``status`` (a :class:`finsler.status.PropertyOutcome`): ``failed`` if a property
+    """Every property checked on one metric (and policy): `table` for people,
+    `to_dict` for JSON; ``ok`` is False if any property failed (inconclusive
+    results are not failures: `exit_code` with ``strict`` counts them).
+    ``status`` (a `finsler.status.PropertyOutcome`): ``failed`` if a property
     failed, else ``inconclusive`` if one was, else ``passed``; ``converged`` is then
     ``exit_code(strict=True) == 0``, and ``wall_time`` is ``seconds``."""
 

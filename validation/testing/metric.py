@@ -4,7 +4,7 @@ indicatrix) with the non-convex region mapped, strong convexity (the fundamental
 reversibility as declared, the lowered numpy/torch forms against the symbolic one, and
 smoothness where the solver and exp/log need it.
 
-Each ``check_*`` function takes the metric and returns a :class:`PropertyResult`; a
+Each ``check_*`` function takes the metric and returns a `PropertyResult`; a
 metric that documents where ``F(x, .)`` is not convex (``convex_everywhere = False``) has
 that region *mapped* (how much of the domain, how near the centre it comes), and the
 claim is tested on its convex part: a region the caller names (``convex_shrink``: the
@@ -103,7 +103,7 @@ def _vec(x: np.ndarray) -> list[float]:
 # ----------------------------------------------------------------------------------------
 def domain_scale_of(domain: Domain, x: np.ndarray) -> np.ndarray | None:
     """For points ``x`` ``(N, dim)``: the smallest ``s`` with ``x`` in the domain scaled by
-    ``s`` about its centre (as :func:`validation.strategies.points` scales it) -> ``(N,)``;
+    ``s`` about its centre (as `validation.strategies.points` scales it) -> ``(N,)``;
     None for a domain kind that is not a box, disk or product of them."""
     x = np.asarray(x, float).reshape(-1, domain.dim)
     if isinstance(domain, Box):
@@ -128,7 +128,7 @@ def domain_scale_of(domain: Domain, x: np.ndarray) -> np.ndarray | None:
 class ConvexityMap:
     """Where ``F(x, .)`` is not strongly convex, from ``samples`` uniform points of the
     domain (seeded): the smallest eigenvalue of the fundamental tensor over 32 directions
-    per point (:meth:`finsler.Metric.convexity`).
+    per point (`finsler.Metric.convexity`).
 
     ``fraction``: share of the points where it is ``< 0``; ``nearest``: the non-convex
     point nearest the domain's centre, and ``nearest_scale`` its scale (1 = the boundary;
@@ -160,8 +160,8 @@ class ConvexityMap:
 
 
 def convexity_map(metric: Metric, samples: int = MAP_SAMPLES, seed: int = 0) -> ConvexityMap:
-    """The :class:`ConvexityMap` of ``metric`` (cached on the metric per samples and seed:
-    :meth:`finsler.Metric.derived`)."""
+    """The `ConvexityMap` of ``metric`` (cached on the metric per samples and seed:
+    `finsler.Metric.derived`)."""
     samples, seed = int(samples), int(seed)
     return metric.derived(f"testing.convexity_map.{samples}.{seed}",
                           lambda: _map(metric, samples, seed))
@@ -204,7 +204,7 @@ def convex_region(metric: Metric, convex_shrink: float | None, seed: int = 0
 
 def solve_region(metric: Metric, convex_shrink: float | None = None, seed: int = 0) -> float:
     """Where solved distances are checked: the whole domain (1) for a metric convex
-    everywhere, else its convex region (:func:`convex_region`; 1 if it has none) -- through
+    everywhere, else its convex region (`convex_region`; 1 if it has none) -- through
     a non-convex region discrete lengths converge to the distance slower than their stated
     errors say."""
     if metric.convex_everywhere:
@@ -245,7 +245,7 @@ def _mapped_search(m: Metric, name: str, claim: str, build: Any, check: Any, des
 def check_domain(metric: Metric, *, examples: int = 100, seed: int = 0) -> PropertyResult:
     """What the metric promises about its domain: ``F(x, v)`` is finite and ``> 0`` at
     points sampled over the whole declared domain, its boundary included
-    (:func:`~validation.testing.regions.scan_domain`: uniform points, projections onto the
+    (`scan_domain`: uniform points, projections onto the
     boundary, along the signed coordinate directions), and the projection onto the domain
     lies in it, is idempotent and leaves points of the domain where they are (points
     ``p`` drawn from the domain's bounding box enlarged by 20%). A failure of ``F`` says
@@ -402,7 +402,7 @@ def check_strong_convexity(metric: Metric, *, examples: int = 100, seed: int = 0
                            convex_shrink: float | None = None, directions: int = 64
                            ) -> PropertyResult:
     """The fundamental tensor ``Hess_v F(x, v)**2 / 2`` is positive definite at ``x`` for
-    ``directions`` unit directions ``v`` (:meth:`finsler.Metric.convexity`): a smooth metric
+    ``directions`` unit directions ``v`` (`finsler.Metric.convexity`): a smooth metric
     is Finsler there. Skipped for metrics declared not smooth. Non-convexity the metric
     documents is mapped."""
     m = metric
@@ -630,11 +630,11 @@ SWEEP_RESOLVED = 1e-2
 
 
 def _smoothness_sweep(m: Metric, fn: ca.Function, width: np.ndarray, seed: int) -> Any:
-    """The smoothness test of :func:`check_smoothness` (CasADi's F, evaluated in one
-    batch) at :data:`SMOOTH_SWEEP` uniform
+    """The smoothness test of `check_smoothness` (CasADi's F, evaluated in one
+    batch) at `SMOOTH_SWEEP` uniform
     points (the domain scaled by 0.9 about its centre), unit ``v`` and random directions
-    ``u``, steps :data:`SMOOTH_SWEEP_STEP` and half of it (an error at most
-    :data:`SWEEP_RTOL` relative, or shrinking by 0.6); None if every point passes,
+    ``u``, steps `SMOOTH_SWEEP_STEP` and half of it (an error at most
+    `SWEEP_RTOL` relative, or shrinking by 0.6); None if every point passes,
     else ``((x, v, u), second difference, symbolic, note, failing points)`` at the worst
     one."""
     d, n = m.dim, SMOOTH_SWEEP

@@ -1,16 +1,16 @@
 """Properties of a learned midpoint policy (any object with ``midpoint(starts, goals) ->
 (K, dim)`` and ``generate(starts, goals) -> (K, 2**D + 1, dim)``, e.g.
-:func:`learn.load_policy`): its midpoints against exact midpoints, the symmetry of its
+`learn.load_policy`): its midpoints against exact midpoints, the symmetry of its
 midpoints on reversible metrics, and its success and length ratio on fresh pairs.
 
-The midpoint error is the report's (:func:`validation.midpoint_error`): with ``d`` the
+The midpoint error is the report's (`validation.midpoint_error`): with ``d`` the
 exact discrete geodesic length at the task's ``n = 2**D`` segments, and ``m`` the predicted
 midpoint of ``(x, y)``, ``max(|d(x, m) - d(x, y)/2|, |d(m, y) - d(x, y)/2|) / d(x, y)``
 (the halves at ``n/2``). Proposition 2 of the paper says the policy's fixed point is the
 midpoint, and its proof needs Proposition 1 (``C/d -> 1``), which holds where ``F(x, .)``
 is convex: where the exact geodesic crosses a non-convex region the example is mapped.
 Tolerances are the caller's: a learned policy is approximate, and the defaults
-(:data:`MIDPOINT_RTOL`, ...) are a sanity floor, not a goal (measured on 8 random pairs
+(`MIDPOINT_RTOL`, ...) are a sanity floor, not a goal (measured on 8 random pairs
 each, the shipped policies' midpoint errors reach 0.06 on Matsumoto, 0.28 on Panda and 0.7
 on the car-like metric, whose first-level midpoints are far from exact although 96% of
 its paths succeed).
@@ -54,7 +54,7 @@ MIDPOINT_RTOL = 0.25
 #: Default largest ``L(pi(x, y), pi(y, x)) / L(x, y)`` on a reversible metric (``L``: the
 #: straight segment's length, eq. 58).
 SYMMETRY_RTOL = 0.25
-#: Default smallest success rate on fresh pairs. Basis (:func:`check_policy_success`'s
+#: Default smallest success rate on fresh pairs. Basis (`check_policy_success`'s
 #: pairs, seed 0): the straight line, a policy that learned nothing, succeeds on 3/10
 #: Matsumoto, 0/10 car-like and 4/6 Panda pairs, the shipped policies on all of them.
 MIN_SUCCESS = 0.8
@@ -192,7 +192,7 @@ def check_policy_success(policy: Any, metric: Metric, *, pairs: int = 10, seed: 
                          min_success: float = MIN_SUCCESS,
                          max_length_ratio: float = MAX_LENGTH_RATIO,
                          eps: float | None = None) -> list[PropertyResult]:
-    """On ``pairs`` fresh pairs (:func:`fresh_pairs`): the success rate of the policy's
+    """On ``pairs`` fresh pairs (`fresh_pairs`): the success rate of the policy's
     paths (every segment cost ``<= eps``, default the policy's) is at least
     ``min_success`` (``policy-success``), and the mean ratio of their length (sum of C)
     to the exact discrete geodesic's at the same ``2**D`` segments is at most

@@ -87,7 +87,7 @@ class DomainScan:
 
 def scan_domain(m: Metric, seed: int = 0, inside: int = INSIDE_SAMPLES,
                 boundary: int = BOUNDARY_SAMPLES) -> DomainScan:
-    """``F`` over the whole declared domain (:class:`DomainScan`), seeded. Floating-point
+    """``F`` over the whole declared domain (`DomainScan`), seeded. Floating-point
     warnings are silenced: invalid values are what the scan looks for."""
     rng = np.random.default_rng([int(seed), 48])
     pts = np.concatenate([m.domain.sample(inside, rng), boundary_points(m, boundary, rng),
@@ -161,7 +161,7 @@ def describe_region(m: Metric, x: np.ndarray, bad: np.ndarray, what: str) -> str
 
 def unit_directions(dim: int, n: int, seed: int = 0) -> np.ndarray:
     """``n`` unit directions ``(n, dim)``: evenly spaced on the circle in 2-D (as
-    :meth:`finsler.Metric.convexity` takes them), uniformly random (seeded) otherwise."""
+    `finsler.Metric.convexity` takes them), uniformly random (seeded) otherwise."""
     if dim == 2:
         a = np.linspace(0.0, 2 * np.pi, n, endpoint=False)
         return np.stack([np.cos(a), np.sin(a)], 1)
@@ -185,7 +185,7 @@ def directions_scan(m: Metric, seed: int = 0, points: int = 1024, directions: in
 def weakest_direction(m: Metric, x: np.ndarray, n_directions: int = 64
                       ) -> tuple[np.ndarray, float, np.ndarray]:
     """At a point ``x`` ``(dim,)``: the unit direction ``v`` (of ``n_directions``, as
-    :meth:`finsler.Metric.convexity` samples them) where the fundamental tensor
+    `finsler.Metric.convexity` samples them) where the fundamental tensor
     ``Hess_v F**2 / 2`` has its smallest eigenvalue, that eigenvalue, and its eigenvector
     ``w`` (the direction in which ``F(x, .)`` bends the wrong way near ``v``)."""
     dirs = unit_directions(m.dim, n_directions)

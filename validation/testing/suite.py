@@ -1,4 +1,4 @@
-"""Every property at once: :func:`check` (what ``geodesics check`` runs)."""
+"""Every property at once: `check` (what ``geodesics check`` runs)."""
 
 from __future__ import annotations
 
@@ -74,7 +74,7 @@ def solved_examples_for(examples: int) -> int:
 
 
 def _params(metric: Metric) -> dict[str, Any]:
-    """The metric's parameters (its identity, :class:`finsler.MetricSpec`); none for a
+    """The metric's parameters (its identity, `finsler.MetricSpec`); none for a
     metric that is not a dataclass."""
     try:
         return dict(MetricSpec.of(metric).params)
@@ -101,18 +101,18 @@ def check(
     progress: Callable[[PropertyResult], None] | None = None,
 ) -> CheckReport:
     """Check ``metric`` (and ``policy``, if given) with every property of
-    :mod:`validation.testing`; deterministic for a given ``seed``.
+    `validation.testing`; deterministic for a given ``seed``.
 
     ``examples``: hypothesis examples per property of ``F``; properties that solve
-    geodesics use ``solved_examples`` (default :func:`solved_examples_for`), the policy's
+    geodesics use ``solved_examples`` (default `solved_examples_for`), the policy's
     success and length ratio ``policy_pairs`` fresh pairs (default ``examples // 10``, at
     least 4). ``convex_shrink``: the region (the domain scaled about its centre) where a
     metric documented as not convex everywhere is claimed convex (default: the convex core
     its convexity map finds). ``oracle``: how distances are solved (default
-    :class:`~validation.testing.DiscreteDistance`). ``closed_form`` /
+    [`DiscreteDistance`][validation.testing.DiscreteDistance]). ``closed_form`` /
     ``closed_form_geodesic``: a distance / geodesic to check the solver against (default:
     the metric's own, if it has one). ``progress`` is called with each result as it is
-    found. Returns a :class:`CheckReport`; ``report.ok`` is False if a property failed.
+    found. Returns a `CheckReport`; ``report.ok`` is False if a property failed.
     """
     if isinstance(examples, bool) or not isinstance(examples, int) or examples < 1:
         raise InputError(f"examples must be a positive integer, got {examples!r}")
