@@ -3,16 +3,20 @@
 The measured results live beside the scripts that write them, not in ``docs/``; this hook
 adds each file to the build (so the guides' relative links ``results/NAME.md`` are checked
 by ``mkdocs build --strict``) and writes ``results/index.md``: the folder's README followed
-by a list of every file with its title.
+by a list of every file with its title. It also unescapes ``\\|`` inside the code spans of
+table rows (see `on_page_markdown`).
 """
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 from mkdocs.structure.files import File
 
 RESULTS = Path(__file__).resolve().parents[1] / "benchmarks" / "results"
+
+_TABLE_CODE = re.compile(r"`[^`\n]*`")
 
 
 def _title(path: Path) -> str:
@@ -33,3 +37,17 @@ def on_files(files, config):
     index = readme.rstrip() + "\n\n## Files\n\n" + "\n".join(listing) + "\n"
     files.append(File.generated(config, "results/index.md", content=index))
     return files
+
+
+def on_page_markdown(markdown, page, config, files):
+    """A table row's code span ``a\\|b`` as ``a|b``.
+
+    GitHub splits a table row on every unescaped ``|``, even inside a code span, so the
+    sources write ``\\|`` there; Python-Markdown's tables do not split inside code spans
+    and would show the backslash.
+    """
+    lines = markdown.split("\n")
+    for i, line in enumerate(lines):
+        if line.lstrip().startswith("|") and "\\|" in line:
+            lines[i] = _TABLE_CODE.sub(lambda m: m.group(0).replace("\\|", "|"), line)
+    return "\n".join(lines)
