@@ -15,9 +15,9 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from finsler.errors import DomainError, InputError
+from finsler.errors import DomainError, InputError, short
 
-__all__ = ["Box", "Disk", "Domain", "JointBox", "Product", "is_torch"]
+__all__ = ["Box", "Disk", "Domain", "JointBox", "Product", "as_real", "describe_value", "is_torch"]
 
 
 def is_torch(a: Any) -> bool:
@@ -26,9 +26,47 @@ def is_torch(a: Any) -> bool:
     return mod.startswith("torch")
 
 
+#: How many characters of a refused value an error message quotes.
+QUOTE_LIMIT = 80
+
+
+def describe_value(value: Any) -> str:
+    """``value`` for an error message: its type and a repr cut to `QUOTE_LIMIT`
+    characters (``str '0.1,0.15'``, ``complex128 array of shape (2,)``)."""
+    if isinstance(value, np.ndarray) or is_torch(value):
+        dtype = str(value.dtype).replace("torch.", "")
+        return f"a {dtype} array of shape {tuple(value.shape)}"
+    return f"{type(value).__name__} {short(repr(value), QUOTE_LIMIT)}"
+
+
+def as_real(x: Any, name: str, expect: str = "a real numeric array") -> Any:
+    """``x`` as a float64 numpy array if it is a real numeric array-like (a number, a list,
+    a tuple, a numpy array of integers or floats); a real floating torch tensor passes
+    through unchanged. Anything else (strings, bytes, dicts, None, booleans, complex,
+    object or ragged arrays) is an `InputError` naming ``name``, what was expected
+    (``expect``) and what it got. Shapes are the caller's to check."""
+    if is_torch(x):
+        if x.is_complex() or not x.is_floating_point():
+            raise InputError(f"{name} must be {expect}, got {describe_value(x)}")
+        return x
+    if x is None or isinstance(x, (str, bytes, dict, set, frozenset, bool, np.bool_)):
+        raise InputError(f"{name} must be {expect}, got {describe_value(x)}")
+    if isinstance(x, np.ndarray) and x.dtype == np.float64:
+        return x
+    try:
+        arr = np.asarray(x)
+    except (TypeError, ValueError, OverflowError, RecursionError) as err:  # ragged, odd types
+        raise InputError(f"{name} must be {expect}, got {describe_value(x)}") from err
+    if arr.dtype.kind not in "iuf":
+        raise InputError(f"{name} must be {expect}, got {describe_value(x)}"
+                         + ("" if isinstance(x, np.ndarray) else f" ({arr.dtype} values)"))
+    return arr.astype(np.float64, copy=False)
+
+
 def _as_batch(x: Any, dim: int, name: str, check_finite: bool = True) -> Any:
     """Validate shape ``(N, dim)`` or ``(dim,)`` (and finiteness unless ``check_finite`` is
     false, for callers that check their outputs instead); return a 2-D view."""
+    x = as_real(x, name, f"a real numeric array of shape (N, {dim}) or ({dim},)")
     if is_torch(x):
         import torch
 
@@ -37,7 +75,6 @@ def _as_batch(x: Any, dim: int, name: str, check_finite: bool = True) -> Any:
         if check_finite and not bool(torch.isfinite(x).all()):
             raise InputError(f"{name} contains NaN or inf")
         return x.reshape(-1, dim)
-    x = np.asarray(x, dtype=np.float64)
     if x.ndim not in (1, 2) or x.shape[-1] != dim:
         raise InputError(f"{name} must have shape (N, {dim}) or ({dim},), got {x.shape}")
     if check_finite and not np.all(np.isfinite(x)):

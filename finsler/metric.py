@@ -39,10 +39,10 @@ from typing import Any, ClassVar
 import casadi as ca
 import numpy as np
 
-from finsler.domains import Domain, _as_batch, is_torch
+from finsler.domains import Domain, _as_batch, as_real, is_torch
 from finsler.errors import InputError
 from finsler.hooks import MetricHooks
-from finsler.infra.limits import check_memory, rows_that_fit
+from finsler.infra.limits import check_count, check_memory, check_seed, rows_that_fit
 from finsler.lowering import LoweredFunction, lower
 
 __all__ = ["LengthBounds", "LengthEstimate", "Metric", "Task", "TrainingSettings"]
@@ -98,6 +98,10 @@ class TrainingSettings:
 #: Tolerance of the domain check of the numeric API (solver paths satisfy the domain
 #: constraints to IPOPT's tolerance, not exactly).
 DOMAIN_TOL = 1e-6
+
+#: Most directions per point of :meth:`Metric.convexity` (the spacing of 4096 directions on
+#: the circle is 0.0015 rad; more resolve nothing a finer point set would not).
+MAX_DIRECTIONS = 1 << 12
 
 #: Highest Gauss-Legendre order accepted by :meth:`Metric.segment_length`.
 MAX_QUADRATURE_ORDER = 2048
@@ -468,7 +472,7 @@ class Metric(MetricHooks, ABC):
         of the whole path's length, shared by its segments in proportion to their
         lengths), summed. Returns a :class:`LengthEstimate` of shape ``()`` (or ``(K,)``).
         """
-        p = np.asarray(points, dtype=np.float64)
+        p = as_real(points, "points")
         single = p.ndim == 2
         if single:
             p = p[None]
@@ -521,7 +525,7 @@ class Metric(MetricHooks, ABC):
 
         from finsler.intervals import Interval, enclose
 
-        p = np.asarray(points, dtype=np.float64)
+        p = as_real(points, "points")
         if p.ndim != 2 or p.shape[-1] != self.dim or p.shape[0] < 2:
             raise InputError(f"points must have shape (n+1, {self.dim}) with n >= 1, got "
                              f"{np.shape(points)}")
@@ -574,6 +578,7 @@ class Metric(MetricHooks, ABC):
     def path_costs(self, points: Any, check: bool | None = None) -> Any:
         """Segment costs ``C(p_i, p_{i+1})`` of paths ``(K, n+1, dim)`` -> ``(K, n)``
         (points checked unless torch or ``check=False``)."""
+        points = as_real(points, "paths", f"a real numeric array of shape (K, n+1, {self.dim})")
         if _ndim(points) != 3 or points.shape[-1] != self.dim or points.shape[1] < 2:
             raise InputError(
                 f"paths must have shape (K, n+1, {self.dim}) with n >= 1, got "
@@ -594,7 +599,13 @@ class Metric(MetricHooks, ABC):
         2-D, uniformly random (seeded) unit vectors otherwise. For non-smooth metrics the
         Hessian is taken where ``F`` is smooth (a.e.).
         """
+        n_directions = check_count(n_directions, "n_directions", 1, MAX_DIRECTIONS)
+        seed = check_seed(seed)
         xn = self.domain.check(x, "x")
+        # the directions at every point and their fundamental tensors
+        check_memory((xn.shape[0], n_directions, self.dim + 1, self.dim),
+                     f"convexity at {xn.shape[0]} points x {n_directions} directions",
+                     hint="pass fewer points or directions", copies=4)
         if self.dim == 2:
             a = np.linspace(0.0, 2 * np.pi, n_directions, endpoint=False)
             dirs = np.stack([np.cos(a), np.sin(a)], 1)
@@ -615,7 +626,8 @@ class Metric(MetricHooks, ABC):
 
     def midpoint_convexity_gap(self, x: Any, v: Any, w: Any) -> np.ndarray:
         """``F(x, (v + w) / 2) - (F(x, v) + F(x, w)) / 2``: positive values violate convexity."""
-        return self.F(x, 0.5 * (np.asarray(v) + np.asarray(w))) - 0.5 * (
+        v, w = as_real(v, "v"), as_real(w, "w")
+        return self.F(x, 0.5 * (v + w)) - 0.5 * (
             self.F(x, v) + self.F(x, w)
         )
 
@@ -642,7 +654,24 @@ class Metric(MetricHooks, ABC):
         out = out[..., 0]
         if not np.isfinite(out).all():
             _raise_non_finite(x, v)
+            out = self._rescaled(x, v, out)
             out = np.where(np.all(v == 0, axis=-1), 0.0, out)
+        return out
+
+    def _rescaled(self, x: np.ndarray, v: np.ndarray, out: np.ndarray) -> np.ndarray:
+        """``out`` with its non-finite entries recomputed as ``F(x, v / s) * s``, ``s = max
+        |v|`` (``F`` is positively 1-homogeneous in ``v``): huge vectors whose squares
+        overflow float64 get their finite length (``F(0, (1e308, 1e308)) = 1.41e308``)."""
+        scale = np.max(np.abs(v), axis=-1)
+        redo = ~np.isfinite(out) & (scale > 0) & np.isfinite(scale)
+        if not redo.any():
+            return out
+        out = np.array(out, dtype=np.float64)
+        s = scale[redo]
+        xs = np.broadcast_to(x, v.shape)[redo]
+        with np.errstate(invalid="ignore", divide="ignore", over="ignore", under="ignore"):
+            (unit,) = self.lowered_F(xs, v[redo] / s[:, None])
+            out[redo] = unit[..., 0] * s
         return out
 
     def _pair(self, x: Any, y: Any) -> tuple[Any, Any, bool]:
@@ -650,10 +679,18 @@ class Metric(MetricHooks, ABC):
         xb = _as_batch(x, self.dim, "x", check_finite=False)
         yb = _as_batch(y, self.dim, "y", check_finite=False)
         _same_kind(xb, yb)
-        if xb.shape[0] != yb.shape[0] and 1 not in (xb.shape[0], yb.shape[0]):
-            raise InputError(
-                f"x and y must have the same number of rows, got {xb.shape[0]} and {yb.shape[0]}"
-            )
+        rows = (xb.shape[0], yb.shape[0])
+        if rows[0] != rows[1]:
+            if 1 not in rows:
+                raise InputError(
+                    f"x and y must have the same number of rows, got {rows[0]} and {rows[1]}")
+            # one point against a batch (also an empty one): the same rows on both sides
+            n = rows[1] if rows[0] == 1 else rows[0]
+            if is_torch(xb):
+                xb, yb = xb.expand(n, self.dim), yb.expand(n, self.dim)
+            else:
+                xb = np.broadcast_to(xb, (n, self.dim))
+                yb = np.broadcast_to(yb, (n, self.dim))
         return xb, yb, single
 
     def info(self) -> dict[str, Any]:

@@ -7,8 +7,10 @@ from pathlib import Path
 
 import numpy as np
 
+from finsler.domains import describe_value
 from finsler.errors import InputError, short
 from finsler.infra.files import read_npy
+from finsler.infra.limits import check_count, check_memory, check_seed
 from finsler.metric import Metric
 
 __all__ = [
@@ -28,8 +30,9 @@ DEFAULT_EVAL_SEED = 20240531
 VALIDATION_SEED = 20240607
 
 
-def sample_pairs(metric: Metric, k: int, seed: int | np.random.Generator) -> np.ndarray:
-    """``k`` start/goal pairs, both endpoints uniform on the domain -> ``(k, 2, dim)``.
+def sample_pairs(metric: Metric | str, k: int, seed: int | np.random.Generator) -> np.ndarray:
+    """``k`` start/goal pairs, both endpoints uniform on the domain -> ``(k, 2, dim)``
+    (``metric``: a metric or a registered name).
 
     Deterministic for a given seed (numpy's PCG64 stream is stable across versions). A
     `numpy.random.Generator` is drawn from in place (a training run's own stream:
@@ -42,9 +45,16 @@ def sample_pairs(metric: Metric, k: int, seed: int | np.random.Generator) -> np.
     name "pair ``i`` of seed ``s``", give ``k`` too (the benchmarks' ``--only`` numbers
     pairs in the set of ``--pairs``).
     """
-    if not isinstance(k, (int, np.integer)) or k < 1:
-        raise InputError(f"number of pairs must be a positive integer, got {k!r}")
-    rng = np.random.default_rng(seed)
+    if isinstance(metric, str):
+        from finsler.registry import get_metric
+
+        metric = get_metric(metric)
+    if not isinstance(metric, Metric):
+        raise InputError(f"metric must be a finsler.Metric (get_metric(name) for a name), got "
+                         f"{describe_value(metric)}")
+    k = check_count(k, "k (number of pairs)", 1)
+    check_memory((2 * k, metric.dim), f"{k} pairs", hint="ask for fewer pairs", copies=4)
+    rng = np.random.default_rng(check_seed(seed))
     pts = metric.domain.sample(2 * int(k), rng)
     return pts.reshape(int(k), 2, metric.dim)
 

@@ -10,7 +10,7 @@ import threading
 from collections import OrderedDict
 from typing import Any
 
-from finsler.errors import InputError, UnknownMetricError
+from finsler.errors import InputError, UnknownMetricError, short
 from finsler.metric import Metric
 from finsler.metrics import (
     CarLike,
@@ -83,20 +83,25 @@ def check_name(name: str, what: str = "metric") -> str:
     """``name`` if a metric is registered under it; otherwise `UnknownMetricError`
     naming the closest registered name (``what``: how the caller calls it, e.g.
     ``environment``)."""
+    if not isinstance(name, str):
+        raise UnknownMetricError(f"{what} must be a registered metric name (str), got "
+                                 f"{type(name).__name__} {short(repr(name), 80)}")
     if name in _REGISTRY:
         return name
     lower = {k.lower(): k for k in _REGISTRY}
     close = ([lower[str(name).lower()]] if str(name).lower() in lower
              else difflib.get_close_matches(str(name), _REGISTRY, n=1))
     hint = f" (did you mean {close[0]!r}?)" if close else ""
-    raise UnknownMetricError(f"unknown {what} {name!r}{hint}; registered: "
+    raise UnknownMetricError(f"unknown {what} {short(name, 80)!r}{hint}; registered: "
                              f"{', '.join(_REGISTRY)}")
 
 
-def get_metric(name: str, **params: float) -> Metric:
+def get_metric(name: str, /, **params: Any) -> Metric:
     """The metric registered as ``name`` with its parameters overridden by ``params``.
 
-    Raises `UnknownMetricError` for an unknown name or parameter.
+    Raises `UnknownMetricError` for an unknown name or parameter and `InputError` for a
+    parameter value of the wrong type (checked against the class's field annotations, as
+    a `MetricSpec` checks them) or one the metric refuses.
     """
     if isinstance(name, Metric):
         if params:
@@ -111,7 +116,16 @@ def get_metric(name: str, **params: float) -> Metric:
             f"metric {name!r} has no parameter {', '.join(map(repr, unknown))}; "
             f"its parameters are: {', '.join(sorted(fields)) or '(none)'}"
         )
-    return shared_instance(cls, params)
+    from finsler.spec import check_params
+
+    checked = check_params(name, cls, params)
+    try:
+        return shared_instance(cls, checked)
+    except InputError:
+        raise
+    except (TypeError, ValueError, ArithmeticError) as err:  # a metric's own check
+        raise InputError(f"metric {name!r} refuses parameters {short(repr(params), 80)}: "
+                         f"{short(str(err), 120)}") from err
 
 
 #: How many (class, parameters) instances `shared_instance` keeps.

@@ -22,19 +22,23 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import numbers
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
+import numpy as np
+
 from finsler import registry
-from finsler.errors import InputError
+from finsler.errors import InputError, short
 from finsler.infra.modules import import_user_module
 from finsler.metric import Metric
 
 __all__ = ["MetricSpec", "class_path", "ensure_registered", "metric_spec"]
 
 _PARAM_KINDS: dict[str, tuple[type, ...]] = {
-    "float": (int, float), "int": (int,), "bool": (bool,), "str": (str,)}
+    "float": (numbers.Real,), "int": (numbers.Integral,), "bool": (bool, np.bool_),
+    "str": (str,)}
 
 
 def class_path(cls: type) -> str | None:
@@ -99,20 +103,35 @@ def _check_param(name: str, param: str, kind: str, value: Any) -> Any:
     """``value`` checked against the field annotation ``kind`` of the metric's class."""
     ok_types = _PARAM_KINDS.get(kind.replace(" ", ""))
     if ok_types is not None:
-        ok = isinstance(value, ok_types) and (kind == "bool" or not isinstance(value, bool))
+        ok = isinstance(value, ok_types) and (
+            kind == "bool" or not isinstance(value, (bool, np.bool_)))
         if ok and kind == "float":
             ok = math.isfinite(value)
             value = float(value)
+        elif ok:
+            value = {"int": int, "bool": bool, "str": str}[kind](value)
         if not ok:
-            raise InputError(f"metric parameter {param} of {name!r} must be {kind}"
-                             f"{' (finite)' if kind == 'float' else ''}, got {value!r}")
+            raise InputError(f"metric parameter {param} of {short(name, 80)!r} must be {kind}"
+                             f"{' (finite)' if kind == 'float' else ''}, got "
+                             f"{type(value).__name__} {short(repr(value), 80)}")
         return value
     try:  # another annotation: anything JSON can hold, checked by the metric itself
         json.dumps(value, allow_nan=False)
-    except (TypeError, ValueError) as err:
-        raise InputError(f"metric parameter {param} of {name!r} must be a JSON value, got "
-                         f"{value!r}") from err
+    except (TypeError, ValueError, RecursionError) as err:
+        raise InputError(f"metric parameter {param} of {short(name, 80)!r} must be a JSON "
+                         f"value, got {type(value).__name__} {short(repr(value), 80)}"
+                         ) from err
     return value
+
+
+def check_params(name: str, cls: type, params: Mapping[str, Any]) -> dict[str, Any]:
+    """``params`` checked against the field annotations of the metric class ``cls``
+    (registered as ``name``): a ``float`` field takes a finite real number (not a bool),
+    an ``int`` field an integer, a ``bool`` field a bool; other annotations any JSON
+    value. The parameter names are the caller's to check."""
+    fields = _param_fields(cls)
+    return {k: _check_param(name, k, fields[k], v) if k in fields else v
+            for k, v in params.items()}
 
 
 def _param_fields(cls: type) -> dict[str, str]:
@@ -181,7 +200,7 @@ class MetricSpec:
                 f"metric {name!r} has no parameter {', '.join(map(repr, unknown))}; its "
                 f"parameters are: "
                 f"{', '.join(f'{k} ({t})' for k, t in fields.items()) or '(none)'}")
-        checked = {k: _check_param(name, k, fields[k], v) for k, v in params.items()}
+        checked = check_params(name, mcls, params)
         metric = cls(name, checked, path, mcls).build()
         return cls.of(metric)
 

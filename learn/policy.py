@@ -19,7 +19,8 @@ import numpy as np
 import torch
 
 import finsler
-from finsler.errors import InputError
+from finsler.errors import InputError, short
+from finsler.infra.files import check_path_text
 from finsler.status import EvalStatus, Result, json_ready
 from learn.base import LoadedPolicy
 from learn.config import METHODS, TrainConfig
@@ -273,8 +274,8 @@ def load_midpoint_policy(run: str | Path, device: str = "cpu", checkpoint: str =
         else:
             known = ", ".join(shipped_policies()) or "none"
             raise InputError(
-                f"run directory {str(run)!r} does not exist and is not the name of a shipped "
-                f"policy (shipped: {known})"
+                f"run directory {short(str(run), 80)!r} does not exist and is not the name "
+                f"of a shipped policy (shipped: {known})"
             )
     path, cfg, ckpt, loaded = load_run(path, checkpoint, TrainConfig, METHODS, env,
                                        metric_params)
@@ -301,7 +302,17 @@ def load_policy(run: str | Path, device: str = "cpu", checkpoint: str = "best",
     Raises `InputError` for a missing directory, an unknown name, an ``env`` or
     parameter mismatch, and `CorruptFileError` for unreadable files.
     """
-    path = Path(run)
+    path = check_path_text(run, "run (a run directory or a shipped policy's name)")
+    for name, value in (("checkpoint", checkpoint), ("device", device)):
+        if not isinstance(value, str):
+            raise InputError(f"{name} must be a str, got {type(value).__name__} "
+                             f"{short(repr(value), 80)}")
+    if env is not None and not isinstance(env, str):
+        raise InputError(f"env must be a metric name (str) or None, got {type(env).__name__} "
+                         f"{short(repr(env), 80)}")
+    if metric_params is not None and not isinstance(metric_params, dict):
+        raise InputError(f"metric_params must be a dict or None, got "
+                         f"{type(metric_params).__name__} {short(repr(metric_params), 80)}")
     if path.is_dir():
         method = method_of_run(path, read_config_section(path))
         return method.load_policy(path, checkpoint=checkpoint, device=device, env=env,

@@ -12,7 +12,7 @@ from typing import Any
 
 import torch
 
-from finsler.errors import InputError
+from finsler.errors import InputError, short
 from finsler.infra import files
 
 __all__ = [
@@ -112,7 +112,9 @@ def load_checkpoint(path: Path) -> dict[str, Any]:
     except CorruptFileError:
         raise
     except Exception as err:  # torch raises many types for truncated / foreign files
-        raise CorruptFileError(f"checkpoint {path} is corrupt or unreadable: {err}") from err
+        first = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
+        raise CorruptFileError(f"checkpoint {short(str(path), 80)} is corrupt or unreadable: "
+                               f"{short(first, 120)}") from err
     if not isinstance(obj, dict) or obj.get("format") != "learn-checkpoint-v1":
         raise CorruptFileError(f"checkpoint {path} is not a learn checkpoint")
     return obj
@@ -124,8 +126,10 @@ def read_json(path: Path) -> dict[str, Any]:
         raise InputError(f"{path} does not exist")
     try:
         doc = json.loads(path.read_text(encoding="utf-8"))
-    except (json.JSONDecodeError, UnicodeDecodeError) as err:
-        raise CorruptFileError(f"{path} is not valid JSON: {err}") from err
+    except (ValueError, UnicodeDecodeError, RecursionError) as err:  # nesting too deep too
+        first = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
+        raise CorruptFileError(f"{short(str(path), 80)} is not valid JSON: "
+                               f"{short(first, 120)}") from err
     if not isinstance(doc, dict):
         raise CorruptFileError(f"{path} does not hold a JSON object")
     return doc

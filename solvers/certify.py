@@ -101,7 +101,14 @@ from solvers.certify_mesh import _initial_points, _Mesh, _outline, _zigzag
 from solvers.certify_mesh import _inside_polygon as _inside_polygon
 from solvers.certify_mesh import _spacing as _spacing
 from solvers.certify_reach import reachable_triangles, speed_floor
-from solvers.inputs import SHORT_PAIR, as_metric, check_segments, domain_scale, is_short_pair
+from solvers.inputs import (
+    SHORT_PAIR,
+    as_metric,
+    check_point,
+    check_segments,
+    domain_scale,
+    is_short_pair,
+)
 from solvers.result import CertifyResult as CertifyResult  # defined there, exported here
 from solvers.status import CertifyStatus
 
@@ -274,8 +281,8 @@ def _check_request(m: Metric, start: Any, goal: Any, mesh: MeshSpec | str | None
                                        and math.isfinite(time_limit) and time_limit > 0):
         raise InputError(f"time_limit must be a positive number of seconds, got {time_limit!r}")
     poly = _outline(m)
-    s = m.domain.check(np.asarray(start, float), "start")[0]
-    g = m.domain.check(np.asarray(goal, float), "goal")[0]
+    s = check_point(m, start, "start")
+    g = check_point(m, goal, "goal")
     if np.array_equal(s, g):
         raise InputError("start equals goal: the distance is 0, nothing to certify")
     scale = domain_scale(m)

@@ -28,9 +28,10 @@ from typing import Any
 import numpy as np
 from scipy.integrate import solve_ivp
 
+from finsler.domains import as_real, is_torch
 from finsler.errors import InputError, short
 from finsler.geometry import Spray, spray
-from finsler.infra.limits import check_memory
+from finsler.infra.limits import check_count, check_memory
 from finsler.metric import Metric
 from finsler.status import Result, json_ready
 from solvers.chebyshev import differentiation_matrix
@@ -52,6 +53,8 @@ PD_RATIO = 1e-9
 
 #: Default tolerance of `log_map` on ``|exp(x, v) - y|`` (max norm, coordinates).
 LOG_TOL = 1e-11
+#: Most Newton iterations of :func:`log_map` (it converges in a handful where it converges).
+MAX_LOG_ITER = 1000
 
 #: Relative gap between ``F(x, log(x, y))`` and the solver's distance above which the
 #: shooting is taken to have found another (longer) geodesic.
@@ -164,10 +167,9 @@ class LogResult(Result):
 # exp
 # ----------------------------------------------------------------------------------------
 def _vector(m: Metric, v: Any, name: str) -> np.ndarray:
-    try:
-        arr = np.asarray(v, dtype=np.float64)
-    except (TypeError, ValueError) as err:
-        raise InputError(f"{name} must be a numeric vector of length {m.dim}") from err
+    arr = as_real(v, name, f"a real numeric vector of shape ({m.dim},)")
+    if is_torch(arr):
+        arr = arr.detach().cpu().numpy().astype(np.float64)
     if arr.shape != (m.dim,):
         raise InputError(f"{name} must have shape ({m.dim},), got {arr.shape}")
     if not np.all(np.isfinite(arr)):
@@ -423,8 +425,7 @@ def log_map(
     ys = check_point(m, y, names[1])
     if not (isinstance(tol, float) and math.isfinite(tol) and 0 < tol < 1):
         raise InputError(f"tol must be a float in (0, 1), got {tol!r}")
-    if isinstance(max_iter, bool) or not isinstance(max_iter, (int, np.integer)) or max_iter < 1:
-        raise InputError(f"max_iter must be a positive integer, got {max_iter!r}")
+    check_count(max_iter, "max_iter", 1, MAX_LOG_ITER)
     _check_tolerances(rtol, atol)
     _check_convex_at(m, sp, xs, None, names[0])
     _check_convex_at(m, sp, ys, None, names[1])

@@ -21,10 +21,11 @@ from typing import Any
 
 import numpy as np
 
+from finsler.domains import describe_value
 from finsler.errors import InputError
 from finsler.metric import Metric
 from solvers.batch_jobs import solve_batch
-from solvers.inputs import as_metric, check_pairs, check_point, check_segments
+from solvers.inputs import as_metric, check_initial, check_pairs, check_point, check_segments
 from solvers.pairs import check_initial_paths, refine_minmax, solve_pair
 from solvers.pairs import resolve_method as resolve_method
 from solvers.result import GeodesicResult, MidpointResult, SolverError
@@ -94,6 +95,11 @@ def solve_geodesic(
     how = resolve_method(m, method)
     s = check_point(m, start, "start")
     g = check_point(m, goal, "goal")
+    initial = check_initial(initial)
+    if not isinstance(global_seeds, (bool, np.bool_)):
+        raise InputError(f"global_seeds must be True or False, got {describe_value(global_seeds)}")
+    if not isinstance(minmax, (bool, np.bool_)):
+        raise InputError(f"minmax must be True or False, got {describe_value(minmax)}")
     if tol is not None:
         tol_, max_n = check_tol(m, n, tol, max_segments)
         return solve_to_tol(m, s, g, n, tol_, max_n, t0, seeds=seeds,

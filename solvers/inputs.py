@@ -10,13 +10,15 @@ from typing import Any
 
 import numpy as np
 
-from finsler.errors import InputError
+from finsler.domains import as_real, describe_value, is_torch
+from finsler.errors import InputError, short
 from finsler.metric import Metric
 from finsler.registry import get_metric
 
 __all__ = [
     "SHORT_PAIR",
     "as_metric",
+    "check_initial",
     "check_pairs",
     "check_point",
     "check_segments",
@@ -47,7 +49,8 @@ def as_metric(metric: Metric | str) -> Metric:
         return metric
     if isinstance(metric, str):
         return get_metric(metric)
-    raise InputError(f"metric must be a finsler.Metric or a registered name, got {metric!r}")
+    raise InputError(f"metric must be a finsler.Metric or a registered name, got "
+                     f"{describe_value(metric)}")
 
 
 def check_segments(metric: Metric, segments: int | None) -> int:
@@ -55,7 +58,7 @@ def check_segments(metric: Metric, segments: int | None) -> int:
     if segments is None:
         return metric.task.segments
     if isinstance(segments, bool) or not isinstance(segments, (int, np.integer)):
-        raise InputError(f"segments must be an integer >= 2, got {segments!r}")
+        raise InputError(f"segments must be an integer >= 2, got {describe_value(segments)}")
     if segments < 2:
         raise InputError(f"segments must be >= 2 (interior points to optimise), got {segments}")
     if segments > 1 << 16:
@@ -65,8 +68,8 @@ def check_segments(metric: Metric, segments: int | None) -> int:
 
 def check_point(metric: Metric, x: Any, name: str) -> np.ndarray:
     """One point ``(dim,)`` (or ``(1, dim)``), finite and in the domain -> float64 ``(dim,)``."""
-    arr = np.asarray(x, dtype=np.float64) if not hasattr(x, "detach") else x
-    if getattr(arr, "ndim", 0) == 2 and arr.shape[0] != 1:
+    arr = as_real(x, name, f"a point: a real numeric array of shape ({metric.dim},)")
+    if arr.ndim == 2 and arr.shape[0] != 1:
         raise InputError(f"{name} must be a single point of shape ({metric.dim},), got "
                          f"{tuple(arr.shape)}")
     return metric.domain.check(arr, name)[0].astype(np.float64)
@@ -78,12 +81,36 @@ def check_pairs(metric: Metric, pairs: Any,
     """Validate start/goal pairs ``(K, 2, dim)``: shape, finiteness, domain membership;
     ``names``: how error messages name the starts and the goals (a command line names its
     options)."""
-    arr = np.asarray(pairs, dtype=np.float64)
+    arr = as_real(pairs, "pairs", f"a real numeric array of shape (K, 2, {metric.dim})")
+    if is_torch(arr):
+        arr = arr.detach().cpu().numpy().astype(np.float64)
     if arr.ndim != 3 or arr.shape[1] != 2 or arr.shape[2] != metric.dim or arr.shape[0] < 1:
         raise InputError(
             f"pairs must have shape (K, 2, {metric.dim}) with K >= 1 for metric "
-            f"{metric.name!r}, got {arr.shape}"
+            f"{short(metric.name, 80)!r}, got {arr.shape}"
         )
     metric.domain.check(arr[:, 0], names[0])
     metric.domain.check(arr[:, 1], names[1])
     return arr
+
+
+#: Most caller-given initial paths of one solve (each is solved as a seed).
+MAX_INITIAL_PATHS = 256
+
+
+def check_initial(initial: Any) -> tuple[Any, ...]:
+    """The ``initial`` paths of one solve as a tuple: a list or tuple of paths ``(m+1,
+    dim)``, or an array ``(P, m+1, dim)`` of ``P`` paths (each path's shape and values are
+    checked by the solve, which knows its ends); anything else is an :class:`InputError`."""
+    if isinstance(initial, np.ndarray) or is_torch(initial):
+        if initial.ndim != 3:
+            raise InputError(f"initial must be a list of paths (m+1, dim) or an array (P, m+1, "
+                             f"dim), got {describe_value(initial)}")
+        initial = list(initial)
+    if not isinstance(initial, (list, tuple)):
+        raise InputError(f"initial must be a list of paths (m+1, dim), got "
+                         f"{describe_value(initial)}")
+    if len(initial) > MAX_INITIAL_PATHS:
+        raise InputError(f"initial holds {len(initial)} paths, above the limit of "
+                         f"{MAX_INITIAL_PATHS}")
+    return tuple(initial)

@@ -27,6 +27,7 @@ from typing import Any
 
 import numpy as np
 
+from finsler.domains import as_real
 from finsler.errors import InputError
 from finsler.metric import Metric
 from solvers.batched import (
@@ -70,11 +71,8 @@ def check_initial_paths(metric: Metric, pairs: np.ndarray, n: int, paths: Any
     them to ``(K, n+1, dim)``; ``None`` passes through."""
     if paths is None:
         return None
-    try:
-        arr = np.array(paths, dtype=np.float64)
-    except (TypeError, ValueError) as err:
-        raise InputError(f"initial_paths must be a numeric array, got "
-                         f"{type(paths).__name__}") from err
+    arr = np.array(as_real(paths, "initial_paths",
+                           f"a real numeric array of shape (K, m+1, {metric.dim})"))
     K = pairs.shape[0]
     if arr.ndim != 3 or arr.shape[0] != K or arr.shape[2] != metric.dim or arr.shape[1] < 2:
         raise InputError(f"initial_paths must have shape ({K}, m+1, {metric.dim}) (one path "
@@ -144,10 +142,7 @@ def _initial_path(m: Metric, path: Any, s: np.ndarray, g: np.ndarray, n: int,
     """Validate a caller-given initial path ``(k+1, dim)`` (finite, in the domain, ends at
     ``s`` and ``g``) and resample it to ``(n+1, dim)`` at equal parameter spacing (the
     given points are kept when ``k`` divides ``n``)."""
-    try:
-        arr = np.array(path, dtype=np.float64)
-    except (TypeError, ValueError) as err:
-        raise InputError(f"{name} must be a numeric array, got {type(path).__name__}") from err
+    arr = np.array(as_real(path, name, f"a real numeric array of shape (k+1, {m.dim})"))
     if arr.ndim != 2 or arr.shape[1] != m.dim or arr.shape[0] < 2:
         raise InputError(f"{name} must have shape (k+1, {m.dim}) with k >= 1 (here "
                          f"{n + 1} points are solved), got {arr.shape}")

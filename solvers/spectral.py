@@ -26,7 +26,9 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
+from finsler.domains import describe_value
 from finsler.errors import InputError
+from finsler.infra.limits import check_number
 from finsler.metric import Metric
 from solvers.chebyshev import chebyshev_nodes, differentiation_matrix, interpolation_matrix
 from solvers.geodesic import solve_geodesic
@@ -46,6 +48,9 @@ __all__ = [
 #: Degrees tried by [`distance`][solvers.spectral.distance] (doubling), by metric dimension.
 DEGREES_LOW_DIM = (8, 16, 32, 64, 128)
 DEGREES_HIGH_DIM = (8, 16, 32, 64)
+#: Highest polynomial degree of :func:`distance` (its NLP is dense in the nodes: a degree
+#: of 256 already has a 65536-entry differentiation matrix per coordinate).
+MAX_DEGREE = 256
 
 #: Relative rounding floor added to every error estimate.
 ROUNDING_FLOOR = 1e-13
@@ -168,15 +173,15 @@ def distance(
     m = as_metric(metric)
     if rtol is None:
         rtol = 1e-8 if m.smooth else 1e-4
-    if not (isinstance(rtol, (float, int)) and math.isfinite(rtol) and 0 < rtol < 1):
-        raise InputError(f"rtol must be in (0, 1), got {rtol!r}")
+    rtol = check_number(rtol, "rtol", 0.0, 1.0, low_open=True, high_open=True)
     if degrees is None:
         degrees = DEGREES_LOW_DIM if m.dim <= 3 else DEGREES_HIGH_DIM
-    if len(degrees) < 2 or any(
-        not isinstance(d, (int, np.integer)) or d < 2 for d in degrees
+    if not isinstance(degrees, (list, tuple)) or len(degrees) < 2 or len(degrees) > 16 or any(
+        isinstance(d, bool) or not isinstance(d, (int, np.integer)) or not 2 <= d <= MAX_DEGREE
+        for d in degrees
     ) or list(degrees) != sorted(set(degrees)):
-        raise InputError(f"degrees must be >= 2 increasing integers (two or more), got "
-                         f"{degrees!r}")
+        raise InputError(f"degrees must be 2 to 16 increasing integers in [2, {MAX_DEGREE}], "
+                         f"got {describe_value(degrees)}")
     s = check_point(m, start, "start")
     g = check_point(m, goal, "goal")
     if np.array_equal(s, g):

@@ -15,17 +15,21 @@ from typing import Any
 
 import numpy as np
 
-from finsler.errors import InputError
+from finsler.errors import InputError, short
 from finsler.metric import Metric
 from solvers.inputs import check_segments
 from solvers.pairs import _refine_minmax, solve_pair, solve_pairs
 from solvers.result import GeodesicResult, SolverError, Status
 from solvers.seeding import SeedPlan, resample
 
-__all__ = ["EXPECTED_ORDER", "TOL_MAX_SEGMENTS", "check_tol", "richardson", "solve_to_tol"]
+__all__ = ["EXPECTED_ORDER", "TOL_MAX_SEGMENTS", "TOL_MIN", "check_tol", "richardson",
+           "solve_to_tol"]
 
 #: Largest size [`solve_geodesic`][solvers.geodesic.solve_geodesic] doubles to for ``tol``.
 TOL_MAX_SEGMENTS = 16384
+#: Smallest ``tol``: the rounding term of `Metric.segment_length_error`'s estimate
+#: (``1e2 * machine eps * length``), below which no error estimate can fall.
+TOL_MIN = 1e2 * float(np.finfo(np.float64).eps)
 #: Order of the polyline length of a smooth geodesic: chords lose O(h**2) per unit length.
 EXPECTED_ORDER = 2.0
 
@@ -85,7 +89,12 @@ def check_tol(m: Metric, n: int, tol: Any, max_segments: Any) -> tuple[float, in
     checked, as ``(float, int)``: what `solve_to_tol` takes."""
     if isinstance(tol, bool) or not isinstance(tol, (int, float, np.floating)) or not (
             np.isfinite(tol) and 0 < tol < 1):
-        raise InputError(f"tol must be a relative tolerance in (0, 1), got {tol!r}")
+        raise InputError(f"tol must be a relative tolerance in (0, 1), got "
+                         f"{short(repr(tol), 80)}")
+    if tol < TOL_MIN:
+        raise InputError(f"tol = {tol:g} is below {TOL_MIN:.3g}, which no refinement can "
+                         "reach: every length's error estimate carries a rounding term of "
+                         "100 float64 epsilons")
     if isinstance(max_segments, bool) or not isinstance(max_segments, (int, np.integer)) \
             or max_segments < n:
         raise InputError(f"max_segments must be an integer >= segments ({n}), got "

@@ -48,6 +48,7 @@ __all__ = [
     "check_input_file",
     "check_output_dir",
     "check_output_path",
+    "check_path_text",
     "made_folders",
     "read_npy",
     "read_text",
@@ -92,6 +93,20 @@ def _check_names(path: str | os.PathLike[str], what: str) -> None:
         if n > NAME_MAX:
             raise OutputError(f"{what} {short(text)!r}: the name {short(part, 24)!r} is "
                               f"{n} bytes long, the limit is {NAME_MAX}")
+
+
+def check_path_text(path: Any, what: str) -> Path:
+    """``path`` (a ``str`` or ``os.PathLike``, not bytes) as a ``Path`` whose names fit the
+    file system, else :class:`InputError` naming ``what`` and the (shortened) value: the
+    check of a path given to read, before the file system is asked about it."""
+    if isinstance(path, bytes) or not isinstance(path, (str, os.PathLike)):
+        raise InputError(f"{what} must be a str or a path, got {type(path).__name__} "
+                         f"{short(repr(path), 80)}")
+    try:
+        _check_names(path, what)
+    except OutputError as err:
+        raise InputError(str(err)) from None
+    return Path(path)
 
 
 def _existing_folder(folder: Path, path: str | os.PathLike[str], what: str) -> Path:
@@ -166,7 +181,11 @@ def check_output_path(path: str | os.PathLike[str], what: str = "output file",
         raise OutputError(f"{what} {short(str(path))!r} is not a file name")
     _check_names(path, what)
     if p.is_symlink():
-        p = Path(os.path.realpath(p))
+        target = Path(os.path.realpath(p))
+        if not target.parent.is_dir():  # a dangling link never creates its target's folders
+            raise OutputError(f"{what} {short(str(path))!r} is a symbolic link to "
+                              f"{short(str(target))!r}, whose folder does not exist")
+        p = target
     parent = p.parent
     _existing_folder(parent, path, what)
     try:
