@@ -6,6 +6,8 @@ Python API::
     compare(policy, metric, pairs) -> Comparison          # success, length ratios, timing
     midpoint_error(policy, metric, pairs) -> MidpointErrors
     build_report(env, out, run=None, pairs=None, quick=False) -> dict   # report.md/json/PNGs
+    plot_geodesic(metric, result, "path.png") -> Figure  # one solved path, drawn
+    export_paths(result_or_results, "path.csv")          # .csv, .npy or .json
 
 ``validation.propositions`` holds the grid dynamic programming of eqs. (9)-(13) and the
 Proposition 1 checks; ``validation.strategies`` the hypothesis strategies shared by the
@@ -28,7 +30,9 @@ __all__ = [
     "build_report",
     "compare",
     "exact_reference",
+    "export_paths",
     "midpoint_error",
+    "plot_geodesic",
     "ratio_stats",
 ]
 
@@ -41,6 +45,10 @@ def __getattr__(name: str) -> Any:
         from validation import comparison as _c
 
         return getattr(_c, name)
+    if name in ("export_paths", "plot_geodesic"):
+        from validation import export as _e
+
+        return getattr(_e, name)
     if name == "build_report":
         from validation.report import build_report
 

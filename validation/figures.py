@@ -8,7 +8,7 @@ writes one atomically (rendered in memory, then ``learn.storage.atomic_write_byt
 Report figures (`validation.report`): `learning_curve`, `paths_2d`,
 `carlike_headings`, `panda_motion`, `length_ratios`,
 `midpoint_errors`. Sweep figure (Fig. 2 of the paper, ``geodesics plot-curves``):
-`sweep_curves`.
+`sweep_curves`. One solved path (``geodesics solve --plot``): `geodesic_path`.
 """
 
 from __future__ import annotations
@@ -43,6 +43,7 @@ __all__ = [
     "carlike_headings",
     "coordinates_along_path",
     "figure_bytes",
+    "geodesic_path",
     "has_kinematics",
     "height_map",
     "is_planar_pose",
@@ -502,5 +503,176 @@ def sweep_curves(curves: Mapping[str, Mapping[tuple[str, str], Curve]],
             ax.legend(fontsize=7, loc="best")
     fig.suptitle(f"{_column_label(column)}\nmean over seeds, band = +- standard error",
                  fontsize=10)
+    fig.tight_layout()
+    return fig
+
+
+# ----------------------------------------------------------------------------------------
+# one solved path (``geodesics solve --plot``, `validation.plot_geodesic`)
+# ----------------------------------------------------------------------------------------
+def _unit_speed_map(ax: Any, metric: Metric, res: int = 140) -> Any:
+    """``mean_u F(x, u)`` over 16 unit directions, on the (x0, x1) slice through the centre
+    of the other coordinates; outside the domain blank. Returns the colour mesh."""
+    lo, hi = metric.domain.bounds()
+    gx, gy = np.meshgrid(np.linspace(lo[0], hi[0], res), np.linspace(lo[1], hi[1], res))
+    pts = np.stack([gx.ravel(), gy.ravel()], 1)
+    rest = np.broadcast_to(0.5 * (lo[2:] + hi[2:]), (len(pts), metric.dim - 2))
+    full = np.concatenate([pts, rest], axis=1)
+    inside = metric.domain.contains(full)
+    ang = np.linspace(0, 2 * np.pi, 16, endpoint=False)
+    val = np.full(len(pts), np.nan)
+    x = full[inside]
+    speeds = []
+    for a in ang:
+        u = np.zeros_like(x)
+        u[:, 0], u[:, 1] = np.cos(a), np.sin(a)
+        speeds.append(np.asarray(metric.F(x, u), dtype=float))
+    val[inside] = np.mean(speeds, axis=0)
+    spread = np.nanmax(val) - np.nanmin(val) if inside.any() else 0.0
+    if not spread > 1e-9 * np.nanmax(np.abs(val), initial=1.0):  # F independent of x here
+        ax.pcolormesh(gx, gy, np.where(inside, 1.0, np.nan).reshape(gx.shape),
+                      cmap=ListedColormap(["#e6e6e6"]), shading="auto", rasterized=True)
+        return None
+    return ax.pcolormesh(gx, gy, val.reshape(gx.shape), cmap="viridis", shading="auto",
+                         rasterized=True, alpha=0.85)
+
+
+def _speed_colorbar(fig: Figure, ax: Any, mesh: Any, label: str) -> None:
+    """The map's colour bar; without one (F does not depend on the position) a note."""
+    if mesh is not None:
+        fig.colorbar(mesh, ax=ax, label=label)
+    else:
+        ax.text(0.99, 0.99, "F(x, u) does not depend on x here\n(grey: the domain)",
+                transform=ax.transAxes, ha="right", va="top", fontsize=7)
+
+
+def _arc_length(metric: Metric, points: np.ndarray) -> np.ndarray:
+    """Cumulative length (sum of C) at every point of the path, ``(n+1,)``."""
+    costs = np.asarray(metric.path_costs(points[None]), dtype=float)[0]
+    return np.concatenate([[0.0], np.cumsum(costs)])
+
+
+def _coordinates_against_length(ax: Any, metric: Metric, points: np.ndarray,
+                                s: np.ndarray, ylabel: str) -> None:
+    colors = matplotlib.colormaps["tab10"](np.arange(metric.dim) % 10)
+    for j, name in enumerate(_coordinate_names(metric)):
+        ax.plot(s, points[:, j], color=colors[j], lw=1.4, marker=".", ms=3, label=name)
+    ax.set_xlabel("arc length (sum of C from the start)")
+    ax.set_ylabel(ylabel)
+    ax.legend(fontsize=7, ncol=min(metric.dim, 4))
+    ax.grid(alpha=0.3)
+
+
+def geodesic_path(metric: Metric, points: Any, title: str | None = None) -> Figure:
+    """One path ``points`` ``(n+1, dim)`` of ``metric``.
+
+    2-D: the path over a map of the metric (the mean of ``F(x, u)`` over unit directions
+    ``u``; the height contours of the ``height_map`` hook and the boundary of where
+    ``F(x, .)`` is convex, if the metric has them). 3-D: the (x0, x1) projection over the
+    same map (headings as arrows for a planar pose, `is_planar_pose`) beside every
+    coordinate against arc length. Higher dimensions: the coordinates (joint angles)
+    against arc length, and, for a metric with kinematics (`has_kinematics`), the end
+    effector's path seen from above and from the side with the metric's ``landmarks``."""
+    p = np.asarray(points, dtype=float)
+    if p.ndim != 2 or p.shape[1] != metric.dim or len(p) < 2:
+        raise ValueError(f"points must have shape (n+1, {metric.dim}) with n >= 1, "
+                         f"got {p.shape}")
+    s = _arc_length(metric, p)
+    head = title or f"{metric.name}: a path of {len(p) - 1} segments, length {s[-1]:.6g}"
+    if metric.dim == 2:
+        fig = new_figure((6.4, 5.6))
+        ax = fig.subplots()
+        mesh = _unit_speed_map(ax, metric)
+        _speed_colorbar(fig, ax, mesh, "mean of F(x, u) over unit directions u")
+        height = height_map(metric)
+        lo, hi = metric.domain.bounds()
+        if height is not None or not metric.convex_everywhere:
+            gx, gy = np.meshgrid(np.linspace(lo[0], hi[0], 120), np.linspace(lo[1], hi[1], 120))
+            pts = np.stack([gx.ravel(), gy.ravel()], 1)
+            inside = metric.domain.contains(pts)
+            if height is not None:
+                h = np.full(len(pts), np.nan)
+                h[inside] = np.asarray(height(pts[inside]), dtype=float)
+                cs = ax.contour(gx, gy, h.reshape(gx.shape), levels=8, colors="white",
+                                linewidths=0.6, alpha=0.8)
+                ax.clabel(cs, fontsize=6, fmt="%.2f")
+            if not metric.convex_everywhere:
+                lam = np.full(len(pts), np.nan)
+                lam[inside] = metric.convexity(pts[inside], n_directions=32)
+                ax.contour(gx, gy, lam.reshape(gx.shape), levels=[0.0], colors="tab:red",
+                           linewidths=1.0, linestyles="--")
+        ax.plot(p[:, 0], p[:, 1], color="white", lw=3.2)
+        ax.plot(p[:, 0], p[:, 1], color=EXACT_COLOR, lw=1.5, marker=".", ms=4, label="path")
+        ax.plot(*p[0], "o", color="green", ms=7, label="start")
+        ax.plot(*p[-1], "*", color="red", ms=11, label="goal")
+        handles = ax.get_legend_handles_labels()[0]
+        if height is not None:
+            handles.append(Line2D([], [], color="grey", lw=0.6, label="height h(p) contours"))
+        if not metric.convex_everywhere:
+            handles.append(Line2D([], [], color="tab:red", ls="--", lw=1.0,
+                                  label="boundary of F(x, .) convex"))
+        ax.legend(handles=handles, fontsize=7, loc="lower left")
+        names = _coordinate_names(metric)
+        ax.set_xlabel(names[0])
+        ax.set_ylabel(names[1])
+        ax.set_aspect("equal")
+        ax.set_title(head, fontsize=9)
+        fig.tight_layout()
+        return fig
+    if metric.dim == 3:
+        fig = new_figure((12, 5))
+        ax, ax2 = fig.subplots(1, 2)
+        mesh = _unit_speed_map(ax, metric, res=100)
+        names = _coordinate_names(metric)
+        _speed_colorbar(fig, ax, mesh, f"mean F(x, u), unit u in ({names[0]}, {names[1]}), "
+                        f"{names[2]} at its centre")
+        ax.plot(p[:, 0], p[:, 1], color="white", lw=3.2)
+        ax.plot(p[:, 0], p[:, 1], color=EXACT_COLOR, lw=1.5, marker=".", ms=4, label="path")
+        if is_planar_pose(metric):
+            q = p[:: max(1, len(p) // 16)]
+            ax.quiver(q[:, 0], q[:, 1], np.cos(q[:, 2]), np.sin(q[:, 2]), color="tab:blue",
+                      angles="xy", scale=22, width=0.005, label=f"heading {names[2]}")
+        ax.plot(*p[0, :2], "o", color="green", ms=7, label="start")
+        ax.plot(*p[-1, :2], "*", color="red", ms=11, label="goal")
+        ax.legend(fontsize=7, loc="lower left")
+        ax.set_xlabel(names[0])
+        ax.set_ylabel(names[1])
+        ax.set_aspect("equal")
+        ax.set_title(f"projection on ({names[0]}, {names[1]})", fontsize=9)
+        _coordinates_against_length(ax2, metric, p, s, "coordinate value")
+        ax2.set_title("every coordinate along the path", fontsize=9)
+        fig.suptitle(head, fontsize=10)
+        fig.tight_layout()
+        return fig
+    arm = has_kinematics(metric)
+    fig = new_figure((15, 4.8) if arm else (7.5, 4.8))
+    axes = fig.subplots(1, 3 if arm else 1, squeeze=False)[0]
+    _coordinates_against_length(axes[0], metric, p, s,
+                                "joint angle (rad)" if arm else "coordinate value")
+    axes[0].set_title("joint angles along the path" if arm else "coordinates along the path",
+                      fontsize=9)
+    if arm:
+        hand = np.asarray(metric.frame_positions(p), dtype=float)[:, -1, :]  # (n+1, 3)
+        marks = metric.landmarks()
+        for ax, (i, j), view in ((axes[1], (0, 1), "from above"),
+                                 (axes[2], (0, 2), "from the side")):
+            ax.plot(hand[:, i], hand[:, j], color=EXACT_COLOR, lw=1.5, marker=".", ms=3,
+                    label="end effector")
+            ax.plot(hand[0, i], hand[0, j], "o", color="green", ms=7, label="start")
+            ax.plot(hand[-1, i], hand[-1, j], "*", color="red", ms=11, label="goal")
+            for label, where in marks.items():
+                w = np.asarray(where, dtype=float)
+                if j < len(w):
+                    ax.plot(w[i], w[j], "s", color="tab:red", ms=7, label=label)
+                else:  # a point (x, y) of the floor plan: a vertical line seen from the side
+                    ax.axvline(w[i], color="tab:red", ls="--", lw=1.0,
+                               label=f"{label} (vertical)")
+            ax.set_xlabel("xyz"[i] + " (world frame)")
+            ax.set_ylabel("xyz"[j] + " (world frame)")
+            ax.set_aspect("equal", adjustable="datalim")
+            ax.set_title(f"end effector's path, {view}", fontsize=9)
+            ax.legend(fontsize=7)
+            ax.grid(alpha=0.3)
+    fig.suptitle(head, fontsize=10)
     fig.tight_layout()
     return fig

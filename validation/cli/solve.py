@@ -127,7 +127,16 @@ def solve_command(
     segments: Annotated[
         int | None, typer.Option(help="Number of segments n (default 2**D of the task).")
     ] = None,
-    out: Annotated[Path | None, typer.Option(help="Write the JSON result to this file.")] = None,
+    out: Annotated[Path | None, typer.Option(
+        help="Write the result to this file: FILE.csv (the path's points, a header of "
+             "coordinate names; with --pairs the columns pair,point first), FILE.npy "
+             "((n+1, dim), or (K, n+1, dim) with --pairs) or, for any other name, the "
+             "JSON document.")] = None,
+    plot: Annotated[Path | None, typer.Option(
+        help="Draw the solved path (one pair) to this figure (.png, .pdf or .svg): 2-D "
+             "over a map of the metric, 3-D its (x0, x1) projection and the coordinates "
+             "against arc length, a robot arm its joint angles and the end effector's "
+             "path.")] = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print JSON.")] = False,
     workers: Annotated[int | None, typer.Option(
         help="Worker processes for --pairs (default: 1 for the batched Newton method below "
@@ -173,12 +182,13 @@ def solve_command(
     """Exact discrete geodesics (globally seeded; the batched Newton method, IPOPT where
     it does not cover the metric or cannot finish a pair) with min-max refinement.
 
-    With --pairs and --out, finished pairs are kept in OUT.parts/ until the JSON is
+    With --pairs and --out, finished pairs are kept in OUT.parts/ until the file is
     written, so running the same command again after an interruption resumes it (also
     across --workers and --ray)."""
     m = metric_from_options(metric, metric_param, metric_module)
     _check_options(pairs, start, goal, workers, ray, chunk_size, tol, warm_start,
                    warm_search, keep_global_seeds, recheck_above)
+    _check_files(out, plot, pairs, tol)
     arr = _read_pairs(m, pairs, start, goal)
     parts = None
     try:
@@ -186,6 +196,8 @@ def solve_command(
                                  method, device, warm_start, warm_search, method_module)
         if out is not None:
             out, parts = _checked_out(out, pairs is not None)
+        if plot is not None:
+            plot = finsler.check_output_path(plot, "--plot")
         results = _solve(job, progress and pairs is not None, parts)
     except InputError as err:
         fail(str(err))
@@ -194,11 +206,16 @@ def solve_command(
         payload["warm_start"] = warm
     text = json_text(payload, indent=None if pairs is not None else 2)
     if out is not None:
-        _write(out, parts, text)
+        _write(out, parts, _out_bytes(out, m, results, text, pairs is not None))
+    if plot is not None:
+        _plot(plot, m, results[0])
     if as_json:
         typer.echo(text)
     elif pairs is None:
         _print_pair(results[0], payload, tol)
+        for path in (out, plot):
+            if path is not None:
+                typer.echo(f"written                   {path}")
     else:
         typer.echo(
             f"{len(results)} pairs, success rate (exact ceiling) {payload['success_rate']:.2%}"
@@ -233,6 +250,51 @@ def _check_options(pairs: Path | None, start: str | None, goal: str | None,
             typer.echo(f"warning: {name} is deprecated and does nothing: --warm-start adds the "
                        "learned path as one more start beside the global seeds, which are "
                        "always solved", err=True)
+
+
+def _check_files(out: Path | None, plot: Path | None, pairs: Path | None,
+                 tol: float | None) -> None:
+    """Step 1b: what --out's suffix and --plot can hold, before any solve."""
+    from validation.export import FIGURE_FORMATS, check_suffix
+
+    if plot is not None:
+        if pairs is not None:
+            fail("--plot draws one pair: give --start and --goal (with --pairs, --out "
+                 "FILE.csv or FILE.npy exports every path)")
+        try:
+            check_suffix(plot, FIGURE_FORMATS, "--plot")
+        except InputError as err:
+            fail(str(err))
+    if (out is not None and out.suffix.lower() == ".npy" and pairs is not None
+            and tol is not None):
+        fail("--out FILE.npy holds one array (K, n+1, dim), and with --tol each pair stops "
+             "at its own number of segments: use --out FILE.csv or FILE.json")
+
+
+def _out_bytes(out: Path, m: finsler.Metric, results: list[solvers.GeodesicResult],
+               text: str, many: bool) -> bytes:
+    """--out's content: the points as CSV or .npy (from the suffix; with --pairs in the
+    several-pairs layout even for one), else the JSON."""
+    from validation.export import path_bytes
+
+    suffix = out.suffix.lower()
+    if suffix not in (".csv", ".npy"):
+        return text.encode()
+    try:
+        return path_bytes(results if many else results[0], suffix, m)
+    except InputError as err:
+        fail(f"--out {out}: {err}")
+        raise  # unreachable
+
+
+def _plot(plot: Path, m: finsler.Metric, result: solvers.GeodesicResult) -> None:
+    """--plot: the solved path drawn, written atomically."""
+    from validation.export import plot_geodesic
+
+    try:
+        plot_geodesic(m, result, plot)
+    except InputError as err:
+        fail(f"--plot {plot}: {err}")
 
 
 def _read_pairs(m: finsler.Metric, pairs: Path | None, start: str | None,
@@ -303,10 +365,10 @@ def _solve(job: Any, progress: bool, parts: Path | None) -> list[solvers.Geodesi
         raise typer.Exit(code=130) from None
 
 
-def _write(out: Path, parts: Path | None, text: str) -> None:
-    """Step 6: the JSON written to --out; the resumable parts removed once it is."""
+def _write(out: Path, parts: Path | None, data: bytes) -> None:
+    """Step 6: --out written; the resumable parts removed once it is."""
     try:
-        finsler.atomic_write_text(out, text, "--out")
+        finsler.atomic_write_bytes(out, data, "--out")
     except InputError as err:
         kept = f"; the finished pairs are kept in {parts}" if parts is not None else ""
         fail(f"{err}{kept}")
