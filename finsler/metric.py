@@ -40,7 +40,7 @@ import casadi as ca
 import numpy as np
 
 from finsler.domains import Domain, _as_batch, as_real, is_torch
-from finsler.errors import InputError
+from finsler.errors import InputError, short
 from finsler.hooks import MetricHooks
 from finsler.infra.limits import check_count, check_memory, check_seed, rows_that_fit
 from finsler.lowering import LoweredFunction, lower
@@ -230,6 +230,15 @@ class Metric(MetricHooks, ABC):
     unique_geodesics: ClassVar[bool] = False
     training: ClassVar[TrainingSettings] = TrainingSettings()
 
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        """Every ``F_sx`` a subclass defines is wrapped once so that what it returns is
+        checked to be a scalar CasADi expression (`_scalar_F_sx`), wherever it is used."""
+        super().__init_subclass__(**kwargs)
+        own = cls.__dict__.get("F_sx")
+        if callable(own) and not getattr(own, "__isabstractmethod__", False) and not getattr(
+                own, "_scalar_checked", False):
+            cls.F_sx = _scalar_F_sx(own)  # type: ignore[method-assign]
+
     # -- to implement -------------------------------------------------------------------
     @property
     @abstractmethod
@@ -346,7 +355,30 @@ class Metric(MetricHooks, ABC):
     def _check_points(self, check: bool | None, **arrays: Any) -> None:
         for name, a in arrays.items():
             if check or (check is None and not is_torch(a)):
+                self.check_values()
                 self.domain.check(a, name, tol=DOMAIN_TOL)
+
+    def check_values(self) -> None:
+        """Raise `InputError` naming the metric and the point unless ``F(x, v)`` is finite
+        and ``> 0`` at a few points of the domain (seeded) and unit directions ``v``: the
+        cheap first look at a metric every checked entry point takes (the numeric methods
+        on checked points, the solvers), made once per metric (``geodesics check`` searches
+        thoroughly, property by property)."""
+        if self.__dict__.get("_values_checked"):
+            return
+        x, v = _value_samples(self.domain)
+        with np.errstate(all="ignore"):
+            f = np.asarray(self.casadi_F.map(x.shape[0])(x.T, v.T), dtype=float).reshape(-1)
+        bad = ~(np.isfinite(f) & (f > 0))
+        if bad.any():
+            i = int(np.flatnonzero(bad)[0])
+            raise InputError(
+                f"metric {short(self.name, 80)!r}: F(x, v) = {f[i]:.6g} at x = "
+                f"{short(str(x[i].tolist()), 80)}, v = {short(str(v[i].tolist()), 80)}, a "
+                "point of its domain: F must be finite and > 0 for v != 0 on the whole "
+                "domain (fix F there or declare a smaller domain; `geodesics check` "
+                "searches for the region)")
+        self.__dict__["_values_checked"] = True
 
     def F(self, x: Any, v: Any, check: bool | None = None) -> Any:
         """``F(x, v)`` for ``x, v`` of shape ``(N, dim)`` (or ``(dim,)``) -> ``(N,)`` (or ``()``).
@@ -600,6 +632,7 @@ class Metric(MetricHooks, ABC):
         Hessian is taken where ``F`` is smooth (a.e.).
         """
         n_directions = check_count(n_directions, "n_directions", 1, MAX_DIRECTIONS)
+        self.check_values()
         seed = check_seed(seed)
         xn = self.domain.check(x, "x")
         # the directions at every point and their fundamental tensors
@@ -749,6 +782,70 @@ def _adaptive_gk(f: Any, x: np.ndarray, d: np.ndarray, rtol: float, atol: float,
         width = np.repeat(half, 2)
     error = error + 1e2 * np.finfo(float).eps * np.abs(value)
     return value, error, count
+
+
+#: Points and directions per point of `Metric.check_values`.
+VALUE_SAMPLES = (8, 4)
+
+
+def _value_samples(domain: Domain) -> tuple[np.ndarray, np.ndarray]:
+    """``(x, v)``, each ``(N, dim)``: a few points of ``domain`` (uniform, seeded, or the
+    projections of points of ``[-1, 1]**dim`` where it cannot be sampled uniformly), each
+    with the first coordinate direction, its negative and random unit directions."""
+    n, k = VALUE_SAMPLES
+    rng = np.random.default_rng(0)
+    dim = domain.dim
+    try:
+        x = np.asarray(domain.sample(n, rng), dtype=float)
+    except (InputError, ValueError, TypeError, NotImplementedError):
+        x = np.asarray(domain.project(rng.uniform(-1.0, 1.0, (n, dim))), dtype=float)
+    g = rng.normal(size=(n, k - 2, dim))
+    e = np.zeros((n, 2, dim))
+    e[:, 0, 0], e[:, 1, 0] = 1.0, -1.0
+    v = np.concatenate([e, g / np.linalg.norm(g, axis=-1, keepdims=True)], axis=1)
+    return np.repeat(x, k, axis=0), v.reshape(-1, dim)
+
+
+def _metric_name(m: Any) -> str:
+    return short(str(getattr(m, "name", type(m).__name__)), 80)
+
+
+def _scalar_F_sx(raw: Callable[..., Any]) -> Callable[..., Any]:
+    """``raw`` (a metric class's ``F_sx``) with its result checked: a scalar CasADi SX
+    expression (a number is taken as a constant). A vector, None, a string, or an error
+    raised while building the expression (numpy functions on CasADi symbols, for one) is an
+    `InputError` naming the metric."""
+
+    @functools.wraps(raw)
+    def F_sx(self: Any, x: Any, v: Any) -> ca.SX:
+        try:
+            out = raw(self, x, v)
+        except InputError:
+            raise
+        except Exception as err:  # a user's F: any error, reported in one line
+            text = str(err).strip().splitlines()
+            raise InputError(
+                f"metric {_metric_name(self)!r}: F_sx(x, v) failed on CasADi symbols "
+                f"({type(err).__name__}: {short(text[0] if text else '', 120)}); write F "
+                "with CasADi operations (ca.sqrt, ca.dot, ca.fmax), not numpy or math"
+            ) from err
+        if out is None or isinstance(out, (str, bytes, bool, dict, list, tuple)):
+            raise InputError(f"metric {_metric_name(self)!r}: F_sx(x, v) must return a scalar "
+                             f"CasADi expression of x and v, got {type(out).__name__}")
+        if not isinstance(out, (ca.SX, ca.MX)):
+            try:
+                out = ca.SX(out)
+            except Exception as err:
+                raise InputError(f"metric {_metric_name(self)!r}: F_sx(x, v) must return a "
+                                 f"scalar CasADi SX expression of x and v, got "
+                                 f"{type(out).__name__}") from err
+        if out.shape != (1, 1):
+            raise InputError(f"metric {_metric_name(self)!r}: F_sx(x, v) must return a "
+                             f"scalar expression of x and v, got shape {out.shape}")
+        return out
+
+    F_sx._scalar_checked = True  # type: ignore[attr-defined]
+    return F_sx
 
 
 def _raise_non_finite(x: Any, v: Any) -> None:

@@ -104,7 +104,6 @@ from solvers.certify_reach import reachable_triangles, speed_floor
 from solvers.inputs import (
     SHORT_PAIR,
     as_metric,
-    check_point,
     check_segments,
     domain_scale,
     is_short_pair,
@@ -281,8 +280,12 @@ def _check_request(m: Metric, start: Any, goal: Any, mesh: MeshSpec | str | None
                                        and math.isfinite(time_limit) and time_limit > 0):
         raise InputError(f"time_limit must be a positive number of seconds, got {time_limit!r}")
     poly = _outline(m)
-    s = check_point(m, start, "start")
-    g = check_point(m, goal, "goal")
+    s, g = (m.domain.check(p, name) for p, name in ((start, "start"), (goal, "goal")))
+    for pts, name in ((s, "start"), (g, "goal")):
+        if pts.shape[0] != 1:
+            raise InputError(f"{name} must be a single point of shape ({m.dim},), got "
+                             f"{pts.shape[0]} points")
+    s, g = s[0], g[0]
     if np.array_equal(s, g):
         raise InputError("start equals goal: the distance is 0, nothing to certify")
     scale = domain_scale(m)

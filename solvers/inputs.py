@@ -44,11 +44,15 @@ def is_short_pair(m: Metric, s: np.ndarray, g: np.ndarray) -> bool:
 
 
 def as_metric(metric: Metric | str) -> Metric:
-    """A metric object, or the registered metric of that name."""
+    """A metric object, or the registered metric of that name, whose ``F`` passed the first
+    look of `Metric.check_values` (finite and positive at a few points of the domain)."""
     if isinstance(metric, Metric):
+        metric.check_values()
         return metric
     if isinstance(metric, str):
-        return get_metric(metric)
+        m = get_metric(metric)
+        m.check_values()
+        return m
     raise InputError(f"metric must be a finsler.Metric or a registered name, got "
                      f"{describe_value(metric)}")
 

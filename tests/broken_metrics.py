@@ -24,6 +24,8 @@ Each mistake is one a user can make writing a metric; the property that must nam
   0.6)**3`` on the unit disk: Finsler except in the cap ``x_0 > 0.6 + (1/45)**(1/3) =
   0.881`` (2.4% of the disk), where ``c > 1/15`` makes the unit ball non-convex; declared
   convex everywhere;
+* ``broken-negative``: ``-|v|``, a sign slip: negative everywhere, the domain's centre
+  included, so the fault is F's (``finite-positive``), not the domain's extent;
 * ``broken-reversible``: a drift term ``0.3 v_0`` in a metric declared reversible;
 * ``broken-positive``: a Randers drift ``<b(x), v>`` with ``|b(x)| = 1.5 |x_0| > 1`` near
   the sides of the box, where ``F`` is negative against the drift (found by ``domain``
@@ -57,6 +59,7 @@ EXPECTED = {
     "broken-homogeneity": "homogeneity",
     "broken-subadditivity": "subadditivity",
     "broken-convex-cap": "strong-convexity",
+    "broken-negative": "finite-positive",
     "broken-reversible": "reversibility",
     "broken-positive": "domain",
     "broken-lowered": "lowered-forms",
@@ -84,6 +87,20 @@ class NotHomogeneous(Metric):
 
     def F_sx(self, x: ca.SX, v: ca.SX) -> ca.SX:
         return (1 + 0.5 * x[0] ** 2) * ca.sqrt(ca.dot(v, v) + 0.01)
+
+
+@register_metric
+@dataclass(frozen=True)
+class Negative(Metric):
+    """``F(x, v) = -|v|`` on ``[-1, 1]**2``: the sign is wrong everywhere."""
+
+    name: ClassVar[str] = "broken-negative"
+    task: ClassVar[Task] = Task(depth=4, eps=0.2)
+    reversible: ClassVar[bool] = True
+    domain = property(lambda self: Box((-1.0, -1.0), (1.0, 1.0)))
+
+    def F_sx(self, x: ca.SX, v: ca.SX) -> ca.SX:
+        return -_norm(v)
 
 
 @register_metric

@@ -249,7 +249,10 @@ def check_domain(metric: Metric, *, examples: int = 100, seed: int = 0) -> Prope
     boundary, along the signed coordinate directions), and the projection onto the domain
     lies in it, is idempotent and leaves points of the domain where they are (points
     ``p`` drawn from the domain's bounding box enlarged by 20%). A failure of ``F`` says
-    where it stops being valid (a threshold on ``|x|`` or a coordinate, from the samples)."""
+    where it stops being valid (a threshold on ``|x|`` or a coordinate, from the samples).
+    An ``F`` that fails at the domain's centre is a fault of ``F`` itself, which no smaller
+    domain mends: it is left to `check_finite_positive`, and this property checks the
+    projection only."""
     m = metric
     name = "domain"
     claim = ("F is finite and > 0 on the whole declared domain (boundary included); "
@@ -260,8 +263,9 @@ def check_domain(metric: Metric, *, examples: int = 100, seed: int = 0) -> Prope
     n = len(scan.points)
     where = (f"{n} points ({scan.inside} uniform, {n - scan.inside} on the boundary, the "
              f"centre) along the {len(scan.directions)} signed coordinate directions")
-    if bad.any():
-        r = np.linalg.norm(scan.points - scan.points[-1], axis=1)  # the centre is last
+    at_centre = bool(bad[-1])  # the centre is last
+    if bad.any() and not at_centre:
+        r = np.linalg.norm(scan.points - scan.points[-1], axis=1)
         j = int(np.flatnonzero(bad)[np.argmin(r[bad])])
         i = int(np.flatnonzero(scan.bad_values[j])[0])
         region = describe_region(m, scan.points, bad, scan.what())
@@ -301,7 +305,10 @@ def check_domain(metric: Metric, *, examples: int = 100, seed: int = 0) -> Prope
                  rng=seeded(seed, name))
     res.tried += n
     res.passed += n
-    res.note = (f"F finite and > 0 at all {where}. {res.note}").strip()
+    about_f = (f"F is {scan.what()} at the domain's centre: a fault of F itself, not of the "
+               "domain's extent (property finite-positive)" if at_centre
+               else f"F finite and > 0 at all {where}")
+    res.note = f"{about_f}. {res.note}".strip()
     res.seconds = time.perf_counter() - t0
     return res
 
