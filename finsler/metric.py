@@ -252,7 +252,11 @@ class Metric(MetricHooks, ABC):
     # -- derived symbolic objects ---------------------------------------------------------
     @property
     def dim(self) -> int:
-        return self.domain.dim
+        domain = self.domain
+        if not isinstance(domain, Domain):
+            raise InputError(f"metric {_metric_name(self)!r}: domain must be a finsler Domain "
+                             f"(Box, Disk, Product, ...), got {type(domain).__name__}")
+        return domain.dim
 
     @property
     def _ident(self) -> str:
@@ -366,6 +370,7 @@ class Metric(MetricHooks, ABC):
         thoroughly, property by property)."""
         if self.__dict__.get("_values_checked"):
             return
+        _ = self.dim  # a domain that is not a Domain is refused first
         x, v = _value_samples(self.domain)
         with np.errstate(all="ignore"):
             f = np.asarray(self.casadi_F.map(x.shape[0])(x.T, v.T), dtype=float).reshape(-1)

@@ -16,12 +16,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
-from finsler.errors import InputError
+from finsler.infra.limits import check_count
 from finsler.status import Result, RunStop
 from learn.run_config import RunConfig, check_choice, check_hidden
 from learn.storage import write_result
+
+#: Deepest tree a policy generates (``2**20`` segments per path: 16 MiB of 2-D points per
+#: pair; deeper requests would exhaust memory before the first midpoint).
+MAX_DEPTH = 20
 
 __all__ = [
     "LoadedPolicy",
@@ -58,9 +60,7 @@ class LoadedPolicy:
     def check_depth(self, depth: Any) -> int:
         """``depth`` checked (a non-negative integer), or the policy's own if None."""
         d = self.depth if depth is None else depth
-        if not isinstance(d, (int, np.integer)) or isinstance(d, bool) or d < 0:
-            raise InputError(f"depth must be a non-negative integer, got {depth!r}")
-        return int(d)
+        return check_count(d, "depth", 0, MAX_DEPTH)
 
     _depth = check_depth  # the name before issue 49
 

@@ -22,6 +22,7 @@ import numpy as np
 
 from finsler.errors import InputError
 from finsler.infra.files import OutputError, atomic_write_bytes
+from finsler.infra.limits import check_count
 from finsler.infra.pool import ProcessPool
 from finsler.metric import Metric
 from finsler.spec import MetricSpec
@@ -257,9 +258,12 @@ class BatchJob:
                 self.global_seeds, self.tol, self.method, self.device)
 
 
-def _positive_int(value: Any, name: str) -> None:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
-        raise InputError(f"{name} must be a positive integer, got {value!r}")
+#: Most worker processes of one `solve_batch` (each holds a copy of the metric's NLPs).
+MAX_WORKERS = 256
+
+
+def _positive_int(value: Any, name: str, high: int | None = None) -> None:
+    check_count(value, name, 1, high)
 
 
 def check_batch(metric: Metric | str, pairs: Any, segments: int | None = None, *,
@@ -285,7 +289,7 @@ def check_batch(metric: Metric | str, pairs: Any, segments: int | None = None, *
         workers = os.cpu_count() or 1
         if how == "newton" and arr.shape[0] < NEWTON_POOL_MIN:
             workers = 1
-    _positive_int(workers, "workers")
+    _positive_int(workers, "workers", MAX_WORKERS)
     if chunk_size is not None:
         _positive_int(chunk_size, "chunk_size")
     if ray_address is not None:

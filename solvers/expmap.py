@@ -182,6 +182,11 @@ def _check_speed(m: Metric, x: np.ndarray, v: np.ndarray, names: tuple[str, str]
     equation differentiates) overflows float64."""
     with np.errstate(all="ignore"):
         speed = float(m.F(x, v, check=False))
+        unit = float(m.F(x, v / np.max(np.abs(v)), check=False)) if np.any(v) else 0.0
+    if not (math.isfinite(unit) and unit >= 0):  # F itself fails here, whatever the scale
+        raise InputError(f"{m.name}: F({names[0]}, {names[1]}) = {speed:.6g} at {names[0]} = "
+                         f"{short(str(x.tolist()), 60)}, {names[1]} = "
+                         f"{short(str(v.tolist()), 60)}: F must be finite and > 0 there")
     if not (math.isfinite(speed) and math.isfinite(speed * speed)):
         raise InputError(f"{names[1]} = {short(str(v.tolist()), 60)} is too large: the speed "
                          f"F({names[0]}, {names[1]}) overflows float64; scale it down (the "
