@@ -863,7 +863,14 @@ def _raise_non_finite(x: Any, v: Any) -> None:
 
 
 def _ndim(a: Any) -> int:
-    return int(a.ndim) if hasattr(a, "ndim") else int(np.ndim(a))
+    """``a``'s number of dimensions; -1 for what is no array (ragged lists: `as_real`
+    then names the argument)."""
+    if hasattr(a, "ndim"):
+        return int(a.ndim)
+    try:
+        return int(np.ndim(a))
+    except (ValueError, TypeError):
+        return -1
 
 
 def _same_kind(a: Any, b: Any) -> None:

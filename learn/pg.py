@@ -623,9 +623,8 @@ class PGPolicy(LoadedPolicy):
 
     def midpoint(self, starts: Any, goals: Any) -> np.ndarray:
         """``pi_1``'s predicted midpoints ``(K, dim)`` (projected means)."""
-        single = np.ndim(starts) == 1
-        out = self.generate(starts, goals, depth=1)[:, 1]
-        return out[0] if single else out
+        out = self.generate(starts, goals, depth=1)[:, 1]  # checks the points first
+        return out[0] if np.ndim(starts) == 1 else out
 
     def evaluate(self, pairs: Any = None, eps: float | None = None,
                  depth: int | None = None) -> EvalResult:

@@ -19,8 +19,10 @@ import numpy as np
 import torch
 
 import finsler
+from finsler.domains import as_real, is_torch
 from finsler.errors import InputError, short
 from finsler.infra.files import check_path_text
+from finsler.infra.limits import check_number
 from finsler.status import EvalStatus, Result, json_ready
 from learn.base import LoadedPolicy
 from learn.config import METHODS, TrainConfig
@@ -141,10 +143,9 @@ class EvalResult(Result):
 def evaluate_paths(metric: finsler.Metric, paths: np.ndarray, eps: float) -> EvalResult:
     """Success (every segment cost <= eps), length and max segment cost of paths
     ``(K, n + 1, dim)``, all in float64."""
-    if not (np.isfinite(eps) and eps > 0):
-        raise InputError(f"eps must be positive and finite, got {eps!r}")
+    check_number(eps, "eps", 0.0, low_open=True)
     t0 = time.perf_counter()
-    paths = np.asarray(paths, dtype=np.float64)
+    paths = as_real(paths, "paths", f"a real numeric array of shape (K, n+1, {metric.dim})")
     costs = metric.path_costs(paths)
     mx = costs.max(axis=1)
     length = costs.sum(axis=1)
@@ -165,7 +166,9 @@ def evaluate_paths(metric: finsler.Metric, paths: np.ndarray, eps: float) -> Eva
 
 def check_pairs(metric: finsler.Metric, pairs: Any) -> np.ndarray:
     """``pairs`` as float64 ``(K, 2, dim)``, checked: shape, K >= 1, finite, in the domain."""
-    arr = np.asarray(pairs, dtype=np.float64)
+    arr = as_real(pairs, "pairs", f"a real numeric array of shape (K, 2, {metric.dim})")
+    if is_torch(arr):
+        arr = arr.detach().cpu().numpy().astype(np.float64)
     if arr.ndim != 3 or arr.shape[1] != 2 or arr.shape[2] != metric.dim:
         raise InputError(
             f"pairs must have shape (K, 2, {metric.dim}) for {metric.name}, got {arr.shape}"
@@ -222,9 +225,8 @@ class Policy(LoadedPolicy):
 
     def midpoint(self, starts: Any, goals: Any) -> np.ndarray:
         """Predicted midpoints ``(K, dim)`` (the deterministic mean, projected)."""
-        single = np.ndim(starts) == 1
-        out = self.generate(starts, goals, depth=1)[:, 1]
-        return out[0] if single else out
+        out = self.generate(starts, goals, depth=1)[:, 1]  # checks the points first
+        return out[0] if np.ndim(starts) == 1 else out
 
     def evaluate(
         self, pairs: Any = None, eps: float | None = None, depth: int | None = None,

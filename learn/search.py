@@ -54,6 +54,7 @@ import torch
 
 import finsler
 from finsler.errors import InputError
+from finsler.infra.limits import check_number
 from finsler.status import Result, SearchStatus, json_ready
 from learn.tree import build_tree
 
@@ -372,8 +373,7 @@ def search_paths(metric: finsler.Metric, predict: Predict, starts: torch.Tensor,
     tensors in the domain, ``predict(a, b)`` the actor's projected float64 midpoints, the
     task's success threshold ``eps`` -> paths ``(K, 2**depth + 1, dim)`` and the
     evaluations of C made."""
-    if not (isinstance(eps, (int, float)) and math.isfinite(eps) and eps > 0):
-        raise InputError(f"eps must be positive and finite, got {eps!r}")
+    check_number(eps, "eps", 0.0, low_open=True)
     spec = spec or SearchSpec()
     if not isinstance(spec, SearchSpec):
         raise InputError(f"search must be a SearchSpec, got {type(spec).__name__}")

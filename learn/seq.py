@@ -40,7 +40,8 @@ import torch
 
 import finsler
 from finsler.errors import InputError
-from learn.base import LoadedPolicy, TrainResult
+from finsler.infra.limits import check_count, check_number
+from learn.base import MAX_DEPTH, LoadedPolicy, TrainResult
 from learn.config import training_settings
 from learn.env import (
     TIME_LIMITS,
@@ -339,10 +340,8 @@ def evaluate_seq(act: Any, metric: finsler.Metric, pairs: np.ndarray, eps: float
     * ``reached``: the paper's/authors' success for Seq: ``C(p_j, g) < eps`` within the
       ``n`` steps of an episode (one more step than fits in n segments; no segment test).
     """
-    if not isinstance(depth, (int, np.integer)) or isinstance(depth, bool) or depth < 0:
-        raise InputError(f"depth must be a non-negative integer, got {depth!r}")
-    if not (np.isfinite(eps) and eps > 0):
-        raise InputError(f"eps must be positive and finite, got {eps!r}")
+    check_count(depth, "depth", 0, MAX_DEPTH)
+    check_number(eps, "eps", 0.0, low_open=True)
     t0 = time.perf_counter()
     n = 2 ** int(depth)
     pts, reached_at = rollout(act, metric, pairs[:, 0], pairs[:, 1], float(eps), n)
