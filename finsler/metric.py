@@ -709,7 +709,14 @@ class Metric(MetricHooks, ABC):
         xs = np.broadcast_to(x, v.shape)[redo]
         with np.errstate(invalid="ignore", divide="ignore", over="ignore", under="ignore"):
             (unit,) = self.lowered_F(xs, v[redo] / s[:, None])
-            out[redo] = unit[..., 0] * s
+            unit = unit[..., 0]
+            out[redo] = unit * s
+        over = np.isfinite(unit) & ~np.isfinite(out[redo])
+        if over.any():  # the length itself is beyond float64, not an intermediate
+            i = int(np.flatnonzero(over)[0])
+            raise InputError(f"F(x, v) = {unit[i]:.6g} * {s[i]:.6g} at v = "
+                             f"{short(str(v[redo][i].tolist()), 80)} exceeds the largest "
+                             "float64 (1.8e308): scale v down (F is 1-homogeneous in v)")
         return out
 
     def _pair(self, x: Any, y: Any) -> tuple[Any, Any, bool]:

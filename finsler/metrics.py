@@ -430,6 +430,11 @@ class ClosedFormMetric(Metric):
         return x[:, None] + t[None, :, None] * (y - x)[:, None]
 
 
+#: Largest dimension of the Euclidean metric: its symbolic F has n entries per vector and
+#: the solvers' Hessians n**2, so far larger n exhausts memory before a first solve.
+MAX_EUCLIDEAN_DIM = 1024
+
+
 @dataclass(frozen=True)
 class Euclidean(ClosedFormMetric):
     """Euclidean metric ``F(x, v) = |v|`` on the box ``[-1, 1]**dim``."""
@@ -448,8 +453,10 @@ class Euclidean(ClosedFormMetric):
     reversible: ClassVar[bool] = True
 
     def __post_init__(self) -> None:
-        if not isinstance(self.n, (int, np.integer)) or self.n < 1:
-            raise InputError(f"euclidean dimension must be a positive integer, got {self.n!r}")
+        if isinstance(self.n, bool) or not isinstance(self.n, (int, np.integer)) or not (
+                1 <= self.n <= MAX_EUCLIDEAN_DIM):
+            raise InputError(f"euclidean dimension n must be an integer in [1, "
+                             f"{MAX_EUCLIDEAN_DIM}], got {self.n!r}")
 
     @property
     def domain(self) -> Domain:

@@ -77,7 +77,7 @@ from typing import Any
 import numpy as np
 
 from finsler.errors import InputError
-from finsler.infra.limits import check_memory
+from finsler.infra.limits import check_memory, check_number
 from finsler.metric import Metric
 from finsler.status import Status
 from solvers.certify_bounds import SPLIT_DEPTH as SPLIT_DEPTH
@@ -276,9 +276,8 @@ def _check_request(m: Metric, start: Any, goal: Any, mesh: MeshSpec | str | None
         mesh is None or isinstance(mesh, str)) else mesh
     if not isinstance(spec, MeshSpec):
         raise InputError(f"mesh must be a MeshSpec or a preset name, got {type(mesh).__name__}")
-    if time_limit is not None and not (isinstance(time_limit, (int, float))
-                                       and math.isfinite(time_limit) and time_limit > 0):
-        raise InputError(f"time_limit must be a positive number of seconds, got {time_limit!r}")
+    if time_limit is not None:
+        check_number(time_limit, "time_limit (seconds)", 0.0, low_open=True)
     poly = _outline(m)
     s, g = (m.domain.check(p, name) for p, name in ((start, "start"), (goal, "goal")))
     for pts, name in ((s, "start"), (g, "goal")):

@@ -174,6 +174,9 @@ def distance(
     if rtol is None:
         rtol = 1e-8 if m.smooth else 1e-4
     rtol = check_number(rtol, "rtol", 0.0, 1.0, low_open=True, high_open=True)
+    if rtol < ROUNDING_FLOOR:
+        raise InputError(f"rtol = {rtol:g} is below {ROUNDING_FLOOR:g}, the rounding floor "
+                         "every error estimate carries: no degree can reach it")
     if degrees is None:
         degrees = DEGREES_LOW_DIM if m.dim <= 3 else DEGREES_HIGH_DIM
     if not isinstance(degrees, (list, tuple)) or len(degrees) < 2 or len(degrees) > 16 or any(

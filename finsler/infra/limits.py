@@ -81,11 +81,11 @@ def check_number(value: Any, name: str, low: float = -math.inf, high: float = ma
 
 def check_seed(seed: Any, name: str = "seed") -> Any:
     """A seed numpy's ``default_rng`` takes: an integer >= 0, a ``numpy.random.Generator``
-    (returned as it is), or a non-empty sequence of integers >= 0; else
-    :class:`InputError` naming ``name``."""
+    (returned as it is), a non-empty sequence of integers >= 0, or None (fresh entropy:
+    not reproducible); else :class:`InputError` naming ``name``."""
     import numpy as np
 
-    if isinstance(seed, np.random.Generator):
+    if seed is None or isinstance(seed, np.random.Generator):
         return seed
     if isinstance(seed, (list, tuple)) and seed and all(
             isinstance(s, numbers.Integral) and not isinstance(s, bool) and s >= 0
