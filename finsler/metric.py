@@ -420,8 +420,9 @@ class Metric(MetricHooks, ABC):
                        check: bool | None = None) -> Any:
         """Length (eq. 58) of the coordinate segment from ``x`` to ``y`` by Gauss-Legendre
         quadrature of the given order; an upper bound of the distance ``d(x, y)``."""
-        if not isinstance(order, (int, np.integer)) or order < 1:
-            raise InputError(f"quadrature order must be a positive integer, got {order!r}")
+        if isinstance(order, bool) or not isinstance(order, (int, np.integer)) or order < 1:
+            raise InputError(f"quadrature order must be a positive integer, got "
+                             f"{short(repr(order), 80)}")
         if order > MAX_QUADRATURE_ORDER:
             raise InputError(f"quadrature order {order} is above {MAX_QUADRATURE_ORDER}: its "
                              "nodes cost O(order^2) memory and O(order^3) time, and a "

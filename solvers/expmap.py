@@ -31,7 +31,7 @@ from scipy.integrate import solve_ivp
 from finsler.domains import as_real, is_torch
 from finsler.errors import InputError, short
 from finsler.geometry import Spray, spray
-from finsler.infra.limits import check_count, check_memory
+from finsler.infra.limits import check_count, check_memory, check_number
 from finsler.metric import Metric
 from finsler.status import Result, json_ready
 from solvers.chebyshev import differentiation_matrix
@@ -53,6 +53,10 @@ PD_RATIO = 1e-9
 
 #: Default tolerance of `log_map` on ``|exp(x, v) - y|`` (max norm, coordinates).
 LOG_TOL = 1e-11
+#: Smallest ``tol`` of `log_map`: a few float64 spacings of coordinates of order 1.
+LOG_TOL_MIN = 1e-15
+#: Smallest ``rtol`` of the integration: scipy's DOP853 raises smaller ones to it.
+RTOL_MIN = 100 * float(np.finfo(np.float64).eps)
 #: Most Newton iterations of :func:`log_map` (it converges in a handful where it converges).
 MAX_LOG_ITER = 1000
 
@@ -358,7 +362,8 @@ def exp_map(
         raise InputError(f"t must be a finite number >= 0, got {t!r}")
     samples = _samples(return_curve)
     if samples:  # the dense output is evaluated at every sample: (2 dim, samples) floats
-        check_memory((samples, 2 * m.dim), f"{samples} samples of the curve", copies=3)
+        check_memory((samples, 2 * m.dim), f"return_curve = {samples} samples of the curve",
+                     copies=3)
     _check_tolerances(rtol, atol)
     _check_speed(m, xs, vs, names)
     _check_convex_at(m, sp, xs, vs, names[0])
@@ -391,8 +396,10 @@ def _samples(return_curve: bool | int) -> int:
 
 def _check_tolerances(rtol: float, atol: float) -> None:
     for name, val in (("rtol", rtol), ("atol", atol)):
-        if not (isinstance(val, (int, float)) and math.isfinite(val) and 0 < val < 1):
-            raise InputError(f"{name} must be in (0, 1), got {val!r}")
+        check_number(val, name, 0.0, 1.0, low_open=True, high_open=True)
+    if rtol < RTOL_MIN:  # scipy would raise it silently (with a warning) to this floor
+        raise InputError(f"rtol = {rtol:g} is below {RTOL_MIN:.3g}, the smallest relative "
+                         "tolerance DOP853 works to in float64")
 
 
 # ----------------------------------------------------------------------------------------
@@ -428,8 +435,10 @@ def log_map(
     sp = spray(m)
     xs = check_point(m, x, names[0])
     ys = check_point(m, y, names[1])
-    if not (isinstance(tol, float) and math.isfinite(tol) and 0 < tol < 1):
-        raise InputError(f"tol must be a float in (0, 1), got {tol!r}")
+    check_number(tol, "tol", 0.0, 1.0, low_open=True, high_open=True)
+    if tol < LOG_TOL_MIN:
+        raise InputError(f"tol = {tol:g} is below {LOG_TOL_MIN:g}: |exp(x, v) - y| is a "
+                         "difference of float64 coordinates, which resolve no finer")
     check_count(max_iter, "max_iter", 1, MAX_LOG_ITER)
     _check_tolerances(rtol, atol)
     _check_convex_at(m, sp, xs, None, names[0])

@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from finsler.domains import as_real
-from finsler.errors import InputError
+from finsler.errors import InputError, short
 from finsler.metric import Metric
 from solvers.batched import (
     BatchOptions,
@@ -310,7 +310,8 @@ def resolve_method(m: Metric, method: Any) -> str:
     metric, :func:`solvers.batched.covers`; ``"newton"`` also for a metric that is not
     smooth but provides ``smooth_square_sx``, :func:`solvers.batched.covers_opt_in`)."""
     if method not in ("auto", "newton", "ipopt"):
-        raise InputError(f"method must be 'auto', 'newton' or 'ipopt', got {method!r}")
+        raise InputError(f"method must be 'auto', 'newton' or 'ipopt', got "
+                         f"{short(repr(method), 80)}")
     if method == "auto":
         return "newton" if covers(m) else "ipopt"
     if method == "newton" and not covers_opt_in(m):

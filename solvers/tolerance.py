@@ -16,8 +16,8 @@ from typing import Any
 import numpy as np
 
 from finsler.errors import InputError, short
+from finsler.infra.limits import check_count
 from finsler.metric import Metric
-from solvers.inputs import check_segments
 from solvers.pairs import _refine_minmax, solve_pair, solve_pairs
 from solvers.result import GeodesicResult, SolverError, Status
 from solvers.seeding import SeedPlan, resample
@@ -98,8 +98,8 @@ def check_tol(m: Metric, n: int, tol: Any, max_segments: Any) -> tuple[float, in
     if isinstance(max_segments, bool) or not isinstance(max_segments, (int, np.integer)) \
             or max_segments < n:
         raise InputError(f"max_segments must be an integer >= segments ({n}), got "
-                         f"{max_segments!r}")
-    return float(tol), check_segments(m, int(max_segments))
+                         f"{short(repr(max_segments), 80)}")
+    return float(tol), check_count(max_segments, "max_segments", n, 1 << 16)
 
 
 def solve_to_tol(m: Metric, s: np.ndarray, g: np.ndarray, n: int, tol: float,
