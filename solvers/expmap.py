@@ -183,7 +183,7 @@ def _vector(m: Metric, v: Any, name: str) -> np.ndarray:
 
 def _check_speed(m: Metric, x: np.ndarray, v: np.ndarray, names: tuple[str, str]) -> None:
     """Refuse a velocity whose speed ``F(x, v)`` (or ``F(x, v)**2``, which the geodesic
-    equation differentiates) overflows float64."""
+    equation differentiates) overflows or underflows float64."""
     with np.errstate(all="ignore"):
         speed = float(m.F(x, v, check=False))
         unit = float(m.F(x, v / np.max(np.abs(v)), check=False)) if np.any(v) else 0.0
@@ -191,6 +191,10 @@ def _check_speed(m: Metric, x: np.ndarray, v: np.ndarray, names: tuple[str, str]
         raise InputError(f"{m.name}: F({names[0]}, {names[1]}) = {speed:.6g} at {names[0]} = "
                          f"{short(str(x.tolist()), 60)}, {names[1]} = "
                          f"{short(str(v.tolist()), 60)}: F must be finite and > 0 there")
+    if np.any(v) and speed * speed < np.finfo(np.float64).tiny:
+        raise InputError(f"{names[1]} = {short(str(v.tolist()), 60)} is too small: the speed "
+                         f"F({names[0]}, {names[1]})**2 underflows float64; scale it up (the "
+                         "curve of c v at time t / c is the same)")
     if not (math.isfinite(speed) and math.isfinite(speed * speed)):
         raise InputError(f"{names[1]} = {short(str(v.tolist()), 60)} is too large: the speed "
                          f"F({names[0]}, {names[1]}) overflows float64; scale it down (the "
