@@ -39,7 +39,7 @@ from solvers.seeding import (
 )
 
 __all__ = ["BatchOptions", "BatchSolution", "Rows", "covers", "covers_opt_in",
-           "solve_pairs_batched", "warp_answers"]
+           "solve_pairs_batched"]
 
 #: Relative energy difference under which two seeds count as agreeing with the best.
 AGREE_RTOL = 1e-6
@@ -460,30 +460,6 @@ def _hop(run: Any, rows: Rows, K: int, given_names: set[str], plan: SeedPlan, ro
     stats["levels"].append({"segments": n1 - 1, "rows": len(extra), "polish": True, **warp,
                             "wall_time": time.perf_counter() - t1})
     return rows
-
-
-def warp_answers(m: Metric, points: np.ndarray, energy: np.ndarray, names: list[str],
-                 converged: np.ndarray, plan: SeedPlan, opts: BatchOptions | None = None
-                 ) -> tuple[Rows, dict[str, Any]]:
-    """The warp rounds of ``plan`` (``warps`` copies, ``warp_rounds`` rounds,
-    ``warp_scale``) from answers another method found, one per pair (``points``
-    ``(K, n+1, dim)``, their ``energy`` ``(K,)``, ``names``, ``converged`` ``(K,)``), by the
-    batched method (:func:`covers_opt_in`): each round warps the best of the pair's answer
-    and the rows so far (a pair whose answer did not converge is left alone). Returns the
-    new rows (``<name>~w<j>``, from the second round on ``<name>~w<round>.<j>``) and their
-    level (per pair ``solved`` and ``iterations``)."""
-    K = points.shape[0]
-    run = _Runner(m, opts or BatchOptions(), K)
-    ok = np.asarray(converged, bool) & np.isfinite(energy)
-    base = Rows(np.arange(K, dtype=np.int64), list(names), np.asarray(points, np.float64),
-                np.asarray(energy, np.float64),
-                np.where(ok, NewtonStatus.CONVERGED, NewtonStatus.MAX_ITERATIONS),
-                np.zeros(K, dtype=np.int64), np.full(K, np.nan))
-    levels: list[dict[str, Any]] = []
-    rows = _hop(run, base, K, set(), plan, plan.warp_rounds, plan.warps, "w",
-                lambda p, rnd: warped_batch(m, p, plan.warps, plan.warp_scale), levels,
-                {"levels": []})
-    return rows.take(np.arange(K, len(rows))), levels[0]
 
 
 def residuals(m: Metric, points: np.ndarray) -> np.ndarray:

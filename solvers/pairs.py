@@ -36,7 +36,6 @@ from solvers.batched import (
     covers,
     covers_opt_in,
     solve_pairs_batched,
-    warp_answers,
 )
 from solvers.inputs import SHORT_PAIR, as_metric, domain_scale
 from solvers.nonsmooth import optimality_residual
@@ -49,6 +48,7 @@ from solvers.seeding import (
     perturbed_curves,
     resample,
     seed_curves,
+    warped_batch,
 )
 from solvers.transcription import energy_nlp, minmax_nlp
 
@@ -359,8 +359,6 @@ def solve_pairs(m: Metric, pairs: np.ndarray, n: int, plan: SeedPlan,
     elif long_:
         ladders = [_ipopt_solves(m, pairs[k, 0], pairs[k, 1], n, plan, given[k],
                                  global_seeds, warm) for k in long_]
-        if global_seeds and plan.warps and covers_opt_in(m):
-            _warp_ladders(m, ladders, n, plan, device)
         for k, lad in zip(long_, ladders, strict=True):
             out[k] = _ipopt_result(m, lad)
     share = (time.perf_counter() - t0) / max(len(long_), 1)
@@ -459,10 +457,11 @@ def _from_batch(m: Metric, sol: BatchSolution, global_seeds: bool
 
 @dataclasses.dataclass
 class _Ladder:
-    """One pair's solves before its result is assembled (:func:`_ipopt_solves`): every
-    solve, the per-level summaries, seeds tried, seeds agreeing, total iterations, the
-    solves from the seeds (first size), the chosen one and the best of the plan's own
-    solves (``own``: caller-given paths excluded, the base of the warps, issue 47)."""
+    """One pair's solves before its result is assembled (`_ipopt_solves`): every solve,
+    the per-level summaries, seeds tried, seeds agreeing, total iterations, the solves
+    from the seeds (first size), the chosen one and the best of the plan's own solves
+    (``own``: caller-given paths excluded; the base of the warps, so that a learned warm
+    start changes nothing the plan does)."""
 
     solved: list[_Solve]
     levels: list[dict[str, Any]]
@@ -508,45 +507,40 @@ def _ipopt_solves(m: Metric, s: np.ndarray, g: np.ndarray, n: int, plan: SeedPla
     given_names = {name for name, _ in given}
     own = min((r for r in solved if r.ok and r.name not in given_names),
               key=lambda r: r.energy, default=None)
+    if global_seeds and plan.warps and own is not None:
+        t1 = time.perf_counter()
+        tries = _warp_rounds(m, own, plan)
+        its = sum(max(r.iterations, 0) for r in tries)
+        solved += tries
+        total_iter += its
+        levels.append({"segments": n, "solved": len(tries), "iterations": its,
+                       "wall_time": time.perf_counter() - t1, "polish": True, "warp": True})
+        win = min((r for r in tries if r.ok), key=lambda r: r.energy, default=None)
+        if win is not None and win.energy < best.energy * (1.0 - 1e-12):
+            best = win
     return _Ladder(solved, levels, n_seeds, agree, total_iter, first, best, own)
 
 
-def _warp_ladders(m: Metric, ladders: list[_Ladder], n: int, plan: SeedPlan,
-                  device: Any) -> None:
-    """The plan's warp rounds (:attr:`SeedPlan.warps`) from every pair's best converged
-    IPOPT solve of the plan's own (a caller-given path changes nothing they do) at once,
-    by the batched method (:func:`solvers.batched.warp_answers`; the metric must be
-    covered, :func:`covers_opt_in`): the interior point reaches the
-    discrete minima where a kinked path changes phase one segment earlier or later, which
-    IPOPT's solves from the same warped copies mostly skip. A converged row lower by more
-    than rounding (``1e-12``, relative) becomes the pair's answer (its ``method`` then
-    ``"newton"``)."""
-    todo = [L for L in ladders if L.own is not None]
-    if not todo:
-        return
-    t0 = time.perf_counter()
-    extra, level = warp_answers(m, np.stack([L.own.points for L in todo]),
-                                np.array([L.own.energy for L in todo]),
-                                [L.own.name for L in todo], np.ones(len(todo), bool), plan,
-                                BatchOptions(device=device))
-    share = (time.perf_counter() - t0) / len(todo)
-    pts = _onto_domain_many(m, extra.points)
-    energy = np.sum(np.asarray(m.path_costs(pts, check=False)) ** 2, axis=1) \
-        if len(extra) else np.zeros(0)
-    ok = extra.ok
-    for j, L in enumerate(todo):
-        tries = [_Solve(extra.names[i], pts[i],
-                        Status.SUCCESS if ok[i] else Status.MAX_ITERATIONS,
-                        int(extra.iterations[i]), float(energy[i]), True, "newton")
-                 for i in np.flatnonzero(extra.pair == j)]
-        its = int(level["iterations"][j])
-        L.solved += tries
-        L.total_iter += its
-        L.levels.append({"segments": n, "solved": len(tries), "iterations": its,
-                         "wall_time": share, "polish": True, "warp": True})
-        win = min((r for r in tries if r.ok), key=lambda r: r.energy, default=None)
-        if win is not None and win.energy < L.best.energy * (1.0 - 1e-12):
-            L.best = win
+def _warp_rounds(m: Metric, base: _Solve, plan: SeedPlan) -> list[_Solve]:
+    """The plan's warped copies (`SeedPlan.warps`) of ``base``, solved by IPOPT from its
+    warm options (a warped copy is a converged path with its points slid along it: a small
+    barrier keeps the solve near the phase switch the warp moved), round after round from
+    the best so far, until ``plan.warp_rounds`` rounds or a round that lowers nothing
+    (rows ``<base>~w<round>.<j>``)."""
+    nlp = energy_nlp(m, base.points.shape[0] - 1, warm=True)
+    tries: list[_Solve] = []
+    best, stem = base, base.name.split("~")[0]
+    for rnd in range(plan.warp_rounds):
+        lowered = False
+        copies = warped_batch(m, best.points[None], plan.warps, plan.warp_scale)[0]
+        for j, curve in enumerate(copies):
+            r = _solve_one(m, nlp, f"{stem}~w{rnd}.{j}", curve)
+            tries.append(r)
+            if r.rank < best.energy * (1.0 - 1e-9):
+                best, lowered = r, True
+        if not lowered:
+            break
+    return tries
 
 
 def _ipopt_result(m: Metric, L: _Ladder) -> GeodesicResult:
