@@ -261,3 +261,18 @@ def test_a_dangling_symlink_is_refused_like_a_missing_folder(tmp_path: Any) -> N
     with pytest.raises(OutputError, match="symbolic link"):
         check_output_path(link)
     assert not (tmp_path / "nowhere").exists()
+
+
+def test_certify_out_through_a_dangling_symlink_is_refused(tmp_path: Any) -> None:
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    os.symlink("nowhere/x.npy", tmp_path / "dangling.npy")
+    exe = Path(sys.executable).with_name("geodesics")
+    proc = subprocess.run([str(exe), "certify", "--metric", "poincare", "--start", "0.1,0.2",
+                           "--goal", "0.4,-0.3", "--mesh", "coarse", "--out", "dangling.npy"],
+                          cwd=tmp_path, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 2, proc.stderr
+    assert "symbolic link" in proc.stderr and "Traceback" not in proc.stderr
+    assert not (tmp_path / "nowhere").exists()
