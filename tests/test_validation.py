@@ -325,6 +325,45 @@ def test_report_writes_markdown_json_and_figures(report_dir: Path) -> None:
     assert lr["median"] == pytest.approx(float(np.median(ratios)), rel=1e-12)
 
 
+def test_report_states_its_threads_and_times_warm(report_dir: Path, matsumoto_policy) -> None:
+    """The report's learned time per path: one torch thread (said in report.md), batches
+    1, 100 and 10,000, and at 10,000 within 2x of a warm one-thread measurement made here."""
+    import time
+
+    import torch
+
+    import learn
+
+    out = report_dir / "out"
+    doc = json.loads((out / "report.json").read_text())
+    t = doc["timing"]
+    md = (out / "report.md").read_text()
+    assert t["threads"] == 1 and "torch limited to 1 thread(s)" in md
+    assert set(t["learned_seconds_per_path"]) == {"1", "100", "10000"}
+    for row in ("| 1 |", "| 100 |", "| 10,000 |"):
+        assert row in md
+    assert "Speed-up of the learned policy on matsumoto" in md
+    src = matsumoto_policy[1]
+    policy = learn.load_policy(src) if matsumoto_policy[0] == "--env" else \
+        learn.load_any_policy(src)
+    pairs = finsler.default_pairs(finsler.get_metric("matsumoto"))[:8]
+    idx = np.arange(10_000) % len(pairs)
+    s, g = pairs[idx, 0], pairs[idx, 1]
+    old = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        policy.generate(s, g)
+        times = []
+        for _ in range(3):
+            t0 = time.perf_counter()
+            policy.generate(s, g)
+            times.append((time.perf_counter() - t0) / len(idx))
+    finally:
+        torch.set_num_threads(old)
+    ours, theirs = float(np.median(times)), t["learned_seconds_per_path"]["10000"]
+    assert 0.5 < theirs / ours < 2.0, (theirs, ours)
+
+
 def test_report_gives_the_route_search_beside_the_policy(report_dir: Path) -> None:
     """The report's fourth path set: the policy with the route search, never failing where
     the policy succeeds (its largest segment within max(eps, the policy's)), shorter on

@@ -42,6 +42,8 @@ __all__ = [
     "exact_reference",
     "midpoint_error",
     "ratio_stats",
+    "time_exact_single",
+    "time_policy",
 ]
 
 
@@ -490,17 +492,56 @@ def _num(x: float) -> float | None:
     return float(x) if np.isfinite(x) else None
 
 
-def _time_policy(policy: Any, arr: np.ndarray, depth: int) -> tuple[np.ndarray, float, float]:
-    policy.generate(arr[:1, 0], arr[:1, 1], depth=depth)  # warm up (lazy compilation)
-    t0 = time.perf_counter()
-    paths = policy.generate(arr[:, 0], arr[:, 1], depth=depth)
-    batch = (time.perf_counter() - t0) / len(arr)
-    reps = min(len(arr), 20)
-    t0 = time.perf_counter()
-    for i in range(reps):
-        policy.generate(arr[i : i + 1, 0], arr[i : i + 1, 1], depth=depth)
-    single = (time.perf_counter() - t0) / reps
-    return np.asarray(paths, dtype=np.float64), batch, single
+#: Batch sizes at which `time_policy` times a policy (the report's table).
+TIMING_BATCHES = (1, 100, 10_000)
+#: torch threads while timing: one, so that a time does not depend on what else the
+#: machine runs (a shared machine's other jobs take the other cores).
+TIMING_THREADS = 1
+
+
+def time_policy(policy: Any, pairs: np.ndarray, depth: int,
+                batches: tuple[int, ...] = TIMING_BATCHES, repeats: int = 5,
+                threads: int = TIMING_THREADS) -> dict[str, Any]:
+    """Seconds per path of ``policy.generate`` at each batch size of ``batches``: the
+    pairs ``(K, 2, dim)`` repeated up to the batch size, one warm-up call, then the median
+    of ``repeats`` timed calls (21 single-pair calls over different pairs for batch 1),
+    with torch limited to ``threads`` threads (restored after). Returns ``{"threads",
+    "repeats", "seconds_per_path": {batch: seconds}}``."""
+    try:
+        import torch
+    except ImportError:  # pragma: no cover - torch is a dependency of learn
+        torch = None
+    old = torch.get_num_threads() if torch is not None else None
+    if torch is not None:
+        torch.set_num_threads(int(threads))
+    per_path: dict[int, float] = {}
+    try:
+        for b in batches:
+            idx = np.arange(b) % len(pairs)
+            calls = [idx] * repeats if b > 1 else [np.array([i % len(pairs)])
+                                                   for i in range(21)]
+            policy.generate(pairs[calls[0], 0], pairs[calls[0], 1], depth=depth)  # warm up
+            times = []
+            for sel in calls:
+                t0 = time.perf_counter()
+                policy.generate(pairs[sel, 0], pairs[sel, 1], depth=depth)
+                times.append((time.perf_counter() - t0) / len(sel))
+            per_path[int(b)] = float(np.median(times))
+    finally:
+        if torch is not None:
+            torch.set_num_threads(old)
+    return {"threads": int(threads), "repeats": int(repeats), "seconds_per_path": per_path}
+
+
+def time_exact_single(metric: Metric, pairs: np.ndarray, segments: int, k: int = 3) -> float:
+    """Median wall time of `solvers.solve_geodesic` (min-max on, as the report's exact
+    set) on the first ``k`` pairs one at a time: the exact time per path at batch 1."""
+    times = []
+    for s, g in pairs[:k]:
+        t0 = time.perf_counter()
+        solvers.solve_geodesic(metric, s, g, segments, minmax=True)
+        times.append(time.perf_counter() - t0)
+    return float(np.median(times))
 
 
 def compare(
@@ -516,6 +557,9 @@ def compare(
     workers: int | None = None,
     progress: bool = True,
     search: Any = None,
+    timing_batches: tuple[int, ...] = TIMING_BATCHES,
+    timing_repeats: int = 5,
+    exact_single: int = 0,
 ) -> Comparison:
     """Compare ``policy`` with exact geodesics and the straight baseline on ``pairs``
     ``(K, 2, dim)`` (default: ``finsler.default_pairs``), at depth ``D`` (default: the
@@ -523,7 +567,12 @@ def compare(
     task's). ``exact`` reuses solved references; ``midpoint`` adds the first-level midpoint
     error; ``continuum`` adds continuum distances where the metric is Finsler. ``search``
     (a [`learn.SearchSpec`][learn.SearchSpec], for a policy with a ``search`` method) adds the paths
-    of the policy-guided route search as a fourth set, ``searched``."""
+    of the policy-guided route search as a fourth set, ``searched``.
+
+    ``timing``: the policy's seconds per path at each of ``timing_batches``
+    (`time_policy`: warm, median of ``timing_repeats``, one torch thread), the exact
+    batched solve's share per path, the exact solve of one pair at a time (median over
+    ``exact_single`` pairs; 0: not measured) and the speed-ups."""
     m = finsler.get_metric(metric if metric is not None else policy.metric)
     arr = solvers.check_pairs(m, finsler.default_pairs(m) if pairs is None else pairs)
     d = int(depth if depth is not None else getattr(policy, "depth", m.task.depth))
@@ -533,7 +582,11 @@ def compare(
     if not (np.isfinite(e) and e > 0):
         raise InputError(f"eps must be positive and finite, got {e!r}")
     n = 2**d
-    paths, per_path, single = _time_policy(policy, arr, d)
+    policy.generate(arr[:1, 0], arr[:1, 1], depth=d)  # warm up (lazy compilation)
+    paths = np.asarray(policy.generate(arr[:, 0], arr[:, 1], depth=d), dtype=np.float64)
+    learned_time = time_policy(policy, arr, d, timing_batches, timing_repeats)
+    per_batch = learned_time["seconds_per_path"]
+    per_path = per_batch.get(len(arr), per_batch[max(per_batch)])
     if paths.shape != (len(arr), n + 1, m.dim):
         raise InputError(f"policy.generate returned shape {paths.shape}, expected "
                          f"({len(arr)}, {n + 1}, {m.dim})")
@@ -567,12 +620,23 @@ def compare(
     if midpoint:
         mid = midpoint_error(policy, m, arr, segments=n, exact=exact, continuum=continuum,
                              workers=workers, progress=progress)
-    timing = {
-        "learned_seconds_per_path_batched": per_path,
+    exact_batch = float(exact.wall_time.mean())
+    exact_one = time_exact_single(m, arr, n, exact_single) if exact_single > 0 else None
+    single = per_batch.get(1)
+    largest = max(per_batch)
+    timing: dict[str, Any] = {
+        "threads": learned_time["threads"],
+        "repeats": learned_time["repeats"],
+        "learned_seconds_per_path": {str(b): t for b, t in per_batch.items()},
+        "learned_seconds_per_path_batched": per_batch[largest],
+        "learned_batch": largest,
         "learned_seconds_per_path_single": single,
-        "exact_seconds_per_path": float(exact.wall_time.mean()),
-        "speedup_batched": float(exact.wall_time.mean() / per_path),
-        "speedup_single": float(exact.wall_time.mean() / single),
+        "exact_seconds_per_path": exact_batch,
+        "exact_batch": len(arr),
+        "exact_seconds_per_path_single": exact_one,
+        "speedup_batched": exact_batch / per_batch[largest],
+        "speedup_single": (exact_one if exact_one is not None else exact_batch) / single
+        if single else None,
         **search_time,
     }
     if searched is not None:

@@ -37,11 +37,50 @@ from validation.comparison import Comparison, compare, midpoint_error, ratio_sta
 from validation.jsonout import jsonable
 from validation.report_certify import certified_intervals, default_count, md_certified
 
-__all__ = ["build_report", "load_report_policy", "read_learning_curve", "write_figures"]
+__all__ = ["QUICK_TIMESTEPS", "build_report", "load_report_policy", "quick_training_note",
+           "read_learning_curve", "write_figures"]
+
+#: Work budget (evaluations of C) of the policy ``--quick`` trains for an environment
+#: without a shipped policy: a budget, not a time limit, so that the policy does not depend
+#: on the machine's load.
+QUICK_TIMESTEPS = 3_000_000
 
 # ----------------------------------------------------------------------------------------
 # policy
 # ----------------------------------------------------------------------------------------
+def _quick_state(run_dir: Path) -> str:
+    """``"none"`` (no --quick run yet), ``"unfinished"`` (interrupted: config.json without
+    result.json) or ``"finished"``."""
+    from learn.storage import RESULT_FILE
+
+    if not (run_dir / "config.json").is_file():
+        return "none"
+    return "finished" if (run_dir / RESULT_FILE).is_file() else "unfinished"
+
+
+def quick_training_note(env: str | None, run: str | Path | None, quick: bool,
+                        out: str | Path) -> str | None:
+    """The sentence to say before `build_report` trains a policy (``quick`` on an
+    environment without a shipped policy and without a finished ``--quick`` run in
+    ``out``): what it trains, its budget, the expected time and how to stop it; None when
+    nothing will be trained."""
+    if run is not None or env is None or not quick:
+        return None
+    import learn
+
+    if env in learn.shipped_policies():
+        return None
+    run_dir = Path(out) / "quick_run"
+    state = _quick_state(run_dir)
+    if state == "finished":
+        return None
+    what = ("resuming the interrupted --quick training" if state == "unfinished" else
+            f"no shipped policy for {env!r}: training one first")
+    return (f"{what} ({QUICK_TIMESTEPS:.0e} evaluations of C, typically 2-5 minutes on one "
+            f"CPU core for a 2-D metric; the bar shows the rate and time left) into "
+            f"{run_dir}; Ctrl-C keeps it resumable, and the same command resumes it")
+
+
 def load_report_policy(
     env: str | None, run: str | Path | None, quick: bool, out: Path, progress: bool = True,
     checkpoint: str = "best", metric_params: dict[str, Any] | None = None,
@@ -74,7 +113,8 @@ def load_report_policy(
             f"on {chosen_on}; see learn/policies/README.md for fresh pairs)")
     if quick:
         run_dir = out / "quick_run"
-        if (run_dir / "config.json").is_file():  # a previous --quick run: reuse its policy
+        state = _quick_state(run_dir)
+        if state == "finished":  # a previous --quick run: reuse its policy
             try:  # (env: a quick run of another environment is not reused)
                 pol = learn.load_policy(run_dir, checkpoint=checkpoint, env=env,
                                         metric_params=metric_params)
@@ -90,9 +130,14 @@ def load_report_policy(
         # a work budget only: a wall-clock limit would make the policy depend on the load
         # (any environment: its default configuration at a small budget; a policy for a
         # hard task trained this way is weak, and the report says how it was trained)
-        cfg = learn.default_config(env, timesteps=3_000_000, eval_every=5,
+        cfg = learn.default_config(env, timesteps=QUICK_TIMESTEPS, eval_every=5,
                                    metric_params=metric_params)
-        learn.train_run(cfg, run_dir, progress=progress)
+        if state == "unfinished" and _quick_run_env(run_dir) not in (None, env):
+            raise InputError(f"{run_dir} holds a --quick run for {_quick_run_env(run_dir)!r}, "
+                             f"not {env!r}: choose another --out")
+        # an interrupted --quick run is resumed (TrainingInterrupted propagates: the caller
+        # says what was kept), never reported half-trained
+        learn.train_run(cfg, run_dir, resume=state == "unfinished", progress=progress)
         pol = learn.load_policy(run_dir, checkpoint=checkpoint)
         return pol, run_dir, (
             f"small policy trained by --quick ({cfg.timesteps:.0e} evaluations of C) in "
@@ -352,23 +397,7 @@ def _md_finsler_and_timing(doc: dict[str, Any]) -> list[str]:
         "",
         "## Time per path",
         "",
-        "| | seconds per path |",
-        "|---|---|",
-    ]
-    t = doc["timing"]
-    lines += [
-        f"| learned, batch of {doc['pairs']} | {_f(t['learned_seconds_per_path_batched'], 3)} |",
-        f"| learned, one pair at a time | {_f(t['learned_seconds_per_path_single'], 3)} |",
-        *([f"| learned + route search, batch of {doc['pairs']} | "
-           f"{_f(t['searched_seconds_per_path_batched'], 3)} |"]
-          if "searched_seconds_per_path_batched" in t else []),
-        f"| exact (globally seeded batched solve + min-max) | "
-        f"{_f(t['exact_seconds_per_path'], 3)} |",
-        "",
-        f"Speed-up of the learned policy: {t['speedup_batched']:.3g}x (batched), "
-        f"{t['speedup_single']:.3g}x (single pair)"
-        + (f"; with the route search {t['speedup_searched']:.3g}x (batched)."
-           if "speedup_searched" in t else "."),
+        *_md_timing(doc),
         "",
         f"Exact solver: {doc['exact_solver']['converged']}/{doc['pairs']} converged, status "
         f"counts {doc['exact_solver']['status_counts']}, on average "
@@ -378,6 +407,41 @@ def _md_finsler_and_timing(doc: dict[str, Any]) -> list[str]:
         "## Figures",
         "",
     ]
+    return lines
+
+
+def _md_timing(doc: dict[str, Any]) -> list[str]:
+    """The time-per-path table: learned at each timed batch size beside the exact solve
+    (one pair at a time for batch 1, else the report's batched solve), and the speed-ups."""
+    t = doc["timing"]
+    k = t.get("exact_batch", doc["pairs"])
+    one = t.get("exact_seconds_per_path_single")
+    lines = [
+        f"Learned times: warm (one call first), the median of {t.get('repeats', 1)} calls "
+        f"(21 single-pair calls for batch 1), torch limited to {t.get('threads', '?')} "
+        "thread(s); the pairs are repeated up to the batch size. Exact times: "
+        + (f"batch 1 is `solvers.solve_geodesic` on one pair at a time (median of a few "
+           f"pairs); the others are the share per path of this report's batched solve of "
+           f"{k} pairs (globally seeded, min-max refined)." if one is not None else
+           f"the share per path of this report's batched solve of {k} pairs."),
+        "",
+        "| batch | learned, s per path | exact, s per path | speed-up |",
+        "|---|---|---|---|",
+    ]
+    exact_batched = t["exact_seconds_per_path"]
+    for b, sec in (t.get("learned_seconds_per_path") or {}).items():
+        ex = one if (b == "1" and one is not None) else exact_batched
+        where = "" if (b == "1" and one is not None) else f" (batch of {k})"
+        lines.append(f"| {int(b):,} | {_f(sec, 3)} | {_f(ex, 3)}{where} | "
+                     f"{ex / sec:.3g}x |" if sec else f"| {b} | - | - | - |")
+    if "searched_seconds_per_path_batched" in t:
+        lines.append(f"| {doc['pairs']:,}, learned + route search | "
+                     f"{_f(t['searched_seconds_per_path_batched'], 3)} | "
+                     f"{_f(exact_batched, 3)} | {t['speedup_searched']:.3g}x |")
+    lines += ["", f"Speed-up of the learned policy on {doc['metric']}: "
+              f"{t['speedup_batched']:.3g}x at batch {t.get('learned_batch', k):,}"
+              + (f", {t['speedup_single']:.3g}x one pair at a time"
+                 if t.get("speedup_single") else "") + "."]
     return lines
 
 
@@ -510,7 +574,8 @@ def _build_report(env: str | None, out: Path, *, run: str | Path | None,
     elif search not in (None, False, True):
         spec = search
     cmp = compare(pol, metric, arr, continuum=continuum, workers=workers, progress=progress,
-                  search=spec)
+                  search=spec, timing_repeats=3 if quick else 5,
+                  exact_single=1 if quick else 3)
 
     class _ExactMid:
         def midpoint(self, s: Any, g: Any) -> np.ndarray:

@@ -29,6 +29,7 @@ __all__ = [
     "TrainedMetricParamOption",
     "fail",
     "import_metric_modules",
+    "interrupted",
     "json_text",
     "metric_from_options",
     "metric_or_fail",
@@ -95,6 +96,19 @@ def fail(message: str, code: int = 2) -> None:
     failed)."""
     typer.echo(f"error: {one_line(message)}", err=True)
     raise typer.Exit(code=code)
+
+
+#: How the running command was interrupted: ``signal`` (set by the CLI's SIGTERM handler;
+#: otherwise SIGINT) and ``said`` (the command printed its own line, `interrupted`).
+INTERRUPT: dict[str, Any] = {"signal": None, "said": False}
+
+
+def interrupted(message: str) -> None:
+    """Print the one line that says how the command stopped on SIGINT / SIGTERM and what
+    was kept, and exit 130 (the entry point then prints nothing more)."""
+    typer.echo(" ".join(str(message).split()), err=True)
+    INTERRUPT["said"] = True
+    raise typer.Exit(code=130)
 
 
 def json_text(doc: Any, indent: int | None = 2) -> str:

@@ -8,13 +8,17 @@ from __future__ import annotations
 
 import importlib
 import os
+import signal
 import sys
-from typing import Annotated
+import threading
+from typing import Annotated, Any
 
 import typer
 
 from finsler.errors import InputError
+from finsler.infra.pool import PoolInterrupted
 from validation.cli.common import (
+    INTERRUPT,
     MetricModuleOption,
     MetricParamOption,
     fail,
@@ -158,12 +162,25 @@ def _click_error(name: str) -> type[Exception]:
     return next(c for c in typer.BadParameter.__mro__ if c.__name__ == name)
 
 
+class _Terminated(KeyboardInterrupt):
+    """SIGTERM in the main thread, raised like Ctrl-C's KeyboardInterrupt: every command
+    then stops the same way (exit 130, one line, files written atomically or not at all).
+    Training loops and process pools install their own handlers while they run."""
+
+
+def _on_sigterm(signum: int, frame: Any) -> None:
+    INTERRUPT["signal"] = "SIGTERM"
+    raise _Terminated
+
+
 def main(args: list[str] | None = None) -> None:
     """Console-script entry point. A usage error (unknown option or command, missing or
     malformed value) is one line, ``error: ... (see 'geodesics CMD --help')``, exit 2, like
     every other bad input, instead of click's boxed usage panel; no command at all prints
     the help (exit 2)."""
     argv = sys.argv[1:] if args is None else list(args)
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGTERM, _on_sigterm)
     try:
         code = app(args=argv, standalone_mode=False)
     except _click_error("UsageError") as err:
@@ -180,9 +197,15 @@ def main(args: list[str] | None = None) -> None:
     except _click_error("ClickException") as err:  # pragma: no cover - other click errors
         typer.echo(f"error: {one_line(err.format_message())}", err=True)
         sys.exit(getattr(err, "exit_code", 1))
-    except (KeyboardInterrupt, typer.Abort):  # pragma: no cover - interactive
-        typer.echo("interrupted", err=True)
+    except PoolInterrupted as stop:  # a command that did not say more itself
+        typer.echo(f"interrupted ({stop.signal_name})", err=True)
         sys.exit(130)
+    except (KeyboardInterrupt, typer.Abort) as stop:  # pragma: no cover - interactive
+        typer.echo(f"interrupted ({'SIGTERM' if isinstance(stop, _Terminated) else 'SIGINT'})",
+                   err=True)
+        sys.exit(130)
+    if code == 130 and not INTERRUPT["said"]:  # typer turns KeyboardInterrupt into exit 130
+        typer.echo(f"interrupted ({INTERRUPT['signal'] or 'SIGINT'})", err=True)
     sys.exit(code if isinstance(code, int) else 0)
 
 

@@ -23,6 +23,7 @@ from validation.cli.common import (
     TrainedMetricParamOption,
     fail,
     import_metric_modules,
+    interrupted,
     json_text,
     output_path,
     parse_metric_params,
@@ -114,12 +115,11 @@ def train_command(
         fail(str(err))
         return
     except TrainingInterrupted as stop:
-        typer.echo(f"interrupted ({stop.signal_name}): the run is saved in {stop.run_dir} at "
-                   f"{stop.timesteps} evaluations of C (iteration {stop.iterations}); resume "
-                   f"with: geodesics train --env {env} --out {stop.run_dir} --resume"
-                   + "".join(f" --metric-module {m}" for m in metric_module or [])
-                   + "".join(f" --method-module {m}" for m in method_module or []), err=True)
-        raise typer.Exit(code=130) from None
+        interrupted(f"interrupted ({stop.signal_name}): the run is saved in {stop.run_dir} at "
+                    f"{stop.timesteps} evaluations of C (iteration {stop.iterations}); resume "
+                    f"with: geodesics train --env {env} --out {stop.run_dir} --resume"
+                    + "".join(f" --metric-module {m}" for m in metric_module or [])
+                    + "".join(f" --method-module {m}" for m in method_module or []))
     _print_trained(env, result)
 
 

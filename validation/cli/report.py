@@ -16,6 +16,7 @@ from validation.cli.common import (
     TrainedMetricParamOption,
     fail,
     import_metric_modules,
+    interrupted,
     output_path,
     parse_metric_params,
 )
@@ -37,8 +38,11 @@ def report_command(
         help="PAIRS.npy of shape (K, 2, dim); default: the environment's 100 default "
              "evaluation pairs.")] = None,
     quick: Annotated[bool, typer.Option(
-        "--quick", help="Use the shipped policy (or train a small Matsumoto one in a few "
-        "minutes) and skip continuum distances.")] = False,
+        "--quick", help="Skip continuum distances and certify fewer pairs on a coarser "
+        "mesh. Without --run, on an environment without a shipped policy (any metric, a "
+        "user's too): first train its default configuration for 3e6 evaluations of C into "
+        "OUT/quick_run (said first, with a progress bar; interrupted, the same command "
+        "resumes it); a shipped policy is used as it is.")] = False,
     continuum: Annotated[bool | None, typer.Option(
         "--continuum/--no-continuum",
         help="Continuum distances for the midpoint error where the metric is Finsler along "
@@ -66,8 +70,10 @@ def report_command(
 ) -> None:
     """Benchmark a learned policy against exact geodesics and the straight-line baseline:
     success rates, length ratios, midpoint errors, timing, figures."""
+    from finsler.infra.pool import PoolInterrupted
+    from learn.base import TrainingInterrupted
     from learn.registry import import_method_modules
-    from validation.report import build_report
+    from validation.report import build_report, quick_training_note
     from validation.report_certify import cli_lines
 
     try:
@@ -79,12 +85,22 @@ def report_command(
         import_metric_modules(metric_module)
         import_method_modules(method_module)
         params = parse_metric_params(metric_param)
+        note = quick_training_note(env, run, quick, out)
+        if note is not None:
+            typer.echo(note)
         doc = build_report(env, out, run=run, pairs=pairs, quick=quick, continuum=continuum,
                            workers=workers, progress=progress, checkpoint=checkpoint,
                            metric_params=params, search=search, certify=certify)
     except InputError as err:
         fail(str(err))
         return
+    except TrainingInterrupted as stop:
+        interrupted(f"interrupted ({stop.signal_name}) while training the --quick policy: "
+                    f"it is kept in {stop.run_dir} at {stop.timesteps} evaluations of C, and "
+                    "the same command resumes it; no report written")
+    except PoolInterrupted as stop:
+        interrupted(f"interrupted ({stop.signal_name}) during the exact solves, all workers "
+                    "stopped; no report written")
     sr = doc["success_rate"]
     lr = doc["length_ratio"]["learned"]["length"]
     mp = ", ".join(f"{k}={v}" for k, v in (doc.get("metric_params") or {}).items())
@@ -102,6 +118,11 @@ def report_command(
                    f"evaluations of C per path): success {sr['searched']:.0%}, length/exact "
                    f"mean {sl['mean']:.4f}, median {sl['median']:.4f}, 95th pct "
                    f"{sl['p95']:.4f}, max {sl['max']:.4f}")
+    t = doc["timing"]
+    typer.echo(f"time per path ({t.get('threads', '?')} torch thread): learned "
+               f"{t['learned_seconds_per_path_batched']:.3g} s at batch "
+               f"{t.get('learned_batch', doc['pairs']):,}, exact {t['exact_seconds_per_path']:.3g}"
+               f" s (batch of {doc['pairs']}): {t['speedup_batched']:.3g}x faster")
     for line in cli_lines(doc):
         typer.echo(line)
     typer.echo(f"figures: {', '.join(doc['figures'])}")

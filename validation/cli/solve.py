@@ -47,6 +47,7 @@ from validation.cli.common import (
     MetricModuleOption,
     MetricParamOption,
     fail,
+    interrupted,
     json_text,
     metric_from_options,
     parse_point,
@@ -361,8 +362,7 @@ def _solve(job: Any, progress: bool, parts: Path | None) -> list[solvers.Geodesi
         kept = (f"the pairs solved so far are kept in {parts}; run the same command to "
                 "resume" if parts is not None else "nothing was kept (give --out to keep "
                 "finished pairs)")
-        typer.echo(f"interrupted ({stop.signal_name}), all workers stopped: {kept}", err=True)
-        raise typer.Exit(code=130) from None
+        interrupted(f"interrupted ({stop.signal_name}), all workers stopped: {kept}")
 
 
 def _write(out: Path, parts: Path | None, data: bytes) -> None:

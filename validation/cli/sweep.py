@@ -17,6 +17,7 @@ from validation.cli.common import (
     SweepMetricParamOption,
     fail,
     import_metric_modules,
+    interrupted,
     json_text,
     output_path,
     parse_metric_params,
@@ -141,10 +142,9 @@ def sweep_command(
         fail(str(err))
         return
     except PoolInterrupted as stop:
-        typer.echo(f"interrupted ({stop.signal_name}): every worker saved its run and stopped;"
-                   f" finished runs are kept in {out} (status in {out / sw.SWEEP_FILE}); run "
-                   "the same command to resume", err=True)
-        raise typer.Exit(code=130) from None
+        interrupted(f"interrupted ({stop.signal_name}): every worker saved its run and "
+                    f"stopped; finished runs are kept in {out} (status in "
+                    f"{out / sw.SWEEP_FILE}); run the same command to resume")
     rows = result.rows()
     if as_json:
         typer.echo(json_text(rows))
