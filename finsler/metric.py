@@ -99,7 +99,7 @@ class TrainingSettings:
 #: constraints to IPOPT's tolerance, not exactly).
 DOMAIN_TOL = 1e-6
 
-#: Most directions per point of :meth:`Metric.convexity` (the spacing of 4096 directions on
+#: Most directions per point of `Metric.convexity` (the spacing of 4096 directions on
 #: the circle is 0.0015 rad; more resolve nothing a finer point set would not).
 MAX_DIRECTIONS = 1 << 12
 

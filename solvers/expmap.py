@@ -57,7 +57,7 @@ LOG_TOL = 1e-11
 LOG_TOL_MIN = 1e-15
 #: Smallest ``rtol`` of the integration: scipy's DOP853 raises smaller ones to it.
 RTOL_MIN = 100 * float(np.finfo(np.float64).eps)
-#: Most Newton iterations of :func:`log_map` (it converges in a handful where it converges).
+#: Most Newton iterations of `log_map` (it converges in a handful where it converges).
 MAX_LOG_ITER = 1000
 
 #: Relative gap between ``F(x, log(x, y))`` and the solver's distance above which the

@@ -105,7 +105,7 @@ MAX_INITIAL_PATHS = 256
 def check_initial(initial: Any) -> tuple[Any, ...]:
     """The ``initial`` paths of one solve as a tuple: a list or tuple of paths ``(m+1,
     dim)``, or an array ``(P, m+1, dim)`` of ``P`` paths (each path's shape and values are
-    checked by the solve, which knows its ends); anything else is an :class:`InputError`."""
+    checked by the solve, which knows its ends); anything else is an `InputError`."""
     if isinstance(initial, np.ndarray) or is_torch(initial):
         if initial.ndim != 3:
             raise InputError(f"initial must be a list of paths (m+1, dim) or an array (P, m+1, "

@@ -48,7 +48,7 @@ __all__ = [
 #: Degrees tried by [`distance`][solvers.spectral.distance] (doubling), by metric dimension.
 DEGREES_LOW_DIM = (8, 16, 32, 64, 128)
 DEGREES_HIGH_DIM = (8, 16, 32, 64)
-#: Highest polynomial degree of :func:`distance` (its NLP is dense in the nodes: a degree
+#: Highest polynomial degree of `distance` (its NLP is dense in the nodes: a degree
 #: of 256 already has a 65536-entry differentiation matrix per coordinate).
 MAX_DEGREE = 256
 

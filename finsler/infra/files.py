@@ -97,7 +97,7 @@ def _check_names(path: str | os.PathLike[str], what: str) -> None:
 
 def check_path_text(path: Any, what: str) -> Path:
     """``path`` (a ``str`` or ``os.PathLike``, not bytes) as a ``Path`` whose names fit the
-    file system, else :class:`InputError` naming ``what`` and the (shortened) value: the
+    file system, else `InputError` naming ``what`` and the (shortened) value: the
     check of a path given to read, before the file system is asked about it."""
     if isinstance(path, bytes) or not isinstance(path, (str, os.PathLike)):
         raise InputError(f"{what} must be a str or a path, got {type(path).__name__} "

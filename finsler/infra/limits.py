@@ -2,7 +2,7 @@
 (quadrature order, tree depth, number of pairs) is checked here first, so that an
 impossible request is a clear error with the figure, not a machine out of memory. The
 numeric options of the public API (counts, tolerances, seeds) are checked for type and
-range here too (:func:`check_count`, :func:`check_number`, :func:`check_seed`)."""
+range here too (`check_count`, `check_number`, `check_seed`)."""
 
 from __future__ import annotations
 
@@ -48,7 +48,7 @@ def _got(value: Any) -> str:
 
 def check_count(value: Any, name: str, low: int = 1, high: int | None = None) -> int:
     """``value`` as an ``int`` if it is an integer (Python or numpy, not a bool) with
-    ``low <= value <= high``; else :class:`InputError` naming ``name`` and the value.
+    ``low <= value <= high``; else `InputError` naming ``name`` and the value.
     ``high`` is the caller's memory or time limit (None: no limit)."""
     kind = {0: "a non-negative integer", 1: "a positive integer"}.get(low,
                                                                     f"an integer >= {low}")
@@ -66,7 +66,7 @@ def check_number(value: Any, name: str, low: float = -math.inf, high: float = ma
                  low_open: bool = False, high_open: bool = False) -> float:
     """``value`` as a ``float`` if it is a real number (not a bool, not complex), finite,
     in the interval from ``low`` to ``high`` (``low_open`` / ``high_open``: the end itself
-    excluded); else :class:`InputError` naming ``name`` and the value."""
+    excluded); else `InputError` naming ``name`` and the value."""
     lo = "(" if low_open else "["
     hi = ")" if high_open else "]"
     span = f"in {lo}{low:g}, {high:g}{hi}"
@@ -82,7 +82,7 @@ def check_number(value: Any, name: str, low: float = -math.inf, high: float = ma
 def check_seed(seed: Any, name: str = "seed") -> Any:
     """A seed numpy's ``default_rng`` takes: an integer >= 0, a ``numpy.random.Generator``
     (returned as it is), a non-empty sequence of integers >= 0, or None (fresh entropy:
-    not reproducible); else :class:`InputError` naming ``name``."""
+    not reproducible); else `InputError` naming ``name``."""
     import numpy as np
 
     if seed is None or isinstance(seed, np.random.Generator):
