@@ -254,10 +254,31 @@ def test_report_learning_curve_labels_the_all_inclusive_count() -> None:
     assert len(labels) == 3
     assert "all-inclusive" in labels[0] and "minutes" in labels[1]
     assert "paper" in labels[2] and "all-inclusive" not in labels[2]
-    assert fig.axes[2].lines[0].get_xdata().tolist() == [0, 2, 4, 6, 8]
+    # logarithmic evaluations (the rise is early): the row at 0 evaluations is not drawn
+    assert fig.axes[2].lines[0].get_xdata().tolist() == [2, 4, 6, 8]
+    assert all(a.get_xscale() == "log" for a in fig.axes) and "log axis" in labels[0]
     same = [dict(r, timesteps_paper=r["timesteps"]) for r in rows]
     assert len(fg.learning_curve(same, cmp).axes) == 2
     assert fg.learning_curve([], cmp) is None
     old = [{k: v for k, v in r.items() if k != "timesteps_paper"} for r in rows]
     old_fig = fg.learning_curve(old, cmp)  # log written before the contract
     assert len(old_fig.axes) == 2 and "not known" in old_fig.axes[0].get_xlabel()
+
+
+def test_length_ratio_figure_shows_ratio_minus_one_on_a_log_axis() -> None:
+    """1.001 and 1.01 land a decade apart; the straight line has a panel's curve of its own;
+    a ratio at or below 1 is drawn at the floor and counted."""
+    r = {"learned": np.array([1.001, 1.01, 1.0, np.nan]),
+         "searched": np.array([1.0005, 1.002, 1.0, 1.0]),
+         "straight": np.array([1.2, 1.5, 2.5, 1.0])}
+    cmp = SimpleNamespace(metric="matsumoto", pairs=np.zeros((4, 2, 2)),
+                          searched=object(), ratios=lambda w, ms="length": r[w])
+    fig = fg.length_ratios(cmp)
+    left, right = fig.axes
+    assert left.get_xscale() == right.get_xscale() == "log"
+    assert "ratio - 1" in left.get_xlabel()
+    labels = [t.get_text() for t in left.get_legend().get_texts()]
+    assert "median 0.1 %, 1 at <= 1e-06" in labels[0]
+    steps = {ln.get_label().split(" (")[0]: ln.get_xdata() for ln in right.lines}
+    assert set(steps) == {"learned", "learned + route search", "straight line"}
+    np.testing.assert_allclose(sorted(steps["learned"]), [1e-6, 1e-3, 1e-2], rtol=1e-6)

@@ -15,7 +15,7 @@ shipped), runs `validation.compare` on the evaluation pairs and writes
   ``carlike_headings.png`` for planar poses (x, y, heading: car-like);
   ``panda_motion.png`` for metrics with the ``frame_positions`` kinematics hook (Panda);
   ``coordinates.png`` (every coordinate along the path) for any other metric;
-* ``length_ratio.png`` (histograms) and ``midpoint_error.png``.
+* ``length_ratio.png`` (ratio - 1 on a log axis) and ``midpoint_error.png``.
 
 The figures are drawn by `validation.figures`; files are written atomically.
 """
@@ -452,7 +452,8 @@ def _md_figures(doc: dict[str, Any], figures: list[str]) -> list[str]:
         "learning_curve.png": "Learning curve (success rate on "
         + CURVE_SETS[doc.get("learning_curve_pairs", "validation")] + ", from "
         "`metrics.csv`) against evaluations of C, all-inclusive (column `timesteps`: every "
-        "evaluation the learner made in training), and wall time, with the exact ceiling "
+        "evaluation the learner made in training), and wall time, both on log axes, with the "
+        "exact ceiling "
         "and the straight-line baseline; when the log also has the paper's count "
         "(`timesteps_paper`, section 5.2) and it differs, a third panel uses it.",
         "paths.png": "Learned (blue), exact (black dashed) and straight (orange dotted) paths "
@@ -463,7 +464,9 @@ def _md_figures(doc: dict[str, Any], figures: list[str]) -> list[str]:
         "(with the pole, for the Panda metric).",
         "coordinates.png": "Every coordinate along the path for 4 pairs spread over the "
         "length ratio (learned solid, exact dashed, straight dotted).",
-        "length_ratio.png": "Histograms of the per-pair length ratio to the exact geodesic.",
+        "length_ratio.png": "How much longer than the exact geodesic each path is: the "
+        "per-pair ratio - 1 (sum of C) on a log axis, so that 0.1 % and 1 % look different; "
+        "histogram of the learned paths, and the cumulative share with the straight line.",
         "midpoint_error.png": "First-level midpoint error against the pair's distance.",
     }
     if "learning_curve.png" not in figures:
