@@ -66,6 +66,8 @@ CASES = [
     (["evaluate", "--env", "matsumoto", "--depth", "30"], 2,
      ["depth 30", "GiB", "over the limit", "smaller depth"]),
     # messages that say what is wrong
+    (["certify", "--metric", "matsumoto", "--start", "0.1,0.2", "--goal", "-0.3,0.4",
+      "--mesh", "p2"], 2, ["--mesh p2", "matsumoto is 2-D", "coarse, default or fine"]),
     (["solve", "--metric", "euclidean", "--pairs", "text.npy"], 2,
      ["not a readable .npy array", "numpy.save"]),
     (["solve", "--metric", "euclidean", "--pairs", "empty.npy"], 2, ["K >= 1", "(0, 2, 2)"]),

@@ -60,8 +60,8 @@ def certify_command(
     goal: Annotated[str, typer.Option(help='Goal point, e.g. "0.5,0.3".')],
     mesh: Annotated[str, typer.Option(
         help="Mesh preset: coarse (a few 1e-2, fastest), default (gap <= 1e-2) or fine "
-             "(gap <= 1e-3, minutes); in 3-D also p2 (a quadratic potential: gap <= 1e-2 "
-             "in minutes where F has affine rules).")] = "default",
+             "(gap <= 1e-3, minutes); in 3-D and up also p2 (a quadratic potential: gap <= "
+             "1e-2 in minutes where F has affine rules; not for 2-D metrics).")] = "default",
     h: Annotated[float | None, typer.Option(
         "--h", help="Spacing of the first mesh along the path (overrides the preset).")] = None,
     directions: Annotated[int | None, typer.Option(
@@ -90,12 +90,15 @@ def certify_command(
     from solvers.status import CertifyStatus
 
     m = metric_from_options(metric, metric_param, metric_module)
-    if m.dim > 3 and m.provides("conformal_factor_sx"):  # n-D conformal (issue 46, item 3)
+    if m.dim > 3 and m.provides("conformal_factor_sx"):  # n-D conformal: split factor
         _certify_conformal(m, start, goal, target_gap, max_boxes, out, as_json)
         return
-    if m.dim != 2:  # any other dimension, F(x, .) convex (issue 46, items 1-2)
+    if m.dim != 2:  # any other dimension, F(x, .) convex: a verified potential
         _certify_nd(m, start, goal, mesh, h, target_gap, out, as_json)
         return
+    if mesh == "p2":
+        fail(f"--mesh p2 (a piecewise-quadratic potential) is for metrics of 3 and more "
+             f"dimensions; {m.name} is 2-D: choose coarse, default or fine")
     s = parse_point(start, m.dim, "--start")
     g = parse_point(goal, m.dim, "--goal")
     try:
