@@ -236,6 +236,15 @@ def test_compare_straight_lines_are_exact_for_constant_norms(randers_cmp) -> Non
     assert c.timing["speedup_batched"] > 1
 
 
+def test_comparison_has_success_rates_and_a_short_repr(randers_cmp) -> None:
+    _, pairs, c = randers_cmp
+    assert c.success_rate == c.to_dict()["success_rate"]
+    assert c.success_rate["learned"] == c.learned.success_rate
+    text = repr(c)
+    assert len(text) < 300 and text.startswith("Comparison(metric='randers'")
+    assert f"pairs={len(pairs)}" in text and "exact ceiling" in text
+
+
 def test_compare_exposes_detours_on_a_curved_metric() -> None:
     m = finsler.get_metric("poincare")
     pairs = finsler.default_pairs(m)[:8]

@@ -399,6 +399,28 @@ class Comparison:
     """The search's settings and its evaluations of C per path."""
 
     @property
+    def success_rate(self) -> dict[str, float]:
+        """Share of pairs whose every segment cost is ``<= eps``: ``learned``,
+        ``exact_ceiling`` (the min-max refined exact path: the task's ceiling),
+        ``exact_energy_path``, ``straight`` and, with the route search, ``searched`` (the
+        same numbers as ``to_dict()["success_rate"]``)."""
+        out = {"learned": self.learned.success_rate, "exact_ceiling": self.exact.ceiling_rate,
+               "exact_energy_path": self.exact.success_rate,
+               "straight": self.straight.success_rate}
+        if self.searched is not None:
+            out["searched"] = self.searched.success_rate
+        return out
+
+    def __repr__(self) -> str:
+        sr = self.success_rate
+        med = ratio_stats(self.ratios("learned"))["median"]
+        search = f", searched {sr['searched']:.0%}" if "searched" in sr else ""
+        return (f"Comparison(metric={self.metric!r}, pairs={len(self.pairs)}, "
+                f"segments={2**self.depth}, eps={self.eps:g}: success learned "
+                f"{sr['learned']:.0%}{search}, exact ceiling {sr['exact_ceiling']:.0%}, "
+                f"straight {sr['straight']:.0%}; learned/exact length median {med:.4g})")
+
+    @property
     def methods(self) -> tuple[str, ...]:
         """The path sets compared with the exact ones."""
         return ("learned", "searched", "straight") if self.searched is not None else (
@@ -461,12 +483,7 @@ class Comparison:
             "segments": 2**self.depth,
             "pairs": len(self.pairs),
             "policy": self.policy_source,
-            "success_rate": {
-                "learned": self.learned.success_rate,
-                "exact_ceiling": self.exact.ceiling_rate,
-                "exact_energy_path": self.exact.success_rate,
-                "straight": self.straight.success_rate,
-            },
+            "success_rate": self.success_rate,
             "mean_length": self._means("length"),
             "mean_max_segment_cost": self._means("max_segment_cost"),
             "length_ratio": ratios,
@@ -481,7 +498,6 @@ class Comparison:
             "per_pair": per_pair,
         }
         if self.searched is not None:
-            out["success_rate"]["searched"] = self.searched.success_rate
             out["search"] = dict(self.search or {})
         if self.midpoint is not None:
             out["midpoint_error"] = self.midpoint.summary()
