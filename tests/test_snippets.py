@@ -9,6 +9,9 @@ must show it. Two first-line comments change what happens to a snippet:
   and ``metrics.md``), and a ``test_*.py`` one is run with pytest after the page's snippets.
 - ``# not run by the snippet test: REASON``: skipped, and the reason is shown on the page
   (trainings of minutes). The test lists what it skipped.
+
+The README's shown outputs of its quick commands (``$ geodesics solve ...``, ``certify``,
+``evaluate``) are checked against a real run, so that they cannot go stale.
 """
 
 from __future__ import annotations
@@ -95,3 +98,34 @@ def test_page_snippets_run(page: Path, tmp_path: Path):
         assert proc.returncode == 0, f"{page.name}: pytest {name} failed:\n{proc.stdout[-4000:]}"
     if skipped:
         print("skipped, with the reason the page gives:\n" + "\n".join(skipped))
+
+
+#: README commands whose shown output is checked against a real run (a few seconds each);
+#: the others (check, train, report) take minutes or depend on the load.
+CHECKED_COMMANDS = ("geodesics solve --metric matsumoto --start",
+                    "geodesics certify --metric poincare", "geodesics evaluate --env matsumoto")
+SHELL_BLOCK = re.compile(r"^```\n\$ (geodesics [^\n]*)\n(.*?)^```", re.S | re.M)
+#: Shown lines that hold a time (they change from run to run) are not compared.
+TIMED = re.compile(r"wall time|^time |s CPU|\d+(\.\d+)? s\)?$")
+
+
+def shown_outputs(page: Path) -> list[tuple[str, list[str]]]:
+    """The ``$ geodesics ...`` blocks of ``page``: (command, shown output lines)."""
+    return [(cmd, body.splitlines()) for cmd, body in SHELL_BLOCK.findall(page.read_text())]
+
+
+@pytest.mark.parametrize("prefix", CHECKED_COMMANDS)
+def test_readme_shows_what_the_command_prints(prefix: str, tmp_path: Path):
+    """Every shown line (but ``...`` and times) is a line the command prints today."""
+    blocks = [(c, lines) for c, lines in shown_outputs(ROOT / "README.md")
+              if c.startswith(prefix)]
+    assert len(blocks) == 1, blocks
+    cmd, shown = blocks[0]
+    exe = Path(sys.executable).with_name("geodesics")
+    proc = subprocess.run([str(exe), *cmd.split()[1:]], cwd=tmp_path, capture_output=True,
+                          text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    printed = {ln.replace(f"{ROOT}/", "").rstrip() for ln in proc.stdout.splitlines()}
+    stale = [ln for ln in shown if ln.strip() != "..." and not TIMED.search(ln)
+             and ln.rstrip() not in printed]
+    assert not stale, f"README's output of `{cmd}` is stale; it now prints:\n{proc.stdout}"
