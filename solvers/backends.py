@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from finsler.errors import InputError
+from finsler.errors import InputError, short
 
 __all__ = ["backend_for"]
 
@@ -168,8 +168,9 @@ def backend_for(device: Any) -> Any:
         dev = torch.device(device)
     except (TypeError, RuntimeError) as err:
         raise InputError(f"device must be None (numpy) or a torch device such as 'cpu' or "
-                         f"'cuda', got {device!r}") from err
+                         f"'cuda', got {short(repr(device), 80)}") from err
     if dev.type == "cuda" and not torch.cuda.is_available():
-        raise InputError(f"device {device!r} asked for, but torch sees no CUDA device here")
+        raise InputError(f"device {short(repr(device), 80)} asked for, but torch sees no CUDA "
+                         "device here")
     return _Torch(dev)
 

@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from finsler.errors import InputError
+from finsler.errors import InputError, short
 from finsler.infra.files import OutputError, atomic_write_bytes
 from finsler.infra.limits import check_count
 from finsler.infra.pool import ProcessPool
@@ -292,6 +292,9 @@ def check_batch(metric: Metric | str, pairs: Any, segments: int | None = None, *
     _positive_int(workers, "workers", MAX_WORKERS)
     if chunk_size is not None:
         _positive_int(chunk_size, "chunk_size")
+    if ray_address is not None and not isinstance(ray_address, str):
+        raise InputError(f"ray_address must be a str ('auto', 'local' or host:port), got "
+                         f"{type(ray_address).__name__} {short(repr(ray_address), 80)}")
     if ray_address is not None:
         from finsler.infra.cluster import probe_address, require_ray
 

@@ -76,6 +76,7 @@ from typing import Any
 
 import numpy as np
 
+from finsler.domains import as_real
 from finsler.errors import InputError
 from finsler.infra.limits import check_memory, check_number
 from finsler.metric import Metric
@@ -331,7 +332,7 @@ def _upper_bound(m: Metric, s: np.ndarray, g: np.ndarray, spec: MeshSpec,
         pts = np.asarray(sol.points, float)
         solver_status = sol.status
     else:
-        pts = np.array(path, dtype=np.float64)
+        pts = np.array(as_real(path, "path", "a real numeric array of shape (n+1, dim)"))
         if pts.ndim != 2 or pts.shape[1] != 2 or pts.shape[0] < 2:
             raise InputError(f"path must have shape (n+1, 2), got {pts.shape}")
         if not (np.allclose(pts[0], s, rtol=0, atol=1e-12)

@@ -77,6 +77,7 @@ import casadi as ca
 import numpy as np
 
 from finsler.affine import enclose_affine
+from finsler.domains import as_real
 from finsler.errors import InputError
 from finsler.intervals import Interval, enclose
 from finsler.lowering import LoweredFunction, lower
@@ -421,7 +422,7 @@ def certify_conformal(metric: Metric | str, start: Any, goal: Any,
         pts = np.asarray(sol.points, float)
         solver_status = sol.status.label
     else:
-        pts = np.array(path, dtype=np.float64)
+        pts = np.array(as_real(path, "path", "a real numeric array of shape (n+1, dim)"))
         if pts.ndim != 2 or pts.shape[1] != m.dim or pts.shape[0] < 2:
             raise InputError(f"path must have shape (n+1, {m.dim}), got {pts.shape}")
         if not (np.allclose(pts[0], x, rtol=0, atol=1e-12)

@@ -44,6 +44,7 @@ from typing import Any
 
 import numpy as np
 
+from finsler.domains import as_real
 from finsler.errors import InputError
 from finsler.metric import Metric
 from finsler.status import CertifyStop, LPStatus, Status
@@ -241,7 +242,7 @@ def certify_nd(metric: Metric | str, start: Any, goal: Any, mesh: NDSpec | str |
         pts = np.asarray(sol.points, float)
         solver_status = sol.status.label
     else:
-        pts = np.array(path, dtype=np.float64)
+        pts = np.array(as_real(path, "path", "a real numeric array of shape (n+1, dim)"))
         if pts.ndim != 2 or pts.shape[1] != n or pts.shape[0] < 2:
             raise InputError(f"path must have shape (m+1, {n}), got {pts.shape}")
         if not (np.allclose(pts[0], s, rtol=0, atol=1e-12)

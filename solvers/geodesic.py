@@ -98,8 +98,9 @@ def solve_geodesic(
     initial = check_initial(initial)
     if not isinstance(global_seeds, (bool, np.bool_)):
         raise InputError(f"global_seeds must be True or False, got {describe_value(global_seeds)}")
-    if not isinstance(minmax, (bool, np.bool_)):
-        raise InputError(f"minmax must be True or False, got {describe_value(minmax)}")
+    for name, flag in (("minmax", minmax), ("strict", strict)):
+        if not isinstance(flag, (bool, np.bool_)):
+            raise InputError(f"{name} must be True or False, got {describe_value(flag)}")
     if tol is not None:
         tol_, max_n = check_tol(m, n, tol, max_segments)
         return solve_to_tol(m, s, g, n, tol_, max_n, t0, seeds=seeds,

@@ -594,6 +594,9 @@ def refine_minmax(metric: Metric | str, result: GeodesicResult) -> MinMaxResult:
     The returned points are the refined ones if they lie in the domain and lower the max,
     else the starting points (the status then tells why); costs are recomputed in float64.
     """
+    if not isinstance(result, GeodesicResult):
+        raise InputError(f"result must be a GeodesicResult (of solve_geodesic), got "
+                         f"{type(result).__name__}")
     return _refine_minmax(as_metric(metric), result)
 
 

@@ -54,6 +54,9 @@ MAX_DEGREE = 256
 
 #: Relative rounding floor added to every error estimate.
 ROUNDING_FLOOR = 1e-13
+#: Smallest ``rtol`` of `distance`: float64's relative resolution (an ``rtol`` between it
+#: and ``ROUNDING_FLOOR`` is answered with TOLERANCE_NOT_REACHED).
+RTOL_MIN = float(np.finfo(np.float64).eps)
 
 
 def _quadrature_points(n: int) -> int:
@@ -174,9 +177,9 @@ def distance(
     if rtol is None:
         rtol = 1e-8 if m.smooth else 1e-4
     rtol = check_number(rtol, "rtol", 0.0, 1.0, low_open=True, high_open=True)
-    if rtol < ROUNDING_FLOOR:
-        raise InputError(f"rtol = {rtol:g} is below {ROUNDING_FLOOR:g}, the rounding floor "
-                         "every error estimate carries: no degree can reach it")
+    if rtol < RTOL_MIN:
+        raise InputError(f"rtol = {rtol:g} is below {RTOL_MIN:.3g}, the relative resolution "
+                         "of float64: no length can be known that finely")
     if degrees is None:
         degrees = DEGREES_LOW_DIM if m.dim <= 3 else DEGREES_HIGH_DIM
     if not isinstance(degrees, (list, tuple)) or len(degrees) < 2 or len(degrees) > 16 or any(

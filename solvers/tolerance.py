@@ -18,6 +18,7 @@ import numpy as np
 from finsler.errors import InputError, short
 from finsler.infra.limits import check_count
 from finsler.metric import Metric
+from solvers.inputs import check_segments
 from solvers.pairs import _refine_minmax, solve_pair, solve_pairs
 from solvers.result import GeodesicResult, SolverError, Status
 from solvers.seeding import SeedPlan, resample
@@ -99,7 +100,8 @@ def check_tol(m: Metric, n: int, tol: Any, max_segments: Any) -> tuple[float, in
             or max_segments < n:
         raise InputError(f"max_segments must be an integer >= segments ({n}), got "
                          f"{short(repr(max_segments), 80)}")
-    return float(tol), check_count(max_segments, "max_segments", n, 1 << 16)
+    check_count(max_segments, "max_segments", n, 1 << 16)  # named, not "segments"
+    return float(tol), check_segments(m, int(max_segments))
 
 
 def solve_to_tol(m: Metric, s: np.ndarray, g: np.ndarray, n: int, tol: float,
