@@ -19,9 +19,10 @@ from __future__ import annotations
 
 import argparse
 
+from results_file import ResultsFile, markdown_table
+
 import finsler
 import learn
-from results_file import ResultsFile, markdown_table
 from validation.comparison import exact_reference, time_exact_single, time_policy
 
 DEFAULT_PAIRS = {"matsumoto": 100, "panda-pole": 20, "carlike": 4}
