@@ -179,3 +179,12 @@ def test_docs_python_blocks_are_python(page: Path) -> None:
     run in tests/test_readme.py)."""
     for block in re.findall(r"```python\n(.*?)```", page.read_text(encoding="utf-8"), re.S):
         compile(block, str(page), "exec")
+
+
+def test_metrics_guide_lists_every_hook() -> None:
+    """The hooks table of docs/guides/metrics.md has a row for every `finsler.hooks.HOOKS`."""
+    from finsler.hooks import HOOKS
+
+    text = (DOCS / "guides" / "metrics.md").read_text(encoding="utf-8")
+    rows = set(re.findall(r"^\| `(\w+)", text, flags=re.M))
+    assert set(HOOKS) - rows == set()
