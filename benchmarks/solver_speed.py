@@ -48,6 +48,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import sys
 import time
 
 import numpy as np
@@ -203,10 +204,10 @@ def run_fresh(k: int, cache: str | None, seed: int = FRESH_SEED) -> None:
     print(f"load average during the run: {os.getloadavg()[0]:.1f} (2 cores)")
 
 
-def run_scale(k: int, sizes: list[int], full_max: int) -> None:
-    """N vs time per plan, full solve with min-max (issue 14)."""
+def run_scale(k: int, sizes: list[int], full_max: int, seed: int = SCALE_SEED) -> None:
+    """N vs time per plan, full solve with min-max."""
     m = finsler.get_metric("matsumoto")
-    pairs = finsler.sample_pairs(m, k, seed=SCALE_SEED)
+    pairs = finsler.sample_pairs(m, k, seed=seed)
     default = SeedPlan.default(m)
     same = dataclasses.replace(default, coarse=None)  # the same seeds, every one at full N
     previous = SeedPlan(bulges=(0.25, 0.6), random=2)  # the previous default: 8, at full N
@@ -214,7 +215,7 @@ def run_scale(k: int, sizes: list[int], full_max: int) -> None:
              "8 seeds at full N (previous)": previous}
     limits = {"same seeds, all at full N": full_max // 4, "8 seeds at full N (previous)":
               full_max}
-    print(f"\n== N vs time, {k} fresh Matsumoto pairs (seed {SCALE_SEED}), energy + min-max, "
+    print(f"\n== N vs time, {k} fresh Matsumoto pairs (seed {seed}), energy + min-max, "
           "one process, each size warmed up once")
     lengths: dict[tuple[str, int], np.ndarray] = {}
     energies: dict[tuple[str, int], np.ndarray] = {}
@@ -305,6 +306,8 @@ def main() -> None:
                          "chosen on)")
     ap.add_argument("--scale", type=int, default=0, help="fresh pairs for N vs time")
     ap.add_argument("--sizes", default="64,256,1024,4096")
+    ap.add_argument("--scale-seed", type=int, default=SCALE_SEED,
+                    help="seed of the --scale pairs (a fresh one for a new measurement)")
     ap.add_argument("--full-max", type=int, default=1024,
                     help="largest N for the all-seeds-at-full-N plan")
     ap.add_argument("--linear", action="store_true",
@@ -322,7 +325,26 @@ def main() -> None:
     if args.fresh:
         run_fresh(args.fresh, args.fresh_cache, args.fresh_seed)
     if args.scale:
-        run_scale(args.scale, [int(v) for v in args.sizes.split(",")], args.full_max)
+        # printed, and written to benchmarks/results/solver_scale-DATE.md
+        import contextlib
+        import io
+
+        from results_file import ResultsFile
+
+        buf = io.StringIO()
+
+        class _Tee(io.TextIOBase):
+            def write(self, text: str) -> int:
+                sys.__stdout__.write(text)
+                return buf.write(text)
+
+        with contextlib.redirect_stdout(_Tee()):
+            run_scale(args.scale, [int(v) for v in args.sizes.split(",")], args.full_max,
+                      args.scale_seed)
+        out = ResultsFile("solver_scale", title="Exact solve time against the number of "
+                          "segments (Matsumoto)")
+        out.add("```\n" + buf.getvalue().strip() + "\n```")
+        print(out.write())
     if args.linear:
         run_linear()
 

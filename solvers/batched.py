@@ -322,6 +322,17 @@ def solve_pairs_batched(m: Metric, pairs: np.ndarray, n: int, plan: SeedPlan,
     sizes = plan.ladder(n) if global_seeds else [n]
     levels: list[dict[str, Any]] = []
     stats: dict[str, Any] = {"levels": []}
+
+    def polish(rows: Rows) -> Rows:
+        # ``polish_rounds`` rounds of basin hopping: each perturbs the best row so far
+        # (round r > 0 names its rows ``~p{r}.{j}``, draws seeds after round r - 1's)
+        def perturbed(points: np.ndarray, rnd: int) -> np.ndarray:
+            return np.stack([perturbed_batch(m, points, 1, plan.polish_scale,
+                                             plan.seed + 1000 + rnd * plan.polish + j)[:, 0]
+                             for j in range(plan.polish)], 1)
+
+        return _hop(run, rows, K, given_names, plan, plan.polish_rounds, plan.polish, "p",
+                    perturbed, levels, stats)
     tol = 1e-4 * domain_scale(m)
     if global_seeds:
         t0 = time.perf_counter()
@@ -331,7 +342,7 @@ def solve_pairs_batched(m: Metric, pairs: np.ndarray, n: int, plan: SeedPlan,
         seeds = Rows(np.repeat(np.arange(K), S), names * K, curves.reshape(K * S, n0 + 1, -1))
         parts = [seeds]
         tried = np.full(K, S, dtype=np.int64)
-        if plan.graph:
+        if plan.graph or plan.field_routes:
             gs = graph_seeds(m, pairs[:, 0], pairs[:, 1], n0, plan)
             have = [(k, name, c) for k in range(K) for name, c in gs[k]]
             if have:
@@ -379,6 +390,9 @@ def solve_pairs_batched(m: Metric, pairs: np.ndarray, n: int, plan: SeedPlan,
         levels.append(_level(rows, K, n0))
         stats["levels"].append({"segments": n0, "rows": len(rows),
                                 "wall_time": time.perf_counter() - t0})
+        at = plan.polish_size(n)
+        if plan.polish and at == n0 and n0 < n:
+            rows = polish(rows)
         for li, size in enumerate(sizes[1:], start=1):
             t1 = time.perf_counter()
             prev = sizes[li - 1]
@@ -393,22 +407,16 @@ def solve_pairs_batched(m: Metric, pairs: np.ndarray, n: int, plan: SeedPlan,
             levels.append(_level(rows, K, size))
             stats["levels"].append({"segments": size, "rows": len(rows),
                                     "wall_time": time.perf_counter() - t1})
+            if plan.polish and at == size and size < n:
+                rows = polish(rows)
     else:
         tried = np.bincount(given_rows.pair, minlength=K)
         rows = run.solve(given_rows)
         levels.append(_level(rows, K, n))
         agree = _agreeing(rows, K)
         first = rows
-    if global_seeds and plan.polish:
-        # ``polish_rounds`` rounds of basin hopping: each perturbs the best row so far
-        # (round r > 0 names its rows ``~p{r}.{j}``, draws seeds after round r - 1's)
-        def perturbed(points: np.ndarray, rnd: int) -> np.ndarray:
-            return np.stack([perturbed_batch(m, points, 1, plan.polish_scale,
-                                             plan.seed + 1000 + rnd * plan.polish + j)[:, 0]
-                             for j in range(plan.polish)], 1)
-
-        rows = _hop(run, rows, K, given_names, plan, plan.polish_rounds, plan.polish, "p",
-                    perturbed, levels, stats)
+    if global_seeds and plan.polish and plan.polish_size(n) == n:
+        rows = polish(rows)
     if global_seeds and plan.warps:
         # reparametrised copies of the best row so far: the same curve with its points
         # slid along it, which moves the segments where a kinked metric's path changes
@@ -427,10 +435,10 @@ def solve_pairs_batched(m: Metric, pairs: np.ndarray, n: int, plan: SeedPlan,
 def _hop(run: Any, rows: Rows, K: int, given_names: set[str], plan: SeedPlan, rounds: int,
          count: int, letter: str, curves_of: Any, levels: list[dict[str, Any]],
          stats: dict[str, Any]) -> Rows:
-    """``rounds`` rounds of ``count`` rows per pair at the final size, each round from the
+    """``rounds`` rounds of ``count`` rows per pair at the rows' size, each round from the
     best of the plan's own rows so far (a caller-given row, e.g. a learned warm start, is
     one more candidate beside them and changes nothing they do, so the result is never
-    worse than without it: issue 47): ``curves_of(points (P, n+1, dim), round)`` ->
+    worse than without it): ``curves_of(points (P, n+1, dim), round)`` ->
     ``(P, count, n+1, dim)``, rows named ``<best>~<letter>[<round>.]<j>``. Returns every
     row; appends one level (``polish``; ``warp`` for letter ``w``) to ``levels`` and
     ``stats``."""

@@ -66,14 +66,16 @@ class SeedPlan:
     After the seeds, at the final size: ``polish`` perturbations (``polish_scale * |g -
     s|``) of the best so far, in ``polish_rounds`` rounds (batched solves; IPOPT re-bases
     after every try), each kept if lower (near-equal discrete minima of non-convex metrics
-    lie close together); ``warps`` reparametrised copies of the best (`warped_batch`: the
-    same curve, its points slid along it by ``warp_scale``) in up to ``warp_rounds`` rounds,
-    each from the best so far. A metric with kinks has a discrete minimum for each segment
-    at which the path changes phase (car-like: where the heading reaches its bound or the
-    turn becomes tight); sliding the points moves those switches, which perturbing them
-    does not. IPOPT solves the warped copies from its warm options and stops at the first
-    round that lowers nothing (a pair already at its lowest switch costs one round); the
-    batched methods solve every round.
+    lie close together); batched solves polish at the ladder's size ``polish_at`` instead
+    where the ladder reaches it (`polish_size`: near-equal discrete minima merge as segments
+    are added, while a polish round's cost grows with them); ``warps`` reparametrised copies of
+    the best (`warped_batch`: the same curve, its points slid along it by ``warp_scale``) in
+    up to ``warp_rounds`` rounds, each from the best so far. A metric with kinks has a
+    discrete minimum for each segment at which the path changes phase (car-like: where the
+    heading reaches its bound or the turn becomes tight); sliding the points moves those
+    switches, which perturbing them does not. IPOPT solves the warped copies from its warm
+    options and stops at the first round that lowers nothing (a pair already at its lowest
+    switch costs one round); the batched methods solve every round.
 
     Batched solves only: ``drop_after`` / ``drop_factor``: a seed still running after
     ``drop_after`` iterations whose energy is above ``drop_factor`` times the best converged
@@ -110,6 +112,7 @@ class SeedPlan:
     warp_scale: float = field(default=0.06, repr=False)
     warp_rounds: int = field(default=1, repr=False)
     barriers: tuple[float, ...] = field(default=(), repr=False)
+    polish_at: int | None = field(default=None, repr=False)
     field_routes: int = field(default=0, repr=False)
     field_resolution: int = field(default=64, repr=False)
     field_separation: float = field(default=8.0, repr=False)
@@ -148,6 +151,10 @@ class SeedPlan:
         if not (isinstance(self.field_ratio, (int, float)) and not isinstance(
                 self.field_ratio, bool) and self.field_ratio >= 1):
             raise InputError(f"field_ratio must be a number >= 1, got {self.field_ratio!r}")
+        if self.polish_at is not None and (isinstance(self.polish_at, bool) or not isinstance(
+                self.polish_at, int) or self.polish_at < 2):
+            raise InputError(f"polish_at must be None or an integer >= 2, got "
+                             f"{self.polish_at!r}")
         if self.coarse is not None and (not isinstance(self.coarse, int) or self.coarse < 2):
             raise InputError(f"coarse must be None or an integer >= 2, got {self.coarse!r}")
         if not isinstance(self.refine_top, int) or self.refine_top < 1:
@@ -165,6 +172,15 @@ class SeedPlan:
                 and self.drop_factor > 1):
             raise InputError(f"drop_factor must be a finite number > 1, got "
                              f"{self.drop_factor!r}")
+
+    def polish_size(self, n: int) -> int:
+        """The ladder size at which the batched solves polish: the largest size of
+        `ladder` not above ``polish_at`` (its first size if none is), ``n`` without
+        ``polish_at``; the polished rows are then carried up with the others."""
+        sizes = self.ladder(n)
+        if self.polish_at is None:
+            return n
+        return max((s for s in sizes if s <= self.polish_at), default=sizes[0])
 
     def ladder(self, n: int) -> list[int]:
         """Sizes solved on the way to ``n`` segments: ``coarse``, ``coarse * factor``, ...,
@@ -230,7 +246,7 @@ DEFAULT_PLANS: tuple[tuple[str, Any, dict[str, SeedPlan]], ...] = (
      lambda m: not m.convex_everywhere,
      {"newton": SeedPlan(bulges=_NOT_CONVEX, random=20, graph=True, coarse=16, factor=4,
                          refine_top=8, drop_rtol=0.005, polish=6, polish_scale=0.15,
-                         polish_rounds=2, drop_after=0),
+                         polish_rounds=2, drop_after=0, polish_at=64),
       "ipopt": SeedPlan(bulges=_NOT_CONVEX, random=20, graph=True, coarse=64,
                         refine_top=4)}),
     ("convex and smooth (few local minima)",

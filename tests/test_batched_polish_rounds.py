@@ -91,3 +91,33 @@ def test_each_round_perturbs_the_best_row_so_far(monkeypatch) -> None:
     once = solve_pairs_batched(m, pairs, 64, dataclasses.replace(plan, polish_rounds=1))
     e3, e1 = s.final.energy[s.best], once.final.energy[once.best]
     assert (e3 <= e1 * (1 + 1e-12)).all()
+
+
+def test_polish_at_polishes_on_the_ladder_and_carries_the_answer_up() -> None:
+    """SeedPlan(polish_at=64) on a 16 -> 64 -> 256 ladder: the polish rows are solved at 64
+    segments, between the ladder's levels, none at 256; every row at 256 is carried up, and
+    the answer's energy is that of its own points. Without
+    ``polish_at`` (or with it at or above the final size) the polish is at the final
+    size."""
+    m = finsler.get_metric("matsumoto")
+    plan = SeedPlan(bulges=(0.3,), random=2, graph=False, coarse=16, factor=4, polish=3,
+                    polish_rounds=2, polish_scale=0.15, polish_at=64)
+    assert plan.polish_size(256) == 64 and plan.polish_size(64) == 64
+    assert plan.polish_size(16) == 16 and SeedPlan(polish_at=8, coarse=16).polish_size(64) == 16
+    assert dataclasses.replace(plan, polish_at=None).polish_size(256) == 256
+    s = solve_pairs_batched(m, PAIRS[:1] * 0.8, 256, plan)
+    sizes = [(lv["segments"], bool(lv.get("polish"))) for lv in s.levels]
+    assert sizes == [(16, False), (64, False), (64, True), (256, False)]
+    # the final rows are carried up: from 16 (``@16``) or a polish row of 64 (``~p..@64``)
+    assert s.final.points.shape[1] == 257
+    assert all(nm.endswith("@16") or ("~p" in nm and nm.endswith("@64"))
+               for nm in s.final.names)
+    best = s.best[0]
+    pts = s.final.points[best]
+    costs = np.asarray(m.path_costs(pts[None]))[0]
+    assert s.final.energy[best] == pytest.approx(float(np.sum(costs**2)), rel=1e-10)
+    at_end = solve_pairs_batched(m, PAIRS[:1] * 0.8, 256,
+                                 dataclasses.replace(plan, polish_at=256))
+    assert [lv["segments"] for lv in at_end.levels if lv.get("polish")] == [256]
+    with pytest.raises(InputError, match="polish_at"):
+        SeedPlan(polish_at=1)
