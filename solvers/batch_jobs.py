@@ -27,7 +27,6 @@ from finsler.infra.pool import ProcessPool
 from finsler.metric import Metric
 from finsler.spec import MetricSpec
 from solvers.backends import backend_for
-from solvers.batched import covers_opt_in
 from solvers.inputs import as_metric, check_pairs, check_segments
 from solvers.pairs import check_initial_paths, resolve_method, solve_pairs
 from solvers.result import GeodesicResult, SolverError
@@ -313,27 +312,13 @@ def check_batch(metric: Metric | str, pairs: Any, segments: int | None = None, *
                     None if chunk_size is None else int(chunk_size))
 
 
-#: Pairs per chunk solved by IPOPT when the plan ends with warp rounds solved by the batched
-#: method (`SeedPlan.warps`): the pairs' IPOPT solves one after the other, then one warp
-#: pass for all of them (a pair's rows never depend on the others'). Measured on 8 car-like
-#: tuning pairs at 256 segments, one thread: the warp pass 3.0 s per pair together against
-#: 4.1 s one pair at a time; the default on the first 20 tuning pairs (sample_pairs(carlike,
-#: 100, 20261214)) 11.95 s CPU per pair against 13.76 s, every energy the same to the last
-#: bit. A chunk is saved when it finishes (at most this many pairs' work lost to an
-#: interruption).
-IPOPT_WARP_PAIRS = 8
-
-
 def _chunks(job: BatchJob, todo: list[int]) -> list[list[int]]:
     """Step 2: the pairs still to solve cut into chunks (one batched Newton solve each, of
-    about `NEWTON_ROWS` problems; by IPOPT one pair each, or
-    `IPOPT_WARP_PAIRS` when the plan's warps are batched; several per worker so
-    finished work is kept)."""
+    about `NEWTON_ROWS` problems; by IPOPT one pair each; several per worker so finished
+    work is kept)."""
     size = 1
     if job.method == "newton":
         size = _chunk_pairs(job.plan, job.global_seeds)
-    elif job.global_seeds and job.plan.warps and covers_opt_in(job.m):
-        size = IPOPT_WARP_PAIRS
     if job.workers > 1:
         size = max(1, min(size, -(-len(todo) // (4 * job.workers))))
     return [todo[i:i + size] for i in range(0, len(todo), size)]

@@ -31,7 +31,8 @@ def ipopt_solutions(carlike: finsler.Metric) -> list[tuple[np.ndarray, float, np
     seed)."""
     m = carlike
     pairs = finsler.sample_pairs(m, 2, 777)
-    _, curves = seed_batch(m, pairs[:, 0], pairs[:, 1], N, SeedPlan.default(m, "ipopt"))
+    _, curves = seed_batch(m, pairs[:, 0], pairs[:, 1], N,
+                           SeedPlan(bulges=(0.15, 0.3, 0.45, 0.6, 0.8), random=4))
     seeds = curves.reshape(-1, N + 1, m.dim)[::3]
     nlp = energy_nlp(m, N)
     grad = nlp.solver.get_function("nlp_grad")
