@@ -82,7 +82,7 @@ class GraphSeeder:
 
     @classmethod
     def lattice_nodes(cls, metric: Metric, spacing: tuple[float, ...]) -> np.ndarray:
-        """The nodes of :meth:`lattice` (inside the domain), without its edges."""
+        """The nodes of `lattice` (inside the domain), without its edges."""
         flat, inside, _ = cls._grid(metric, spacing)
         return flat[inside]
 
