@@ -238,6 +238,14 @@ class Metric(MetricHooks, ABC):
         if callable(own) and not getattr(own, "__isabstractmethod__", False) and not getattr(
                 own, "_scalar_checked", False):
             cls.F_sx = _scalar_F_sx(own)  # type: ignore[method-assign]
+        post = cls.__dict__.get("__post_init__")
+        if callable(post) and not getattr(post, "_types_checked", False):
+            cls.__post_init__ = _typed_post_init(post)  # type: ignore[attr-defined]
+
+    def __post_init__(self) -> None:
+        """A dataclass metric's parameters checked against their annotations
+        (`_check_field_types`) before its own checks run."""
+        _check_field_types(self)
 
     # -- to implement -------------------------------------------------------------------
     @property
@@ -821,6 +829,37 @@ def _value_samples(domain: Domain) -> tuple[np.ndarray, np.ndarray]:
 
 def _metric_name(m: Any) -> str:
     return short(str(getattr(m, "name", type(m).__name__)), 80)
+
+
+#: Field annotations whose values `_check_field_types` checks (others are the metric's own).
+_SIMPLE_KINDS = ("float", "int", "bool", "str")
+
+
+def _check_field_types(metric: Any) -> None:
+    """Raise `InputError` naming the parameter if a dataclass field annotated ``float``,
+    ``int``, ``bool`` or ``str`` holds a value of another type (``Sphere(radius="abc")``,
+    ``radius=True``, ``1 + 1j``, ``height=None``), as `MetricSpec` checks a name's
+    parameters. Values are not converted."""
+    if not dataclasses.is_dataclass(metric):
+        return
+    from finsler.spec import _check_param
+
+    for f in dataclasses.fields(metric):
+        kind = f.type if isinstance(f.type, str) else getattr(f.type, "__name__", "")
+        if f.init and kind in _SIMPLE_KINDS:
+            _check_param(_metric_name(metric), f.name, kind, getattr(metric, f.name))
+
+
+def _typed_post_init(own: Callable[..., Any]) -> Callable[..., Any]:
+    """A metric class's own ``__post_init__`` preceded by `_check_field_types`."""
+
+    @functools.wraps(own)
+    def __post_init__(self: Any) -> None:
+        _check_field_types(self)
+        own(self)
+
+    __post_init__._types_checked = True  # type: ignore[attr-defined]
+    return __post_init__
 
 
 def _scalar_F_sx(raw: Callable[..., Any]) -> Callable[..., Any]:

@@ -21,9 +21,9 @@ from finsler.status import Result, RunStop
 from learn.run_config import RunConfig, check_choice, check_hidden
 from learn.storage import write_result
 
-#: Deepest tree a policy generates (``2**20`` segments per path: 16 MiB of 2-D points per
-#: pair; deeper requests would exhaust memory before the first midpoint).
-MAX_DEPTH = 20
+#: Deepest tree a depth is accepted for: ``2**40`` segments, past any memory; below it the
+#: paths' memory check (`check_memory`) refuses a tree too large with its figure.
+MAX_DEPTH = 40
 
 __all__ = [
     "LoadedPolicy",

@@ -276,3 +276,14 @@ def test_certify_out_through_a_dangling_symlink_is_refused(tmp_path: Any) -> Non
     assert proc.returncode == 2, proc.stderr
     assert "symbolic link" in proc.stderr and "Traceback" not in proc.stderr
     assert not (tmp_path / "nowhere").exists()
+
+
+@pytest.mark.parametrize("make, what", [
+    (lambda: finsler.Sphere(radius="abc"), "radius"),
+    (lambda: finsler.Sphere(radius=True), "radius"),
+    (lambda: finsler.Sphere(radius=1 + 1j), "radius"),
+    (lambda: finsler.Matsumoto(height=None), "height"),
+    (lambda: finsler.Euclidean(n=2.5), "n"),
+])
+def test_metric_classes_check_their_parameter_types(make: Any, what: str) -> None:
+    _raises_naming(make, what)
