@@ -1,15 +1,15 @@
-"""The :class:`Metric` base: one symbolic ``F(x, v)``, every numeric method derived from it.
+"""The `Metric` base: one symbolic ``F(x, v)``, every numeric method derived from it.
 
 A concrete metric is a small frozen dataclass holding its parameters and
-implementing :meth:`Metric.F_sx`, the CasADi SX expression of ``F(x, v)``.
+implementing `Metric.F_sx`, the CasADi SX expression of ``F(x, v)``.
 From that single expression the class derives
 
 * the CasADi function used by IPOPT (``casadi_F``, exact derivatives), the fundamental
   tensor ``casadi_hessian`` (Hessian in ``v`` of ``F**2 / 2``) and the Hessian of ``F`` in
-  ``x`` ``casadi_hessian_x``, each derived once (the spray of :mod:`finsler.geometry` is
+  ``x`` ``casadi_hessian_x``, each derived once (the spray of `finsler.geometry` is
   built on the fundamental tensor),
 * vectorised numpy / torch evaluators obtained by *lowering* the SX
-  instruction list (:mod:`finsler.lowering`), compiled once and cached,
+  instruction list (`finsler.lowering`), compiled once and cached,
 * the local costs of the paper: ``cost`` (eq. 4), ``cost_symmetric`` (eq. 59)
   and ``segment_length`` (eq. 58, Gauss-Legendre quadrature of a fixed order), and
   lengths with an error estimate: ``segment_length_error`` / ``path_length_error``
@@ -17,13 +17,13 @@ From that single expression the class derives
 * a numerical convexity check of ``F(x, .)`` (the Finsler condition).
 
 Derived objects are built once per metric: ``functools.cached_property`` for what this
-class derives, :meth:`Metric.derived` for what other packages derive (the spray, the
+class derives, `Metric.derived` for what other packages derive (the spray, the
 solvers' NLPs and graphs), never a module-level cache keyed by a metric.
 
 A metric's OPTIONAL capabilities (a smooth form of a non-smooth ``F``, a seeding plan, a
 height map or kinematics for figures, a closed-form distance) are declared, with their
-meaning, in :mod:`finsler.hooks` (:class:`~finsler.hooks.MetricHooks`, a base of
-:class:`Metric`); the toolkit asks ``metric.provides(hook)``.
+meaning, in `finsler.hooks` (`MetricHooks`, a base of
+`Metric`); the toolkit asks ``metric.provides(hook)``.
 """
 
 from __future__ import annotations
@@ -47,9 +47,9 @@ from finsler.lowering import LoweredFunction, lower
 
 __all__ = ["LengthBounds", "LengthEstimate", "Metric", "Task", "TrainingSettings"]
 
-#: Largest number of halvings of a segment in :meth:`Metric.path_length_bounds`.
+#: Largest number of halvings of a segment in `Metric.path_length_bounds`.
 MAX_LENGTH_HALVINGS = 14
-#: :meth:`Metric.path_length_bounds` halves no further once this many pieces are pending.
+#: `Metric.path_length_bounds` halves no further once this many pieces are pending.
 MAX_LENGTH_PIECES = 1 << 18
 
 
@@ -74,7 +74,7 @@ class Task:
 
 @dataclass(frozen=True)
 class TrainingSettings:
-    """Data for :mod:`learn` about a metric's task (``Metric.training``; finsler only holds
+    """Data for `learn` about a metric's task (``Metric.training``; finsler only holds
     it): the paper's settings (appendix B: ``paper_lr``, the learning rate, and
     ``paper_timesteps``, the budget, used by the paper's configuration and by Seq), the
     toolkit's measured training ``defaults`` (fields of ``learn.TrainConfig`` over its
@@ -103,7 +103,7 @@ DOMAIN_TOL = 1e-6
 #: the circle is 0.0015 rad; more resolve nothing a finer point set would not).
 MAX_DIRECTIONS = 1 << 12
 
-#: Highest Gauss-Legendre order accepted by :meth:`Metric.segment_length`.
+#: Highest Gauss-Legendre order accepted by `Metric.segment_length`.
 MAX_QUADRATURE_ORDER = 2048
 
 
@@ -137,16 +137,16 @@ def _gk15_01() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 _GK_T, _GK_WK, _GK_WG = _gk15_01()
 
-#: Default relative tolerance of :meth:`Metric.segment_length_error`.
+#: Default relative tolerance of `Metric.segment_length_error`.
 LENGTH_RTOL = 1e-10
-#: Default cap on the subintervals per segment of :meth:`Metric.segment_length_error`.
+#: Default cap on the subintervals per segment of `Metric.segment_length_error`.
 MAX_LENGTH_INTERVALS = 1024
 
 
 @dataclass(frozen=True)
 class LengthBounds:
     """PROVEN bounds ``lower <= length <= upper`` of a polyline (interval arithmetic, see
-    :meth:`Metric.path_length_bounds`); ``pieces`` counts the pieces the segments were
+    `Metric.path_length_bounds`); ``pieces`` counts the pieces the segments were
     cut into, ``converged`` says whether every piece's enclosure reached ``rtol``."""
 
     lower: float
@@ -168,7 +168,7 @@ class LengthEstimate:
     was reached within the cap on subintervals; ``intervals`` counts the subintervals used.
     ``lower`` / ``upper`` are ``value -/+ error``: ``upper`` bounds the curve's length,
     hence the distance, from above (under the estimate's assumption, see
-    :meth:`Metric.segment_length_error`).
+    `Metric.segment_length_error`).
     """
 
     value: Any
@@ -202,18 +202,18 @@ class Metric(MetricHooks, ABC):
     """A Finsler-type metric ``F(x, v)`` on a coordinate domain.
 
     Subclasses are frozen dataclasses; their fields are the metric's parameters (its
-    identity is its registered name plus those parameters: :class:`finsler.MetricSpec`).
-    They implement :attr:`domain` and :meth:`F_sx`, and may provide the optional hooks of
-    :mod:`finsler.hooks` (``metric.provides(hook)``, ``metric.hooks()``).
+    identity is its registered name plus those parameters: `finsler.MetricSpec`).
+    They implement `domain` and `F_sx`, and may provide the optional hooks of
+    `finsler.hooks` (``metric.provides(hook)``, ``metric.hooks()``).
     Class attributes describe it:
 
-    * ``name``: registry name; ``task``: default :class:`Task`;
+    * ``name``: registry name; ``task``: default `Task`;
     * ``reversible``: ``F(x, -v) == F(x, v)``;
     * ``smooth``: ``F`` is smooth on ``TM \\ 0``;
     * ``convex_everywhere``: ``F(x, .)`` is convex at every point of the domain
       (for ``smooth`` metrics: strongly convex, i.e. Finsler);
     * ``convexity_note``: a sentence for docs and the CLI;
-    * ``training``: :class:`TrainingSettings`, data for :mod:`learn` (the paper's learning
+    * ``training``: `TrainingSettings`, data for `learn` (the paper's learning
       rate and budget for the task, the toolkit's measured training defaults);
     * ``unique_geodesics``: every two points of the domain are joined by exactly one
       geodesic, which is the shortest curve (e.g. a constant norm, a Hadamard manifold, a
@@ -288,7 +288,7 @@ class Metric(MetricHooks, ABC):
     @functools.cached_property
     def casadi_hessian(self) -> ca.Function:
         """CasADi function: Hessian in ``v`` of ``F(x, v)**2 / 2`` (the fundamental tensor
-        ``g(x, v)``, ``(dim, dim)``, dense). The spray (:mod:`finsler.geometry`) and the
+        ``g(x, v)``, ``(dim, dim)``, dense). The spray (`finsler.geometry`) and the
         convexity check use this one graph; call it on SX symbols to build on it."""
         x = ca.SX.sym("x", self.dim)
         v = ca.SX.sym("v", self.dim)
@@ -299,7 +299,7 @@ class Metric(MetricHooks, ABC):
     @functools.cached_property
     def casadi_hessian_x(self) -> ca.Function:
         """CasADi function: Hessian in ``x`` of ``F(x, v)`` ``(dim, dim)``, dense (the
-        second derivative of a segment's length integrand, :meth:`path_length_bounds`).
+        second derivative of a segment's length integrand, `path_length_bounds`).
         Call it on SX symbols to differentiate further (``h = m.casadi_hessian_x(x, v)``)."""
         x = ca.SX.sym("x", self.dim)
         v = ca.SX.sym("v", self.dim)
@@ -324,7 +324,7 @@ class Metric(MetricHooks, ABC):
 
     def __getstate__(self) -> dict[str, Any]:
         """Pickle the parameters only: derived objects (lowered programs, CasADi
-        functions, :meth:`derived` entries) are rebuilt on demand in the other process."""
+        functions, `derived` entries) are rebuilt on demand in the other process."""
         if dataclasses.is_dataclass(self):
             return {f.name: self.__dict__[f.name] for f in dataclasses.fields(self)
                     if f.name in self.__dict__}
@@ -332,7 +332,7 @@ class Metric(MetricHooks, ABC):
 
     @functools.cached_property
     def lowered_F(self) -> LoweredFunction:
-        """Vectorised numpy/torch program of ``F``, lowered from :attr:`casadi_F`."""
+        """Vectorised numpy/torch program of ``F``, lowered from `casadi_F`."""
         return lower(self.casadi_F)
 
     @functools.cached_property
@@ -345,8 +345,8 @@ class Metric(MetricHooks, ABC):
         ``phi = C(x, y)**2 = F(x, y - x)**2`` (the summand of the discrete energy, eq. 7):
         ``grad`` ``(2 dim,)`` its gradient in ``(x, y)``, ``hess`` the upper triangle of its
         Hessian in ``(x, y)``, row by row (entries ``(i, j)``, ``i <= j``). Derived
-        symbolically from :meth:`F_sx` and lowered once (the batched Newton solver of
-        :mod:`solvers.newton` evaluates it for every segment of every problem at once)."""
+        symbolically from `F_sx` and lowered once (the batched Newton solver of
+        `solvers.newton` evaluates it for every segment of every problem at once)."""
         x = ca.SX.sym("x", self.dim)
         y = ca.SX.sym("y", self.dim)
         z = ca.vertcat(x, y)
@@ -477,7 +477,7 @@ class Metric(MetricHooks, ABC):
         of ``F`` (non-smooth metrics) are resolved by bisection, the estimate stays
         honest there because the kink makes ``|K15 - G7|`` large.
 
-        Returns a :class:`LengthEstimate` (``value``, ``error``, ``converged``,
+        Returns a `LengthEstimate` (``value``, ``error``, ``converged``,
         ``intervals``), float64 numpy. Torch input is refused (not a training-loop path).
         """
         for name, val in (("rtol", rtol), ("atol", atol)):
@@ -514,9 +514,9 @@ class Metric(MetricHooks, ABC):
                           max_intervals: int = MAX_LENGTH_INTERVALS,
                           check: bool | None = None) -> LengthEstimate:
         """Length of polylines ``(n+1, dim)`` (or a batch ``(K, n+1, dim)``) with an error
-        estimate: :meth:`segment_length_error` of every segment (relative tolerance ``rtol``
+        estimate: `segment_length_error` of every segment (relative tolerance ``rtol``
         of the whole path's length, shared by its segments in proportion to their
-        lengths), summed. Returns a :class:`LengthEstimate` of shape ``()`` (or ``(K,)``).
+        lengths), summed. Returns a `LengthEstimate` of shape ``()`` (or ``(K,)``).
         """
         p = as_real(points, "points")
         single = p.ndim == 2
@@ -555,7 +555,7 @@ class Metric(MetricHooks, ABC):
         On a piece ``[t0, t0 + tau]`` of a segment ``x(t) = a + t d`` the length is
         ``int F(x(t), d) dt = tau F(x(c), d) + tau**3 / 24 f''(xi)`` (midpoint rule,
         ``f'' = d' Hess_x F(x, d) d``), so it lies in ``tau [F(x(c), d)] + tau**3 / 24
-        [f''(box)]`` where the brackets are interval enclosures (:mod:`finsler.intervals`,
+        [f''(box)]`` where the brackets are interval enclosures (`finsler.intervals`,
         outward rounding) at the piece's midpoint and over its bounding box. Pieces whose
         enclosure is wider than ``rtol`` of their length are halved, up to
         ``MAX_LENGTH_HALVINGS`` times (and no further once ``MAX_LENGTH_PIECES`` are
@@ -683,7 +683,7 @@ class Metric(MetricHooks, ABC):
         """Lowered ``F`` on shape-checked batches -> ``(N,)``.
 
         Finiteness is checked on the output (one pass over N values instead of 2N inputs):
-        a non-finite result is traced back to non-finite inputs (:class:`InputError`), or
+        a non-finite result is traced back to non-finite inputs (`InputError`), or
         to zero vectors, where ``F(x, 0) = 0`` exactly (formulas such as Matsumoto's
         ``alpha**2 / (alpha - beta)`` are 0/0 there).
         """
@@ -901,7 +901,7 @@ def _scalar_F_sx(raw: Callable[..., Any]) -> Callable[..., Any]:
 
 
 def _raise_non_finite(x: Any, v: Any) -> None:
-    """Raise :class:`InputError` if ``x`` or ``v`` holds NaN or inf (called only after a
+    """Raise `InputError` if ``x`` or ``v`` holds NaN or inf (called only after a
     non-finite result, so the check costs nothing on good input)."""
     for arr in (x, v):
         finite = arr.isfinite() if is_torch(arr) else np.isfinite(arr)

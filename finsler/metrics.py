@@ -1,7 +1,7 @@
 """The registered metrics: the paper's environments and closed-form references.
 
 Each metric is written exactly once, as the CasADi SX expression returned by
-``F_sx``; every numeric evaluator is derived from it (:mod:`finsler.metric`).
+``F_sx``; every numeric evaluator is derived from it (`finsler.metric`).
 """
 
 from __future__ import annotations
@@ -215,7 +215,7 @@ class CarLike(Metric):
         return ca.sqrt(self._square_sx(x, v)[0])
 
     def smooth_square_sx(self, x: ca.SX, v: ca.SX, tag: str = "") -> dict[str, Any]:
-        """Hook (:mod:`finsler.hooks`) for optimisers that need C^2 functions (solvers'
+        """Hook (`finsler.hooks`) for optimisers that need C^2 functions (solvers'
         transcriptions): ``F**2`` as a smooth expression of ``(x, v, xi)`` with one slack
         ``xi``, exact at any minimiser of an objective increasing in ``F**2``.
 
@@ -233,7 +233,7 @@ class CarLike(Metric):
                 "ubw": [ca.inf], "g": g, "lbg": [0.0, 0.0], "ubg": [ca.inf, ca.inf]}
 
     #: Tangent lengths (times ``radius``) of the Hermite seed curves, and how their
-    #: heading is laid (see :meth:`seed_curves`). Chosen on 30 tuning pairs
+    #: heading is laid (see `seed_curves`). Chosen on 30 tuning pairs
     #: (``sample_pairs(carlike, 30, 11)``, 256 segments, IPOPT from each curve alone): the
     #: default seeds without these missed the best energy found by 1e-4 on 5 pairs (by up
     #: to 4.7x); four of these curves (shift 0.5 and 1, track 1, linear 0.5) found all 5.
@@ -247,7 +247,7 @@ class CarLike(Metric):
     SEED_HEADINGS: ClassVar[tuple[str, ...]] = ("track", "shift", "linear")
 
     def seed_curves(self, starts: Any, goals: Any, t: Any) -> dict[str, np.ndarray]:
-        """Hook (:mod:`finsler.hooks`): cubic Hermite curves in the plane whose end
+        """Hook (`finsler.hooks`): cubic Hermite curves in the plane whose end
         tangents follow the start and goal headings (forward motion), one per tangent
         length of ``SEED_TANGENTS``, for each way of laying the heading along them
         (family ``hermite-<way>``): ``track`` follows the curve's tangent direction,

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from finsler.domains import describe_value
+from finsler.domains import Domain, describe_value
 from finsler.errors import InputError, short
 from finsler.infra.files import read_npy
 from finsler.infra.limits import check_count, check_memory, check_seed
@@ -49,7 +49,9 @@ def sample_pairs(metric: Metric | str, k: int, seed: int | np.random.Generator) 
         from finsler.registry import get_metric
 
         metric = get_metric(metric)
-    if not isinstance(metric, Metric):
+    # a metric, or an object with a metric's domain (the property suite's duck-typed ones)
+    if not isinstance(metric, Metric) and not isinstance(getattr(metric, "domain", None),
+                                                         Domain):
         raise InputError(f"metric must be a finsler.Metric (get_metric(name) for a name), got "
                          f"{describe_value(metric)}")
     k = check_count(k, "k (number of pairs)", 1)

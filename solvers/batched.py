@@ -1,19 +1,19 @@
 """Globally seeded discrete geodesics for many pairs at once: every (pair, seed) problem
-of a call is a row of one batched Newton solve (:mod:`solvers.newton`).
+of a call is a row of one batched Newton solve (`solvers.newton`).
 
-The seed plan (:class:`~solvers.seeding.SeedPlan`: straight line, bulges, random curves,
+The seed plan (`SeedPlan`: straight line, bulges, random curves,
 the graph path, restarts) becomes rows of the batch at the plan's coarse size; a seed
 clearly losing against its pair's best is dropped while the batch runs; the best few
 distinct optima of each pair are carried up the plan's ladder of sizes in the same batched
 way (warm started by interpolation); the best is polished by perturbed restarts at the
-final size. IPOPT (:mod:`solvers.transcription`) stays the reference and the fallback: a
+final size. IPOPT (`solvers.transcription`) stays the reference and the fallback: a
 pair whose best candidate the Newton solve could not finish (an active domain constraint,
 a stall, the iteration cap) is finished by IPOPT from that candidate, and metrics the
 batched path does not cover by default (not ``smooth``: kinks that need the slack
 reformulation) are solved by IPOPT alone, or on request (``method="newton"``) by the
-batched primal-dual interior point of :mod:`solvers.interior` on that reformulation.
+batched primal-dual interior point of `solvers.interior` on that reformulation.
 Every result names its method and carries the first-order optimality residual of its
-path (:func:`solvers.newton.energy_residual`; the KKT residual where ``F`` is not smooth).
+path (`solvers.newton.energy_residual`; the KKT residual where ``F`` is not smooth).
 """
 
 from __future__ import annotations
@@ -49,15 +49,15 @@ def covers(metric: Metric) -> bool:
     """True if the batched Newton path solves ``metric`` by default (``method="auto"``):
     ``F`` smooth away from zero velocity (the energy's Hessian exists), as the metric
     declares; otherwise IPOPT with the metric's smooth reformulation solves it (or, on
-    request, ``method="newton"``, the batched interior point of :func:`covers_opt_in`)."""
+    request, ``method="newton"``, the batched interior point of `covers_opt_in`)."""
     return bool(metric.smooth)
 
 
 def covers_opt_in(metric: Metric) -> bool:
     """True if ``method="newton"`` can solve ``metric`` in batches: a smooth ``F``
-    (:func:`covers`), or one that is not smooth but provides the ``smooth_square_sx`` hook
+    (`covers`), or one that is not smooth but provides the ``smooth_square_sx`` hook
     (its slack reformulation), solved by the batched primal-dual interior point
-    (:func:`solvers.interior.interior_energy`). Opt-in for the latter: on measured car-like
+    (`solvers.interior.interior_energy`). Opt-in for the latter: on measured car-like
     pairs it does not yet reach IPOPT's optima on every pair (see
     ``benchmarks/nonsmooth_newton.py``)."""
     return covers(metric) or covers_interior(metric)
@@ -67,9 +67,9 @@ def covers_opt_in(metric: Metric) -> bool:
 class BatchOptions:
     """How the batch is run. ``newton``: the Newton settings; ``device``: ``None`` for
     numpy, or a torch device (``"cuda"``); ``local``: modify only the Hessian blocks that
-    are not positive definite (else IPOPT-like global shifts, :class:`NewtonState`);
+    are not positive definite (else IPOPT-like global shifts, `NewtonState`);
     ``interior``: the interior-point settings for a metric that is not smooth (numpy
-    only, :func:`solvers.interior.interior_energy`)."""
+    only, `solvers.interior.interior_energy`)."""
 
     newton: NewtonOptions = field(default_factory=NewtonOptions)
     device: Any = None
@@ -81,7 +81,7 @@ class BatchOptions:
 class Rows:
     """Rows of a batch, as arrays: ``pair`` ``(R,)`` (index of each row's pair),
     ``names`` (``R`` strings), ``points`` ``(R, n+1, d)``; once solved, ``energy``,
-    ``status`` (:class:`NewtonStatus`), ``iterations``, ``residual`` ``(R,)``."""
+    ``status`` (`NewtonStatus`), ``iterations``, ``residual`` ``(R,)``."""
 
     pair: np.ndarray
     names: list[str]
@@ -137,7 +137,7 @@ def _best(rows: Rows, k: int) -> np.ndarray:
 
 
 def _best_of(rows: Rows, k: int, among: np.ndarray) -> np.ndarray:
-    """:func:`_best` among the rows where ``among`` ``(R,)`` is True (indices into
+    """`_best` among the rows where ``among`` ``(R,)`` is True (indices into
     ``rows``; ``-1`` for a pair with none)."""
     idx = np.flatnonzero(among)
     if idx.size == len(rows):
@@ -196,7 +196,7 @@ def _carried(rows: Rows, k: int, keep: int, drop_rtol: float, tol: float) -> np.
 
 
 class _Runner:
-    """Runs rows through :class:`NewtonState`; counts iterations per pair."""
+    """Runs rows through `NewtonState`; counts iterations per pair."""
 
     def __init__(self, m: Metric, opts: BatchOptions, k: int) -> None:
         self.m, self.opts = m, opts
@@ -310,7 +310,7 @@ def solve_pairs_batched(m: Metric, pairs: np.ndarray, n: int, plan: SeedPlan,
     """Seed, solve, carry up the ladder and polish every pair of ``pairs`` ``(K, 2, d)``
     (none of them short) in batches. ``given``: per pair, caller-given initial paths at
     the final size ``n`` (names, ``(n+1, d)``), solved beside the seeds (alone with
-    ``global_seeds=False``). Returns a :class:`BatchSolution`."""
+    ``global_seeds=False``). Returns a `BatchSolution`."""
     opts = opts or BatchOptions()
     K = pairs.shape[0]
     run = _Runner(m, opts, K)
@@ -471,6 +471,6 @@ def _hop(run: Any, rows: Rows, K: int, given_names: set[str], plan: SeedPlan, ro
 
 
 def residuals(m: Metric, points: np.ndarray) -> np.ndarray:
-    """:func:`solvers.newton.energy_residual` of paths ``(K, n+1, d)`` with the metric's
+    """`solvers.newton.energy_residual` of paths ``(K, n+1, d)`` with the metric's
     domain size."""
     return energy_residual(m, points, domain_scale(m))

@@ -42,7 +42,7 @@ __all__ = ["FieldSpec", "LatticeField", "lattice_field"]
 
 @dataclass(frozen=True)
 class FieldSpec:
-    """The lattice of a :class:`LatticeField`: ``resolution`` cells along the longest side
+    """The lattice of a `LatticeField`: ``resolution`` cells along the longest side
     of the domain's bounding box (the same spacing in every coordinate), moves within
     ``reach`` cells per coordinate, kept when at least ``prune`` (relative) cheaper than
     every split into two, start and goal linked to their ``link`` nearest nodes."""
@@ -108,7 +108,7 @@ def _splits(offsets: np.ndarray, reach: int) -> tuple[np.ndarray, np.ndarray, np
 
 
 class LatticeField:
-    """The lattice graph of ``metric`` (:class:`FieldSpec`) and its shortest-path searches.
+    """The lattice graph of ``metric`` (`FieldSpec`) and its shortest-path searches.
 
     ``nodes`` ``(N, dim)``; ``graph`` the forward edges (CSR, ``N + 1`` rows: the last row is
     a start's links, rewritten per query) and ``back`` the reversed edges with a goal's
@@ -340,7 +340,7 @@ class LatticeField:
 
 
 def lattice_field(metric: Metric, spec: FieldSpec | None = None) -> LatticeField:
-    """The lattice field of ``metric`` for ``spec`` (default :class:`FieldSpec`), built
+    """The lattice field of ``metric`` for ``spec`` (default `FieldSpec`), built
     once per metric and spec (``metric.derived``)."""
     spec = spec or FieldSpec()
     if not isinstance(spec, FieldSpec):

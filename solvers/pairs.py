@@ -1,20 +1,20 @@
-"""The solve of validated (start, goal) pairs behind :func:`~solvers.geodesic.solve_geodesic`
-and :func:`~solvers.geodesic.solve_batch`: seeds, solver, selection, reported figures.
+"""The solve of validated (start, goal) pairs behind `solve_geodesic`
+and `solve_batch`: seeds, solver, selection, reported figures.
 
-:func:`solve_pairs` takes pairs already checked against the metric's domain: short pairs
+`solve_pairs` takes pairs already checked against the metric's domain: short pairs
 become straight segments, the others are solved by the batched Newton method
-(:mod:`solvers.batched`; IPOPT finishes the rows it cannot) or by IPOPT alone from every
-seed of a :class:`~solvers.seeding.SeedPlan` (the multiresolution ladder,
-:func:`_ladder`), and per pair the lowest energy among the converged solves is kept
+(`solvers.batched`; IPOPT finishes the rows it cannot) or by IPOPT alone from every
+seed of a `SeedPlan` (the multiresolution ladder,
+`_ladder`), and per pair the lowest energy among the converged solves is kept
 (selection by energy, not by length: a car-like local minimum can hide a cheap turn in
 one long segment, which the energy penalises). Every result's figures (length by
 quadrature with its error, largest segment cost, residual) are computed here, and
-:func:`refine_minmax` minimises the largest segment cost: the exact ceiling of the
-paper's task. :func:`solve_pair` is one pair's solve without ``tol`` or ``strict``.
+`refine_minmax` minimises the largest segment cost: the exact ceiling of the
+paper's task. `solve_pair` is one pair's solve without ``tol`` or ``strict``.
 
-Input is checked once, at the public boundary (:func:`~solvers.geodesic.solve_geodesic`,
-:func:`~solvers.geodesic.solve_batch`, :func:`refine_minmax`); the functions here take the
-checked objects (a :class:`~finsler.Metric`, float64 points in the domain, a checked size)
+Input is checked once, at the public boundary (`solve_geodesic`,
+`solve_batch`, `refine_minmax`); the functions here take the
+checked objects (a `Metric`, float64 points in the domain, a checked size)
 and do not check them again.
 """
 
@@ -93,7 +93,7 @@ def _finish_many(metric: Metric, paths: np.ndarray, residual: np.ndarray | None 
     """The reported figures of paths ``(K, n+1, dim)``, all evaluated at once: segment
     costs, energy, length, the polyline's length by adaptive quadrature with its error,
     largest segment cost, points where ``F`` is not convex (metrics not convex
-    everywhere), optimality residual (:func:`solvers.nonsmooth.optimality_residual`: the
+    everywhere), optimality residual (`solvers.nonsmooth.optimality_residual`: the
     KKT residual where ``F`` is not smooth; ``residual``: known ones, NaN where unknown)."""
     k, n1, dim = paths.shape
     costs = metric.path_costs(paths, check=False)
@@ -124,7 +124,7 @@ def _onto_domain(m: Metric, pts: np.ndarray) -> np.ndarray:
 
 
 def _onto_domain_many(m: Metric, paths: np.ndarray) -> np.ndarray:
-    """:func:`_onto_domain` for paths ``(B, n+1, dim)`` in one call of the projection (the
+    """`_onto_domain` for paths ``(B, n+1, dim)`` in one call of the projection (the
     batched methods' points are in the domain up to 1e-12 of its size)."""
     out = np.asarray(m.domain.project(paths.reshape(-1, m.dim)),
                      dtype=np.float64).reshape(paths.shape)
@@ -307,8 +307,8 @@ def _ladder(m: Metric, s: np.ndarray, g: np.ndarray, n: int, plan: SeedPlan,
 
 def resolve_method(m: Metric, method: Any) -> str:
     """``"newton"`` or ``"ipopt"`` for ``method`` (``"auto"``: Newton where it covers the
-    metric, :func:`solvers.batched.covers`; ``"newton"`` also for a metric that is not
-    smooth but provides ``smooth_square_sx``, :func:`solvers.batched.covers_opt_in`)."""
+    metric, `solvers.batched.covers`; ``"newton"`` also for a metric that is not
+    smooth but provides ``smooth_square_sx``, `solvers.batched.covers_opt_in`)."""
     if method not in ("auto", "newton", "ipopt"):
         raise InputError(f"method must be 'auto', 'newton' or 'ipopt', got "
                          f"{short(repr(method), 80)}")
@@ -476,7 +476,7 @@ class _Ladder:
 def _ipopt_solves(m: Metric, s: np.ndarray, g: np.ndarray, n: int, plan: SeedPlan,
                   given: list[tuple[str, np.ndarray]], global_seeds: bool, warm: bool
                   ) -> _Ladder:
-    """One pair by IPOPT: the seed plan's ladder (:func:`_ladder`), or only the given
+    """One pair by IPOPT: the seed plan's ladder (`_ladder`), or only the given
     paths (``global_seeds=False``; ``warm``: nearly converged, IPOPT's warm options)."""
     if global_seeds:
         solved, levels, n_seeds, agree, total_iter, first = _ladder(m, s, g, n, plan, given)
@@ -544,7 +544,7 @@ def _warp_rounds(m: Metric, base: _Solve, plan: SeedPlan) -> list[_Solve]:
 
 
 def _ipopt_result(m: Metric, L: _Ladder) -> GeodesicResult:
-    """The result of one pair's solves (:class:`_Ladder`)."""
+    """The result of one pair's solves (`_Ladder`)."""
     best, solved, first = L.best, L.solved, L.first
     energies = {r.name: (r.energy if r.status.converged else float("nan")) for r in solved}
     return GeodesicResult(
@@ -571,10 +571,10 @@ def solve_pair(m: Metric, s: np.ndarray, g: np.ndarray, n: int, *,
                seeds: SeedPlan | None = None, initial: Sequence[np.ndarray] = (),
                global_seeds: bool = True, minmax: bool = False, method: str = "newton",
                device: Any = None) -> GeodesicResult:
-    """One pair as :func:`~solvers.geodesic.solve_geodesic` solves it without ``tol`` and
+    """One pair as `solve_geodesic` solves it without ``tol`` and
     ``strict``, from checked input (``m`` a metric, ``s`` / ``g`` float64 points in its
-    domain, :func:`solvers.inputs.check_point`; ``n`` checked, ``method`` resolved by
-    :func:`resolve_method`): the seed plan (default :meth:`SeedPlan.default`) and the
+    domain, `solvers.inputs.check_point`; ``n`` checked, ``method`` resolved by
+    `resolve_method`): the seed plan (default `SeedPlan.default`) and the
     ``initial`` paths solved."""
     plan = seeds if seeds is not None else SeedPlan.default(m, method)
     if not isinstance(plan, SeedPlan):
@@ -601,7 +601,7 @@ def refine_minmax(metric: Metric | str, result: GeodesicResult) -> MinMaxResult:
 
 
 def _refine_minmax(m: Metric, result: GeodesicResult) -> MinMaxResult:
-    """:func:`refine_minmax` with ``m`` a metric (what the solvers call)."""
+    """`refine_minmax` with ``m`` a metric (what the solvers call)."""
     t0 = time.perf_counter()
     if result.status in (Status.TRIVIAL, Status.SHORT):
         return MinMaxResult(result.points, result.segment_costs, result.max_segment_cost,

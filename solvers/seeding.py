@@ -441,7 +441,7 @@ def perturbed_curves(metric: Metric, path: np.ndarray, k: int, scale: float, see
 
 def perturbed_batch(metric: Metric, paths: np.ndarray, k: int, scale: float, seed: int
                     ) -> np.ndarray:
-    """:func:`perturbed_curves` of many paths ``(K, n+1, dim)`` at once -> ``(K, k, n+1,
+    """`perturbed_curves` of many paths ``(K, n+1, dim)`` at once -> ``(K, k, n+1,
     dim)`` (every path gets the same seeded coefficients, scaled by its own amplitude)."""
     p = np.asarray(paths, dtype=np.float64)
     n1, dim = p.shape[1], p.shape[2]

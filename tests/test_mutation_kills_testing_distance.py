@@ -941,7 +941,7 @@ def test_along_edges():
 
 def test_discrete_oracle_sizes_and_mapping():
     x, y = np.array([0.1, 0.2]), np.array([-0.5, 0.3])
-    capped = VD.DiscreteDistance(1e-14, 4, 8).solve(Randers(), x, y)
+    capped = VD.DiscreteDistance(1e-12, 4, 8).solve(Randers(), x, y)
     assert capped.extra["segments"] == 8 and not capped.extra["tol_reached"]
     loose = VD.DiscreteDistance(1e-2, 4, 64).solve(Randers(), x, y)
     assert loose.extra["segments"] == 16 and loose.extra["tol_reached"]  # 4, 8, 16
