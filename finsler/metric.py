@@ -44,6 +44,17 @@ from finsler.errors import InputError, short
 from finsler.hooks import MetricHooks
 from finsler.infra.limits import check_count, check_memory, check_seed, rows_that_fit
 from finsler.lowering import LoweredFunction, lower
+from finsler.metric_checks import (
+    _check_field_types,
+    _metric_name,
+    _ndim,
+    _raise_non_finite,
+    _same_kind,
+    _scalar_F_sx,
+    _typed_post_init,
+    _value_samples,
+)
+from finsler.quadrature import _adaptive_gk, _gauss_legendre01
 
 __all__ = ["LengthBounds", "LengthEstimate", "Metric", "Task", "TrainingSettings"]
 
@@ -107,35 +118,6 @@ MAX_DIRECTIONS = 1 << 12
 MAX_QUADRATURE_ORDER = 2048
 
 
-#: Gauss-Kronrod 7-15 rule on [-1, 1] (QUADPACK's qk15): Kronrod nodes from the end to the
-#: centre, their weights, and the Gauss weights of the odd-indexed nodes (1, 3, 5, 7).
-_GK15_X = np.array([
-    0.991455371120812639206854697526329, 0.949107912342758524526189684047851,
-    0.864864423359769072789712788640926, 0.741531185599394439863864773280788,
-    0.586087235467691130294144845693013, 0.405845151377397166906606412076961,
-    0.207784955007898467600689403773245, 0.0])
-_GK15_WK = np.array([
-    0.022935322010529224963732008058970, 0.063092092629978553290700663189204,
-    0.104790010322250183839876322541518, 0.140653259715525918745189590510238,
-    0.169004726639267902826583426598550, 0.190350578064785409913256402421014,
-    0.204432940075298892414161999234649, 0.209482141084727828012999174891714])
-_G7_W = np.array([
-    0.129484966168869693270611432679082, 0.279705391489276667901467771423780,
-    0.381830050505118944950369775488975, 0.417959183673469387755102040816327])
-
-
-def _gk15_01() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The G7-K15 pair on ``[0, 1]``: nodes ``(15,)``, Kronrod weights ``(15,)`` and Gauss
-    weights ``(15,)`` (zero at the Kronrod-only nodes)."""
-    x = np.concatenate([-_GK15_X[:-1], _GK15_X[::-1]])
-    wk = np.concatenate([_GK15_WK[:-1], _GK15_WK[::-1]])
-    wg_half = np.zeros(8)
-    wg_half[1::2] = _G7_W
-    wg = np.concatenate([wg_half[:-1], wg_half[::-1]])
-    return 0.5 * (x + 1.0), 0.5 * wk, 0.5 * wg
-
-
-_GK_T, _GK_WK, _GK_WG = _gk15_01()
 
 #: Default relative tolerance of `Metric.segment_length_error`.
 LENGTH_RTOL = 1e-10
@@ -192,10 +174,6 @@ class LengthEstimate:
                 "converged": py(self.converged), "intervals": py(self.intervals)}
 
 
-@functools.lru_cache(maxsize=16)
-def _gauss_legendre01(order: int) -> tuple[np.ndarray, np.ndarray]:
-    t, w = np.polynomial.legendre.leggauss(order)
-    return 0.5 * (t + 1.0), 0.5 * w
 
 
 class Metric(MetricHooks, ABC):
@@ -759,167 +737,3 @@ class Metric(MetricHooks, ABC):
             "convexity": self.convexity_note,
             "hooks": list(self.hooks()),
         }
-
-
-def _adaptive_gk(f: Any, x: np.ndarray, d: np.ndarray, rtol: float, atol: float,
-                 max_intervals: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Adaptive G7-K15 quadrature of ``t -> f(x + t d, d)`` over ``[0, 1]`` for every row of
-    ``x``, ``d`` ``(N, dim)`` -> ``(value, error, intervals)`` each ``(N,)``.
-
-    Subintervals are kept as flat arrays (owner row, left end, width). Each round evaluates
-    every pending subinterval at once, accepts those whose ``|K15 - G7|`` is within
-    ``tol * width`` (``tol`` from the row's current length), and bisects the others, until
-    none is pending or a row reaches ``max_intervals`` (its pending subintervals are then
-    accepted as they are, and the row is reported unconverged by its error)."""
-    n, dim = x.shape
-    value = np.zeros(n)
-    error = np.zeros(n)
-    count = np.ones(n, dtype=np.int64)
-    owner = np.arange(n)
-    left = np.zeros(n)
-    width = np.ones(n)
-    while owner.size:
-        t = left[:, None] + width[:, None] * _GK_T[None, :]  # (M, 15)
-        pts = x[owner][:, None, :] + t[:, :, None] * d[owner][:, None, :]
-        dirs = np.broadcast_to(d[owner][:, None, :], pts.shape)
-        fv = f(pts.reshape(-1, dim), dirs.reshape(-1, dim)).reshape(-1, 15)
-        k = width * (fv @ _GK_WK)
-        g = width * (fv @ _GK_WG)
-        err = np.abs(k - g)
-        # each row's current length (accepted parts plus pending estimates) sets its tolerance
-        current = value + np.bincount(owner, weights=k, minlength=n)
-        tol = np.maximum(atol, rtol * np.abs(current))
-        ok = err <= tol[owner] * width
-        full = count[owner] >= max_intervals  # rows at the cap accept what they have
-        accept = ok | full
-        np.add.at(value, owner[accept], k[accept])
-        np.add.at(error, owner[accept], err[accept])
-        split = ~accept
-        # each bisection replaces one subinterval by two
-        np.add.at(count, owner[split], 1)
-        half = 0.5 * width[split]
-        owner = np.repeat(owner[split], 2)
-        left = np.stack([left[split], left[split] + half], 1).reshape(-1)
-        width = np.repeat(half, 2)
-    error = error + 1e2 * np.finfo(float).eps * np.abs(value)
-    return value, error, count
-
-
-#: Points and directions per point of `Metric.check_values`.
-VALUE_SAMPLES = (8, 4)
-
-
-def _value_samples(domain: Domain) -> tuple[np.ndarray, np.ndarray]:
-    """``(x, v)``, each ``(N, dim)``: a few points of ``domain`` (uniform, seeded, or the
-    projections of points of ``[-1, 1]**dim`` where it cannot be sampled uniformly), each
-    with the first coordinate direction, its negative and random unit directions."""
-    n, k = VALUE_SAMPLES
-    rng = np.random.default_rng(0)
-    dim = domain.dim
-    try:
-        x = np.asarray(domain.sample(n, rng), dtype=float)
-    except (InputError, ValueError, TypeError, NotImplementedError):
-        x = np.asarray(domain.project(rng.uniform(-1.0, 1.0, (n, dim))), dtype=float)
-    g = rng.normal(size=(n, k - 2, dim))
-    e = np.zeros((n, 2, dim))
-    e[:, 0, 0], e[:, 1, 0] = 1.0, -1.0
-    v = np.concatenate([e, g / np.linalg.norm(g, axis=-1, keepdims=True)], axis=1)
-    return np.repeat(x, k, axis=0), v.reshape(-1, dim)
-
-
-def _metric_name(m: Any) -> str:
-    return short(str(getattr(m, "name", type(m).__name__)), 80)
-
-
-#: Field annotations whose values `_check_field_types` checks (others are the metric's own).
-_SIMPLE_KINDS = ("float", "int", "bool", "str")
-
-
-def _check_field_types(metric: Any) -> None:
-    """Raise `InputError` naming the parameter if a dataclass field annotated ``float``,
-    ``int``, ``bool`` or ``str`` holds a value of another type (``Sphere(radius="abc")``,
-    ``radius=True``, ``1 + 1j``, ``height=None``), as `MetricSpec` checks a name's
-    parameters. Values are not converted."""
-    if not dataclasses.is_dataclass(metric):
-        return
-    from finsler.spec import _check_param
-
-    for f in dataclasses.fields(metric):
-        kind = f.type if isinstance(f.type, str) else getattr(f.type, "__name__", "")
-        if f.init and kind in _SIMPLE_KINDS:
-            _check_param(_metric_name(metric), f.name, kind, getattr(metric, f.name))
-
-
-def _typed_post_init(own: Callable[..., Any]) -> Callable[..., Any]:
-    """A metric class's own ``__post_init__`` preceded by `_check_field_types`."""
-
-    @functools.wraps(own)
-    def __post_init__(self: Any) -> None:
-        _check_field_types(self)
-        own(self)
-
-    __post_init__._types_checked = True  # type: ignore[attr-defined]
-    return __post_init__
-
-
-def _scalar_F_sx(raw: Callable[..., Any]) -> Callable[..., Any]:
-    """``raw`` (a metric class's ``F_sx``) with its result checked: a scalar CasADi SX
-    expression (a number is taken as a constant). A vector, None, a string, or an error
-    raised while building the expression (numpy functions on CasADi symbols, for one) is an
-    `InputError` naming the metric."""
-
-    @functools.wraps(raw)
-    def F_sx(self: Any, x: Any, v: Any) -> ca.SX:
-        try:
-            out = raw(self, x, v)
-        except InputError:
-            raise
-        except Exception as err:  # a user's F: any error, reported in one line
-            text = str(err).strip().splitlines()
-            raise InputError(
-                f"metric {_metric_name(self)!r}: F_sx(x, v) failed on CasADi symbols "
-                f"({type(err).__name__}: {short(text[0] if text else '', 120)}); write F "
-                "with CasADi operations (ca.sqrt, ca.dot, ca.fmax), not numpy or math"
-            ) from err
-        if out is None or isinstance(out, (str, bytes, bool, dict, list, tuple)):
-            raise InputError(f"metric {_metric_name(self)!r}: F_sx(x, v) must return a scalar "
-                             f"CasADi expression of x and v, got {type(out).__name__}")
-        if not isinstance(out, (ca.SX, ca.MX)):
-            try:
-                out = ca.SX(out)
-            except Exception as err:
-                raise InputError(f"metric {_metric_name(self)!r}: F_sx(x, v) must return a "
-                                 f"scalar CasADi SX expression of x and v, got "
-                                 f"{type(out).__name__}") from err
-        if out.shape != (1, 1):
-            raise InputError(f"metric {_metric_name(self)!r}: F_sx(x, v) must return a "
-                             f"scalar expression of x and v, got shape {out.shape}")
-        return out
-
-    F_sx._scalar_checked = True  # type: ignore[attr-defined]
-    return F_sx
-
-
-def _raise_non_finite(x: Any, v: Any) -> None:
-    """Raise `InputError` if ``x`` or ``v`` holds NaN or inf (called only after a
-    non-finite result, so the check costs nothing on good input)."""
-    for arr in (x, v):
-        finite = arr.isfinite() if is_torch(arr) else np.isfinite(arr)
-        if not bool(finite.all()):
-            raise InputError("input points or vectors contain NaN or inf")
-
-
-def _ndim(a: Any) -> int:
-    """``a``'s number of dimensions; -1 for what is no array (ragged lists: `as_real`
-    then names the argument)."""
-    if hasattr(a, "ndim"):
-        return int(a.ndim)
-    try:
-        return int(np.ndim(a))
-    except (ValueError, TypeError):
-        return -1
-
-
-def _same_kind(a: Any, b: Any) -> None:
-    if is_torch(a) != is_torch(b):
-        raise InputError("mix of numpy arrays and torch tensors: pass both as the same kind")

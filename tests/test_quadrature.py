@@ -11,7 +11,7 @@ from typer.testing import CliRunner
 import finsler
 from finsler import panda
 from finsler.errors import InputError
-from finsler.metric import _GK_T, _GK_WG, _GK_WK
+from finsler.quadrature import _GK_T, _GK_WG, _GK_WK
 from validation.cli import app
 
 runner = CliRunner()
