@@ -517,12 +517,15 @@ TIMING_THREADS = 1
 
 def time_policy(policy: Any, pairs: np.ndarray, depth: int,
                 batches: tuple[int, ...] = TIMING_BATCHES, repeats: int = 5,
-                threads: int = TIMING_THREADS) -> dict[str, Any]:
+                threads: int = TIMING_THREADS, progress: bool = False) -> dict[str, Any]:
     """Seconds per path of ``policy.generate`` at each batch size of ``batches``: the
     pairs ``(K, 2, dim)`` repeated up to the batch size, one warm-up call, then the median
     of ``repeats`` timed calls (21 single-pair calls over different pairs for batch 1),
-    with torch limited to ``threads`` threads (restored after). Returns ``{"threads",
-    "repeats", "seconds_per_path": {batch: seconds}}``."""
+    with torch limited to ``threads`` threads (restored after); ``progress``: a bar over
+    the batch sizes. Returns ``{"threads", "repeats", "seconds_per_path": {batch:
+    seconds}}``."""
+    from tqdm.auto import tqdm
+
     try:
         import torch
     except ImportError:  # pragma: no cover - torch is a dependency of learn
@@ -532,7 +535,8 @@ def time_policy(policy: Any, pairs: np.ndarray, depth: int,
         torch.set_num_threads(int(threads))
     per_path: dict[int, float] = {}
     try:
-        for b in batches:
+        for b in tqdm(batches, desc="time the policy (batches)", disable=not progress,
+                      leave=False):
             idx = np.arange(b) % len(pairs)
             calls = [idx] * repeats if b > 1 else [np.array([i % len(pairs)])
                                                    for i in range(21)]
@@ -600,7 +604,8 @@ def compare(
     n = 2**d
     policy.generate(arr[:1, 0], arr[:1, 1], depth=d)  # warm up (lazy compilation)
     paths = np.asarray(policy.generate(arr[:, 0], arr[:, 1], depth=d), dtype=np.float64)
-    learned_time = time_policy(policy, arr, d, timing_batches, timing_repeats)
+    learned_time = time_policy(policy, arr, d, timing_batches, timing_repeats,
+                               progress=progress)
     per_batch = learned_time["seconds_per_path"]
     per_path = per_batch.get(len(arr), per_batch[max(per_batch)])
     if paths.shape != (len(arr), n + 1, m.dim):

@@ -31,7 +31,8 @@ def report_command(
              "missing).")],
     env: Annotated[str | None, typer.Option(
         help="Environment (see `geodesics metrics`); uses its shipped policy unless --run "
-             "is given.")] = None,
+             "is given (an environment without one needs --run, or --quick to train "
+             "one).")] = None,
     run: Annotated[Path | None, typer.Option(help="Run directory written by `geodesics "
                                              "train`.")] = None,
     pairs: Annotated[Path | None, typer.Option(
