@@ -107,7 +107,7 @@ def finish_run(run_dir: Path, history: list[dict[str, Any]], best: dict[str, Any
                signal_name: str | None = None) -> TrainResult:
     """Write ``result.json`` (the run is finished) and return its `TrainResult`
     (``final``: the last metrics row's success, lengths, throughput and ``extra_final``).
-    ``stopped_by`` `RunStop.INTERRUPTED` (or, as before issue 49, a signal's name):
+    ``stopped_by`` `RunStop.INTERRUPTED` (or a signal's name):
     the run is NOT finished; raise `TrainingInterrupted` naming ``signal_name``
     instead (the caller saved its checkpoint)."""
     if stopped_by not in (RunStop.TIMESTEPS, RunStop.MINUTES):

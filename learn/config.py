@@ -62,8 +62,8 @@ _ACTIVATIONS = ("relu", "tanh")
 _ENERGY_SCALES = ("none", "straight")
 _ENERGY_SCHEDULES = ("constant", "lr")
 
-#: The base of the method configs before issue 49, now `learn.run_config.RunConfig`
-#: (which holds the run's metric and every run field); kept as a name.
+#: The base of the method configs, `learn.run_config.RunConfig` (which holds the run's
+#: metric and every run field); kept as a name.
 MetricConfig = RunConfig
 
 

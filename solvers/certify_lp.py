@@ -1,6 +1,6 @@
 """The linear programs of `solvers.certify.certify`: the best P2 potential on a mesh.
 
-Split out of `solvers.certify` (issue 23: below 800 lines, one home per idea). Given
+Kept apart from `solvers.certify` (one home per idea). Given
 the rows ``grad phi_T(z_m) . v_k <= b[T, m, k]`` that module proves (values of F minus the
 second-order corrections), `_solve_lp` maximises ``phi(goal) - phi(start)`` with
 cvxpy (Clarabel) in rounds: vertices away from the path are kept inside inner polygons of

@@ -1,6 +1,6 @@
 """The meshes `solvers.certify.certify` computes its bound on, and a zigzag curve.
 
-Split out of `solvers.certify` (issue 23: below 800 lines, one home per idea) so that
+Kept apart from `solvers.certify` (one home per idea) so that
 module keeps the bound code (values of F, interval enclosures of its second derivatives,
 the corrections, which also inflate for the rounding of the circumradii computed here)
 and this one the plain geometry:

@@ -1,4 +1,4 @@
-"""Quadratic (P2) potentials for `solvers.certify_nd.certify_nd` (issue 46, 3-D bar).
+"""Quadratic (P2) potentials for `solvers.certify_nd.certify_nd`.
 
 A piecewise-linear potential has one gradient per cell, which must satisfy the dual
 condition where F is smallest over the cell: the bound loses about ``h |grad log F| / 2``

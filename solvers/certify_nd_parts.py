@@ -1,4 +1,4 @@
-"""The pieces of `solvers.certify_nd.certify_nd` (issue 46): the sampled directions,
+"""The pieces of `solvers.certify_nd.certify_nd`: the sampled directions,
 the graded point cloud and its Delaunay cells, the rigorous lower bounds of F over a cell,
 the cell-by-cell verification of a potential, and the LP.
 
