@@ -210,3 +210,43 @@ def test_results_file_needs_a_plain_claim_folder(claim, monkeypatch):
     rf = _results_file(monkeypatch)
     with pytest.raises(ValueError):
         rf.ResultsFile("x", title="X", claim=claim)
+
+
+def headline_cells(readme: str) -> list[str]:
+    """The cells of the README's headline table (the first table after ``## Headline``)."""
+    section = readme.split("\n## Headline", 1)[1].split("\n## ", 1)[0]
+    cells = []
+    for line in section.splitlines():
+        m = _ROW.match(line.strip())
+        if m:
+            row = [c.strip() for c in re.split(r"(?<!\\)\|", m.group(1))]
+            if not all(set(c) <= set("-: ") for c in row):
+                cells += row
+    return cells
+
+
+def _words(cell: str) -> int:
+    return len(re.sub(r"\[([^\]]*)\]\([^)]*\)", r"\1", cell).split())
+
+
+def test_headline_cells_are_short_and_link_at_most_twice() -> None:
+    """Every cell of the README's headline table: at most 40 words and two links (one
+    figure; the detail is in the linked results file or a docs page), and every figure's
+    row links a file of ``benchmarks/results/``."""
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    cells = headline_cells(readme)
+    assert len(cells) >= 3 * 6
+    long = [c for c in cells if _words(c) > 40 or len(_LINK.findall(c)) > 2]
+    assert long == []
+    rows = [cells[i:i + 3] for i in range(3, len(cells), 3)]
+    for what, _, where in rows:
+        assert any(t.startswith("benchmarks/results/") for t in _LINK.findall(where)), what
+
+
+def test_the_headline_check_counts_words_and_links() -> None:
+    cell = " ".join(["word"] * 39) + " [a link](x.md)"
+    assert _words(cell) == 41
+    where = "[r](benchmarks/" "results/a/b.md)"  # split: not a path of this repository
+    table = ("\n## Headline figures\n\n| what | figure | measured in |\n| --- | --- | --- |\n"
+             f"| a | {cell} | {where} |\n\n## Next\n| x | y |\n")
+    assert headline_cells(table) == ["what", "figure", "measured in", "a", cell, where]
