@@ -2,8 +2,8 @@
 
 README.md is read as GitHub renders it (GitHub's heading slugs); the pages under docs/ as
 MkDocs builds them (Python-Markdown's slugs; ``results/CLAIM/NAME.md`` is published from
-``benchmarks/results/CLAIM/NAME.md`` by ``docs/hooks.py``). ``mkdocs build --strict`` in CI checks the
-site again, with the API reference; this test needs no MkDocs and runs with the suite.
+``benchmarks/results/CLAIM/NAME.md`` by ``docs/hooks.py``). ``mkdocs build --strict`` in CI
+checks the site again, with the API reference; this test needs no MkDocs and runs with the suite.
 """
 
 from __future__ import annotations

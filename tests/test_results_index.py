@@ -104,7 +104,8 @@ def test_the_index_check_finds_problems(tmp_path: Path) -> None:
     (tmp_path / "a" / "history" / "a-0.md").write_text("# a, older\n")
     (tmp_path / "stray.md").write_text("# at the top\n")
     (tmp_path / "README.md").write_text(
-        "# R\n\n## Claims\n\n| claim | current file | script | command |\n| --- | --- | --- | --- |\n"
+        "# R\n\n## Claims\n\n| claim | current file | script | command |\n"
+        "| --- | --- | --- | --- |\n"
         "| one | [ok](a/a-1.md) | `a.py` | `python a.py` |\n"
         "| two | [gone](a/a-9.md) | `a.py` | `python a.py` |\n"
         "| three | [old](a/history/a-0.md) | `a.py` | `python a.py` |\n"
