@@ -137,6 +137,36 @@ def test_the_table_names_scripts_that_exist_and_write_where_the_table_says() -> 
                 assert written <= folders or folders <= written, (row["claim"], script, written)
 
 
+def _claims_written_by(script: Path) -> list[object]:
+    """The ``claim=`` of every ``ResultsFile(...)`` call of a script (None: no such keyword,
+    or not a string constant)."""
+    import ast
+
+    found = []
+    for node in ast.walk(ast.parse(script.read_text(encoding="utf-8"))):
+        if isinstance(node, ast.Call) and getattr(node.func, "id", None) == "ResultsFile":
+            kw = {k.arg: k.value for k in node.keywords}
+            value = kw.get("claim")
+            found.append(value.value if isinstance(value, ast.Constant) else None)
+    return found
+
+
+def test_every_benchmark_writes_into_a_claim_of_the_table() -> None:
+    """Each ``ResultsFile`` of a script under benchmarks/ names its claim's folder as a
+    string, and that folder has a row in the table (a current file or a pending one)."""
+    rows = claims_table(INDEX.read_text(encoding="utf-8"))
+    folders = {t.split("/")[0] for row in rows
+               for t in _LINK.findall(row["current file"]) + _PENDING.findall(row["current file"])}
+    writers = 0
+    for script in sorted((ROOT / "benchmarks").glob("*.py")):
+        if script.name == "results_file.py":
+            continue
+        for claim in _claims_written_by(script):
+            writers += 1
+            assert claim in folders, (script.name, claim)
+    assert writers >= 15
+
+
 def test_no_mutation_report_at_the_root() -> None:
     assert not (ROOT / "mutation_report.md").exists()
     assert (RESULTS / "mutation" / "mutation_report.md").is_file()
