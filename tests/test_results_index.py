@@ -176,13 +176,17 @@ _MENTION = re.compile(r"benchmarks/results/([\w./*-]+\.md)")
 
 
 def _sources() -> list[Path]:
-    skip = {".git", ".venv", "build", "site", "node_modules", "results"}
+    """The repository's Python, Markdown and config files (not the results themselves, nor
+    what runs and installs leave in the tree), then the results files."""
+    import os
+
+    skip = {"build", "dist", "runs", "report", "out", "site", "mutants", "node_modules",
+            "results", "__pycache__"}
     out = []
-    for path in ROOT.rglob("*"):
-        rel = path.relative_to(ROOT)
-        if path.suffix in {".py", ".md", ".yml", ".toml"} and not skip & set(rel.parts[:-1]):
-            out.append(path)
-    return out + sorted(RESULTS.glob("*/*.md"))
+    for top, dirs, names in os.walk(ROOT):
+        dirs[:] = [d for d in dirs if d not in skip and not d.startswith(".")]
+        out += [Path(top) / n for n in names if n.endswith((".py", ".md", ".yml", ".toml"))]
+    return sorted(out) + sorted(RESULTS.glob("*/*.md"))
 
 
 def test_every_results_path_written_in_the_repository_exists() -> None:
