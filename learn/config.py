@@ -105,7 +105,7 @@ class TrainConfig(RunConfig):
     (None: ``hidden``). Generation calls only the actor, so a larger critic costs training
     time, not generation time. Measured on Matsumoto (128-128, 1e8, 2 seeds): no gain on
     fresh pairs for 1.5x the wall time
-    (benchmarks/results/relative-critic-moved.md)."""
+    (benchmarks/results/training/relative-critic-moved.md)."""
     activation: str = "relu"
     """``relu`` (paper) or ``tanh``."""
     lr: float = 3e-5
@@ -389,7 +389,7 @@ def default_config(env: str, **overrides: Any) -> TrainConfig:
 # The model-free defaults keep the defaults' actor_relative: at 2e7 (Matsumoto, seeds 0 / 1,
 # 500 fresh pairs, last checkpoints) 98.7 +- 0.9% success and ratio mean 1.025 against
 # 95.4 +- 1.0% and 1.122 with the absolute residual actor
-# (benchmarks/results/actor-relative-moved.md).
+# (benchmarks/results/training/actor-relative-moved.md).
 # (Metric.training.model_free holds the per-metric settings.)
 
 

@@ -9,7 +9,7 @@ Every row is built from what the certificate carries, never from the metric's na
 on) and ``lp_status``; the row names their work counts as they are (``work``), their
 ``method`` (the result's own where it has one) and the source of each bound.
 
-Budgets (``benchmarks/report_certify.py``; ``benchmarks/results/report_certify-2026-11-28.md``
+Budgets (``benchmarks/report_certify.py``; ``benchmarks/results/reports/report_certify-2026-11-28.md``
 and ``-2.md``: CPU seconds of the certificate alone, two pairs of seed 20261230 per metric, on a
 machine shared with other jobs): in 2-D a report certifies ``QUICK_PAIRS`` pairs with the
 ``"coarse"`` preset under ``--quick`` (Matsumoto 5-15 s a pair, gap ~5e-2) and
