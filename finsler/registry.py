@@ -11,8 +11,8 @@ from collections import OrderedDict
 from typing import Any
 
 from finsler.errors import InputError, UnknownMetricError, short
-from finsler.metric import Metric
-from finsler.metrics import (
+from finsler.metrics.base import Metric
+from finsler.metrics.paper import (
     CarLike,
     Euclidean,
     Matsumoto,

@@ -32,7 +32,7 @@ import numpy as np
 from finsler import registry
 from finsler.errors import InputError, short
 from finsler.infra.modules import import_user_module
-from finsler.metric import Metric
+from finsler.metrics.base import Metric
 
 __all__ = ["MetricSpec", "class_path", "ensure_registered", "metric_spec"]
 

@@ -27,9 +27,10 @@ from typing import TYPE_CHECKING, Any
 from finsler.infra.lazy import lazy_exports
 
 if TYPE_CHECKING:
-    from solvers.certify import CertifyResult, MeshSpec, certify
-    from solvers.expmap import ExpResult, LogResult, exp_map, log_map
-    from solvers.geodesic import (
+    from solvers.certificates.plane.certificate import CertifyResult, MeshSpec, certify
+    from solvers.continuum.expmap import ExpResult, LogResult, exp_map, log_map
+    from solvers.continuum.spectral import distance
+    from solvers.geodesic.solve import (
         check_pairs,
         check_segments,
         midpoint,
@@ -44,8 +45,7 @@ if TYPE_CHECKING:
         MinMaxResult,
         SolverError,
     )
-    from solvers.seeding import SeedPlan
-    from solvers.spectral import distance
+    from solvers.seeding.plans import SeedPlan
     from solvers.status import (
         CertifyStatus,
         DistanceStatus,
@@ -59,32 +59,32 @@ if TYPE_CHECKING:
 # (and the `geodesics` command line's --help) does not pay for scipy.integrate, the Newton
 # stack and IPOPT until a solver is called. `from solvers import solve_batch` works as before.
 _LAZY = {
-    "CertifyResult": "solvers.certify",
+    "CertifyResult": "solvers.certificates.plane.certificate",
     "CertifyStatus": "solvers.status",
     "DistanceResult": "solvers.result",
     "DistanceStatus": "solvers.status",
-    "ExpResult": "solvers.expmap",
+    "ExpResult": "solvers.continuum.expmap",
     "ExpStatus": "solvers.status",
     "GeodesicResult": "solvers.result",
-    "LogResult": "solvers.expmap",
+    "LogResult": "solvers.continuum.expmap",
     "LogStatus": "solvers.status",
-    "MeshSpec": "solvers.certify",
+    "MeshSpec": "solvers.certificates.plane.certificate",
     "MidpointResult": "solvers.result",
     "MinMaxResult": "solvers.result",
     "Outcome": "solvers.status",
-    "SeedPlan": "solvers.seeding",
+    "SeedPlan": "solvers.seeding.plans",
     "SolverError": "solvers.result",
     "Status": "solvers.status",
-    "certify": "solvers.certify",
-    "check_pairs": "solvers.geodesic",
-    "check_segments": "solvers.geodesic",
-    "distance": "solvers.spectral",
-    "exp_map": "solvers.expmap",
-    "log_map": "solvers.expmap",
-    "midpoint": "solvers.geodesic",
-    "refine_minmax": "solvers.geodesic",
-    "solve_batch": "solvers.geodesic",
-    "solve_geodesic": "solvers.geodesic",
+    "certify": "solvers.certificates.plane.certificate",
+    "check_pairs": "solvers.geodesic.solve",
+    "check_segments": "solvers.geodesic.solve",
+    "distance": "solvers.continuum.spectral",
+    "exp_map": "solvers.continuum.expmap",
+    "log_map": "solvers.continuum.expmap",
+    "midpoint": "solvers.geodesic.solve",
+    "refine_minmax": "solvers.geodesic.solve",
+    "solve_batch": "solvers.geodesic.solve",
+    "solve_geodesic": "solvers.geodesic.solve",
 }
 
 __all__ = [

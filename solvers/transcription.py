@@ -23,7 +23,7 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from finsler.metric import Metric
+from finsler.metrics.base import Metric
 from solvers.result import Status
 
 __all__ = [

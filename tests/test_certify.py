@@ -23,8 +23,8 @@ from validation.cli import app
 
 runner = CliRunner()
 # the module (``solvers.certify`` the attribute is the function of the same name)
-certify_mod = importlib.import_module("solvers.certify")
-bounds_mod = importlib.import_module("solvers.certify_bounds")
+certify_mod = importlib.import_module("solvers.certificates.plane.certificate")
+bounds_mod = importlib.import_module("solvers.certificates.plane.bounds")
 
 #: the metrics that provide a closed-form distance (asked, not listed)
 CLOSED_FORM = finsler.list_metrics(provides="distance", dim=2)
@@ -244,7 +244,7 @@ def test_cli_certify_json() -> None:
     ("args", "message"),
     [
         (["--metric", "panda-pole", "--start", "0,0,0,-1,0,1,0", "--goal", "0,0,0,-1,0,1,0"],
-         "start equals goal"),  # 7-D conformal: solvers.certify_conformal (issue 46)
+         "start equals goal"),  # 7-D conformal: solvers.certificates.conformal.certificate (issue 46)
         (["--metric", "matsumoto", "--start", "1.2,0", "--goal", "0,0"], "outside the domain"),
         (["--metric", "matsumoto", "--start", "0.1,0", "--goal", "0,0", "--mesh", "huge"],
          "unknown mesh preset"),

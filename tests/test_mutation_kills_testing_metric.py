@@ -16,7 +16,7 @@ import pytest
 from finsler import Box, Disk, Metric, Product, Task
 from finsler.domains import Domain
 from finsler.errors import InputError
-from finsler.metrics import Euclidean, Matsumoto, Randers
+from finsler.metrics.paper import Euclidean, Matsumoto, Randers
 from validation.testing import metric as VM
 from validation.testing.engine import FAILED, MAPPED, PASSED, SKIPPED
 

@@ -144,7 +144,7 @@ def test_string_outcomes_are_members_with_their_old_words() -> None:
 
 def test_strict_in_solve_batch(results: dict[str, Any], monkeypatch: pytest.MonkeyPatch
                                ) -> None:
-    import solvers.batch_jobs as bj
+    import solvers.geodesic.batches as bj
 
     m = finsler.get_metric("poincare")
     pairs = np.stack(PAIR)[None]

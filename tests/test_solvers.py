@@ -23,7 +23,7 @@ import finsler
 import solvers
 from finsler.errors import DomainError, InputError
 from solvers import DistanceStatus, SeedPlan, Status
-from solvers.baseline import adam_energy_baseline
+from solvers.geodesic.baseline import adam_energy_baseline
 from solvers.transcription import energy_nlp
 
 #: the metrics that provide a closed-form distance (asked, not listed)
@@ -243,7 +243,7 @@ def test_trivial_pair() -> None:
 
 def test_non_convergence_is_a_status_and_strict_raises(monkeypatch) -> None:
     """With a 2-iteration IPOPT budget nothing converges: the result says so, strict raises."""
-    import solvers.pairs as sp  # the module whose solves call energy_nlp / BatchOptions
+    import solvers.geodesic.pair_solver as sp  # the module whose solves call energy_nlp / BatchOptions
     from solvers.transcription import EnergyNLP
 
     assert Status.from_ipopt("Maximum_Iterations_Exceeded") is Status.MAX_ITERATIONS
@@ -259,8 +259,8 @@ def test_non_convergence_is_a_status_and_strict_raises(monkeypatch) -> None:
         solvers.solve_geodesic(m, s, g, 16, strict=True, method="ipopt")
     # the Newton path: 2 Newton iterations leave every candidate unfinished, IPOPT (also
     # cut to 2 iterations) finishes none: the result is IPOPT's status, never a success
-    from solvers.batched import BatchOptions
-    from solvers.newton import NewtonOptions
+    from solvers.newton.driver import BatchOptions
+    from solvers.newton.energy import NewtonOptions
 
     monkeypatch.setattr(sp, "BatchOptions", lambda device=None: BatchOptions(
         newton=NewtonOptions(max_iter=2), device=device))
@@ -509,8 +509,8 @@ def test_solve_batch_warm_start_from_exact_paths() -> None:
 def test_solve_batch_initial_paths_reach_the_ray_chunks() -> None:
     """The Ray task body passes each pair's own initial path (checked without Ray: the
     chunk function is plain Python)."""
-    from solvers.batch_jobs import _chunk_worker, _metric_spec
-    from solvers.distributed import _solve_chunk
+    from solvers.geodesic.batches import _chunk_worker, _metric_spec
+    from solvers.geodesic.distributed import _solve_chunk
 
     m = finsler.get_metric("matsumoto")
     pairs = finsler.sample_pairs(m, 2, seed=5)

@@ -15,7 +15,7 @@ budget_reached | time_limit | corrections_too_large | lp_failed), ``message``.
 A conformal metric of dimension > 3 (hook ``conformal_factor_sx``, e.g. ``panda-pole``)
 gets a proven lower bound instead, the best of the full run, the factor split into its parts
 and the whole factor in 4 coordinates
-(`solvers.certify_conformal_split.certify_conformal_best`; JSON: ``lower``, ``upper``,
+(`solvers.certificates.conformal.split.certify_conformal_best`; JSON: ``lower``, ``upper``,
 ``ratio``, ``gap``, ``trivial``, ``potential_lower``, ``min_factor``, ``boxes``,
 ``enclosures``, ``cells``, ``momentum``, ``status``, ``bound_by`` (full | split | merged),
 ``split_lower``, ``constant``, ``shares``, ``part_dims``, ``full``, ``parts``, ``merged``
@@ -47,7 +47,7 @@ from validation.cli.common import (
 )
 
 if TYPE_CHECKING:
-    from solvers.certify import CertifyResult
+    from solvers.certificates.plane.certificate import CertifyResult
 
 __all__ = ["certify_command", "register"]
 
@@ -85,7 +85,7 @@ def certify_command(
     solver's path length (proven upper bound)."""
     import dataclasses
 
-    from solvers.certify import MeshSpec, certify
+    from solvers.certificates.plane.certificate import MeshSpec, certify
     from solvers.inputs import domain_scale
     from solvers.status import CertifyStatus
 
@@ -170,11 +170,11 @@ def _run_and_write(m: Any, start: str, goal: str, out: Path | None, as_json: boo
 def _certify_conformal(m: Any, start: str, goal: str, target_gap: float | None,
                        max_boxes: int | None, out: Path | None, as_json: bool) -> None:
     """``geodesics certify`` on a conformal metric of dimension > 3: a proven lower bound
-    (`solvers.certify_conformal_split.certify_conformal_best`)."""
+    (`solvers.certificates.conformal.split.certify_conformal_best`)."""
     import dataclasses
 
-    from solvers.certify_conformal import ConformalSpec
-    from solvers.certify_conformal_split import certify_conformal_best
+    from solvers.certificates.conformal.certificate import ConformalSpec
+    from solvers.certificates.conformal.split import certify_conformal_best
     from solvers.status import CertifyStatus
 
     def spec() -> Any:
@@ -215,10 +215,10 @@ def _certify_conformal(m: Any, start: str, goal: str, target_gap: float | None,
 def _certify_nd(m: Any, start: str, goal: str, mesh: str, h: float | None,
                 target_gap: float | None, out: Path | None, as_json: bool) -> None:
     """``geodesics certify`` in dimension 3 and up: a verified piecewise-linear (or, with
-    ``--mesh p2``, piecewise-quadratic) potential (`solvers.certify_nd.certify_nd`)."""
+    ``--mesh p2``, piecewise-quadratic) potential (`solvers.certificates.nd.certificate.certify_nd`)."""
     import dataclasses
 
-    from solvers.certify_nd import NDSpec, certify_nd
+    from solvers.certificates.nd.certificate import NDSpec, certify_nd
     from solvers.status import CertifyStatus
 
     def spec() -> Any:

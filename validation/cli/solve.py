@@ -318,8 +318,8 @@ def _checked_job(m: finsler.Metric, arr: np.ndarray, pairs: Path | None,
     """Step 3: the solver's own check of the input, once (naming the options), before
     --out and before a policy is loaded; the job it returns is solved without checking
     again. With --warm-start the learned paths join the job (and the payload's entry)."""
-    from solvers.batch_jobs import check_batch
-    from solvers.pairs import check_initial_paths
+    from solvers.geodesic.batches import check_batch
+    from solvers.geodesic.pair_solver import check_initial_paths
 
     if method_module:
         from learn.registry import import_method_modules
@@ -354,7 +354,7 @@ def _checked_out(out: Path, many: bool) -> tuple[Path, Path | None]:
 def _solve(job: Any, progress: bool, parts: Path | None) -> list[solvers.GeodesicResult]:
     """Step 5: the checked job solved; an interruption stops every worker and says what
     was kept (exit code 130)."""
-    from solvers.batch_jobs import run_batch
+    from solvers.geodesic.batches import run_batch
 
     try:
         return run_batch(job, progress=progress, checkpoint_dir=parts)
