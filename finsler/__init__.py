@@ -8,10 +8,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from finsler.infra import moved as _moved
 from finsler.infra.lazy import lazy_exports
-
-_moved.install()  # finsler.pool, finsler.files, ... (moved into finsler.infra) still import
 
 if TYPE_CHECKING:
     from finsler.domains import Box, Disk, Domain, JointBox, Product

@@ -27,6 +27,7 @@ from finsler.status import (
 from solvers.continuum.chebyshev import interpolation_matrix
 
 __all__ = [
+    "Certificate",
     "CertifyResult",
     "DistanceResult",
     "DistanceStatus",
@@ -277,13 +278,46 @@ class DistanceResult(Result):
         return interpolation_matrix(n, 2.0 * t - 1.0) @ self.nodes
 
 
-class MeshCertificate(Result):
-    """What the mesh certificates share ([`CertifyResult`][solvers.result.CertifyResult] in 2-D,
-    ``solvers.certificates.nd.certificate.NDResult`` beyond): the outcome fields as members of the status
-    family (words are accepted and converted), ``wall_time`` from ``times["total"]``,
-    ``certified`` and a field-by-field ``to_dict``. Subclasses are dataclasses with
-    ``lower``, ``upper``, ``times``, ``path``, ``stopped_by``, ``lp_status``,
-    ``solver_status`` and ``status`` fields."""
+class Certificate(Result):
+    """Base of every result of [`solvers.certify`][solvers.certify]: a proven interval
+    ``lower <= d(start, goal) <= upper``, whichever certificate made it
+    ([`CertifyResult`][solvers.result.CertifyResult] in 2-D, ``NDResult`` in 3-D and up,
+    ``SplitCertifyResult`` for a conformal metric).
+
+    Every certificate carries ``metric`` (its name), ``start`` / ``goal``, ``lower``,
+    ``upper``, ``gap = (upper - lower) / upper``, the ``path`` of the upper bound,
+    ``times`` (seconds, ``"total"`` among them), ``stopped_by`` (what ended the
+    refinement, a `finsler.status.CertifyStop`), ``status`` (a `solvers.CertifyStatus`),
+    ``message`` and the class's ``rigour`` (what each part of the interval rests on).
+    The fields beyond these say how the bound was found and differ by certificate.
+    """
+
+    rigour: ClassVar[dict[str, str]]
+    metric: str
+    start: np.ndarray
+    goal: np.ndarray
+    lower: float
+    upper: float
+    gap: float
+    times: dict[str, float]
+    stopped_by: CertifyStop
+    status: CertifyStatus
+    message: str
+
+    @property
+    def certified(self) -> bool:
+        """True if both bounds are finite and ``lower <= upper``."""
+        return bool(np.isfinite(self.lower) and np.isfinite(self.upper)
+                    and self.lower <= self.upper)
+
+
+class MeshCertificate(Certificate):
+    """What the mesh certificates share ([`CertifyResult`][solvers.result.CertifyResult] in
+    2-D, ``NDResult`` beyond): the outcome fields as members of the status family (words
+    are accepted and converted), ``wall_time`` from ``times["total"]`` and a
+    field-by-field ``to_dict``. Subclasses are dataclasses with ``lower``, ``upper``,
+    ``times``, ``path``, ``stopped_by``, ``lp_status``, ``solver_status`` and ``status``
+    fields."""
 
     def __post_init__(self) -> None:
         self.stopped_by = CertifyStop(self.stopped_by)
@@ -299,12 +333,6 @@ class MeshCertificate(Result):
     def converged(self) -> bool:
         """True if the refinement reached its target gap (``status`` is ``CERTIFIED``)."""
         return self.status.converged
-
-    @property
-    def certified(self) -> bool:
-        """True if both bounds are finite and ``lower <= upper``."""
-        return bool(np.isfinite(self.lower) and np.isfinite(self.upper)
-                    and self.lower <= self.upper)
 
     def to_dict(self, with_path: bool = False) -> dict[str, Any]:
         """JSON-ready dict in field order (``path`` only if ``with_path``; labels, lists,

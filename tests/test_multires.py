@@ -26,7 +26,7 @@ import solvers
 from finsler.errors import InputError
 from finsler.metrics.paper import Matsumoto, Poincare
 from solvers import SeedPlan, Status
-from solvers.geodesic.solve import richardson
+from solvers.geodesic.tolerance import richardson
 from solvers.seeding.plans import perturbed_curves
 
 

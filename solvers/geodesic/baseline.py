@@ -34,7 +34,7 @@ def adam_energy_baseline(
     """
     import torch
 
-    from solvers.geodesic.solve import check_pairs, check_segments
+    from solvers.inputs import check_pairs, check_segments
 
     arr = check_pairs(metric, pairs)
     n = check_segments(metric, segments)

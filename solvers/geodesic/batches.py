@@ -12,6 +12,7 @@ module only schedules and stores.
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import time
 from collections.abc import Sequence
@@ -25,49 +26,41 @@ from finsler.infra.files import OutputError, atomic_write_bytes
 from finsler.infra.limits import check_count
 from finsler.infra.pool import ProcessPool
 from finsler.metrics.base import Metric
-from finsler.spec import MetricSpec
 from solvers.geodesic.pair_solver import check_initial_paths, resolve_method, solve_pairs
+from solvers.geodesic.request import SolveRequest, seed_plan
 from solvers.geodesic.tolerance import TOL_MAX_SEGMENTS, check_tol, solve_to_tol
 from solvers.inputs import as_metric, check_pairs, check_segments
 from solvers.newton.backends import backend_for
 from solvers.result import GeodesicResult, SolverError
 from solvers.seeding.plans import SeedPlan
 
-__all__ = ["NEWTON_POOL_MIN", "NEWTON_ROWS", "BatchJob", "check_batch", "run_batch",
+__all__ = ["NEWTON_POOL_MIN", "NEWTON_ROWS", "BatchJob", "Chunk", "check_batch", "run_batch",
            "solve_batch"]
 
 
-def _metric_spec(m: Metric) -> MetricSpec:
-    """What a worker process rebuilds the metric from (finsler's identity of a metric)."""
-    return MetricSpec.of(m)
+@dataclass(frozen=True)
+class Chunk:
+    """The pairs of a batch that one batched solve takes (in this process, a worker
+    process or a Ray task): the request, the pairs' indices in the batch, the pairs
+    ``(k, 2, dim)`` and their initial paths or None. Pickles by the metric's spec
+    (`SolveRequest`)."""
+
+    request: SolveRequest
+    ks: list[int]
+    pairs: np.ndarray
+    inits: np.ndarray | None = None
 
 
-def _chunk_worker(args: tuple) -> list[tuple[int, GeodesicResult]]:
-    """Solve one chunk of pairs in a worker process or Ray task: ``args`` = (metric spec,
-    pair indices, pairs ``(k, 2, dim)``, segments, plan, minmax, initial paths or None,
-    global_seeds, tol, method, device) -> ``[(index, result)]``."""
-    spec, ks, pairs, n, plan, minmax, inits, global_seeds, tol, method, device = args
-    m = spec.build()
-    return _solve_chunk(m, ks, pairs, n, plan, minmax, inits, global_seeds, tol, method,
-                        device)
-
-
-def _solve_chunk(m: Metric, ks: Sequence[int], pairs: np.ndarray, n: int, plan: SeedPlan,
-                 minmax: bool, inits: np.ndarray | None, global_seeds: bool,
-                 tol: float | None, method: str, device: Any
-                 ) -> list[tuple[int, GeodesicResult]]:
-    """The pairs of a chunk (checked by `solve_batch`): one batched solve (each pair
-    refined on its own with ``tol``)."""
-    if tol is not None:
-        return [(k, solve_to_tol(m, p[0], p[1], n, tol, TOL_MAX_SEGMENTS,
-                                 time.perf_counter(), seeds=plan,
-                                 initial=() if inits is None else (inits[i],),
-                                 global_seeds=global_seeds, minmax=minmax, strict=False,
-                                 method=method, device=device))
+def _solve_chunk(chunk: Chunk) -> list[tuple[int, GeodesicResult]]:
+    """The pairs of a chunk (checked by `check_batch`): one batched solve (each pair
+    refined on its own with ``tol``) -> ``[(index, result)]``."""
+    req, ks, pairs, inits = chunk.request, chunk.ks, chunk.pairs, chunk.inits
+    if req.tol is not None:
+        return [(k, solve_to_tol(req, p[0], p[1], time.perf_counter(),
+                                 initial=() if inits is None else (inits[i],)))
                 for i, (k, p) in enumerate(zip(ks, pairs, strict=True))]
     given = [[] if inits is None else [("initial0", inits[i])] for i in range(len(ks))]
-    res = solve_pairs(m, np.asarray(pairs), n, plan, given, global_seeds, method, device,
-                      minmax)
+    res = solve_pairs(req, np.asarray(pairs), given)
     return list(zip(ks, res, strict=True))
 
 
@@ -216,14 +209,15 @@ def run_batch(job: BatchJob, *, progress: bool = True,
     solve (the command line checks its ``--out`` path there) calls the two steps."""
     if not isinstance(job, BatchJob):
         raise InputError(f"run_batch needs a BatchJob (check_batch), got {type(job).__name__}")
-    store = (_BatchStore(checkpoint_dir, job.m, job.n, job.plan, job.minmax,
-                         job.global_seeds, job.tol) if checkpoint_dir else None)
+    req = job.request
+    store = (_BatchStore(checkpoint_dir, req.metric, req.segments, req.plan, req.minmax,
+                         req.global_seeds, req.tol) if checkpoint_dir else None)
     results = _solve_checked(job, store, progress)
     if strict:
         bad = [k for k, r in enumerate(results)
                if not (r.converged and (r.minmax is None or r.minmax.converged))]
         if bad:
-            raise SolverError(f"{job.m.name}: {len(bad)} of {len(results)} pairs did not "
+            raise SolverError(f"{req.metric.name}: {len(bad)} of {len(results)} pairs did not "
                               f"converge (first: pair {bad[0]}, status "
                               f"{results[bad[0]].status.label})", results)
     return results
@@ -231,30 +225,40 @@ def run_batch(job: BatchJob, *, progress: bool = True,
 
 @dataclass(frozen=True)
 class BatchJob:
-    """A batch's checked input (`check_batch`): what `run_batch` and the
-    chunks take without checking again. ``pairs`` is read-only."""
+    """A batch's checked input (`check_batch`): what `run_batch` and the chunks take
+    without checking again: the solve request, the pairs ``(K, 2, dim)`` (read-only),
+    the initial paths ``(K, n+1, dim)`` or None, and how the chunks are run."""
 
-    m: Metric
+    request: SolveRequest
     pairs: np.ndarray
-    n: int
-    method: str
-    plan: SeedPlan
-    workers: int
-    inits: np.ndarray | None
-    global_seeds: bool
-    tol: float | None
-    minmax: bool
-    device: Any
+    inits: np.ndarray | None = None
+    workers: int = 1
     ray_address: str | None = None
     chunk_size: int | None = None
+
+    @property
+    def metric(self) -> Metric:
+        """The request's metric."""
+        return self.request.metric
+
+    @property
+    def segments(self) -> int:
+        """The request's size ``n``."""
+        return self.request.segments
+
+    def with_initial_paths(self, paths: Any) -> BatchJob:
+        """This job with one initial path per pair ``(K, m+1, dim)`` (checked: finite,
+        in the domain, ending at the pair's start and goal; resampled to ``n + 1``
+        points), e.g. a learned policy's paths computed once the pairs were checked."""
+        inits = check_initial_paths(self.metric, self.pairs, self.segments, paths)
+        return dataclasses.replace(self, inits=inits)
 
     def inits_of(self, ks: Sequence[int] | int) -> np.ndarray | None:
         return None if self.inits is None else self.inits[ks]
 
-    def args(self, spec: MetricSpec, ks: list[int]) -> tuple:
-        """The arguments of `_chunk_worker` for the pairs ``ks``."""
-        return (spec, ks, self.pairs[ks], self.n, self.plan, self.minmax, self.inits_of(ks),
-                self.global_seeds, self.tol, self.method, self.device)
+    def chunk(self, ks: list[int]) -> Chunk:
+        """The chunk of the pairs ``ks``."""
+        return Chunk(self.request, ks, self.pairs[ks], self.inits_of(ks))
 
 
 #: Most worker processes of one `solve_batch` (each holds a copy of the metric's NLPs).
@@ -281,9 +285,7 @@ def check_batch(metric: Metric | str, pairs: Any, segments: int | None = None, *
     how = resolve_method(m, method)
     if device is not None:
         backend_for(device)  # a bad device fails here, before any work
-    plan = seeds if seeds is not None else SeedPlan.default(m, how)
-    if not isinstance(plan, SeedPlan):
-        raise InputError(f"seeds must be a SeedPlan, got {type(plan).__name__}")
+    plan = seed_plan(m, seeds, how)
     if workers is None:
         workers = os.cpu_count() or 1
         if how == "newton" and arr.shape[0] < NEWTON_POOL_MIN:
@@ -307,8 +309,9 @@ def check_batch(metric: Metric | str, pairs: Any, segments: int | None = None, *
     tol_ = None if tol is None else check_tol(m, n, tol, TOL_MAX_SEGMENTS)[0]
     arr = arr.copy()  # the caller's array stays the caller's
     arr.flags.writeable = False  # checked: nobody changes it before the solve
-    return BatchJob(m, arr, n, how, plan, int(workers), inits, bool(global_seeds), tol_,
-                    bool(minmax), device, ray_address,
+    req = SolveRequest(m, n, plan, how, bool(global_seeds), bool(minmax), tol_,
+                       TOL_MAX_SEGMENTS, device)
+    return BatchJob(req, arr, inits, int(workers), ray_address,
                     None if chunk_size is None else int(chunk_size))
 
 
@@ -317,8 +320,8 @@ def _chunks(job: BatchJob, todo: list[int]) -> list[list[int]]:
     about `NEWTON_ROWS` problems; by IPOPT one pair each; several per worker so finished
     work is kept)."""
     size = 1
-    if job.method == "newton":
-        size = _chunk_pairs(job.plan, job.global_seeds)
+    if job.request.method == "newton":
+        size = _chunk_pairs(job.request.plan, job.request.global_seeds)
     if job.workers > 1:
         size = max(1, min(size, -(-len(todo) // (4 * job.workers))))
     return [todo[i:i + size] for i in range(0, len(todo), size)]
@@ -330,7 +333,7 @@ def _solve_checked(job: BatchJob, store: _BatchStore | None, progress: bool
     in worker processes or as Ray tasks, every finished chunk saved at once."""
     from tqdm.auto import tqdm
 
-    m, arr = job.m, job.pairs
+    m, arr = job.metric, job.pairs
     K = arr.shape[0]
     results: list[GeodesicResult | None] = [None] * K
     if store is not None:
@@ -339,7 +342,6 @@ def _solve_checked(job: BatchJob, store: _BatchStore | None, progress: bool
     todo = [k for k in range(K) if results[k] is None]
     chunks = _chunks(job, todo)
     workers = int(min(job.workers, max(len(chunks), 1)))
-    spec = _metric_spec(m)
     bar = tqdm(total=K, desc=f"solve {m.name}", disable=not progress, unit="pair",
                initial=K - len(todo))
 
@@ -355,19 +357,16 @@ def _solve_checked(job: BatchJob, store: _BatchStore | None, progress: bool
             from solvers.geodesic.distributed import solve_chunks_ray
 
             local_cpus = int(min(workers, len(todo)))
-            for done in solve_chunks_ray(job.ray_address, _chunk_worker,
-                                         lambda ks: job.args(spec, ks), todo,
+            for done in solve_chunks_ray(job.ray_address, _solve_chunk, job.chunk, todo,
                                          job.chunk_size, num_cpus=local_cpus):
                 take(done)
         elif workers == 1 or len(chunks) <= 1:
             for ks in chunks:
-                take(_solve_chunk(m, ks, arr[ks], job.n, job.plan, job.minmax,
-                                  job.inits_of(ks), job.global_seeds, job.tol, job.method,
-                                  job.device))
+                take(_solve_chunk(job.chunk(ks)))
         else:
             with ProcessPool(workers) as pool:
-                for done in pool.map_unordered(_chunk_worker,
-                                               [job.args(spec, ks) for ks in chunks]):
+                for done in pool.map_unordered(_solve_chunk,
+                                               [job.chunk(ks) for ks in chunks]):
                     take(done)
     finally:
         bar.close()

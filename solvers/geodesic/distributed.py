@@ -23,15 +23,15 @@ from finsler.infra.cluster import RAY_MISSING, connect_ray, require_ray
 __all__ = ["RAY_MISSING", "connect_ray", "require_ray", "solve_chunks_ray"]
 
 
-def _solve_chunk(worker: Callable[[tuple], list[tuple[int, Any]]], args: tuple
+def _solve_chunk(worker: Callable[[Any], list[tuple[int, Any]]], chunk: Any
                  ) -> list[tuple[int, Any]]:
-    """Ray-task body: ``worker(args)`` (the batch solver's chunk function on one chunk's
-    job) -> ``[(k, result)]``."""
-    return worker(args)
+    """Ray-task body: ``worker(chunk)`` (the batch solver's chunk function on one chunk)
+    -> ``[(k, result)]``."""
+    return worker(chunk)
 
 
-def solve_chunks_ray(address: str, worker: Callable[[tuple], list[tuple[int, Any]]],
-                     job: Callable[[list[int]], tuple], todo: list[int],
+def solve_chunks_ray(address: str, worker: Callable[[Any], list[tuple[int, Any]]],
+                     job: Callable[[list[int]], Any], todo: list[int],
                      chunk_size: int | None = None,
                      num_cpus: int | None = None) -> Iterator[list[tuple[int, Any]]]:
     """Solve the pairs ``todo`` as Ray tasks of ``chunk_size`` pairs (default: about four

@@ -30,6 +30,7 @@ import numpy as np
 from finsler.domains import as_real
 from finsler.errors import InputError, short
 from finsler.metrics.base import Metric
+from solvers.geodesic.request import SolveRequest
 from solvers.inputs import SHORT_PAIR, as_metric, domain_scale
 from solvers.newton.driver import (
     BatchOptions,
@@ -54,6 +55,7 @@ from solvers.transcription import energy_nlp, minmax_nlp
 
 __all__ = [
     "check_initial_paths",
+    "refine_checked_minmax",
     "refine_minmax",
     "resolve_method",
     "solve_pair",
@@ -220,7 +222,7 @@ def _distinct(m: Metric, ranked: list[_Solve], keep: int, drop_rtol: float) -> l
     return out
 
 
-def _ladder(m: Metric, s: np.ndarray, g: np.ndarray, n: int, plan: SeedPlan,
+def _ladder(req: SolveRequest, s: np.ndarray, g: np.ndarray,
             given: list[tuple[str, np.ndarray]]
             ) -> tuple[list[_Solve], list[dict[str, Any]], int, int, int, list[_Solve]]:
     """Multiresolution energy stage: every seed of ``plan`` solved at the plan's coarse
@@ -232,6 +234,7 @@ def _ladder(m: Metric, s: np.ndarray, g: np.ndarray, n: int, plan: SeedPlan,
     Returns (solves at the final size, per-level summaries, seeds tried, starts (seeds and
     restarts) agreeing with the best coarse energy, total IPOPT iterations, the solves
     from the seeds at the first size)."""
+    m, n, plan = req.metric, req.segments, req.plan
     sizes = plan.ladder(n)
     n0 = sizes[0]
     t0 = time.perf_counter()
@@ -335,30 +338,30 @@ def _short_result(m: Metric, s: np.ndarray, g: np.ndarray, n: int, minmax: bool
     return res
 
 
-def solve_pairs(m: Metric, pairs: np.ndarray, n: int, plan: SeedPlan,
-                given: list[list[tuple[str, np.ndarray]]], global_seeds: bool, method: str,
-                device: Any, minmax: bool, warm: bool = False,
+def solve_pairs(req: SolveRequest, pairs: np.ndarray,
+                given: list[list[tuple[str, np.ndarray]]],
                 options: BatchOptions | None = None) -> list[GeodesicResult]:
-    """Results for ``pairs`` ``(K, 2, dim)`` (validated, in the domain): short pairs as
-    straight segments, the others by the batched Newton method (IPOPT finishing what it
-    cannot) or by IPOPT alone; ``warm``: the given paths are nearly converged (IPOPT's warm
-    options)."""
+    """Results for ``pairs`` ``(K, 2, dim)`` (validated, in the domain) as ``req`` asks:
+    short pairs as straight segments, the others by the batched Newton method (IPOPT
+    finishing what it cannot) or by IPOPT alone. ``given``: per pair, caller-given paths
+    at the request's size (names, ``(n+1, dim)``); ``options``: the Newton batch's
+    settings (default: on the request's device)."""
     t0 = time.perf_counter()
+    m, n, minmax = req.metric, req.segments, req.minmax
     K = pairs.shape[0]
     out: list[GeodesicResult | None] = [None] * K
     short = np.max(np.abs(pairs[:, 1] - pairs[:, 0]), axis=1) <= SHORT_PAIR * domain_scale(m)
     long_ = [int(k) for k in np.flatnonzero(~short)]
     for k in np.flatnonzero(short):
         out[k] = _short_result(m, pairs[k, 0], pairs[k, 1], n, minmax)
-    if long_ and method == "newton":
-        opts = options or BatchOptions(device=device)
-        sol = solve_pairs_batched(m, pairs[long_], n, plan, opts, [given[k] for k in long_],
-                                  global_seeds)
-        for k, r in zip(long_, _from_batch(m, sol, global_seeds), strict=True):
+    if long_ and req.method == "newton":
+        opts = options or BatchOptions(device=req.device)
+        sol = solve_pairs_batched(m, pairs[long_], n, req.plan, opts,
+                                  [given[k] for k in long_], req.global_seeds)
+        for k, r in zip(long_, _from_batch(m, sol, req.global_seeds), strict=True):
             out[k] = r
     elif long_:
-        ladders = [_ipopt_solves(m, pairs[k, 0], pairs[k, 1], n, plan, given[k],
-                                 global_seeds, warm) for k in long_]
+        ladders = [_ipopt_solves(req, pairs[k, 0], pairs[k, 1], given[k]) for k in long_]
         for k, lad in zip(long_, ladders, strict=True):
             out[k] = _ipopt_result(m, lad)
     share = (time.perf_counter() - t0) / max(len(long_), 1)
@@ -368,7 +371,7 @@ def solve_pairs(m: Metric, pairs: np.ndarray, n: int, plan: SeedPlan,
     if minmax:
         for r in res:
             if r.minmax is None:
-                r.minmax = _refine_minmax(m, r)
+                r.minmax = refine_checked_minmax(m, r)
     return res
 
 
@@ -473,18 +476,18 @@ class _Ladder:
     own: _Solve | None = None
 
 
-def _ipopt_solves(m: Metric, s: np.ndarray, g: np.ndarray, n: int, plan: SeedPlan,
-                  given: list[tuple[str, np.ndarray]], global_seeds: bool, warm: bool
-                  ) -> _Ladder:
+def _ipopt_solves(req: SolveRequest, s: np.ndarray, g: np.ndarray,
+                  given: list[tuple[str, np.ndarray]]) -> _Ladder:
     """One pair by IPOPT: the seed plan's ladder (`_ladder`), or only the given
     paths (``global_seeds=False``; ``warm``: nearly converged, IPOPT's warm options)."""
+    m, n, plan, global_seeds = req.metric, req.segments, req.plan, req.global_seeds
     if global_seeds:
-        solved, levels, n_seeds, agree, total_iter, first = _ladder(m, s, g, n, plan, given)
+        solved, levels, n_seeds, agree, total_iter, first = _ladder(req, s, g, given)
     else:
         solved, levels, total_iter, first = [], [], 0, []
         nlp = energy_nlp(m, n)
         for name, seed in given:
-            solved.append(_solve_warm(m, name, seed) if warm
+            solved.append(_solve_warm(m, name, seed) if req.warm
                           else _solve_one(m, nlp, name, seed))
             total_iter += max(solved[-1].iterations, 0)
         n_seeds, agree = len(given), 0
@@ -567,24 +570,18 @@ def _ipopt_result(m: Metric, L: _Ladder) -> GeodesicResult:
     )
 
 
-def solve_pair(m: Metric, s: np.ndarray, g: np.ndarray, n: int, *,
-               seeds: SeedPlan | None = None, initial: Sequence[np.ndarray] = (),
-               global_seeds: bool = True, minmax: bool = False, method: str = "newton",
-               device: Any = None) -> GeodesicResult:
-    """One pair as `solve_geodesic` solves it without ``tol`` and
-    ``strict``, from checked input (``m`` a metric, ``s`` / ``g`` float64 points in its
-    domain, `solvers.inputs.check_point`; ``n`` checked, ``method`` resolved by
-    `resolve_method`): the seed plan (default `SeedPlan.default`) and the
-    ``initial`` paths solved."""
-    plan = seeds if seeds is not None else SeedPlan.default(m, method)
-    if not isinstance(plan, SeedPlan):
-        raise InputError(f"seeds must be a SeedPlan, got {type(plan).__name__}")
+def solve_pair(req: SolveRequest, s: np.ndarray, g: np.ndarray,
+               initial: Sequence[np.ndarray] = ()) -> GeodesicResult:
+    """One pair as `solve_geodesic` solves it without ``tol`` and ``strict``, from
+    checked input (``s`` / ``g`` float64 points in the request's domain,
+    `solvers.inputs.check_point`): the request's seed plan and the ``initial`` paths
+    ``(m+1, dim)`` (resampled to the request's size) solved."""
+    m, n = req.metric, req.segments
     given = [(f"initial{k}", _initial_path(m, init, s, g, n, f"initial path {k}"))
              for k, init in enumerate(initial)]
-    if not global_seeds and not given:
+    if not req.global_seeds and not given:
         raise InputError("global_seeds=False needs at least one initial path")
-    return solve_pairs(m, np.stack([s, g])[None], n, plan, [given], bool(global_seeds), method,
-                       device, minmax)[0]
+    return solve_pairs(req, np.stack([s, g])[None], [given])[0]
 
 
 def refine_minmax(metric: Metric | str, result: GeodesicResult) -> MinMaxResult:
@@ -597,11 +594,12 @@ def refine_minmax(metric: Metric | str, result: GeodesicResult) -> MinMaxResult:
     if not isinstance(result, GeodesicResult):
         raise InputError(f"result must be a GeodesicResult (of solve_geodesic), got "
                          f"{type(result).__name__}")
-    return _refine_minmax(as_metric(metric), result)
+    return refine_checked_minmax(as_metric(metric), result)
 
 
-def _refine_minmax(m: Metric, result: GeodesicResult) -> MinMaxResult:
-    """`refine_minmax` with ``m`` a metric (what the solvers call)."""
+def refine_checked_minmax(m: Metric, result: GeodesicResult) -> MinMaxResult:
+    """`refine_minmax` from checked input (``m`` a metric): what the solvers call on their
+    own results."""
     t0 = time.perf_counter()
     if result.status in (Status.TRIVIAL, Status.SHORT):
         return MinMaxResult(result.points, result.segment_costs, result.max_segment_cost,

@@ -10,7 +10,6 @@ size and only the best few distinct optima are carried up a ladder of sizes to `
 largest segment cost: the exact ceiling of the paper's task. ``tol`` refines the size
 until the continuum length is known to that relative accuracy (`solvers.geodesic.tolerance`,
 Richardson extrapolation). Many pairs: `solve_batch` (`solvers.geodesic.batches`).
-Those names are re-exported here, as before the split.
 """
 
 from __future__ import annotations
@@ -24,24 +23,14 @@ import numpy as np
 from finsler.domains import describe_value
 from finsler.errors import InputError
 from finsler.metrics.base import Metric
-from solvers.geodesic.batches import solve_batch
-from solvers.geodesic.pair_solver import check_initial_paths, refine_minmax, solve_pair
-from solvers.geodesic.pair_solver import resolve_method as resolve_method
+from solvers.geodesic.pair_solver import resolve_method, solve_pair
+from solvers.geodesic.request import SolveRequest, seed_plan
 from solvers.geodesic.tolerance import TOL_MAX_SEGMENTS, check_tol, solve_to_tol
-from solvers.geodesic.tolerance import richardson as richardson
-from solvers.inputs import as_metric, check_initial, check_pairs, check_point, check_segments
+from solvers.inputs import as_metric, check_initial, check_point, check_segments
 from solvers.result import GeodesicResult, MidpointResult, SolverError
 from solvers.seeding.plans import SeedPlan
 
-__all__ = [
-    "check_initial_paths",
-    "check_pairs",
-    "check_segments",
-    "midpoint",
-    "refine_minmax",
-    "solve_batch",
-    "solve_geodesic",
-]
+__all__ = ["midpoint", "solve_geodesic"]
 
 
 def solve_geodesic(
@@ -101,13 +90,13 @@ def solve_geodesic(
     for name, flag in (("minmax", minmax), ("strict", strict)):
         if not isinstance(flag, (bool, np.bool_)):
             raise InputError(f"{name} must be True or False, got {describe_value(flag)}")
+    req = SolveRequest(m, n, seed_plan(m, seeds, how), how, bool(global_seeds), bool(minmax),
+                       device=device)
     if tol is not None:
         tol_, max_n = check_tol(m, n, tol, max_segments)
-        return solve_to_tol(m, s, g, n, tol_, max_n, t0, seeds=seeds,
-                            initial=initial, global_seeds=global_seeds, minmax=minmax,
-                            strict=strict, method=how, device=device)
-    res = solve_pair(m, s, g, n, seeds=seeds, initial=initial,
-                     global_seeds=global_seeds, minmax=minmax, method=how, device=device)
+        return solve_to_tol(req.at(n, tol=tol_, max_segments=max_n), s, g, t0,
+                            initial=initial, strict=strict)
+    res = solve_pair(req, s, g, initial)
     res.wall_time = time.perf_counter() - t0
     if strict and not (res.converged and (res.minmax is None or res.minmax.converged)):
         raise SolverError(

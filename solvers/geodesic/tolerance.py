@@ -18,7 +18,8 @@ import numpy as np
 from finsler.errors import InputError, short
 from finsler.infra.limits import check_count
 from finsler.metrics.base import Metric
-from solvers.geodesic.pair_solver import _refine_minmax, solve_pair, solve_pairs
+from solvers.geodesic.pair_solver import refine_checked_minmax, solve_pair, solve_pairs
+from solvers.geodesic.request import SolveRequest
 from solvers.inputs import check_segments
 from solvers.result import GeodesicResult, SolverError, Status
 from solvers.seeding.plans import SeedPlan, resample
@@ -104,16 +105,18 @@ def check_tol(m: Metric, n: int, tol: Any, max_segments: Any) -> tuple[float, in
     return float(tol), check_segments(m, int(max_segments))
 
 
-def solve_to_tol(m: Metric, s: np.ndarray, g: np.ndarray, n: int, tol: float,
-                 max_segments: int, t0: float, *, minmax: bool, strict: bool, method: str,
-                 device: Any, **kw: Any) -> GeodesicResult:
-    """``solve_geodesic(..., tol=tol)`` from checked input (``m`` a metric, ``s`` / ``g``
-    points in its domain, ``n`` checked, ``tol`` / ``max_segments`` by `check_tol`,
-    ``method`` resolved): the pair solved at ``n`` (``kw``: ``seeds``, ``initial``,
-    ``global_seeds``), then at doubled sizes, each warm started from the last, until
-    `_tol_estimate` is within ``tol`` or ``max_segments`` is reached; ``t0``: the
-    caller's start time (for ``wall_time``)."""
-    res = first = solve_pair(m, s, g, n, method=method, device=device, **kw)
+def solve_to_tol(req: SolveRequest, s: np.ndarray, g: np.ndarray, t0: float, *,
+                 initial: Sequence[np.ndarray] = (), strict: bool = False) -> GeodesicResult:
+    """``solve_geodesic(..., tol=tol)`` from checked input (``s`` / ``g`` points in the
+    request's domain; the request's ``tol`` / ``max_segments`` by `check_tol`): the pair
+    solved at the request's size with its seeds and the ``initial`` paths, then at doubled
+    sizes, each warm started from the last, until `_tol_estimate` is within ``tol`` or
+    ``max_segments`` is reached; ``t0``: the caller's start time (for ``wall_time``)."""
+    m, tol, minmax = req.metric, req.tol, req.minmax
+    max_segments = req.max_segments or TOL_MAX_SEGMENTS
+    if tol is None:
+        raise InputError("solve_to_tol needs a request with tol")
+    res = first = solve_pair(req.at(req.segments, minmax=False), s, g, initial)
     iterations = first.iterations
     levels: list[dict[str, Any]] = []
     while True:
@@ -128,8 +131,9 @@ def solve_to_tol(m: Metric, s: np.ndarray, g: np.ndarray, n: int, tol: float,
             break
         nxt = 2 * res.segments
         warm = [("refined", resample(res.points, np.ones(res.segments), nxt))]
-        res = solve_pairs(m, np.stack([s, g])[None], nxt, SeedPlan.default(m, method), [warm],
-                          False, method, device, False, warm=True)[0]
+        again = req.at(nxt, plan=SeedPlan.default(m, req.method), global_seeds=False,
+                       minmax=False, warm=True)
+        res = solve_pairs(again, np.stack([s, g])[None], [warm])[0]
         iterations += res.iterations
     # the seeding happened at the first size; later sizes are warm starts of its winner
     res.seeds_tried, res.seeds_agreeing = first.seeds_tried, first.seeds_agreeing
@@ -149,7 +153,7 @@ def solve_to_tol(m: Metric, s: np.ndarray, g: np.ndarray, n: int, tol: float,
     res.tol_reached = bool(done)
     res.tol_levels = levels
     if minmax:
-        res.minmax = _refine_minmax(m, res)
+        res.minmax = refine_checked_minmax(m, res)
     res.wall_time = time.perf_counter() - t0
     if strict and not (res.converged and res.tol_reached
                        and (res.minmax is None or res.minmax.converged)):

@@ -82,7 +82,7 @@ from finsler.enclosures.intervals import Interval, enclose
 from finsler.errors import InputError
 from finsler.lowering import LoweredFunction, lower
 from finsler.metrics.base import Metric
-from finsler.status import CertifyStop, LPStatus, Result, Status
+from finsler.status import CertifyStop, LPStatus, Status
 from solvers.certificates.conformal.grid import SLACK as _SLACK
 from solvers.certificates.conformal.grid import (
     Grid,
@@ -94,6 +94,7 @@ from solvers.certificates.conformal.grid import (
 )
 from solvers.certificates.domain import domain_constraints, outside_domain
 from solvers.inputs import as_metric
+from solvers.result import Certificate
 from solvers.status import CertifyStatus
 
 __all__ = ["ConformalCertifyResult", "ConformalSpec", "certify_conformal"]
@@ -176,7 +177,7 @@ class ConformalSpec:
 
 
 @dataclass
-class ConformalCertifyResult(Result):
+class ConformalCertifyResult(Certificate):
     """A proven interval ``lower <= d(start, goal) <= upper`` for a conformal metric.
 
     ``lower`` is the larger of ``potential_lower`` (the verified planar potential) and

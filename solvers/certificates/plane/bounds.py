@@ -1,4 +1,4 @@
-"""The bounds behind the rows of `solvers.certificates.plane.certificate.certify` (2-D): values of F at the
+"""The bounds behind the rows of `solvers.certificates.plane.certificate.certify_plane` (2-D): values of F at the
 mesh points, interval enclosures of F's second derivatives over each triangle, the
 second-order corrections, and the rows ``b = F - corr`` themselves.
 

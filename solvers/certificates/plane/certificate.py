@@ -1,9 +1,9 @@
-"""Certified intervals ``lower <= d(start, goal) <= upper`` for 2-D metrics (issue 10).
+"""The 2-D certificate: a certified interval ``lower <= d(start, goal) <= upper``.
 
 Lower bound by convex duality. If a potential ``phi`` satisfies ``dphi_z(v) <= F(z, v)`` for
 every point ``z`` and every vector ``v`` (the dual norm ``F*(z, dphi_z) <= 1``), then for
 every curve ``gamma`` from ``x`` to ``y``, ``phi(y) - phi(x) = int dphi(gamma') <=
-int F(gamma, gamma')``, hence ``d(x, y) >= phi(y) - phi(x)``. `certify` maximises
+int F(gamma, gamma')``, hence ``d(x, y) >= phi(y) - phi(x)``. `certify_plane` maximises
 ``phi(goal) - phi(start)`` over continuous piecewise-quadratic (P2) potentials on a Delaunay
 triangulation that covers the whole domain (a convex polygon containing it), a linear
 program solved with cvxpy (Clarabel).
@@ -81,38 +81,24 @@ from finsler.errors import InputError
 from finsler.infra.limits import check_memory, check_number
 from finsler.metrics.base import Metric
 from finsler.status import Status
-from solvers.certificates.plane.bounds import SPLIT_DEPTH as SPLIT_DEPTH
-from solvers.certificates.plane.bounds import SPLIT_FRACTION as SPLIT_FRACTION
-from solvers.certificates.plane.bounds import SPLIT_OVERESTIMATE as SPLIT_OVERESTIMATE
-from solvers.certificates.plane.bounds import _bounds_on_boxes as _bounds_on_boxes
-from solvers.certificates.plane.bounds import _corrections as _corrections
-from solvers.certificates.plane.bounds import _eval_values as _eval_values
-from solvers.certificates.plane.bounds import _PointData, _RowBounds, direction_group
-from solvers.certificates.plane.bounds import _row_bounds as _row_bounds
-from solvers.certificates.plane.bounds import _second_derivatives as _second_derivatives
-from solvers.certificates.plane.lp import INITIAL_DIRECTIONS as INITIAL_DIRECTIONS
+from solvers.certificates.plane.bounds import (
+    _PointData,
+    _RowBounds,
+    direction_group,
+)
 from solvers.certificates.plane.lp import LP_SOLVER, LPFailure, _initial_modes, _solve_lp
-from solvers.certificates.plane.lp import TIGHT_DUAL as TIGHT_DUAL
-from solvers.certificates.plane.lp import WINDOW_FRACTION as WINDOW_FRACTION
-from solvers.certificates.plane.lp import _Rays as _Rays
-from solvers.certificates.plane.lp import _window as _window
-from solvers.certificates.plane.mesh import _distance_to_path as _distance_to_path
-from solvers.certificates.plane.mesh import _hex_lattice as _hex_lattice
 from solvers.certificates.plane.mesh import _initial_points, _Mesh, _outline, _zigzag
-from solvers.certificates.plane.mesh import _inside_polygon as _inside_polygon
-from solvers.certificates.plane.mesh import _spacing as _spacing
 from solvers.certificates.plane.reach import reachable_triangles, speed_floor
 from solvers.inputs import (
     SHORT_PAIR,
-    as_metric,
     check_segments,
     domain_scale,
     is_short_pair,
 )
-from solvers.result import CertifyResult as CertifyResult  # defined there, exported here
+from solvers.result import CertifyResult
 from solvers.status import CertifyStatus
 
-__all__ = ["CertifyResult", "MeshSpec", "certify"]
+__all__ = ["MeshSpec", "certify_plane"]
 
 _LOG = logging.getLogger(__name__)
 
@@ -129,7 +115,7 @@ GOAL_FLOOR = 0.3
 
 @dataclass(frozen=True)
 class MeshSpec:
-    """Mesh and refinement settings of [`certify`][solvers.certificates.plane.certificate.certify].
+    """Mesh and refinement settings of the 2-D certificate (`certify_plane`).
 
     Lengths are in coordinates. The first mesh has spacing ``h_path`` within ``corridor`` of
     the solver's path, growing by ``grade`` per unit distance beyond, up to ``h_far``.
@@ -213,58 +199,41 @@ def _convexity(m: Metric, points: np.ndarray) -> tuple[str, str]:
             "(an infimum of lengths, unchanged by convexification)")
 
 
-def certify(
-    metric: Metric | str,
+def certify_plane(
+    m: Metric,
     start: Any,
     goal: Any,
     mesh: MeshSpec | str | None = None,
     *,
     path: Any = None,
     time_limit: float | None = None,
-    strict: bool = False,
 ) -> CertifyResult:
-    """Certified interval ``lower <= d(start, goal) <= upper`` on a 2-D metric (a
-    conformal metric of dimension > 3, hook ``conformal_factor_sx``, goes to
-    `solvers.certificates.conformal.split.certify_conformal_best`: a
-    ``SplitCertifyResult``, the best of its bounds).
+    """Certified interval ``lower <= d(start, goal) <= upper`` on a 2-D metric (what
+    [`solvers.certify`][solvers.certify] runs for one, after its check of the metric:
+    ``m`` is a `Metric` object).
 
     ``start``, ``goal``: points ``(2,)`` in the domain. ``mesh``: a `MeshSpec` or a
     preset name (``"coarse"``, ``"default"`` (also for None), ``"fine"``). ``path``
-    ``(n+1, 2)``: a curve
-    from start to goal for the upper bound and the first mesh (default: solved with
-    `solvers.solve_geodesic` at ``mesh.segments`` segments). ``time_limit``
-    (seconds): no new refinement round starts after it. The upper bound is the path's
-    length plus its quadrature error estimate; the lower bound is the dual bound
-    described in the module docstring. Raises `InputError` for a metric that is
+    ``(n+1, 2)``: a curve from start to goal for the upper bound and the first mesh
+    (default: solved with `solvers.solve_geodesic` at ``mesh.segments`` segments).
+    ``time_limit`` (seconds): no new refinement round starts after it. The upper bound is
+    the path's length plus its quadrature error estimate; the lower bound is the dual
+    bound described in the module docstring. Raises `InputError` for a metric that is
     not 2-D (or whose domain is not a box or a disk), points outside the domain, or bad
-    options. ``strict=True`` raises [`SolverError`][solvers.SolverError] unless the status is
-    ``CERTIFIED`` (the interval is proven either way).
+    options.
 
     The input is checked here, once (`_check_request`); the steps below trust it:
     `_upper_bound` (the solve, or the given path), `_lower_bound` (the
     refinement rounds), `_outcome` (status and message) and `_result`.
     """
     t_start = time.perf_counter()
-    m = as_metric(metric)
-    if m.dim > 3 and m.provides("conformal_factor_sx"):  # n-D conformal (issue 46, item 3)
-        from solvers.certificates.conformal.certificate import ConformalSpec
-        from solvers.certificates.conformal.split import certify_conformal_best
-
-        spec = ConformalSpec.preset(mesh) if isinstance(mesh, str) else mesh
-        res = certify_conformal_best(m, start, goal,
-                                     spec if isinstance(spec, ConformalSpec) else None,
-                                     path=path)
-        return res.strict() if strict else res  # type: ignore[return-value]
-    if m.dim != 2:  # any other dimension: a verified potential (issue 46, items 1-2)
-        from solvers.certificates.nd.certificate import certify_nd
-
-        res = certify_nd(m, start, goal, mesh, path=path)  # type: ignore[arg-type]
-        return res.strict() if strict else res  # type: ignore[return-value]
+    if m.dim != 2:
+        raise InputError(f"the plane certificate is for 2-D metrics; {m.name} is {m.dim}-D "
+                         "(solvers.certify picks the certificate by dimension)")
     spec, poly, s, g = _check_request(m, start, goal, mesh, time_limit)
     up = _upper_bound(m, s, g, spec, path)
     low = _lower_bound(m, poly, up, s, g, spec, time_limit, t_start)
-    res = _result(m, s, g, spec, poly, up, low, t_start)
-    return res.strict() if strict else res
+    return _result(m, s, g, spec, poly, up, low, t_start)
 
 
 def _check_request(m: Metric, start: Any, goal: Any, mesh: MeshSpec | str | None,
@@ -325,10 +294,12 @@ def _upper_bound(m: Metric, s: np.ndarray, g: np.ndarray, spec: MeshSpec,
     t0 = time.perf_counter()
     if path is None:
         from solvers.geodesic.pair_solver import resolve_method, solve_pair
+        from solvers.geodesic.request import SolveRequest, seed_plan
 
         n = check_segments(m, spec.segments if spec.segments is not None
                            else 4 * m.task.segments)
-        sol = solve_pair(m, s, g, n, method=resolve_method(m, "auto"))
+        how = resolve_method(m, "auto")
+        sol = solve_pair(SolveRequest(m, n, seed_plan(m, None, how), how), s, g)
         pts = np.asarray(sol.points, float)
         solver_status = sol.status
     else:

@@ -1,4 +1,4 @@
-"""The linear programs of `solvers.certificates.plane.certificate.certify`: the best P2 potential on a mesh.
+"""The linear programs of `solvers.certificates.plane.certificate.certify_plane`: the best P2 potential on a mesh.
 
 Kept apart from `solvers.certify` (one home per idea). Given
 the rows ``grad phi_T(z_m) . v_k <= b[T, m, k]`` that module proves (values of F minus the
@@ -10,7 +10,7 @@ ALL rows and scaled down by its largest row ratio, so the bound it gives is vali
 the LP solver's tolerance. `_initial_modes` chooses the first exact vertices and
 directions of a mesh (near the path, or inherited from the previous mesh's LP).
 
-A failed LP raises `LPFailure`, which `solvers.certificates.plane.certificate.certify` turns into
+A failed LP raises `LPFailure`, which `solvers.certificates.plane.certificate.certify_plane` turns into
 `solvers.CertifyStatus.LP_FAILED`. Nothing here imports `solvers.certify`
 (which imports these names, and re-exports them for code that reaches them as
 ``solvers.certificates.plane.certificate._solve_lp``).

@@ -1,4 +1,4 @@
-"""The meshes `solvers.certificates.plane.certificate.certify` computes its bound on, and a zigzag curve.
+"""The meshes `solvers.certificates.plane.certificate.certify_plane` computes its bound on, and a zigzag curve.
 
 Kept apart from `solvers.certify` (one home per idea) so that
 module keeps the bound code (values of F, interval enclosures of its second derivatives,

@@ -1,4 +1,4 @@
-"""The region a short path can reach, for `solvers.certificates.plane.certificate.certify`.
+"""The region a short path can reach, for `solvers.certificates.plane.certificate.certify_plane`.
 
 The dual bound needs ``dphi(v) <= F(z, v)`` only where a curve from ``x`` to ``y`` no
 longer than the upper bound ``U`` can go. With a PROVEN speed floor ``F(z, v) >= m |v|``
