@@ -21,19 +21,16 @@ if TYPE_CHECKING:
         check_output_path,
     )
     from finsler.metrics.base import LengthBounds, LengthEstimate, Metric, Task, TrainingSettings
-    from finsler.metrics.paper import (
-        MATSUMOTO_CONVEX_RADIUS,
-        CarLike,
+    from finsler.metrics.closed_form import (
         ClosedFormMetric,
         Euclidean,
-        Matsumoto,
         Minkowski,
-        PandaPole,
         Poincare,
         PoincareSlab,
         Randers,
         Sphere,
     )
+    from finsler.metrics.paper import MATSUMOTO_CONVEX_RADIUS, CarLike, Matsumoto, PandaPole
     from finsler.pairs import (
         DEFAULT_EVAL_SEED,
         VALIDATION_SEED,
@@ -51,12 +48,12 @@ if TYPE_CHECKING:
 _LAZY = {
     "Box": "finsler.domains",
     "CarLike": "finsler.metrics.paper",
-    "ClosedFormMetric": "finsler.metrics.paper",
+    "ClosedFormMetric": "finsler.metrics.closed_form",
     "DEFAULT_EVAL_SEED": "finsler.pairs",
     "Disk": "finsler.domains",
     "Domain": "finsler.domains",
     "DomainError": "finsler.errors",
-    "Euclidean": "finsler.metrics.paper",
+    "Euclidean": "finsler.metrics.closed_form",
     "HOOKS": "finsler.hooks",
     "InputError": "finsler.errors",
     "JointBox": "finsler.domains",
@@ -67,14 +64,14 @@ _LAZY = {
     "Metric": "finsler.metrics.base",
     "MetricHooks": "finsler.hooks",
     "MetricSpec": "finsler.spec",
-    "Minkowski": "finsler.metrics.paper",
+    "Minkowski": "finsler.metrics.closed_form",
     "OutputError": "finsler.infra.files",
     "PandaPole": "finsler.metrics.paper",
-    "Poincare": "finsler.metrics.paper",
-    "PoincareSlab": "finsler.metrics.paper",
+    "Poincare": "finsler.metrics.closed_form",
+    "PoincareSlab": "finsler.metrics.closed_form",
     "Product": "finsler.domains",
-    "Randers": "finsler.metrics.paper",
-    "Sphere": "finsler.metrics.paper",
+    "Randers": "finsler.metrics.closed_form",
+    "Sphere": "finsler.metrics.closed_form",
     "Task": "finsler.metrics.base",
     "TrainingSettings": "finsler.metrics.base",
     "UnknownMetricError": "finsler.errors",

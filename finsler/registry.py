@@ -12,17 +12,15 @@ from typing import Any
 
 from finsler.errors import InputError, UnknownMetricError, short
 from finsler.metrics.base import Metric
-from finsler.metrics.paper import (
-    CarLike,
+from finsler.metrics.closed_form import (
     Euclidean,
-    Matsumoto,
     Minkowski,
-    PandaPole,
     Poincare,
     PoincareSlab,
     Randers,
     Sphere,
 )
+from finsler.metrics.paper import CarLike, Matsumoto, PandaPole
 
 __all__ = ["check_name", "get_metric", "list_metrics", "metric_class", "register_metric",
            "shared_instance", "unregister_metric"]

@@ -12,7 +12,7 @@ import pytest
 import finsler
 import solvers.newton.driver as batched
 from finsler.errors import InputError
-from finsler.metrics.paper import Euclidean
+from finsler.metrics.closed_form import Euclidean
 from solvers.newton.driver import _best, solve_pairs_batched
 from solvers.seeding.plans import SeedPlan, seed_family
 

@@ -24,7 +24,8 @@ import pytest
 import finsler
 import solvers
 from finsler.errors import InputError
-from finsler.metrics.paper import Matsumoto, Poincare
+from finsler.metrics.closed_form import Poincare
+from finsler.metrics.paper import Matsumoto
 from solvers import SeedPlan, Status
 from solvers.geodesic.tolerance import richardson
 from solvers.seeding.plans import perturbed_curves

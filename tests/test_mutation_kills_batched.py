@@ -11,7 +11,8 @@ import time
 import numpy as np
 import pytest
 
-from finsler.metrics.paper import CarLike, Euclidean, Poincare
+from finsler.metrics.closed_form import Euclidean, Poincare
+from finsler.metrics.paper import CarLike
 from solvers.newton.driver import (
     AGREE_RTOL,
     BatchOptions,

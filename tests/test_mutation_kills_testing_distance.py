@@ -16,7 +16,7 @@ import pytest
 
 from finsler import Box, Metric, Task
 from finsler.errors import InputError
-from finsler.metrics.paper import Euclidean, Randers
+from finsler.metrics.closed_form import Euclidean, Randers
 from finsler.status import DistanceStatus, Status
 from validation.testing import distance as VD
 from validation.testing.engine import FAILED, INCONCLUSIVE, MAPPED, PASSED, SKIPPED
