@@ -1,4 +1,5 @@
-"""Certified intervals in 3-D (issue 46, items 1-2): ``solvers.certificates.nd.certificate`` on fresh pairs of
+"""Certified intervals in 3-D (issue 46, items 1-2): ``solvers.certificates.nd.certificate`` on
+fresh pairs of
 the closed-form ``poincare-slab`` (every interval must contain the exact distance) and of
 ``carlike`` (the lower bound must stay below the solver's path length, the best length
 known for a fresh pair). Prints a table and writes it to benchmarks/results/ via

@@ -2,8 +2,8 @@
 a potential whose gradient is AFFINE in the cell (a quadratic, P2, element) — the
 measurement behind the next step of issue 46's 3-D bar (gap 1e-2).
 
-The proof of :mod:`solvers.certificates.nd.certificate` needs, on every cell ``Z`` and direction ``w``,
-an upper bound of ``H(z) = p(z) . w - F(z, w)`` over ``z`` in ``Z``. Two ways are
+The proof of :mod:`solvers.certificates.nd.certificate` needs, on every cell ``Z`` and direction
+``w``, an upper bound of ``H(z) = p(z) . w - F(z, w)`` over ``z`` in ``Z``. Two ways are
 compared on cells of width ``h`` (cubes), each against the largest of 4000 sampled values
 of ``H`` (the truth, from below):
 

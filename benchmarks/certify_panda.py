@@ -6,7 +6,8 @@ the full run before it on ``sample_pairs(panda, 4, 11)``; seed 20261211 reported
 ungrouped split, 20261217 the grouped one before the full run's budget was raised: its
 results were seen, so 20261218 is the report seed), this runs
 :func:`solvers.certificates.conformal.split.certify_conformal_split`: the full run of
-:func:`solvers.certificates.conformal.certificate.certify_conformal` with the work budget ``--max-boxes``
+:func:`solvers.certificates.conformal.certificate.certify_conformal` with the work budget
+``--max-boxes``
 (box enclosures), then the factor's parts (nested ones grouped; ``--no-group``: each part
 alone), each with ``--part-boxes``, and the whole factor in 4 coordinates with
 ``--merged-boxes``. It prints per pair:

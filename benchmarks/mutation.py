@@ -37,9 +37,11 @@ ROOT = Path(__file__).resolve().parents[1]
 #: group -> (files mutated, fast focused tests run against them). mutmut runs, per
 #: mutant, only the selected tests that called the mutated function.
 GROUPS: dict[str, tuple[list[str], list[str]]] = {
-    "block_tridiagonal": (["solvers/newton/block_tridiagonal.py"], ["tests/test_block_tridiagonal.py",
+    "block_tridiagonal": (["solvers/newton/block_tridiagonal.py"],
+                          ["tests/test_block_tridiagonal.py",
                                                              "tests/test_block_tridiagonal_rows.py"]),
-    "certify_mesh": (["solvers/certificates/plane/mesh.py"], ["tests/test_mutation_kills_certify_mesh.py"]),
+    "certify_mesh": (["solvers/certificates/plane/mesh.py"],
+                     ["tests/test_mutation_kills_certify_mesh.py"]),
     # certify_lp: its kill tests and the repair's (which run _solve_lp's repair branch)
     "certify_lp": (["solvers/certificates/plane/lp.py"], ["tests/test_mutation_kills_certify_lp.py",
                                                "tests/test_certify_repair.py"]),

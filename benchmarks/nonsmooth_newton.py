@@ -250,7 +250,8 @@ def whole(m: finsler.Metric, pairs: np.ndarray, n: int, plan: SeedPlan, ipopt: b
     if before:
         eo = np.array([r.energy for r in old])
         en = np.array([r.energy for r in new])
-        summary += (f". Before (`solvers/newton/interior.py` at {before}, the same pairs in the same "
+        summary += (f". Before (`solvers/newton/interior.py` at {before}, the same pairs in "
+                    f"the same "
                     f"run): wall {(wb1 - wb0) / K:.2f} s, CPU {(cb1 - cb0) / K:.2f} s per pair, "
                     f"after/before CPU {(c1 - c0) / (cb1 - cb0):.2f}; energies after/before - "
                     f"1: max {np.max(en / eo - 1):+.1e}, min {np.min(en / eo - 1):+.1e}; "

@@ -44,7 +44,7 @@ if TYPE_CHECKING:
 
 # Public names -> defining module, imported on first use (PEP 562): `import finsler` and
 # `from finsler.errors import InputError` stay cheap (no CasADi, numpy) for the command line's
-# --help; `from finsler import Metric` works as before.
+# --help.
 _LAZY = {
     "Box": "finsler.domains",
     "CarLike": "finsler.metrics.paper",

@@ -250,7 +250,8 @@ class CertifyStop(str, Outcome):
     NO_REFINEMENT = "no_refinement"
     """No triangle (cell, box) left to refine."""
     LP_ROUNDS = "lp_rounds"
-    """`solvers.certificates.nd.certificate`: the LP rounds of the last mesh found no verified bound."""
+    """The n-D certificate (`solvers.certificates.nd`): the LP rounds of the last mesh found
+    no verified bound."""
     MAX_CELLS = "max_cells"
     """`solvers.certificates.nd.certificate`: the ``max_cells`` budget of its mesh."""
     MAX_BOXES = "max_boxes"

@@ -246,7 +246,7 @@ def test_cli_certify_json() -> None:
     ("args", "message"),
     [
         (["--metric", "panda-pole", "--start", "0,0,0,-1,0,1,0", "--goal", "0,0,0,-1,0,1,0"],
-         "start equals goal"),  # 7-D conformal: solvers.certificates.conformal.certificate (issue 46)
+         "start equals goal"),  # 7-D conformal: solvers.certificates.conformal
         (["--metric", "matsumoto", "--start", "1.2,0", "--goal", "0,0"], "outside the domain"),
         (["--metric", "matsumoto", "--start", "0.1,0", "--goal", "0,0", "--mesh", "huge"],
          "unknown mesh preset"),

@@ -1,5 +1,5 @@
-"""Certified intervals in any dimension (solvers.certificates.nd.certificate, issue 46): soundness against
-closed forms, and the verification catches a potential that breaks the dual condition
+"""Certified intervals in any dimension (solvers.certificates.nd.certificate, issue 46): soundness
+against closed forms, and the verification catches a potential that breaks the dual condition
 (a wrong margin or a broken enclosure), so these tests can fail."""
 
 from __future__ import annotations

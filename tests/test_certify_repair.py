@@ -81,7 +81,8 @@ def test_a_round_short_of_the_target_only_by_broken_rows_is_repaired(
     caplog.set_level(logging.DEBUG, logger="solvers.certificates.plane.lp")
     r = _solve_lp(MESH, b, DIRS, 0, 1, upper=1.001 * value, target=0.05, start=start,
                   max_iter=1)
-    msgs = [rec.getMessage() for rec in caplog.records if rec.name == "solvers.certificates.plane.lp"]
+    msgs = [rec.getMessage() for rec in caplog.records
+            if rec.name == "solvers.certificates.plane.lp"]
     got = [re.fullmatch(r"repaired in (\S+) s: max row ratio (\S+) -> bound (\S+)", m)
            for m in msgs]
     got = [g for g in got if g is not None]

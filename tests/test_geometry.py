@@ -117,7 +117,8 @@ def test_spray_is_refused_for_a_non_smooth_metric() -> None:
 # -- built once per metric -----------------------------------------------------------------
 def test_derived_geometry_is_built_once_per_metric() -> None:
     m = finsler.get_metric("matsumoto")
-    assert solvers.continuum.expmap.spray is geometry.spray and solvers.continuum.expmap.Spray is geometry.Spray
+    expmap = solvers.continuum.expmap
+    assert expmap.spray is geometry.spray and expmap.Spray is geometry.Spray
     sp = geometry.spray(m)
     assert isinstance(sp, geometry.Spray) and geometry.spray(m) is sp
     assert m.casadi_hessian is m.casadi_hessian and m.casadi_hessian_x is m.casadi_hessian_x

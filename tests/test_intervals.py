@@ -1,5 +1,5 @@
-"""Interval enclosures of lowered CasADi programs (``finsler.enclosures.intervals``): every value the
-function takes on a box lies in the enclosure (sampled points of the box, elementary
+"""Interval enclosures of lowered CasADi programs (``finsler.enclosures.intervals``): every value
+the function takes on a box lies in the enclosure (sampled points of the box, elementary
 functions with known ranges), undefined operations give the whole line, and the
 Hessians the certification bounds with are enclosed for every 2-D metric."""
 

@@ -28,8 +28,9 @@ from solvers.newton.driver import (
     residuals,
     solve_pairs_batched,
 )
-from solvers.newton.energy import NewtonOptions, NewtonStatus
+from solvers.newton.energy import NewtonOptions
 from solvers.seeding.plans import SeedPlan
+from solvers.status import NewtonStatus
 
 C, MI, ST = int(NewtonStatus.CONVERGED), int(NewtonStatus.MAX_ITERATIONS), int(
     NewtonStatus.STALLED)

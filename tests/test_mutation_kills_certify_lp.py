@@ -1,4 +1,5 @@
-"""solvers.certificates.plane.lp against independent references, FAST (the mutation-testing selection of
+"""solvers.certificates.plane.lp against independent references, FAST (the mutation-testing
+selection of
 the module, see docs/guides/mutation-testing.md): the rays' exit points by brute force, the
 LP's optimum in closed form (a uniform Euclidean row set: the best potential rises by
 exactly |goal - start|) and by scipy's HiGHS (``linprog``) on the full row set, strong
@@ -396,7 +397,8 @@ def test_each_round_logs_its_rows_value_ratio_and_bound(
     caplog.set_level(logging.DEBUG, logger="solvers.certificates.plane.lp")
     r = _solve_lp(MESH, _weights(), DIRS, 0, 1, upper=100.0, target=1e-6, start=_none(),
                   max_iter=1)
-    msgs = [rec.getMessage() for rec in caplog.records if rec.name == "solvers.certificates.plane.lp"]
+    msgs = [rec.getMessage() for rec in caplog.records
+            if rec.name == "solvers.certificates.plane.lp"]
     assert len(msgs) == 1
     got = re.fullmatch(r"LP rows (\d+) \((\d+) exact vertices\) (\S+) s: value (\S+), "
                        r"max row ratio (\S+) -> bound (\S+)", msgs[0])

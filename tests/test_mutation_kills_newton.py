@@ -18,7 +18,8 @@ import pytest
 import finsler
 from solvers.inputs import domain_scale
 from solvers.newton.driver import _Runner, residuals
-from solvers.newton.energy import NewtonStatus, energy_residual
+from solvers.newton.energy import energy_residual
+from solvers.status import NewtonStatus
 
 
 def euclid_residual(pts: np.ndarray, scale: float) -> np.ndarray:
@@ -561,14 +562,8 @@ def test_a_coordinate_within_bound_eps_of_a_side_pushed_out_is_held(c, side, hel
     first two cases: the sign decides, not the size). Pushed outwards (g > 0 at the left
     side, g < 0 at the right) the coordinate is held: its gradient entry leaves the
     residual and one Newton step leaves it where it is; pulled inwards it is free."""
-    from solvers.newton.backends import backend_for
-    from solvers.newton.energy import (
-        _NUMPY_OPS,
-        NewtonOptions,
-        NewtonState,
-        _to_field,
-        energy_terms,
-    )
+    from solvers.newton.backends import _NUMPY_OPS, backend_for
+    from solvers.newton.energy import NewtonOptions, NewtonState, _to_field, energy_terms
 
     m, scale = _Tilt(c), 2.0
     eps = 1e-9 * scale
@@ -768,7 +763,8 @@ def test_energy_terms_in_chunks_equal_one_evaluation(device) -> None:
     """Five paths of 4 segments with ``chunk=8``: numpy evaluates 8 // 4 = 2 paths at a
     time (2, 2, 1), torch all five at once; the terms equal those of one evaluation of
     everything (the default chunk) to the last bit on numpy."""
-    from solvers.newton.energy import _to_field, backend_for, energy_terms
+    from solvers.newton.backends import backend_for
+    from solvers.newton.energy import _to_field, energy_terms
 
     ops = backend_for(device)
     rng = np.random.default_rng(5)

@@ -16,17 +16,16 @@ import torch
 import finsler
 import solvers
 from finsler.errors import InputError
+from solvers.newton.backends import _NUMPY_OPS, backend_for
+from solvers.newton.block_tridiagonal import block_tridiagonal_solve
 from solvers.newton.energy import (
-    _NUMPY_OPS,
     NewtonOptions,
-    NewtonStatus,
     _to_field,
-    backend_for,
-    block_tridiagonal_solve,
     energy_residual,
     energy_terms,
     newton_energy,
 )
+from solvers.status import NewtonStatus
 
 
 def _dense(a: np.ndarray, o: np.ndarray) -> np.ndarray:

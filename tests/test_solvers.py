@@ -243,7 +243,8 @@ def test_trivial_pair() -> None:
 
 def test_non_convergence_is_a_status_and_strict_raises(monkeypatch) -> None:
     """With a 2-iteration IPOPT budget nothing converges: the result says so, strict raises."""
-    import solvers.geodesic.pair_solver as sp  # the module whose solves call energy_nlp / BatchOptions
+    # the module whose solves call energy_nlp / BatchOptions
+    import solvers.geodesic.pair_solver as sp
     from solvers.transcription import EnergyNLP
 
     assert Status.from_ipopt("Maximum_Iterations_Exceeded") is Status.MAX_ITERATIONS

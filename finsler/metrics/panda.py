@@ -26,7 +26,7 @@ from finsler.errors import InputError
 from finsler.lowering import LoweredFunction, lower
 
 if TYPE_CHECKING:  # imported in load_panda_model: the joint limits (the metric's domain,
-    import pinocchio  # `geodesics metrics`) need no Pinocchio (issue 47)
+    import pinocchio  # `geodesics metrics`) need no Pinocchio
 
 __all__ = [
     "ARM_JOINT_NAMES",

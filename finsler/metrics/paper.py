@@ -46,47 +46,16 @@ class Matsumoto(Metric):
 
     name: ClassVar[str] = "matsumoto"
     task: ClassVar[Task] = Task(depth=6, eps=0.1)
-    # The paper's settings (appendix B.1) and the toolkit's measured training defaults
-    # (read by learn: learn.config.default_config / paper_config, learn.seq).
-    # one pass per collection plus the path-energy term (car-like; Matsumoto's defaults until
-    # issue 25, see below). Budgets count every evaluation of C (all-inclusive). Matsumoto
-    # then: the energy of the actor's paths between 4 fresh pairs per
-    # actor step (5504 in trees + 17 steps * 4 pairs * 64 = 9856 per collection, 1.79x the
-    # trees' count): at the paper's 2e7 budget 98% on tuning pairs against 96% with 8 pairs
-    # and 95.5% with 16 (session-4 note), so 1e8 trains on about the 6e7 trees' evaluations
-    # the shipped policy (16 pairs, 2.5e8 all-inclusive) did. Car-like: 16 pairs, 13.4x the
-    # trees' count, 4e8 = the shipped policy's 3e7 trees. NOT model-free: the energy
-    # differentiates C.
-    # The actor relative to each pair's length (actor_relative, issue 25): 2 seeds at 1e8,
-    # 500 fresh pairs (seed 777), best checkpoints, policy alone: ratio to exact mean
-    # 1.0173 / 1.0139, p95 1.088 / 1.043, max 1.43 / 1.50, success 99.4 / 99.6%, against
-    # the absolute residual actor's 1.0266 / 1.0354, 1.121 / 1.179, 1.92 / 1.75, 99.6 /
-    # 99.0% (same code otherwise); validation mean length 1.458 / 1.455 against 1.482 /
-    # 1.479. Panda, one seed: no difference (not its default); car-like: below.
-    # Matsumoto is MODEL-FREE since issue 25: with the relative actor, Algorithm 1 alone (3
-    # passes per collection, values of C only) beats the path energy above. 1e8, seeds 0 /
-    # 1, 500 fresh pairs (seed 777), best checkpoints, policy alone: success 99.6 / 99.4%,
-    # ratio mean 1.0117 / 1.0104, p95 1.038 / 1.032, max 1.30 / 1.19; validation best 100 /
-    # 99.8%, mean length 1.4380 / 1.4388 (the path-energy defaults above: 1.4578 / 1.4545).
-    # And the critic relative to each pair's length (critic_transform="relative", issue
-    # 25): 1e8, seeds 0 / 1, same pairs, best checkpoints: success 99.8 / 99.8%, ratio mean
-    # 1.0063 / 1.0100, p95 1.019 / 1.030, max 1.31 / 1.37 (last checkpoints 100 / 100%,
-    # 1.0072 / 1.0076, 1.018 / 1.025, 1.36 / 1.18); validation best 100 / 100%, mean length
-    # 1.4352 / 1.4302, last 99.4 / 99.8%, 1.4356 / 1.4343.
-    # And a 128-128-128 actor beside the 64-64 critic (issue 25; the relative actor and
-    # critic had a 64-64 actor): 1e8, seeds 0 / 1, chosen on 300 tuning pairs (seed 4242,
-    # best checkpoints: ratio mean 1.0043 / 1.0048, p95 1.011 / 1.013 against the 64-64
-    # actor's 1.0057 / 1.0075, 1.014 / 1.018); 500 fresh pairs (seed 777), best: success
-    # 100 / 100%, ratio mean 1.0045 / 1.0052, p95 1.014 / 1.011, max 1.22 / 1.47;
-    # validation best 100 / 100%, mean length 1.4288 / 1.4308, last 100 / 99.8%. 1.4x
-    # slower to train (6926 s for the two runs side by side, against 4977 s).
+    # The paper's settings (appendix B.1) and the toolkit's measured training defaults,
+    # read by learn (learn.config.default_config / paper_config, learn.seq); the
+    # measurements behind each default: docs/guides/training-defaults.md.
     training: ClassVar[TrainingSettings] = TrainingSettings(
         paper_lr=3e-5, paper_timesteps=20_000_000,
         defaults=dict(timesteps=100_000_000, hidden=(128, 128, 128), critic_hidden=(64, 64),
                       epochs=3, fused_adam=True, actor_relative=True,
                       critic_transform="relative"),
-        # model-free (Algorithm 1 alone, values of C only): 3 epochs (session 1: first
-        # >= 95% at 9.9e6 evaluations; learn.config.model_free_overrides)
+        # model-free (Algorithm 1 alone, values of C only): 3 epochs, the fastest to 95 %
+        # (learn.config.model_free_overrides)
         model_free=dict(epochs=3),
     )
     reversible: ClassVar[bool] = False
@@ -138,23 +107,15 @@ class CarLike(Metric):
 
     name: ClassVar[str] = "carlike"
     task: ClassVar[Task] = Task(depth=8, eps=0.1)
-    # The paper's settings (appendix B.1) and the toolkit's measured training defaults
-    # (read by learn: learn.config.default_config / paper_config, learn.seq).
-    # Car-like: the energy with p = 4 (path_energy_power), which weights the costliest
-    # segments (those that decide success) more; with p = 2 the default run declined late
-    # (seed 1: 0.97 at 87M to 0.87-0.93 at 124-177M, validation set of 100), trading
-    # success for length (issue 25). The actor relative to each pair's length (2 seeds at
-    # 4e8, 500 fresh pairs, seed 777, ratios on the first 100, best checkpoints, policy
-    # alone): ratio mean 1.146 / 1.155, median 1.046 / 1.049, p95 1.58 / 1.54, max 2.90 /
-    # 3.32, success 98.4 / 98.4%, against the absolute actor's 1.171 / 1.189, 1.073 /
-    # 1.076, 1.67 / 1.62, 2.79 / 2.87, 98.2 / 99.0%; validation best 99.6 / 99.4%, mean
-    # length 7.570 / 7.585 (absolute seed 0: 99.8%, 7.722), last 99.0 / 99.2%.
+    # The paper's settings (appendix B.1) and the toolkit's measured training defaults,
+    # read by learn (learn.config.default_config / paper_config, learn.seq); the
+    # measurements behind each default: docs/guides/training-defaults.md.
     training: ClassVar[TrainingSettings] = TrainingSettings(
         paper_lr=1e-6, paper_timesteps=80_000_000,
         defaults=dict(timesteps=400_000_000, hidden=(128, 128), epochs=1, fused_adam=True,
                       path_energy_weight=1.0, path_energy_pairs=16, path_energy_power=4.0,
                       actor_relative=True),
-        # model-free (Algorithm 1 alone): 2 epochs (session 1)
+        # model-free (Algorithm 1 alone): 2 epochs
         model_free=dict(epochs=2),
     )
     reversible: ClassVar[bool] = False
@@ -209,16 +170,8 @@ class CarLike(Metric):
                 "ubw": [ca.inf], "g": g, "lbg": [0.0, 0.0], "ubg": [ca.inf, ca.inf]}
 
     #: Tangent lengths (times ``radius``) of the Hermite seed curves, and how their
-    #: heading is laid (see `seed_curves`). Chosen on 30 tuning pairs
-    #: (``sample_pairs(carlike, 30, 11)``, 256 segments, IPOPT from each curve alone): the
-    #: default seeds without these missed the best energy found by 1e-4 on 5 pairs (by up
-    #: to 4.7x); four of these curves (shift 0.5 and 1, track 1, linear 0.5) found all 5.
-    #: ``raw`` (12-15 of 30 pairs) and ``clip`` (16-18) found no basin the others missed
-    #: and cost twice the solve time, so they are not in the default set. Tangent 6
-    #: (issue 45): a curve that leaves the disk's edge, projected onto it, seeds the
-    #: basins that loop round (pair 1 of ``sample_pairs(carlike, 12, 20261206)``: energy
-    #: 0.1035 by a loop against 0.3069 straight across; IPOPT reached the loop from tangent
-    #: 2 by a long first step, the batched interior point from tangent 6 only).
+    #: heading is laid (see `seed_curves`): the set that found every basin of the
+    #: tuning pairs at the least solve time (docs/guides/training-defaults.md).
     SEED_TANGENTS: ClassVar[tuple[float, ...]] = (0.25, 0.5, 1.0, 2.0, 6.0)
     SEED_HEADINGS: ClassVar[tuple[str, ...]] = ("track", "shift", "linear")
 
@@ -280,45 +233,9 @@ class PandaPole(Metric):
     pole_y: float = 0.0
 
     name: ClassVar[str] = "panda-pole"
-    # The paper's settings (appendix B.1) and the toolkit's measured training defaults
-    # (read by learn: learn.config.default_config / paper_config, learn.seq).
-    # path energy at weight 1 was tried here and failed (1% success at 7.5e6 timesteps:
-    # the joint-space energy dwarfs the critic's term). Scale-free (path_energy_scale=
-    # "straight", weight 1, seed 0, 1e7 all-inclusive) trains, but loses on 500 fresh pairs
-    # (seed 777) against Algorithm 1 alone at the same budget (95.8/83.4/43.6% at eps
-    # 20/10/5, ratio 1.067): 4 pairs per step 83.2/48.8/9.0%, ratio 1.41 (10.5 min); 1 pair
-    # per step 82.4/57.6/13.4%, 1.40 (21 min). Panda keeps Algorithm 1 alone, with eq. (6)
-    # as a power mean (actor_loss_power, issue 25; model-free): its paths failed eps 10 / 5
-    # on uneven splits. Tuning pairs (seed 4242), best checkpoints, seeds 0 / 1, success at
-    # eps 20 / 10 / 5: p = 8 98.6 / 97.6, 90.6 / 88.6, 59.8 / 59.0%, mean length 119.5 /
-    # 120.5; p = 16 98.4 / 98.0, 89.8 / 89.2, 59.6 / 60.2%, 120.7 / 121.4 (a tie on
-    # success, paths 1% longer); p = 4 (seed 0) 96.0, 87.6, 58.2%; p = 2 at 2e7 (the
-    # paper's budget) 98.4 / 98.0, 87.0 / 88.8, 54.8 / 53.8%; the policy p = 8 replaced
-    # (p = 2, 1e7) 96.6, 84.8, 51.2%. At the paper's budget, 2e7 (the default since issue
-    # 25), p = 8 keeps its balance and the paths get shorter, as eq. (6)'s did: tuning
-    # pairs 98.6 / 99.0, 91.6 / 92.0, 61.6 / 60.0%, mean length 118.3 / 118.4; validation
-    # best 99.4 / 99.4%, last 99.2 / 98.6%. Fresh pairs:
-    # benchmarks/results/balanced-halves-moved.md.
-    # The actor 256-256-256 (the critic stays 128-128, critic_hidden; issue 25): the critic
-    # already knew balanced midpoints, the 128-128 actor did not reproduce them
-    # (benchmarks/results/balanced-halves-moved.md, "What limits the balance"). Same
-    # budget and schedule, seeds 0 / 1, tuning pairs, best
-    # checkpoints: 99.2 / 98.4, 95.2 / 94.8, 67.4 / 66.4%, mean length 116.5 / 116.2
-    # (128-128 above: 98.6 / 99.0, 91.6 / 92.0, 61.6 / 60.0%, 118.3 / 118.4); validation
-    # best 99.8 / 100%, last 98.4 / 99.2%. Training is about 1.7x slower (4400 against 7600
-    # evaluations of C per second, two runs sharing the 2 cores).
-    # The best checkpoint chosen by validation success at eps 10 first (select_eps; at the
-    # task's eps 20 every late checkpoint scores 99-100%), and 3000 polish steps against
-    # the frozen critic after the budget (polish_steps; no evaluation of C, model-free).
-    # Same training otherwise (the validation rows before the polish equal the runs
-    # above, all digits: seed 0's 148, seed 1's first 42, the ones compared). Seeds 0 / 1,
-    # tuning pairs, best checkpoints: 99.6 / 99.8, 95.4 / 96.8, 69.4 / 69.4%, mean length
-    # 116.0 / 115.5 (above: 99.2 / 98.4, 95.2 / 94.8, 67.4 / 66.4%, 116.5 / 116.2); seed
-    # 0's best is a polished checkpoint, seed 1's one at 1.87e7. Fresh pairs:
-    # benchmarks/results/polishing-moved.md.
-    # The budget stays 2e7: 3e7 with these settings (seeds 0 / 1) gains nothing on the tuning
-    # pairs (best 99.4 / 99.6, 96.8 / 95.8, 69.6 / 69.0%) nor on the fresh pairs
-    # (benchmarks/results/polishing-moved.md).
+    # The paper's settings (appendix B.1) and the toolkit's measured training defaults,
+    # read by learn (learn.config.default_config / paper_config, learn.seq); the
+    # measurements behind each default: docs/guides/training-defaults.md.
     training: ClassVar[TrainingSettings] = TrainingSettings(
         paper_lr=1e-6, paper_timesteps=20_000_000,
         defaults=dict(timesteps=20_000_000, hidden=(256, 256, 256), critic_hidden=(128, 128),

@@ -3,10 +3,9 @@ and its inverse.
 
 The geodesic equation ``g(x, x') x'' = b(x, x')`` (the spray) is derived symbolically
 from the metric's one SX expression ``F(x, v)`` and its fundamental tensor, once per
-metric, on the metric side: `finsler.geometry.Spray` / `finsler.geometry.spray`
-(re-exported here as ``solvers.continuum.expmap.Spray`` / ``spray``). The equation is meaningful only
-where ``g(x, x')`` is positive definite (``F`` strongly convex, i.e. Finsler):
-`exp_map` refuses a start where ``F(x, .)`` is not strongly convex and stops with
+metric, on the metric side (`finsler.geometry.Spray` / `finsler.geometry.spray`). The
+equation is meaningful only where ``g(x, x')`` is positive definite (``F`` strongly convex, i.e.
+Finsler): `exp_map` refuses a start where ``F(x, .)`` is not strongly convex and stops with
 status ``NOT_CONVEX`` when the curve reaches such a region.
 
 `exp_map` integrates the first-order system ``(x, v)' = (v, -2 G(x, v))`` with
@@ -40,8 +39,7 @@ from solvers.inputs import as_metric, check_point, is_short_pair
 from solvers.result import DistanceStatus, SolverError
 from solvers.status import ExpStatus, LogStatus
 
-__all__ = ["ExpResult", "ExpStatus", "LogResult", "LogStatus", "Spray", "exp_map", "log_map",
-           "spray"]
+__all__ = ["ExpResult", "ExpStatus", "LogResult", "LogStatus", "exp_map", "log_map"]
 
 #: Default relative and absolute tolerances of the DOP853 integration.
 RTOL = 1e-13
@@ -75,7 +73,8 @@ class ExpResult(Result):
     ``F(gamma, gamma')`` over the integrator's steps (0 in exact arithmetic: a check of the
     integration). ``times`` ``(T,)`` / ``curve`` ``(T, dim)`` sample the curve when it was
     requested (``return_curve``), else they are empty. ``jacobian`` ``(dim, dim)`` is
-    ``d gamma(t_end) / d velocity`` when computed (by [`log_map`][solvers.continuum.expmap.log_map]).
+    ``d gamma(t_end) / d velocity`` when computed (by
+    [`log_map`][solvers.continuum.expmap.log_map]).
     """
 
     metric: str

@@ -49,7 +49,7 @@ __all__ = [
     "spectral_nlp",
 ]
 
-#: Degrees tried by [`distance`][solvers.continuum.spectral.distance] (doubling), by metric dimension.
+#: Degrees tried by [`distance`][solvers.distance] (doubling), by metric dimension.
 DEGREES_LOW_DIM = (8, 16, 32, 64, 128)
 DEGREES_HIGH_DIM = (8, 16, 32, 64)
 #: Highest polynomial degree of `distance` (its NLP is dense in the nodes: a degree
@@ -174,7 +174,7 @@ def distance(
     not convex everywhere) ``F(x, .)`` is convex at every quadrature point of the curve; a
     curve through a non-convex region gets ``NOT_CONVEX`` (its length is that of a smooth
     local minimiser, not the continuum infimum). ``strict=True`` raises
-    [`SolverError`][solvers.continuum.spectral.SolverError] unless converged.
+    [`SolverError`][solvers.SolverError] unless converged.
     """
     t0 = time.perf_counter()
     m = as_metric(metric)

@@ -175,21 +175,20 @@ def solve_batch(
     ``geodesics solve --warm-start`` does) the path is one more start of the pair's batched
     solve, beside the global seeds, and restarts refine the best of the plan's own starts:
     never a worse optimum than without it. With ``False`` only that path is solved (a local
-    polish of a path already near its optimum; from a learned path it was measured no faster
-    than the global seeds and worse on 8 of 100 Matsumoto pairs:
-    ``benchmarks/results/warm_start-2026-11-28.md``).
+    polish of a path already near its optimum; from a learned path it is no faster than the
+    global seeds and can end worse: ``docs/guides/warm-starts.md``).
     ``tol``: every pair solved to that relative accuracy of its length
     ([`solve_geodesic`][solvers.geodesic.solve.solve_geodesic]).
 
-    ``method`` / ``device``: as in [`solve_geodesic`][solvers.geodesic.solve.solve_geodesic]. With the
-    batched Newton method (the default where it covers the metric) the pairs are solved in
+    ``method`` / ``device``: as in [`solve_geodesic`][solvers.geodesic.solve.solve_geodesic]. With
+    the batched Newton method (the default where it covers the metric) the pairs are solved in
     chunks of about `NEWTON_ROWS` (pair, seed) problems, every problem of a chunk in
     one batch; the default ``workers`` is then 1 below `NEWTON_POOL_MIN` pairs (the
     batch is vectorised; processes pay off only for many chunks), else the CPU count.
 
     ``strict=True`` raises `SolverError` (the list of results attached) if a pair
     did not converge (min-max included), after every pair was solved and saved; the default
-    (``False``, as before) returns every result with its status. ``names``: how error
+    (``False``) returns every result with its status. ``names``: how error
     messages name the starts and goals (the command line names ``--start`` / ``--goal``).
 
     The input is checked here, once (`_check_batch`); the chunks trust it.

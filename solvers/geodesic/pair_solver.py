@@ -246,7 +246,7 @@ def _ladder(req: SolveRequest, s: np.ndarray, g: np.ndarray,
     nlp = energy_nlp(m, n0)
     solved = [_solve_one(m, nlp, name, seed) for name, seed in seeds]
     # restarts and polish perturb the best of the plan's own solves: a caller-given path (a
-    # learned warm start) is one more candidate and changes nothing they do (issue 47)
+    # learned warm start) is one more candidate and changes nothing they do
     given_names = {name for name, _ in given}
 
     def plan_best(rows: list[_Solve]) -> _Solve | None:

@@ -27,7 +27,7 @@ import numpy as np
 from finsler.metrics.base import Metric
 from solvers.inputs import domain_scale
 from solvers.newton.backends import backend_for
-from solvers.newton.energy import NewtonOptions, NewtonState, NewtonStatus, energy_residual
+from solvers.newton.energy import NewtonOptions, NewtonState, energy_residual
 from solvers.newton.interior import InteriorOptions, covers_interior, interior_energy
 from solvers.seeding.plans import (
     SeedPlan,
@@ -37,6 +37,7 @@ from solvers.seeding.plans import (
     seed_batch,
     warped_batch,
 )
+from solvers.status import NewtonStatus
 
 __all__ = ["BatchOptions", "BatchSolution", "Rows", "covers", "covers_opt_in",
            "solve_pairs_batched"]

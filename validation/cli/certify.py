@@ -2,8 +2,8 @@
 (`solvers.certify`, which picks the certificate by what the metric provides).
 
 JSON keys of the 2-D certificate (``--json``): ``lower``, ``upper``, ``gap``
-((upper - lower) / upper), then ``length``, ``length_error`` (the quadrature estimate of the path's length; ``upper`` is
-the proven bound of it by interval arithmetic), ``upper_source`` (``path`` |
+((upper - lower) / upper), then ``length``, ``length_error`` (the quadrature estimate of the path's
+length; ``upper`` is the proven bound of it by interval arithmetic), ``upper_source`` (``path`` |
 ``zigzag``), ``path_upper``, ``path_gap`` (the solver's own path), ``triangles``, ``vertices``,
 ``unknowns``, ``directions``, ``lp_rows``, ``lp_rows_total``, ``lp_status``, ``lp_solver``,
 ``convexity`` (``convex`` | ``convexified``), ``convexity_note``, ``solver_status``,

@@ -1,4 +1,4 @@
-"""Sound lower bounds of distances for conformal metrics in any dimension (issue 46, item 3).
+"""Sound lower bounds of distances for conformal metrics in any dimension.
 
 For a conformal metric ``F(q, v) = f(q) |v|`` (the hook ``conformal_factor_sx``; the Panda
 pole metric, eq. 60, is one in 7-D) `certify_conformal` proves ``lower <= d(x, y) <=
@@ -53,17 +53,12 @@ Limits: the bound is only as good as the enclosures of ``f`` over boxes (affine 
 `finsler.enclosures.affine`: about 1 % below the true minimum on 0.1-rad Panda boxes, 3 % on
 0.2-rad ones) and as the ``(s, r)`` reduction, which keeps only the distance to the chord's
 line: two regions at the same ``(s, r)`` share one bound. In 6-D the cells next to the
-chord meet boxes whose ``(s, r)`` range spills over them: on Panda tuning pair 3 of seed
-20261150 every cell, the chord's included, is bounded near the region's global minimum
-(14-16, where the factor's true minimum within 0.4 rad of the chord's middle is about 33),
-and the bound stays near the trivial one's ceiling (0.560 of the upper bound at 3e5 and at
-1e6 boxes with ``r`` ranges of centre -+ half-diagonal; 0.54 with the tighter ranges of
-`_box_sr` and ``SPLIT_ALIGN``, which lift nearly straight pairs instead: tuning pair
-0, 0.888 -> 0.930 at 1.5e5 boxes). Boxes aligned with the
-chord (exact ``(s, r)`` ranges) were tried and did worse (0.455 at 3e5: the rotated boxes
-are larger in the joints). It proves a lower bound, not a tight interval; the ratio also
-carries the upper bound's own slack (the solver's path: within 3e-4 of its 128-segment
-refinement on the ten tuning pairs).
+chord meet boxes whose ``(s, r)`` range spills over them, so every cell may be bounded
+near the region's global minimum and the bound stays near the trivial one's ceiling
+(the split of `solvers.certificates.conformal.split` is the remedy). It proves a lower
+bound, not a tight interval; the ratio also carries the upper bound's own slack. The
+measurements: ``docs/guides/certify.md`` and the ``certify_panda`` results under
+``benchmarks/results/``.
 """
 
 from __future__ import annotations
@@ -110,10 +105,8 @@ PROJECT_GRID = 5
 MIN_SPLIT = 2000
 #: A box is bisected along the side ``j`` maximising ``w_j (1 + SPLIT_ALIGN (|u_j| +
 #: |e_j|))`` (``w`` its widths, ``u`` the chord's direction, ``e`` the unit vector across
-#: the chord to its centre): sides that widen its ``(s, r)`` ranges go first. Panda tuning
-#: pairs 1 and 3 of seed 20261150, the two grouped parts at 1.5e5 boxes (after the tighter
-#: ``r`` ranges): 76.4 / 105.5 with 0 (the widest side), 79.8 / 106.3 with 1, 83.1 / 106.2
-#: with 10, 83.3 (pair 1) with 100.
+#: the chord to its centre): sides that widen its ``(s, r)`` ranges go first (10: the
+#: largest bounds on the Panda tuning pairs; 0 is the widest side alone).
 SPLIT_ALIGN = 10.0
 #: Box enclosures of the ``"coarse"`` preset (all runs of
 #: `solvers.certificates.conformal.split.certify_conformal_best` together).
@@ -165,7 +158,8 @@ class ConformalSpec:
 
     @classmethod
     def preset(cls, name: str) -> ConformalSpec:
-        """The presets by name, as `solvers.certificates.plane.certificate.MeshSpec`'s: ``"coarse"`` (a
+        """The presets by name, as `solvers.certificates.plane.certificate.MeshSpec`'s:
+        ``"coarse"`` (a
         work budget of ``COARSE_BOXES`` box enclosures for all runs together: the quick
         report's), ``"default"`` (the defaults above) or ``"fine"`` (4 x their boxes)."""
         presets = {"coarse": cls(max_boxes=COARSE_BOXES), "default": cls(),
@@ -238,7 +232,7 @@ class ConformalCertifyResult(Certificate):
     path: np.ndarray = field(repr=False)
 
     def __post_init__(self) -> None:
-        # members of the status family (the words, as before, are accepted and converted)
+        # members of the status family (words are accepted and converted)
         self.stopped_by = CertifyStop(self.stopped_by)
         self.lp_status = LPStatus.from_solver(self.lp_status)
         self.solver_status = Status.from_label(self.solver_status)

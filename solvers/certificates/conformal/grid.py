@@ -1,5 +1,5 @@
-"""The plane step of `solvers.certificates.conformal.certificate`: a verified piecewise-linear potential
-on a grid of ``(s, r)`` cells (``s`` along the chord, ``r`` the distance from its line).
+"""The plane step of `solvers.certificates.conformal.certificate`: a verified piecewise-linear
+potential on a grid of ``(s, r)`` cells (``s`` along the chord, ``r`` the distance from its line).
 
 Given a lower bound ``g`` of the conformal factor per cell, `potential` maximises
 ``Phi(goal) - Phi(start)`` subject to ``|grad Phi| <= g`` on every triangle (a second-order

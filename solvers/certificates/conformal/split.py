@@ -1,11 +1,11 @@
-"""A conformal factor that is a sum, bounded part by part (issue 46, item 3).
+"""A conformal factor that is a sum, bounded part by part.
 
 When the factor is a sum ``f = sum_k a_k`` of nonnegative parts, a path's length splits the
 same way, ``int f |q'| = sum_k int a_k |q'|``, so ``d(x, y) >= sum_k lower_k`` where
 ``lower_k`` bounds the ``a_k``-length of every path that can matter (those of ``F``-length
 at most the upper bound ``U``). A part depending on fewer coordinates is bounded in fewer
-dimensions, where the boxes of `solvers.certificates.conformal.certificate.certify_conformal` resolve
-it: its other coordinates are cyclic for it (Clairaut's momentum), and its region is the
+dimensions, where the boxes of `solvers.certificates.conformal.certificate.certify_conformal`
+resolve it: its other coordinates are cyclic for it (Clairaut's momentum), and its region is the
 ellipsoid of paths whose Euclidean length is at most ``U / m`` (``m`` the smallest ``f``
 the full run proved over its region). A constant part ``c`` contributes exactly ``c |y - x|``.
 
@@ -19,16 +19,9 @@ path): a part ``a_k + c_k`` prefers straighter paths, so the parts disagree less
 the split, the whole factor is bounded the same way in at most 4 coordinates (the others
 it varies least with, on Panda ``q5, q6``, spanning their whole range): no split loss,
 only the projection's. The bound is the largest of the split one, that one and the full
-run's own. Tuning pair 3 of seed 20261150 (budgets 3e5): full run 0.560 of the upper
-bound, split 0.643 (0.674 with the constant shared), whole factor in ``q1..q4`` 0.686
-(0.692 at 1e6; in ``q1..q3`` 0.608). Ten fresh pairs (seed 20261211, budgets 5e4 / 1e5
-per part / 3e5 for the whole factor, about 30-40 s CPU a pair): median 0.777 of the upper
-bound, lowest 0.683, above the trivial bound's ceiling on all ten; the full run alone
-0.587-0.767 (``benchmarks/results/certify_panda-2026-11-28-2.md``). With nested parts
-grouped, the tighter ``(s, r)`` ranges of boxes and their aligned bisection, budgets 1.5e5
-for each run (full, two parts, whole factor in 4-D), ten pairs of a seed not used for
-tuning (20261218): median 0.828, lowest 0.693, above the ceiling on all ten, 22-27 s CPU a
-pair (``benchmarks/results/certify_panda-2026-11-28-4.md``). Soundness: each part's
+run's own (on Panda each of the three is the best on some pairs; the figures are in
+``docs/guides/certify.md`` and the ``certify_panda`` results under ``benchmarks/results/``,
+written by ``benchmarks/certify_panda.py``). Soundness: each part's
 bound is that module's (verified potential, outward-rounded enclosures) for the part's
 factor; a part whose enclosure over the domain dips below 0 (an outward-rounded square)
 is raised by that minimum and the constant lowered as much (rounded down), so every part
@@ -38,8 +31,8 @@ min sum_k``), so the split bound is below the distance by what the parts disagre
 
 Grouping (default): parts whose coordinates are nested (Panda: ``q1, q2`` in ``q1..q3`` in
 ``q1..q4``) are bounded as one part in the largest one's coordinates: no extra dimension,
-and they no longer disagree. Tuning pair 3 of seed 20261150, 1.5e5 boxes per part: the
-four parts 0.642 of the upper bound (7.5e4 each), the two groups 0.684.
+and they no longer disagree (on Panda two groups bound more than four parts at the same
+budget).
 
 Front door: `certify_conformal_best` (what `solvers.certify` and ``geodesics
 certify`` run on a conformal metric of dimension > 3) shares one work budget among the

@@ -1,4 +1,4 @@
-"""Certified intervals ``lower <= d(start, goal) <= upper`` in any dimension (issue 46).
+"""Certified intervals ``lower <= d(start, goal) <= upper`` in 3 and more dimensions.
 
 Lower bound: a verified potential. If ``phi`` is Lipschitz and ``grad phi(z) . v <=
 R F(z, v)`` for every ``v`` and almost every ``z`` a path shorter than ``upper`` can reach,

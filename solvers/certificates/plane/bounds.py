@@ -1,9 +1,9 @@
-"""The bounds behind the rows of `solvers.certificates.plane.certificate.certify_plane` (2-D): values of F at the
-mesh points, interval enclosures of F's second derivatives over each triangle, the
-second-order corrections, and the rows ``b = F - corr`` themselves.
+"""The bounds behind the rows of the 2-D certificate: values of F at the mesh points,
+interval enclosures of F's second derivatives over each triangle, the second-order
+corrections, and the rows ``b = F - corr`` themselves.
 
-Split out of `solvers.certify` (below 800 lines; one home per idea). The rule each
-bound follows is stated in that module's docstring: ``Hz`` >= the largest eigenvalue of
+The rule each bound follows is stated in the docstring of
+`solvers.certificates.plane.certificate`: ``Hz`` >= the largest eigenvalue of
 ``Hess_z F(., v_k)`` on a triangle, ``Ht`` >= ``d2/dt2 F(z, w(t))`` along the chord from
 ``v_k`` to ``v_{k+1}``, both interval enclosures (outward rounding) over the triangle's
 bounding box, split into sub-boxes where they are loose.
@@ -46,7 +46,7 @@ SPLIT_FRACTION = 0.25
 SPLIT_OVERESTIMATE = 1.5
 #: Directions are bounded first in groups spanning at most this arc (2 pi / 128: the
 #: default preset's 128 directions one by one, the fine preset's 512 by fours). On tuning
-#: pairs (seed 20261222) fours saved 40-60 % of the fine mesh's bound time with the same
+#: pairs fours saved 40-60 % of the fine mesh's bound time with the same
 #: final gaps; at 128 directions (arcs of 11 degrees) groups of four cost more than they
 #: saved (most rows then need tightening).
 GROUP_ARC = 2 * math.pi / 128

@@ -130,16 +130,16 @@ class MeshSpec:
     h_far: float = 0.25
     """Largest spacing (far from the path); the default and fine presets use 0.1."""
     directions: int = 128
-    """Number K of sampled unit directions per triangle (>= 8). 128: on tuning pairs
-    (seed 20261203) as certain as 256 at the 1e-2 target and 1.5-2.5x faster; 64 leaves
-    chord corrections above half of F on Matsumoto's steep rim."""
+    """Number K of sampled unit directions per triangle (>= 8). 128: as certain as 256 at
+    the 1e-2 target and faster; 64 leaves chord corrections above half of F on
+    Matsumoto's steep rim (``docs/guides/certify.md``)."""
     target_gap: float = 1e-2
     """Stop refining once the relative gap (upper - lower) / upper is at most this."""
     max_triangles: int = 12000
     """Stop refining before the mesh would exceed this many triangles."""
     max_rounds: int = 12
-    """Largest number of refinement rounds (LP solves). 12: the longest tuning pairs
-    (seed 20261210, pairs 9 and 11) stop at 1.65e-2 after 8 and reach 1e-2 after 10."""
+    """Largest number of refinement rounds (LP solves). 12: room for the slowest tuning
+    pairs, which reach the 1e-2 target after 10."""
     mark_fraction: float = 0.9
     """Refine the triangles that carry this fraction of the dual-weighted corrections (less
     once they are near the target: only what the target needs, `GOAL_MARKING`)."""
@@ -176,7 +176,7 @@ class MeshSpec:
             "coarse": cls(h_path=0.1, h_far=0.3, directions=128, target_gap=5e-2,
                           max_rounds=3, max_triangles=3000),
             # h_far 0.1: smaller far triangles need fewer sub-box splits and
-            # pre-refinements; tuning pairs (seeds 20261203, 20261210): 15-25 % less CPU
+            # pre-refinements: 15-25 % less CPU on the tuning pairs
             "default": cls(h_far=0.1),
             "fine": cls(h_path=0.04, h_far=0.1, directions=512, target_gap=1e-3,
                         max_rounds=12, max_triangles=40000, mark_fraction=0.99),

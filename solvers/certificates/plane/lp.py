@@ -1,7 +1,7 @@
-"""The linear programs of `solvers.certificates.plane.certificate.certify_plane`: the best P2 potential on a mesh.
+"""The linear programs of the 2-D certificate
+(`solvers.certificates.plane.certificate.certify_plane`): the best P2 potential on a mesh.
 
-Kept apart from `solvers.certify` (one home per idea). Given
-the rows ``grad phi_T(z_m) . v_k <= b[T, m, k]`` that module proves (values of F minus the
+Given the rows ``grad phi_T(z_m) . v_k <= b[T, m, k]`` that module proves (values of F minus the
 second-order corrections), `_solve_lp` maximises ``phi(goal) - phi(start)`` with
 cvxpy (Clarabel) in rounds: vertices away from the path are kept inside inner polygons of
 their rows' sets (`_Rays`, never violated), vertices near it get the sampled rows
@@ -10,10 +10,8 @@ ALL rows and scaled down by its largest row ratio, so the bound it gives is vali
 the LP solver's tolerance. `_initial_modes` chooses the first exact vertices and
 directions of a mesh (near the path, or inherited from the previous mesh's LP).
 
-A failed LP raises `LPFailure`, which `solvers.certificates.plane.certificate.certify_plane` turns into
-`solvers.CertifyStatus.LP_FAILED`. Nothing here imports `solvers.certify`
-(which imports these names, and re-exports them for code that reaches them as
-``solvers.certificates.plane.certificate._solve_lp``).
+A failed LP raises `LPFailure`, which the certificate turns into
+`solvers.CertifyStatus.LP_FAILED`.
 """
 
 from __future__ import annotations
@@ -57,7 +55,7 @@ SETTLE = 0.1
 #: fills to more than ``1 - near`` (``near = min(NEAR_TIGHT, NEAR_PER_TARGET * target)``),
 #: not only the violated ones, and ``WORST_WINDOW`` directions each side of its worst row;
 #: a promoted vertex also gets its near-tight directions. The gradient's next position is
-#: near those rows: on Matsumoto pairs (seed 20261210) a mesh's rounds fall from ~6 to 2-3.
+#: near those rows: on Matsumoto tuning pairs a mesh's rounds fall from ~6 to 2-3.
 NEAR_TIGHT = 0.06
 #: ``settle``: a mesh short of the target stops after this many rounds in any case (its
 #: duals already say where to refine).
@@ -73,8 +71,8 @@ REPAIR = True
 #: Evenly spaced directions an exact vertex always has (first mesh, promotion, inheritance).
 COARSE_DIRECTIONS = 16
 #: A promoted vertex gets this many windows (`_window`) of directions each side of
-#: its tight facet's normal (3: its gradient moves out along that normal; on tuning pairs
-#: of seed 20261217 one LP round fewer on some meshes, 1 before).
+#: its tight facet's normal (3: its gradient moves out along that normal, and some meshes
+#: need one LP round fewer than with 1).
 PROMOTE_WINDOW = 3
 WORST_WINDOW = 2
 

@@ -1,9 +1,7 @@
-"""The meshes `solvers.certificates.plane.certificate.certify_plane` computes its bound on, and a zigzag curve.
-
-Kept apart from `solvers.certify` (one home per idea) so that
-module keeps the bound code (values of F, interval enclosures of its second derivatives,
-the corrections, which also inflate for the rounding of the circumradii computed here)
-and this one the plain geometry:
+"""The meshes the 2-D certificate computes its bound on, and a zigzag curve: the plain
+geometry, apart from the bound code (`solvers.certificates.plane.bounds`: values of F,
+interval enclosures of its second derivatives, the corrections, which also inflate for the
+rounding of the circumradii computed here):
 
 * the convex polygon covering the domain (`_outline`) and point-in-polygon tests;
 * the first point set, a hexagonal lattice graded around the solver's path
@@ -12,9 +10,6 @@ and this one the plain geometry:
   midpoints): the gradient of the potential at each triangle's vertices as a linear map
   of its six unknowns, the circumradii, point location and refinement by edge midpoints;
 * `_zigzag`, a candidate curve for the upper bound where ``F(z, .)`` is not convex.
-
-Nothing here imports `solvers.certify` (which imports these names, and re-exports
-them for code that reaches them as ``solvers.certificates.plane.certificate._Mesh``).
 """
 
 from __future__ import annotations
@@ -31,8 +26,8 @@ from finsler.metrics.base import Metric
 
 
 class _Grading(Protocol):
-    """The spacing settings of `solvers.certificates.plane.certificate.MeshSpec` used here (read-only, as
-    in the frozen dataclass)."""
+    """The spacing settings of `solvers.MeshSpec` used here (read-only, as in the frozen
+    dataclass)."""
 
     @property
     def h_path(self) -> float: ...
