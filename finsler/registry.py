@@ -12,6 +12,7 @@ from typing import Any
 
 from finsler.errors import InputError, UnknownMetricError, short
 from finsler.metrics.base import Metric
+from finsler.metrics.checks import check_params
 from finsler.metrics.closed_form import (
     Euclidean,
     Minkowski,
@@ -114,7 +115,6 @@ def get_metric(name: str, /, **params: Any) -> Metric:
             f"metric {name!r} has no parameter {', '.join(map(repr, unknown))}; "
             f"its parameters are: {', '.join(sorted(fields)) or '(none)'}"
         )
-    from finsler.spec import check_params
 
     checked = check_params(name, cls, params)
     try:

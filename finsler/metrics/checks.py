@@ -1,11 +1,14 @@
-"""Checks of a metric's definition and of the values it is given, behind `finsler.Metric`:
-parameter types, a scalar ``F_sx``, sampled values, array kinds."""
+"""Checks of a metric's definition and of the values it is given, behind `finsler.Metric`
+and `finsler.spec`: parameter types, a scalar ``F_sx``, sampled values, array kinds."""
 
 from __future__ import annotations
 
 import dataclasses
 import functools
-from collections.abc import Callable
+import json
+import math
+import numbers
+from collections.abc import Callable, Mapping
 from typing import Any
 
 import casadi as ca
@@ -14,7 +17,12 @@ import numpy as np
 from finsler.domains import Domain, is_torch
 from finsler.errors import InputError, short
 
-__all__: list[str] = []
+__all__ = ["check_params", "param_fields"]
+
+#: The field annotations whose values are checked by type (others: any JSON value).
+_PARAM_KINDS: dict[str, tuple[type, ...]] = {
+    "float": (numbers.Real,), "int": (numbers.Integral,), "bool": (bool, np.bool_),
+    "str": (str,)}
 
 
 #: Points and directions per point of `Metric.check_values`.
@@ -54,8 +62,6 @@ def _check_field_types(metric: Any) -> None:
     parameters. Values are not converted."""
     if not dataclasses.is_dataclass(metric):
         return
-    from finsler.spec import _check_param
-
     for f in dataclasses.fields(metric):
         kind = f.type if isinstance(f.type, str) else getattr(f.type, "__name__", "")
         if f.init and kind in _SIMPLE_KINDS:
@@ -135,3 +141,44 @@ def _ndim(a: Any) -> int:
 def _same_kind(a: Any, b: Any) -> None:
     if is_torch(a) != is_torch(b):
         raise InputError("mix of numpy arrays and torch tensors: pass both as the same kind")
+
+
+def _check_param(name: str, param: str, kind: str, value: Any) -> Any:
+    """``value`` checked against the field annotation ``kind`` of the metric's class."""
+    ok_types = _PARAM_KINDS.get(kind.replace(" ", ""))
+    if ok_types is not None:
+        ok = isinstance(value, ok_types) and (
+            kind == "bool" or not isinstance(value, (bool, np.bool_)))
+        if ok and kind == "float":
+            ok = math.isfinite(value)
+            value = float(value)
+        elif ok:
+            value = {"int": int, "bool": bool, "str": str}[kind](value)
+        if not ok:
+            raise InputError(f"metric parameter {param} of {short(name, 80)!r} must be {kind}"
+                             f"{' (finite)' if kind == 'float' else ''}, got "
+                             f"{type(value).__name__} {short(repr(value), 80)}")
+        return value
+    try:  # another annotation: anything JSON can hold, checked by the metric itself
+        json.dumps(value, allow_nan=False)
+    except (TypeError, ValueError, RecursionError) as err:
+        raise InputError(f"metric parameter {param} of {short(name, 80)!r} must be a JSON "
+                         f"value, got {type(value).__name__} {short(repr(value), 80)}"
+                         ) from err
+    return value
+
+
+def check_params(name: str, cls: type, params: Mapping[str, Any]) -> dict[str, Any]:
+    """``params`` checked against the field annotations of the metric class ``cls``
+    (registered as ``name``): a ``float`` field takes a finite real number (not a bool),
+    an ``int`` field an integer, a ``bool`` field a bool; other annotations any JSON
+    value. The parameter names are the caller's to check."""
+    fields = param_fields(cls)
+    return {k: _check_param(name, k, fields[k], v) if k in fields else v
+            for k, v in params.items()}
+
+
+def param_fields(cls: type) -> dict[str, str]:
+    """The parameters of a metric class (its init fields) and their annotations."""
+    return {f.name: f.type.__name__ if isinstance(f.type, type) else str(f.type)
+            for f in dataclasses.fields(cls) if f.init}
