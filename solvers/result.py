@@ -24,7 +24,7 @@ from finsler.status import (
     Status,
     json_ready,
 )
-from solvers.continuum.chebyshev import interpolation_matrix
+from solvers.chebyshev import interpolation_matrix
 
 __all__ = [
     "Certificate",

@@ -33,7 +33,7 @@ from finsler.geometry import Spray, spray
 from finsler.infra.limits import check_count, check_memory, check_number
 from finsler.metrics.base import Metric
 from finsler.status import Result, json_ready
-from solvers.continuum.chebyshev import differentiation_matrix
+from solvers.chebyshev import differentiation_matrix
 from solvers.continuum.spectral import distance
 from solvers.inputs import as_metric, check_point, is_short_pair
 from solvers.result import DistanceStatus, SolverError

@@ -30,7 +30,7 @@ from finsler.domains import describe_value
 from finsler.errors import InputError
 from finsler.infra.limits import check_number
 from finsler.metrics.base import Metric
-from solvers.continuum.chebyshev import (
+from solvers.chebyshev import (
     chebyshev_nodes,
     differentiation_matrix,
     interpolation_matrix,
