@@ -64,7 +64,7 @@ def certify_settings(metric: Metric | str, preset: str = "default", *,
     ``max_boxes``: work budget in box enclosures (conformal). An override the metric's
     certificate has no use for is ignored. Raises `InputError` for an unknown preset or an
     override out of range; ``names``: how its messages name the overrides (the command
-    line names ``--target-gap``, ...)."""
+    line names ``--target-gap``, ...; ``"preset"`` names the preset)."""
     return _settings(as_metric(metric), preset, h, directions, target_gap, max_boxes, names)
 
 
@@ -72,10 +72,11 @@ def _settings(m: Metric, preset: str, h: float | None, directions: int | None,
               target_gap: float | None, max_boxes: int | None,
               names: Mapping[str, str] | None = None) -> CertifySettings:
     """`certify_settings` of a metric object."""
-    name = {k: k for k in ("h", "directions", "target_gap", "max_boxes")} | dict(names or {})
+    name = ({k: k for k in ("h", "directions", "target_gap", "max_boxes")}
+            | {"preset": "mesh preset"} | dict(names or {}))
     kind = _kind(m)
     if preset == "p2" and kind == "plane":
-        raise InputError(f"mesh preset p2 (a piecewise-quadratic potential) is for metrics of "
+        raise InputError(f"{name['preset']} p2 (a piecewise-quadratic potential) is for metrics of "
                          f"3 and more dimensions; {m.name} is 2-D: choose coarse, default or "
                          "fine")
     spec = _SETTINGS[kind].preset(preset)

@@ -117,7 +117,7 @@ def certify_command(
 
 #: The command line's names of `solvers.certify_settings`' overrides, for its messages.
 _FLAGS = {"h": "--h", "directions": "--directions", "target_gap": "--target-gap",
-          "max_boxes": "--max-boxes"}
+          "max_boxes": "--max-boxes", "preset": "--mesh"}
 
 
 def _print_conformal(res: Any) -> None:
