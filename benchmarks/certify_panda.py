@@ -5,8 +5,9 @@ default 20261218, :func:`finsler.sample_pairs`; the split bound was tuned on see
 the full run before it on ``sample_pairs(panda, 4, 11)``; seed 20261211 reported the
 ungrouped split, 20261217 the grouped one before the full run's budget was raised: its
 results were seen, so 20261218 is the report seed), this runs
-:func:`solvers.certify_conformal_split.certify_conformal_split`: the full run of
-:func:`solvers.certify_conformal.certify_conformal` with the work budget ``--max-boxes``
+:func:`solvers.certificates.conformal.split.certify_conformal_split`: the full run of
+:func:`solvers.certificates.conformal.certificate.certify_conformal` with the work budget
+``--max-boxes``
 (box enclosures), then the factor's parts (nested ones grouped; ``--no-group``: each part
 alone), each with ``--part-boxes``, and the whole factor in 4 coordinates with
 ``--merged-boxes``. It prints per pair:
@@ -44,8 +45,8 @@ import numpy as np
 from results_file import ResultsFile, markdown_table
 
 import finsler
-from solvers.certify_conformal import ConformalSpec
-from solvers.certify_conformal_split import certify_conformal_split
+from solvers.certificates.conformal.certificate import ConformalSpec
+from solvers.certificates.conformal.split import certify_conformal_split
 
 
 def main() -> None:

@@ -4,7 +4,7 @@ goals from one start.
 Three measurements, one thread, CPU time (``time.process_time``, children included where a
 subprocess runs):
 
-1. **The field** (`solvers.field.lattice_field` at the default plan's resolution): nodes,
+1. **The field** (`solvers.seeding.field.lattice_field` at the default plan's resolution): nodes,
    edges, moves kept, build time, and the median graph length over the true length on
    ``--pairs`` fresh pairs of a set whose best known energies are cached
    (``ground_truth.py``'s multistart); per pair the time of a route query.
@@ -48,7 +48,7 @@ from results_file import ResultsFile, markdown_table  # noqa: E402
 import finsler  # noqa: E402
 import solvers  # noqa: E402
 from finsler.spec import MetricSpec  # noqa: E402
-from solvers.field import FieldSpec, lattice_field  # noqa: E402
+from solvers.seeding.field import FieldSpec, lattice_field  # noqa: E402
 
 TIGHT, LOOSE = 1e-4, 1e-2
 

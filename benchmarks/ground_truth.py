@@ -65,8 +65,8 @@ from results_file import RESULTS, ResultsFile, markdown_table  # noqa: E402
 import finsler  # noqa: E402
 from finsler.spec import MetricSpec  # noqa: E402
 from solvers import SeedPlan, solve_batch  # noqa: E402
-from solvers.batched import covers  # noqa: E402
-from solvers.seeding import seed_family  # noqa: E402
+from solvers.newton.driver import covers  # noqa: E402
+from solvers.seeding.plans import seed_family  # noqa: E402
 
 CACHE = RESULTS / "ground_truth_cache"
 TIGHT, LOOSE = 1e-4, 1e-2

@@ -38,17 +38,19 @@ ROOT = Path(__file__).resolve().parents[1]
 #: group -> (files mutated, fast focused tests run against them). mutmut runs, per
 #: mutant, only the selected tests that called the mutated function.
 GROUPS: dict[str, tuple[list[str], list[str]]] = {
-    "block_tridiagonal": (["solvers/block_tridiagonal.py"], ["tests/test_block_tridiagonal.py",
+    "block_tridiagonal": (["solvers/newton/block_tridiagonal.py"],
+                          ["tests/test_block_tridiagonal.py",
                                                              "tests/test_block_tridiagonal_rows.py"]),
-    "certify_mesh": (["solvers/certify_mesh.py"], ["tests/test_mutation_kills_certify_mesh.py"]),
+    "certify_mesh": (["solvers/certificates/plane/mesh.py"],
+                     ["tests/test_mutation_kills_certify_mesh.py"]),
     # certify_lp: its kill tests and the repair's (which run _solve_lp's repair branch)
-    "certify_lp": (["solvers/certify_lp.py"], ["tests/test_mutation_kills_certify_lp.py",
+    "certify_lp": (["solvers/certificates/plane/lp.py"], ["tests/test_mutation_kills_certify_lp.py",
                                                "tests/test_certify_repair.py"]),
-    "newton": (["solvers/newton.py"], ["tests/test_newton.py",
+    "newton": (["solvers/newton/energy.py"], ["tests/test_newton.py",
                                        "tests/test_mutation_kills_newton.py"]),
     # batched: its own kill tests alone (closed forms, hand counts: 17 tests in ~3 s);
     # test_newton.py's batched solves took ~3 s a mutant for 53 %
-    "batched": (["solvers/batched.py"], ["tests/test_mutation_kills_batched.py"]),
+    "batched": (["solvers/newton/driver.py"], ["tests/test_mutation_kills_batched.py"]),
 }
 #: the property suite one module at a time, each against its own fast kill tests
 #: (``testing_engine``, ``testing_metric``, ...): small runs that can be spread; the score

@@ -376,7 +376,7 @@ def default_config(env: str, **overrides: Any) -> TrainConfig:
     ``overrides`` replace fields. Unknown environments get the common settings."""
     ensure_registered(env, overrides.get("metric_class"))
     # the metric's measured defaults (Metric.training.defaults, with their figures beside
-    # them in finsler/metrics.py) over the common ones
+    # them in finsler/metrics/paper.py) over the common ones
     settings = {**_OURS_COMMON, **training_settings(env).defaults}
     settings.update(overrides)
     return TrainConfig(env=env, **settings)

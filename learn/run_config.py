@@ -38,7 +38,7 @@ from typing import Any, ClassVar, TypeVar
 import finsler
 from finsler.errors import InputError
 from finsler.infra.limits import check_memory
-from finsler.metric import TrainingSettings
+from finsler.metrics.base import TrainingSettings
 from finsler.spec import MetricSpec, class_path, ensure_registered
 
 __all__ = [

@@ -23,15 +23,11 @@ segment cost ``<= eps``: the exact ceiling of the paper's task.
 
 ``--warm-start RUN_OR_ENV``: the policy's path of each pair is one more start of its batched
 solve, beside the global seeds (the same batch, one more row at the final size), so the
-result is never worse than without it; ``warm_start`` in the JSON names the policy. (Until
-issue 47 it replaced the global seeds: no faster with the batched solver, and on 8 of 100
-fresh Matsumoto pairs a worse optimum; ``--keep-global-seeds`` and ``--recheck-above``,
-which patched that, are accepted with a deprecation warning and do nothing.)
+result is never worse than without it; ``warm_start`` in the JSON names the policy.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import shutil
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any
@@ -163,15 +159,9 @@ def solve_command(
              "(never a worse optimum than without it; costs loading the policy): a run "
              "directory of `geodesics train` or an environment with a shipped policy; the "
              "policy must be for --metric.")] = None,
-    keep_global_seeds: Annotated[bool, typer.Option(
-        "--keep-global-seeds", hidden=True,
-        help="Deprecated, no effect: --warm-start always keeps the global seeds.")] = False,
     warm_search: Annotated[bool, typer.Option(
         "--warm-search", help="With --warm-start: seed with the route search's paths "
         "(learn.search; values of C only) instead of the policy's plain paths.")] = False,
-    recheck_above: Annotated[float | None, typer.Option(
-        "--recheck-above", metavar="RATIO", hidden=True,
-        help="Deprecated, no effect: --warm-start always solves the global seeds.")] = None,
     tol: Annotated[float | None, typer.Option(
         help="Relative accuracy of the length: double the segments from --segments until "
              "the estimated error (Richardson extrapolation; says when the expected order "
@@ -188,7 +178,7 @@ def solve_command(
     across --workers and --ray)."""
     m = metric_from_options(metric, metric_param, metric_module)
     _check_options(pairs, start, goal, workers, ray, chunk_size, tol, warm_start,
-                   warm_search, keep_global_seeds, recheck_above)
+                   warm_search)
     _check_files(out, plot, pairs, tol)
     arr = _read_pairs(m, pairs, start, goal)
     parts = None
@@ -202,7 +192,7 @@ def solve_command(
         results = _solve(job, progress and pairs is not None, parts)
     except InputError as err:
         fail(str(err))
-    payload = solve_payload(m, results, job.n)
+    payload = solve_payload(m, results, job.segments)
     if warm is not None:
         payload["warm_start"] = warm
     text = json_text(payload, indent=None if pairs is not None else 2)
@@ -226,9 +216,8 @@ def solve_command(
 
 def _check_options(pairs: Path | None, start: str | None, goal: str | None,
                    workers: int | None, ray: str | None, chunk_size: int | None,
-                   tol: float | None, warm_start: str | None, warm_search: bool,
-                   keep_global_seeds: bool, recheck_above: float | None) -> None:
-    """Step 1: the options that go together, and the deprecated ones warned about."""
+                   tol: float | None, warm_start: str | None, warm_search: bool) -> None:
+    """Step 1: the options that go together."""
     import numpy as np
 
     if pairs is not None and (start is not None or goal is not None):
@@ -245,12 +234,6 @@ def _check_options(pairs: Path | None, start: str | None, goal: str | None,
         fail(f"--tol must be a relative tolerance in (0, 1), e.g. 1e-7, got {tol:g}")
     if warm_search and warm_start is None:
         fail("--warm-search applies to --warm-start")
-    for given, name in ((keep_global_seeds, "--keep-global-seeds"),
-                        (recheck_above is not None, "--recheck-above")):
-        if given:
-            typer.echo(f"warning: {name} is deprecated and does nothing: --warm-start adds the "
-                       "learned path as one more start beside the global seeds, which are "
-                       "always solved", err=True)
 
 
 def _check_files(out: Path | None, plot: Path | None, pairs: Path | None,
@@ -318,8 +301,7 @@ def _checked_job(m: finsler.Metric, arr: np.ndarray, pairs: Path | None,
     """Step 3: the solver's own check of the input, once (naming the options), before
     --out and before a policy is loaded; the job it returns is solved without checking
     again. With --warm-start the learned paths join the job (and the payload's entry)."""
-    from solvers.batch_jobs import check_batch
-    from solvers.pairs import check_initial_paths
+    from solvers import check_batch
 
     if method_module:
         from learn.registry import import_method_modules
@@ -332,7 +314,7 @@ def _checked_job(m: finsler.Metric, arr: np.ndarray, pairs: Path | None,
     inits, warm = _warm_start(warm_start, m, arr, warm_search)
     if inits is not None:
         typer.echo(WARM_START_DEPRECATED, err=True)
-        job = dataclasses.replace(job, inits=check_initial_paths(m, job.pairs, job.n, inits))
+        job = job.with_initial_paths(inits)
     return job, warm
 
 
@@ -354,7 +336,7 @@ def _checked_out(out: Path, many: bool) -> tuple[Path, Path | None]:
 def _solve(job: Any, progress: bool, parts: Path | None) -> list[solvers.GeodesicResult]:
     """Step 5: the checked job solved; an interruption stops every worker and says what
     was kept (exit code 130)."""
-    from solvers.batch_jobs import run_batch
+    from solvers import run_batch
 
     try:
         return run_batch(job, progress=progress, checkpoint_dir=parts)
