@@ -25,19 +25,16 @@ from learn.config import (
     package_versions,
     paper_config,
 )
-from learn.loop import RunLoop
+from learn.evaluation import EvalResult, evaluate_paths
+from learn.loop import RunLoop, resolve_device, shipped_policies
 from learn.networks import Actor, Critic
 from learn.policy import (
-    EvalResult,
     Policy,
     critic_level_errors,
-    evaluate_paths,
     evaluate_policy,
     export_policy,
     load_critic,
     load_midpoint_policy,
-    load_policy,
-    shipped_policies,
 )
 from learn.registry import (
     Method,
@@ -49,10 +46,17 @@ from learn.registry import (
     register_method,
 )
 from learn.run_config import RunConfig
-from learn.runs import VARIANTS, load_any_policy, make_config, run_one, train_run
+from learn.runs import (
+    VARIANTS,
+    load_any_policy,
+    load_policy,
+    make_config,
+    run_one,
+    train_run,
+)
 from learn.search import SearchResult, SearchSpec, equalize_paths, search_paths
 from learn.storage import CorruptFileError
-from learn.train import Trainer, read_run_config, resolve_device, train
+from learn.train import Trainer, read_run_config, train
 from learn.tree import build_tree, level_pairs, mc_targets, td_lambda_targets
 
 __all__ = [

@@ -58,9 +58,16 @@ from torch import nn
 import finsler
 from finsler.errors import InputError
 from learn.base import LoadedPolicy, TrainResult
-from learn.loop import RunLoop, best_record, eval_columns, load_run, load_weights
-from learn.networks import mlp, resolve_device
-from learn.policy import EvalResult, check_pairs, evaluate_paths
+from learn.evaluation import EvalResult, check_pairs, evaluate_paths
+from learn.loop import (
+    RunLoop,
+    best_record,
+    eval_columns,
+    load_run,
+    load_weights,
+    resolve_device,
+)
+from learn.mlp import mlp
 from learn.registry import Method, deprecated_entry, register_method
 from learn.run_config import (
     RunConfig,

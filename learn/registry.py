@@ -87,7 +87,7 @@ class PathPolicy(Protocol):
     def evaluate(self, pairs: Any = None, eps: float | None = None,
                  depth: int | None = None) -> Any:
         """Section 5.1 evaluation on ``pairs`` ``(K, 2, dim)`` (default:
-        ``finsler.default_pairs``): a `learn.policy.EvalResult`."""
+        ``finsler.default_pairs``): a `learn.evaluation.EvalResult`."""
         ...
 
 

@@ -42,7 +42,6 @@ import finsler
 from finsler.errors import InputError
 from finsler.infra.limits import check_count, check_number
 from learn.base import MAX_DEPTH, LoadedPolicy, TrainResult
-from learn.config import training_settings
 from learn.env import (
     TIME_LIMITS,
     ZERO_ACTION_REWARD,
@@ -52,11 +51,23 @@ from learn.env import (
     move,
     observation,
 )
-from learn.loop import RunLoop, best_record, eval_columns, load_run, load_weights
-from learn.networks import resolve_device
-from learn.policy import EvalResult, check_pairs
+from learn.evaluation import EvalResult, check_pairs
+from learn.loop import (
+    RunLoop,
+    best_record,
+    eval_columns,
+    load_run,
+    load_weights,
+    resolve_device,
+)
 from learn.registry import Method, deprecated_entry, register_method
-from learn.run_config import RunConfig, check_hidden, ensure_registered, package_versions
+from learn.run_config import (
+    RunConfig,
+    check_hidden,
+    ensure_registered,
+    package_versions,
+    training_settings,
+)
 
 __all__ = [
     "SEGMENT_RTOL",
@@ -278,7 +289,7 @@ def rollout(act: Any, metric: finsler.Metric, starts: np.ndarray, goals: np.ndar
 
 @dataclass
 class SeqEvalResult(EvalResult):
-    """`learn.policy.EvalResult` of Seq paths, plus the paper's episode success."""
+    """`learn.evaluation.EvalResult` of Seq paths, plus the paper's episode success."""
 
     reached: np.ndarray = dataclasses.field(repr=False)
     """(K,) bool: ``C(p_j, g) < eps`` for some ``j <= 2**D`` (the paper's success for Seq,
@@ -286,7 +297,7 @@ class SeqEvalResult(EvalResult):
     steps: np.ndarray = dataclasses.field(repr=False)
     """(K,) int: steps taken until reaching (``2**D`` if never reached)."""
     strict_success: np.ndarray = dataclasses.field(repr=False)
-    """(K,) bool: `learn.policy.evaluate_paths`' test without any tolerance."""
+    """(K,) bool: `learn.evaluation.evaluate_paths`' test without any tolerance."""
 
     @property
     def reached_rate(self) -> float:
@@ -331,7 +342,7 @@ def evaluate_seq(act: Any, metric: finsler.Metric, pairs: np.ndarray, eps: float
     * ``success``: reached at ``j <= n - 1`` AND every segment ``C(p_i, p_i+1) <=
       eps * (1 + SEGMENT_RTOL)``. A step of eq. (57) has ``C = eps`` exactly in exact
       arithmetic; in float64 ``F(p, (p + eps/F(p,v) v) - p)`` is ``eps (1 +- 1e-16)``, so
-      `learn.policy.evaluate_paths`' ``C <= eps`` would fail about half of the steps
+      `learn.evaluation.evaluate_paths`' ``C <= eps`` would fail about half of the steps
       by rounding alone. The tolerance (1e-9 relative, 10^7 times the rounding, far below
       any change of the path) accepts exactly those; a step whose projection into the
       domain really raised its cost above eps still fails. The last segment is ``< eps``
@@ -418,7 +429,7 @@ class SeqPolicy(LoadedPolicy):
         """Section 5.1 evaluation on ``pairs`` ``(K, 2, dim)`` (default:
         ``finsler.default_pairs``); ``eps`` is both the step cost of the walk and the
         success threshold. See `evaluate_seq` for how success relates to
-        `learn.policy.evaluate_paths`."""
+        `learn.evaluation.evaluate_paths`."""
         p = finsler.default_pairs(self.metric) if pairs is None else check_pairs(
             self.metric, pairs)
         e = self.eps if eps is None else eps

@@ -45,23 +45,15 @@ from learn.config import (
     paper_config,
     run_document,
 )
+from learn.evaluation import EvalResult, evaluate_paths
 from learn.loop import RunLoop, best_record, eval_columns, read_config_section
 from learn.methods import actor_loss_of, actor_terms
-from learn.networks import resolve_device
-from learn.policy import (
-    EvalResult,
-    build_actor,
-    build_critic,
-    evaluate_paths,
-    generate_paths,
-    load_midpoint_policy,
-)
+from learn.policy import build_actor, build_critic, generate_paths, load_midpoint_policy
 from learn.registry import Method, Variant, deprecated_entry, register_method
 from learn.storage import LATEST_FILE, load_checkpoint
 from learn.tree import build_tree, level_pairs, mc_targets, td_lambda_targets
 
-__all__ = ["TrainResult", "Trainer", "actor_loss", "read_run_config", "resolve_device",
-           "train"]
+__all__ = ["Trainer", "actor_loss", "read_run_config", "train"]
 
 _LOG = logging.getLogger(__name__)
 

@@ -274,7 +274,7 @@ def test_multi_head_actor_starts_its_heads_apart() -> None:
     basins: PyTorch's initialisation of the same network, plus 0.25 along +x, -x, +y, -y
     for heads 1-4 (head 0 and the stds and scores untouched); one head is PyTorch's
     initialisation alone."""
-    from learn.networks import mlp
+    from learn.mlp import mlp
 
     m = finsler.get_metric("matsumoto")
     cfg = learn.default_config("matsumoto", actor_heads=5)
