@@ -4,12 +4,12 @@ Train any method's config with `train_run` (a `TrainConfig` for the midpoint
 learner: `default_config` gives the documented per-environment defaults; every
 method's config extends [`RunConfig`][learn.RunConfig]); load a trained or shipped policy with
 `load_policy` and generate paths with ``policy.generate(starts, goals)``, or with
-the policy-guided route search ``policy.search(starts, goals)`` (`learn.search`).
-The paper's baselines sit beside the midpoint learner (`learn.seq` with its
-gymnasium environment in `learn.env`, `learn.pg`). Every method is a plug-in on
+the policy-guided route search ``policy.search(starts, goals)`` (`learn.midpoint.search`).
+The paper's baselines sit beside the midpoint learner (`learn.seq.trainer` with its
+gymnasium environment in `learn.seq.env`, `learn.pg.trainer`). Every method is a plug-in on
 one run loop ([`learn.loop.RunLoop`][learn.loop.RunLoop]) registered in `learn.registry`, which the
 CLI, sweeps and [`load_policy`][learn.load_policy] read; `learn.runs` trains and loads any method
-and names the paper's variants, and `learn.methods` holds the actor losses and extra
+and names the paper's variants, and `learn.midpoint.losses` holds the actor losses and extra
 terms of the midpoint learner. A loaded policy of any method is a [`PathPolicy`][learn.PathPolicy]
 (`MidpointPolicy` if it predicts midpoints); `learn.examples.toy_method` is a
 whole method in one file, to copy.
@@ -17,7 +17,9 @@ whole method in one file, to copy.
 
 from finsler.status import RunAction, RunStatus, RunStop
 from learn.base import TrainResult
-from learn.config import (
+from learn.evaluation import EvalResult, evaluate_paths
+from learn.loop import RunLoop, resolve_device, shipped_policies
+from learn.midpoint.config import (
     METHODS,
     TrainConfig,
     beyond_paper,
@@ -25,10 +27,8 @@ from learn.config import (
     package_versions,
     paper_config,
 )
-from learn.evaluation import EvalResult, evaluate_paths
-from learn.loop import RunLoop, resolve_device, shipped_policies
-from learn.networks import Actor, Critic
-from learn.policy import (
+from learn.midpoint.networks import Actor, Critic
+from learn.midpoint.policy import (
     Policy,
     critic_level_errors,
     evaluate_policy,
@@ -36,6 +36,8 @@ from learn.policy import (
     load_critic,
     load_midpoint_policy,
 )
+from learn.midpoint.search import SearchResult, SearchSpec, equalize_paths, search_paths
+from learn.midpoint.trainer import Trainer, read_run_config, train
 from learn.registry import (
     Method,
     MidpointPolicy,
@@ -54,9 +56,7 @@ from learn.runs import (
     run_one,
     train_run,
 )
-from learn.search import SearchResult, SearchSpec, equalize_paths, search_paths
 from learn.storage import CorruptFileError
-from learn.train import Trainer, read_run_config, train
 from learn.tree import build_tree, level_pairs, mc_targets, td_lambda_targets
 
 __all__ = [

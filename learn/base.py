@@ -38,7 +38,7 @@ __all__ = [
 
 @dataclass
 class LoadedPolicy:
-    """What every trained policy a method loads holds ([`learn.policy.Policy`][learn.policy.Policy],
+    """What every trained policy a method loads holds ([`learn.Policy`][learn.Policy],
     `learn.pg.PGPolicy`, `learn.seq.SeqPolicy`, a plug-in's): its run config,
     metric, evaluation depth and eps, the run it came from and the checkpoint file."""
 

@@ -424,7 +424,7 @@ def load_run(run: str | Path, checkpoint: str, config_class: type[RunConfig],
     name loaded)``. ``checkpoint``: ``best`` (``checkpoint_best.pt``, else a shipped
     ``policy.pt``, else the latest) or ``latest``; the run's ``method`` must be one of
     ``methods``; ``env`` / ``metric_params``, if given, must be the run's
-    (`learn.config.check_run_metric`). `InputError` / `CorruptFileError`
+    (`learn.run_config.check_run_metric`). `InputError` / `CorruptFileError`
     name the problem."""
     path = Path(run)
     if not path.is_dir():

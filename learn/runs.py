@@ -1,7 +1,7 @@
 """One entry point for every learning method: named variants, training, status, loading.
 
-Every method (the midpoint learner of `learn.train`, the paper's baselines
-`learn.seq` and `learn.pg`, and any method registered from a user's file)
+Every method (the midpoint learner of `learn.midpoint.trainer`, the paper's baselines
+`learn.seq.trainer` and `learn.pg.trainer`, and any method registered from a user's file)
 writes run directories of the same layout (``config.json``, ``metrics.csv``,
 ``checkpoint_latest.pt``, ``checkpoint_best.pt`` and, once finished, ``result.json``:
 [`learn.loop.RunLoop`][learn.loop.RunLoop]). This module finds a run's method in `learn.registry`,
@@ -14,7 +14,7 @@ paper's experiment:
   environments they differentiate C (the path-energy term): not model-free;
 * ``midpoint-free``: the model-free defaults: every term that uses the derivative of C
   switched off (values of C only, like the paper's method), with the passes per collection
-  Algorithm 1 alone was measured best with (``learn.config.model_free_overrides``);
+  Algorithm 1 alone was measured best with (``learn.midpoint.config.model_free_overrides``);
 * ``paper``: appendix B.1's settings (`learn.paper_config`);
 * ``inter`` / ``two-to-one``: ``midpoint-free`` with the actor loss of eq. (17) / (18);
 * ``seq``: goal-conditioned PPO (section 5.2, appendix B.2);

@@ -221,7 +221,7 @@ def test_the_walk_catches_a_result_off_the_base(tmp_path: Any,
 def _learn_and_validation_results() -> dict[str, Any]:
     """One result of each learn / validation type, built directly (cheap)."""
     from learn.evaluation import EvalResult
-    from learn.search import SearchResult
+    from learn.midpoint.search import SearchResult
     from validation.propositions import Prop1Result
     from validation.testing.engine import CheckReport, PropertyResult
 

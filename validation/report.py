@@ -322,7 +322,7 @@ def _md_search(doc: dict[str, Any]) -> list[str]:
         sc = doc["search"]
         lines += [
             "`learned + route search` (`searched` in `report.json`) is the same policy with "
-            "the route search (`learn.search`): at the "
+            "the route search (`learn.midpoint.search`): at the "
             f"top {sc['levels']} levels, {sc['candidates_per_level']} candidate midpoints "
             "per sub-pair (the policy's, the coordinate midpoint and offsets around both) "
             "are each completed by the policy's own halves and the cheapest completed path "
@@ -571,7 +571,7 @@ def _build_report(env: str | None, out: Path, *, run: str | Path | None,
         continuum = not quick
     spec = None
     if search is True and callable(getattr(pol, "search", None)):
-        from learn.search import SearchSpec
+        from learn.midpoint.search import SearchSpec
 
         spec = SearchSpec()
     elif search not in (None, False, True):

@@ -250,7 +250,7 @@ def evaluate_command(
     metric_module: MetricModuleOption = None,
     method_module: MethodModuleOption = None,
     search: Annotated[bool, typer.Option(
-        "--search", help="Evaluate the paths of the route search (learn.search: candidate "
+        "--search", help="Evaluate the paths of the route search (learn.midpoint.search: candidate "
         "midpoints at the top levels chosen by the cost of the policy's completed paths, "
         "values of C only) instead of the plain recursive generation.")] = False,
 ) -> None:

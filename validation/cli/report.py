@@ -59,7 +59,7 @@ def report_command(
     method_module: MethodModuleOption = None,
     search: Annotated[bool, typer.Option(
         "--search/--no-search",
-        help="Also report the policy with the route search (learn.search: candidate "
+        help="Also report the policy with the route search (learn.midpoint.search: candidate "
              "midpoints at the top levels chosen by the cost of the policy's completed "
              "paths; values of C only).")] = True,
     certify: Annotated[int | None, typer.Option(

@@ -168,7 +168,7 @@ def solve_command(
         help="Deprecated, no effect: --warm-start always keeps the global seeds.")] = False,
     warm_search: Annotated[bool, typer.Option(
         "--warm-search", help="With --warm-start: seed with the route search's paths "
-        "(learn.search; values of C only) instead of the policy's plain paths.")] = False,
+        "(learn.midpoint.search; values of C only) instead of the policy's plain paths.")] = False,
     recheck_above: Annotated[float | None, typer.Option(
         "--recheck-above", metavar="RATIO", hidden=True,
         help="Deprecated, no effect: --warm-start always solves the global seeds.")] = None,

@@ -1,17 +1,17 @@
 """The paper's sequential RL baseline "Seq" (section 5.2, appendix B.2): goal-conditioned PPO.
 
 stable-baselines3's PPO, with the paper's hyperparameters, on the goal-conditioned walk of
-eqs. (57) and (14) (`learn.env`: `GeodesicEnv`, and `GeodesicVecEnv`
+eqs. (57) and (14) (`learn.seq.env`: `GeodesicEnv`, and `GeodesicVecEnv`
 that steps ``n_envs`` copies with one vectorised evaluation of ``F`` per quantity).
 `SeqTrainer` trains it into a run directory of the shared contract
 (``config.json``, ``metrics.csv``, ``checkpoint_latest.pt``, ``checkpoint_best.pt``,
 ``result.json``; the loop is [`learn.loop.RunLoop`][learn.loop.RunLoop]'s); `load_seq_policy`
 loads a `SeqPolicy` that generates and evaluates paths like
-[`learn.policy.Policy`][learn.policy.Policy].
+[`learn.midpoint.policy.Policy`][learn.midpoint.policy.Policy].
 
 **Counting.** ``timesteps`` (the budget) counts every evaluation of ``F`` or ``C`` the
 environments make, whatever for (3 per step with a non-zero action, 0 for a zero action,
-2 per sampled start/goal candidate at a reset: `learn.env`); ``timesteps_paper``
+2 per sampled start/goal candidate at a reset: `learn.seq.env`); ``timesteps_paper``
 counts environment steps (the paper's count, section 5.2), so ``timesteps`` is about 3x
 ``timesteps_paper``. The validation rollouts are not training and are not counted.
 
@@ -42,15 +42,6 @@ import finsler
 from finsler.errors import InputError
 from finsler.infra.limits import check_count, check_number
 from learn.base import MAX_DEPTH, LoadedPolicy, TrainResult
-from learn.env import (
-    TIME_LIMITS,
-    ZERO_ACTION_REWARD,
-    GeodesicEnv,
-    GeodesicVecEnv,
-    env_spaces,
-    move,
-    observation,
-)
 from learn.evaluation import EvalResult, check_pairs
 from learn.loop import (
     RunLoop,
@@ -67,6 +58,15 @@ from learn.run_config import (
     ensure_registered,
     package_versions,
     training_settings,
+)
+from learn.seq.env import (
+    TIME_LIMITS,
+    ZERO_ACTION_REWARD,
+    GeodesicEnv,
+    GeodesicVecEnv,
+    env_spaces,
+    move,
+    observation,
 )
 
 __all__ = [
@@ -156,7 +156,7 @@ class SeqConfig(RunConfig):
     """``tanh`` (paper, SB3's default) or ``relu``."""
     def validate(self) -> None:
         """Raise `finsler.InputError` naming the first impossible field of Seq's
-        own (the run fields are [`RunConfig`][learn.seq.RunConfig]'s to check)."""
+        own (the run fields are [`RunConfig`][learn.RunConfig]'s to check)."""
         for name in ("batch_size", "n_envs", "n_steps", "n_epochs"):
             v = getattr(self, name)
             if v < 1:
@@ -401,7 +401,7 @@ def _policy_kwargs(cfg: SeqConfig) -> dict[str, Any]:
 
 class SeqPolicy(LoadedPolicy):
     """A trained Seq policy (deterministic mean actions) for one metric; generates paths
-    like [`learn.policy.Policy`][learn.policy.Policy]."""
+    like [`learn.midpoint.policy.Policy`][learn.midpoint.policy.Policy]."""
 
     def __init__(self, policy: Any, config: SeqConfig, source: str = "",
                  checkpoint: str = "") -> None:
@@ -442,7 +442,7 @@ def load_seq_policy(run_dir: str | Path, checkpoint: str = "best",
                     metric_params: dict[str, Any] | None = None) -> SeqPolicy:
     """Load the Seq policy of a run directory: ``checkpoint`` ``best`` (best validation
     success; falls back to the latest) or ``latest``; ``env`` / ``metric_params``, if
-    given, must be the run's (`learn.config.check_run_metric`)."""
+    given, must be the run's (`learn.run_config.check_run_metric`)."""
     path, cfg, ckpt, name = load_run(run_dir, checkpoint, SeqConfig, ("seq",), env,
                                      metric_params)
     policy = _build_policy(cfg, device)

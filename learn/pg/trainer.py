@@ -172,7 +172,7 @@ class PGConfig(RunConfig):
 
     def validate(self) -> None:
         """Raise `InputError` naming the first impossible field of PG's own (the run
-        fields are [`RunConfig`][learn.pg.RunConfig]'s to check)."""
+        fields are [`RunConfig`][learn.RunConfig]'s to check)."""
         check_choice("activation", self.activation, _ACTIVATIONS)
         check_choice("objective", self.objective, _OBJECTIVES)
         check_choice("surrogate", self.surrogate, _SURROGATES)
@@ -649,7 +649,7 @@ def load_pg_policy(run_dir: str | Path, checkpoint: str = "best",
     """Load the PG policies of a run directory. ``checkpoint``: ``best`` (best success at
     the task's depth on the validation set; falls back to the latest) or ``latest``;
     ``env`` / ``metric_params``, if given, must be the run's
-    (`learn.config.check_run_metric`)."""
+    (`learn.run_config.check_run_metric`)."""
     path, cfg, ckpt, loaded = load_run(run_dir, checkpoint, PGConfig, ("pg",), env,
                                        metric_params)
     policies = _build_policies(cfg, cfg.metric)

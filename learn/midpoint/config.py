@@ -16,7 +16,7 @@ from typing import Any, ClassVar
 
 import finsler
 from finsler.errors import InputError
-from learn.methods import actor_loss_of, derivative_terms, describe
+from learn.midpoint.losses import actor_loss_of, derivative_terms, describe
 from learn.run_config import (
     RunConfig,
     build_metric,
@@ -225,10 +225,10 @@ class TrainConfig(RunConfig):
     """Pairs searched per collection when ``route_candidates > 0``."""
     route_weight: float = 1.0
     """Weight of the squared distance of the actor's mean to a better route's midpoint."""
-    # -- expert iteration (learn.expert): the policy learns what the route search finds --
+    # -- expert iteration (learn.midpoint.expert): the policy learns what the route search finds --
     expert_weight: float = 0.0
     """Beyond the paper, model-free (values of C only; 0 = off): weight of the actor's
-    imitation of the route search's paths (``learn.expert.SearchImitation``): every
+    imitation of the route search's paths (``learn.midpoint.expert.SearchImitation``): every
     ``expert_every`` collections ``expert_pairs`` fresh pairs are searched from the
     policy's own paths; the searched paths' tree midpoints are the actor's targets, their
     sub-path costs the critic's (every evaluation of C the search makes is counted)."""
@@ -248,7 +248,7 @@ class TrainConfig(RunConfig):
     # ------------------------------------------------------------------------------------
     def validate(self) -> None:
         """Raise `finsler.InputError` naming the first impossible option of the
-        learner (the run fields are [`RunConfig`][learn.config.RunConfig]'s to check)."""
+        learner (the run fields are [`RunConfig`][learn.RunConfig]'s to check)."""
         check_choice("targets", self.targets, _TARGETS)
         check_choice("depth_schedule", self.depth_schedule, _SCHEDULES)
         check_choice("lr_schedule", self.lr_schedule, _LR_SCHEDULES)
@@ -329,7 +329,7 @@ class TrainConfig(RunConfig):
     @property
     def model_free(self) -> bool:
         """True if training uses values of C only (like the paper); False if a term
-        differentiates C (see `learn.methods`)."""
+        differentiates C (see `learn.midpoint.losses`)."""
         return not derivative_terms(self)
 
 
@@ -395,7 +395,7 @@ def default_config(env: str, **overrides: Any) -> TrainConfig:
 
 def model_free_overrides(env: str) -> dict[str, Any]:
     """Settings that turn the defaults of ``env`` into the model-free defaults: every term
-    differentiating C (``learn.methods``) off, plus the settings Algorithm 1 alone is
+    differentiating C (``learn.midpoint.losses``) off, plus the settings Algorithm 1 alone is
     measured best with."""
     return {"path_energy_weight": 0.0, **training_settings(env).model_free}
 
