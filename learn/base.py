@@ -62,8 +62,6 @@ class LoadedPolicy:
         d = self.depth if depth is None else depth
         return check_count(d, "depth", 0, MAX_DEPTH)
 
-    _depth = check_depth  # the name before issue 49
-
 
 @dataclass
 class TrainResult(Result):

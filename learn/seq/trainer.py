@@ -96,11 +96,9 @@ SEGMENT_RTOL = 1e-9
 # ----------------------------------------------------------------------------------------
 # Configuration
 # ----------------------------------------------------------------------------------------
-#: Measured on this 2-core machine (shared with other jobs, 1 torch thread), PPO with the
-#: paper's settings on Matsumoto: 0.9-1.0k steps/s with SB3's single environment
-#: (DummyVecEnv over GeodesicEnv, n_steps 2048), 3.6-3.8k with 16 batched copies, no
-#: better with 32 (PPO's 160 minibatch updates per rollout dominate); car-like 0.7k vs
-#: 3.3k, Panda 3.1k with 16. The rollout per update stays SB3's 2048 steps (16 x 128).
+#: 16 batched copies of the environment: about 4x the steps per second of SB3's single
+#: environment with the paper's settings on 2 cores, and 32 are no faster (PPO's minibatch
+#: updates then dominate). The rollout per update stays SB3's 2048 steps (16 x 128).
 _DEFAULT_N_ENVS = 16
 _PAPER_ROLLOUT = 2048
 
