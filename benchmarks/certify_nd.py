@@ -1,8 +1,8 @@
 """Certified intervals in 3-D (issue 46, items 1-2): ``solvers.certify_nd`` on fresh pairs of
 the closed-form ``poincare-slab`` (every interval must contain the exact distance) and of
 ``carlike`` (the lower bound must stay below the solver's path length, the best length
-known for a fresh pair). Prints a table and writes it to benchmarks/results/ via
-results_file.py, with CPU time (time.process_time) next to wall time.
+known for a fresh pair). Prints a table and writes it to benchmarks/results/certify-nd/
+via results_file.py, with CPU time (time.process_time) next to wall time.
 
     python benchmarks/certify_nd.py --metric poincare-slab --pairs 10 --seed 20261207
     python benchmarks/certify_nd.py --metric carlike --pairs 10 --seed 20261208
@@ -66,7 +66,7 @@ def main() -> None:
     rows = []
     closed = m.provides("distance")
     out = ResultsFile(f"certify_nd-{args.metric}",
-                      title=f"Certified intervals in 3-D: {args.metric}")
+                      title=f"Certified intervals in 3-D: {args.metric}", claim="certify-nd")
     for i in idx:
         s, g = pairs[i]
         c0, w0 = time.process_time(), time.perf_counter()

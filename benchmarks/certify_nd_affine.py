@@ -112,7 +112,8 @@ def main() -> None:
           f"wall {time.perf_counter() - t0:.1f} s")
     if not args.no_results_file:
         out = ResultsFile(f"certify_nd_affine-{args.metric}",
-                          title="3-D cell proof: affine (correlated) against decoupled bounds")
+                          title="3-D cell proof: affine (correlated) against decoupled bounds",
+                          claim="certify-nd")
         out.add(f"Metric `{args.metric}`, {args.cells} cells drawn with seed {args.seed}; "
                 "p(z) the closed-form distance's gradient linearised at the cell's centre "
                 "(what a P2 element's gradient is), w the dual maximiser at the centre; "

@@ -19,8 +19,8 @@ ceiling (``f_seen |y - x|``, ``f_seen`` the smallest factor at any box centre: t
 bound with the exact minimum is at most this), whether the lower bound beats that ceiling,
 the parts' bounds, the work (enclosures in all), the CPU time of the process
 (``time.process_time``) and the wall time; then the median ratio and how many pairs beat
-the trivial bound. The figures also go to ``benchmarks/results/certify_panda-DATE.md``
-(:mod:`results_file`).
+the trivial bound. The figures also go to
+``benchmarks/results/certify-nd/certify_panda-DATE.md`` (:mod:`results_file`).
 
 Usage::
 
@@ -60,7 +60,8 @@ def main() -> None:
     ap.add_argument("--no-results-file", action="store_true")
     args = ap.parse_args()
     out = ResultsFile("certify_panda", "Sound lower bounds on Panda distances (issue 46 "
-                      "item 3)")  # started now: the header's times and load span the run
+                      "item 3)",
+                      claim="certify-nd")  # started now: the header's times and load span the run
     m = finsler.get_metric("panda-pole")
     spec = ConformalSpec(max_boxes=args.max_boxes)
     part_spec = ConformalSpec(max_boxes=args.part_boxes)

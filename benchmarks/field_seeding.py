@@ -22,7 +22,7 @@ Usage::
 
     python benchmarks/field_seeding.py [--seed 20261308] [--goals 100] [--cold 3]
 
-Writes ``benchmarks/results/field_seeding-DATE.md``.
+Writes ``benchmarks/results/seed-plans/field_seeding-DATE.md``.
 """
 
 from __future__ import annotations
@@ -135,7 +135,8 @@ def main() -> None:
     args = ap.parse_args()
     m = finsler.get_metric("carlike")
     plan = solvers.SeedPlan.default(m)
-    out = ResultsFile("field_seeding", title="The lattice field of the car-like plan")
+    out = ResultsFile("field_seeding", title="The lattice field of the car-like plan",
+                      claim="seed-plans")
     from ground_truth import cache_path
 
     cached = cache_path(m, args.field_pairs_seed, 100, 256, 20)

@@ -10,10 +10,11 @@ For each group: the COMMITTED tree (``git archive HEAD``, so the score is for th
 the results file names) is unpacked into ``build/mutation/GROUP/``, its ``[tool.mutmut]``
 (``pyproject.toml``) gets the group's source files and its own FAST focused tests, and
 ``mutmut run`` (``nice``) mutates and tests them there. The results file
-(``benchmarks/results/mutation-DATE.md``) gives per group the mutants, killed, timeouts,
-survivors, score = (killed + timeout) / (mutants - skipped), the CPU time, the commit of
-each source file, and the diff of every survivor; ``mutation_report.md`` gives the
-verdicts. A score from a group's focused tests is a lower bound of the whole suite's.
+(``benchmarks/results/mutation/mutation-DATE.md``) gives per group the mutants, killed,
+timeouts, survivors, score = (killed + timeout) / (mutants - skipped), the CPU time, the
+commit of each source file, and the diff of every survivor; ``mutation_report.md`` in the
+same folder gives the verdicts. A score from a group's focused tests is a lower bound of
+the whole suite's.
 Needs ``pip install -e ".[mutation]"`` (mutmut >= 3.8).
 """
 
@@ -210,7 +211,7 @@ def main(argv: list[str] | None = None) -> None:
     named = [g for a in (args.groups or DEFAULT) for g in ALIASES.get(a, [a])]
     args.groups = list(dict.fromkeys(named))
     out = ResultsFile("mutation", title="Mutation testing of the solver core and the "
-                      "property suite (mutmut)")
+                      "property suite (mutmut)", claim="mutation")
     rows, sections = [], []
     sums = {"total": 0, "unchecked": 0, "killed": 0, "timeout": 0, "survived": 0,
             "caught": 0, "checked": 0}
@@ -268,7 +269,7 @@ def main(argv: list[str] | None = None) -> None:
             "CPU = user + system seconds of mutmut and its workers (the machine is shared "
             "by other work, so wall time varies; `-`: not measured by a report-only run). "
             "Survived includes `no tests` (no selected test calls the function). Verdicts "
-            "on the survivors: `mutation_report.md`.",
+            "on the survivors: `mutation_report.md` in this folder.",
             markdown_table(["group", "mutants", "not checked", "killed", "timeout",
                             "survived", "score", "CPU s", "wall s"], rows),
             *sections)

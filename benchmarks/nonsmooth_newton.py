@@ -322,7 +322,8 @@ def main() -> None:
     plan = SeedPlan.default(m) if a.default_plan else dataclasses.replace(
         SeedPlan.default(m), coarse=a.coarse, factor=a.factor, refine_top=a.top)
     out = ResultsFile("nonsmooth_newton" + (f"_{a.tag}" if a.tag else ""),
-                      "Car-like: batched interior point against IPOPT")
+                      "Car-like: batched interior point against IPOPT",
+                      claim="nonsmooth-newton")
     out.add(f"Pairs: `finsler.sample_pairs(carlike, {a.pairs}, {a.seed})`, "
             f"{a.segments} segments, one thread.")
     if not a.skip_rows:

@@ -80,7 +80,7 @@ def main() -> None:
     print(summary)
     if not a.no_write:
         out = ResultsFile("nonsmooth_residual", "Car-like: the KKT residual reported "
-                          "against the energy's gradient")
+                          "against the energy's gradient", claim="nonsmooth-newton")
         out.add("## Per pair", table, "", "## Summary", summary)
         out.write()
 

@@ -325,7 +325,7 @@ def main() -> None:
     if args.fresh:
         run_fresh(args.fresh, args.fresh_cache, args.fresh_seed)
     if args.scale:
-        # printed, and written to benchmarks/results/solver_scale-DATE.md
+        # printed, and written to benchmarks/results/exact-solves/solver_scale-DATE.md
         import contextlib
         import io
 
@@ -342,7 +342,7 @@ def main() -> None:
             run_scale(args.scale, [int(v) for v in args.sizes.split(",")], args.full_max,
                       args.scale_seed)
         out = ResultsFile("solver_scale", title="Exact solve time against the number of "
-                          "segments (Matsumoto)")
+                          "segments (Matsumoto)", claim="exact-solves")
         out.add("```\n" + buf.getvalue().strip() + "\n```")
         print(out.write())
     if args.linear:

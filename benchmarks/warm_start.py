@@ -202,7 +202,8 @@ def main() -> None:
               f"{r['wall']['default']:.2f}", f"{r['wall']['warm']:.2f}",
               f"{r['cpu']['warm'] / r['cpu']['default']:.2f}", r["worse"]["1e-09"],
               r["worse"]["1e-06"], r["better"], f"{r['largest_gap']:.2e}"] for r in rows]
-    res = ResultsFile("warm_start", title="--warm-start as one more start of the batched solve")
+    res = ResultsFile("warm_start", title="--warm-start as one more start of the batched solve",
+                      claim="warm-starts")
     res.add(f"Whole `geodesics solve --pairs P --segments n --no-progress --out F` processes "
             f"with and without `--warm-start METRIC` (the shipped policy), median of "
             f"{args.repeats} run(s) each; CPU = user + system of the process (torch and the "

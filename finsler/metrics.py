@@ -322,10 +322,10 @@ class PandaPole(Metric):
     # 25), p = 8 keeps its balance and the paths get shorter, as eq. (6)'s did: tuning
     # pairs 98.6 / 99.0, 91.6 / 92.0, 61.6 / 60.0%, mean length 118.3 / 118.4; validation
     # best 99.4 / 99.4%, last 99.2 / 98.6%. Fresh pairs:
-    # benchmarks/results/balanced-halves-moved.md.
+    # benchmarks/results/training/balanced-halves-moved.md.
     # The actor 256-256-256 (the critic stays 128-128, critic_hidden; issue 25): the critic
     # already knew balanced midpoints, the 128-128 actor did not reproduce them
-    # (benchmarks/results/balanced-halves-moved.md, "What limits the balance"). Same
+    # (benchmarks/results/training/balanced-halves-moved.md, "What limits the balance"). Same
     # budget and schedule, seeds 0 / 1, tuning pairs, best
     # checkpoints: 99.2 / 98.4, 95.2 / 94.8, 67.4 / 66.4%, mean length 116.5 / 116.2
     # (128-128 above: 98.6 / 99.0, 91.6 / 92.0, 61.6 / 60.0%, 118.3 / 118.4); validation
@@ -339,10 +339,10 @@ class PandaPole(Metric):
     # tuning pairs, best checkpoints: 99.6 / 99.8, 95.4 / 96.8, 69.4 / 69.4%, mean length
     # 116.0 / 115.5 (above: 99.2 / 98.4, 95.2 / 94.8, 67.4 / 66.4%, 116.5 / 116.2); seed
     # 0's best is a polished checkpoint, seed 1's one at 1.87e7. Fresh pairs:
-    # benchmarks/results/polishing-moved.md.
+    # benchmarks/results/training/polishing-moved.md.
     # The budget stays 2e7: 3e7 with these settings (seeds 0 / 1) gains nothing on the tuning
     # pairs (best 99.4 / 99.6, 96.8 / 95.8, 69.6 / 69.0%) nor on the fresh pairs
-    # (benchmarks/results/polishing-moved.md).
+    # (benchmarks/results/training/polishing-moved.md).
     training: ClassVar[TrainingSettings] = TrainingSettings(
         paper_lr=1e-6, paper_timesteps=20_000_000,
         defaults=dict(timesteps=20_000_000, hidden=(256, 256, 256), critic_hidden=(128, 128),

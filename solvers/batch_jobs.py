@@ -184,7 +184,7 @@ def solve_batch(
     never a worse optimum than without it. With ``False`` only that path is solved (a local
     polish of a path already near its optimum; from a learned path it was measured no faster
     than the global seeds and worse on 8 of 100 Matsumoto pairs:
-    ``benchmarks/results/warm_start-2026-11-28.md``).
+    ``benchmarks/results/warm-starts/warm_start-2026-11-28.md``).
     ``tol``: every pair solved to that relative accuracy of its length
     ([`solve_geodesic`][solvers.geodesic.solve_geodesic]).
 

@@ -24,11 +24,11 @@ bound, split 0.643 (0.674 with the constant shared), whole factor in ``q1..q4`` 
 (0.692 at 1e6; in ``q1..q3`` 0.608). Ten fresh pairs (seed 20261211, budgets 5e4 / 1e5
 per part / 3e5 for the whole factor, about 30-40 s CPU a pair): median 0.777 of the upper
 bound, lowest 0.683, above the trivial bound's ceiling on all ten; the full run alone
-0.587-0.767 (``benchmarks/results/certify_panda-2026-11-28-2.md``). With nested parts
+0.587-0.767 (``benchmarks/results/certify-nd/history/certify_panda-2026-11-28-2.md``). With nested parts
 grouped, the tighter ``(s, r)`` ranges of boxes and their aligned bisection, budgets 1.5e5
 for each run (full, two parts, whole factor in 4-D), ten pairs of a seed not used for
 tuning (20261218): median 0.828, lowest 0.693, above the ceiling on all ten, 22-27 s CPU a
-pair (``benchmarks/results/certify_panda-2026-11-28-4.md``). Soundness: each part's
+pair (``benchmarks/results/certify-nd/certify_panda-2026-11-28-4.md``). Soundness: each part's
 bound is that module's (verified potential, outward-rounded enclosures) for the part's
 factor; a part whose enclosure over the domain dips below 0 (an outward-rounded square)
 is raised by that minimum and the constant lowered as much (rounded down), so every part

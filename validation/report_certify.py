@@ -16,7 +16,7 @@ pair). ``--certify N`` sets the count. Presets are work budgets (rounds, cells, 
 never time limits, so the same report gives the same intervals on any machine. The CPU
 seconds and gaps per metric are in ``docs/guides/reports.md`` ("Certified distances in a
 report"), measured by ``benchmarks/report_certify.py`` (its files in
-``benchmarks/results/``).
+``benchmarks/results/reports/``).
 """
 
 from __future__ import annotations

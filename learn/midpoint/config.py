@@ -105,7 +105,7 @@ class TrainConfig(RunConfig):
     (None: ``hidden``). Generation calls only the actor, so a larger critic costs training
     time, not generation time. Measured on Matsumoto (128-128, 1e8, 2 seeds): no gain on
     fresh pairs for 1.5x the wall time
-    (benchmarks/results/relative-critic-moved.md)."""
+    (benchmarks/results/training/relative-critic-moved.md)."""
     activation: str = "relu"
     """``relu`` (paper) or ``tanh``."""
     lr: float = 3e-5
@@ -385,7 +385,7 @@ def default_config(env: str, **overrides: Any) -> TrainConfig:
 # passes over each collection that Algorithm 1 alone learns best with (one pass suits the
 # defaults only because the energy term supplies the local signal). They keep the
 # defaults' relative actor, which learns faster and finds shorter paths than the absolute
-# one (benchmarks/results/actor-relative-moved.md). `Metric.training.model_free` holds the
+# one (benchmarks/results/training/actor-relative-moved.md). `Metric.training.model_free` holds the
 # per-metric settings.
 
 

@@ -68,7 +68,7 @@ CHUNK_FLOATS = 20_000_000
 class SearchSpec:
     """Settings of `search_paths`. The defaults were chosen on tuning pairs never used
     for reporting; the figures are in ``docs/guides/route-search.md`` ("How the defaults
-    were chosen") and ``benchmarks/results/route-search-moved.md``."""
+    were chosen") and ``benchmarks/results/policies/route-search-moved.md``."""
 
     levels: int = 3
     """Top levels of the tree at which candidate midpoints are compared (0: none)."""

@@ -54,7 +54,7 @@ from validation.cli.common import (
 )
 
 #: Printed (stderr) when --warm-start is used; the figures are those of the warm-start
-#: results in benchmarks/results/ (``python benchmarks/warm_start.py`` writes them).
+#: results in benchmarks/results/warm-starts/ (``python benchmarks/warm_start.py`` writes them).
 WARM_START_DEPRECATED = (
     "warning: --warm-start is deprecated: the default solve (without it) reaches the same "
     "optimum (125 of 126 fresh pairs measured) without loading torch and the policy (1.6-1.9 s "
