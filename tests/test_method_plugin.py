@@ -345,8 +345,8 @@ def test_every_registered_method_policy_has_the_protocol(runs, tmp_path) -> None
 
 
 def test_the_old_entry_points_warn_and_still_work(tmp_path) -> None:
-    from learn.pg.trainer import train_pg
-    from learn.seq.trainer import train_seq
+    from learn.pg import train_pg
+    from learn.seq import train_seq
 
     for old in (learn.train, train_pg, train_seq):
         with pytest.warns(DeprecationWarning, match=r"use learn\.train_run\(cfg, out"), \

@@ -14,7 +14,7 @@ import torch
 import finsler
 from finsler.errors import InputError
 from learn import pg
-from learn.pg.trainer import (
+from learn.pg import (
     DepthPolicy,
     PGConfig,
     PGTrainer,

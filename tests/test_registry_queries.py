@@ -107,7 +107,7 @@ _OURS = {
     "carlike": dict(timesteps=400_000_000),
 }
 _MODEL_FREE = {"matsumoto": dict(epochs=3), "carlike": dict(epochs=2)}
-_CYCLES = {"panda-pole": (1077, 1077)}  # learn/pg/trainer.py's PG schedule, one key
+_CYCLES = {"panda-pole": (1077, 1077)}  # learn/pg/config.py's PG schedule, one key
 ok = ("matsumoto",)  # one name in a sequence is a lookup, not a list
 """
     found = _name_lists_in(old, set(finsler.list_metrics()), "old")
@@ -126,7 +126,7 @@ class _Trained(_Flat):
 
 def test_learn_reads_the_training_settings_the_metric_declares() -> None:
     from learn.midpoint.config import default_config, model_free_overrides, paper_config
-    from learn.seq.trainer import default_seq_config
+    from learn.seq import default_seq_config
 
     finsler.register_metric(_Trained)
     finsler.register_metric(_Flat)

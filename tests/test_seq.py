@@ -16,7 +16,7 @@ import torch
 import finsler
 from finsler.errors import InputError
 from learn.runs import train_run
-from learn.seq.trainer import (
+from learn.seq import (
     WALL_COLUMNS,
     ZERO_ACTION_REWARD,
     GeodesicEnv,
