@@ -393,7 +393,7 @@ def _print_pair(r: solvers.GeodesicResult, payload: dict[str, Any], tol: float |
     typer.echo(f"min-max max segment cost  {row['minmax_max_segment_cost']:.6g}"
                f"  (eps {payload['eps']:g}: {'success' if row['success'] else 'fail'})")
     typer.echo(f"seeds agreeing / tried    {r.seeds_agreeing} / {r.seeds_tried}")
-    typer.echo(f"method, residual          {r.method}, {r.residual:.2e}")
+    typer.echo(f"solver, residual          {r.method}, {r.residual:.2e}")
     if r.error_estimate is not None:
         order = ("not seen" if not r.order_seen else f"{r.order:.2f}") + (
             f" (observed {r.order:.2f})" if r.order is not None and not r.order_seen
