@@ -7,7 +7,7 @@ plan or policy was tuned on) it runs the command line as whole processes, as a u
 would, one after the other:
 
 * default: ``geodesics solve --metric M --pairs P --segments n --no-progress --out D.json``
-  (the global seed plan, batched Newton or IPOPT as ``--method auto`` picks);
+  (the global seed plan, batched Newton or IPOPT as ``--solver auto`` picks);
 * warm: the same with ``--warm-start M`` (the shipped policy): the policy's path of each
   pair is one more start in the same batch, beside the global seeds.
 

@@ -255,13 +255,6 @@ class RunConfig:
     def complete(self) -> None:
         """Fill in fields derived from others (after `validate`)."""
 
-    # the names before issue 49 (a method's config called them from its __post_init__)
-    def _check_types(self) -> None:
-        self.check_types()
-
-    def _check_env_and_device(self) -> None:
-        self.check_run()
-
     # -- what the config gives ------------------------------------------------------------
     @property
     def metric_spec(self) -> MetricSpec:

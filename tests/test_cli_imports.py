@@ -17,7 +17,7 @@ import pytest
 
 #: Modules none of the light invocations may import.
 HEAVY = ("scipy.integrate", "torch", "hypothesis", "cvxpy", "solvers.geodesic.solve",
-         "solvers.newton.energy", "pinocchio", "learn.train", "validation.testing")
+         "solvers.newton.energy", "pinocchio", "learn.midpoint.trainer", "validation.testing")
 
 _PROBE = r"""
 import io, json, sys, contextlib

@@ -192,7 +192,7 @@ def _not_on_the_base(classes: dict[str, type]) -> list[str]:
 def test_every_public_result_class_derives_from_the_base() -> None:
     classes = _public_result_classes()
     # the walk finds the types of every package (not an empty scan that passes)
-    for name in ("solvers.result.CertifyResult", "learn.policy.EvalResult",
+    for name in ("solvers.result.CertifyResult", "learn.evaluation.EvalResult",
                  "learn.sweep.SweepResult", "validation.testing.engine.CheckReport",
                  "validation.propositions.Lemma1Report"):
         assert name in classes, name
@@ -217,8 +217,8 @@ def test_the_walk_catches_a_result_off_the_base(tmp_path: Any,
 
 def _learn_and_validation_results() -> dict[str, Any]:
     """One result of each learn / validation type, built directly (cheap)."""
-    from learn.policy import EvalResult
-    from learn.search import SearchResult
+    from learn.evaluation import EvalResult
+    from learn.midpoint.search import SearchResult
     from validation.propositions import Prop1Result
     from validation.testing.engine import CheckReport, PropertyResult
 

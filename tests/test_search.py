@@ -20,8 +20,8 @@ import finsler
 import learn
 import solvers
 from finsler.errors import InputError
-from learn.networks import predictor
-from learn.search import SearchSpec, _regenerate_windows, equalize_paths, search_paths
+from learn.midpoint.networks import predictor
+from learn.midpoint.search import SearchSpec, _regenerate_windows, equalize_paths, search_paths
 from validation.cli import app
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -1,5 +1,5 @@
-"""The contract of an extra actor term of the midpoint learner (`learn.methods`,
-`learn.expert`): what it reads of the trainer and what one actor step returns."""
+"""The contract of an extra actor term of the midpoint learner (`learn.midpoint.losses`,
+`learn.midpoint.expert`): what it reads of the trainer and what one actor step returns."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ import numpy as np
 import torch
 
 import finsler
-from learn.networks import Actor
+from learn.midpoint.networks import Actor
 
 __all__ = ["ActorTerm", "TermOutput", "Trainer"]
 

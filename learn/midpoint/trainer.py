@@ -11,7 +11,7 @@ One iteration of `Trainer` reads like Algorithm 1:
 
 ``timesteps`` count **every** evaluation of C the learner makes during training: the
 collected trees (the paper's count, 2**D per tree of depth D, kept as ``timesteps_paper``)
-and whatever the extra actor terms of `learn.methods` evaluate (path energy, route
+and whatever the extra actor terms of `learn.midpoint.losses` evaluate (path energy, route
 search); ``timesteps_derivative`` counts the evaluations whose derivative the learner
 used. The ``timesteps`` budget binds the all-inclusive count.
 Every ``eval_every`` iterations the deterministic policy is evaluated on the
@@ -37,7 +37,9 @@ import torch
 import finsler
 from finsler.errors import InputError
 from learn.base import TrainResult
-from learn.config import (
+from learn.evaluation import EvalResult, evaluate_paths
+from learn.loop import RunLoop, best_record, eval_columns, read_config_section
+from learn.midpoint.config import (
     METHODS,
     TrainConfig,
     default_config,
@@ -45,30 +47,20 @@ from learn.config import (
     paper_config,
     run_document,
 )
-from learn.loop import RunLoop, best_record, eval_columns, read_config_section
-from learn.methods import actor_loss_of, actor_terms
-from learn.networks import resolve_device
-from learn.policy import (
-    EvalResult,
-    build_actor,
-    build_critic,
-    evaluate_paths,
-    generate_paths,
-    load_midpoint_policy,
-)
+from learn.midpoint.losses import actor_loss_of, actor_terms
+from learn.midpoint.policy import build_actor, build_critic, generate_paths, load_midpoint_policy
 from learn.registry import Method, Variant, deprecated_entry, register_method
 from learn.storage import LATEST_FILE, load_checkpoint
 from learn.tree import build_tree, level_pairs, mc_targets, td_lambda_targets
 
-__all__ = ["TrainResult", "Trainer", "actor_loss", "read_run_config", "resolve_device",
-           "train"]
+__all__ = ["Trainer", "actor_loss", "read_run_config", "train"]
 
 _LOG = logging.getLogger(__name__)
 
 
 def actor_loss(method: str, v_first: torch.Tensor, v_second: torch.Tensor) -> torch.Tensor:
     """Per-pair actor loss from ``V(s, m)`` and ``V(m, g)`` ``(N,)``: eq. (6) ``midpoint``,
-    eq. (17) ``inter``, eq. (18) ``two-to-one`` (see `learn.methods.ACTOR_LOSSES`)."""
+    eq. (17) ``inter``, eq. (18) ``two-to-one`` (see `learn.midpoint.losses.ACTOR_LOSSES`)."""
     return actor_loss_of(method)(v_first, v_second)
 
 
@@ -79,7 +71,7 @@ def paper_depth(trees_before: int, total_timesteps: int, max_depth: int) -> int:
     return min(trees_before // c_d, max_depth)
 
 
-#: The polish settings (`learn.config.TrainConfig`): free on resume until the polish
+#: The polish settings (`learn.midpoint.config.TrainConfig`): free on resume until the polish
 #: begins; after that only ``polish_steps`` (where it stops) may change.
 _POLISH_FIELDS = ("polish_steps", "polish_lr", "polish_pairs", "polish_eval_every")
 
@@ -205,7 +197,7 @@ class Trainer(RunLoop):
 
     def update(self, s: torch.Tensor, g: torch.Tensor, c: torch.Tensor) -> tuple[float, float]:
         """``epochs`` passes of minibatch updates: critic (eq. 5), then actor (the method's
-        loss, eq. 6 / 17 / 18, plus the extra terms of `learn.methods`). Adds the
+        loss, eq. 6 / 17 / 18, plus the extra terms of `learn.midpoint.losses`). Adds the
         terms' evaluations of C to the counters."""
         for term in self.terms:
             self.timesteps += term.prepare(self)
@@ -432,7 +424,7 @@ def train(cfg: TrainConfig, out: str | Path, resume: bool = False,
 
 
 def read_run_config(run_dir: str | Path) -> TrainConfig:
-    """The [`TrainConfig`][learn.train.TrainConfig] saved in a run directory."""
+    """The [`TrainConfig`][learn.TrainConfig] saved in a run directory."""
     return TrainConfig.from_dict(read_config_section(run_dir))
 
 

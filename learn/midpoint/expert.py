@@ -1,8 +1,8 @@
 """Expert iteration: the policy learns what the route search finds (beyond the paper).
 
-Every searched path of `learn.search.search_paths` is a better answer than the
+Every searched path of `learn.midpoint.search.search_paths` is a better answer than the
 policy's own, found with values of C only: a free teacher. `SearchImitation` is an
-actor term (`learn.methods.ActorTerm`) that, every ``every`` collections, draws
+actor term (`learn.midpoint.term.ActorTerm`) that, every ``every`` collections, draws
 ``pairs`` fresh uniform pairs, lets the search (with the policy's current deterministic
 midpoints as its generator) improve the policy's paths between them, and turns each searched
 path ``P`` (``2**D + 1`` points) into training data for both networks:
@@ -30,9 +30,9 @@ from typing import Any, ClassVar
 import torch
 
 import finsler
-from learn.networks import predictor
-from learn.search import SearchSpec, search_paths
-from learn.term import ActorTerm, TermOutput, Trainer
+from learn.midpoint.networks import predictor
+from learn.midpoint.search import SearchSpec, search_paths
+from learn.midpoint.term import ActorTerm, TermOutput, Trainer
 
 __all__ = ["SearchImitation", "search_spec", "tree_targets"]
 

@@ -1,17 +1,15 @@
-"""Trained midpoint policies: loading, path generation and the section 5.1 evaluation.
+"""Trained midpoint policies: building and loading the networks, path generation, export.
 
-``load_policy(run_dir_or_env)`` accepts a run directory of any learning method (its
-loader is found in `learn.registry`) or the name of an environment with a shipped
-policy (``matsumoto``, ``carlike``, ``panda-pole``); a midpoint [`Policy`][learn.policy.Policy]
-generates paths by ``D`` batched actor calls.
+A midpoint [`Policy`][learn.midpoint.policy.Policy] generates paths by ``D`` batched actor calls and
+searches routes with `learn.midpoint.search`; `load_midpoint_policy` is the loader the registry
+holds for the midpoint learner's runs and the shipped policies (``learn.load_policy``
+finds it for any run), `load_critic` opens a run's critic, `export_policy` writes a run
+in the shipped policies' layout.
 """
 
 from __future__ import annotations
 
-import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
-from importlib import resources
 from pathlib import Path
 from typing import Any
 
@@ -19,31 +17,25 @@ import numpy as np
 import torch
 
 import finsler
-from finsler.domains import as_real, is_torch
 from finsler.errors import InputError, short
-from finsler.infra.files import check_path_text
-from finsler.infra.limits import check_number
-from finsler.status import EvalStatus, Result, json_ready
 from learn.base import LoadedPolicy
-from learn.config import METHODS, TrainConfig
-from learn.loop import load_run, load_weights, read_config_section
-from learn.networks import Actor, Critic, predictor, resolve_device
-from learn.registry import method_of_run
-from learn.search import SearchResult, SearchSpec, search_paths
+from learn.evaluation import EvalResult, check_pairs, evaluate_paths
+from learn.loop import load_run, load_weights, resolve_device, shipped_dir, shipped_policies
+from learn.midpoint.config import METHODS, TrainConfig
+from learn.midpoint.networks import Actor, Critic, predictor
+from learn.midpoint.search import SearchResult, SearchSpec, search_paths
 from learn.storage import BEST_FILE, CONFIG_FILE, LATEST_FILE, POLICY_FILE, load_checkpoint
 from learn.tree import build_tree, level_pairs, mc_targets
 
 __all__ = [
-    "EvalResult",
     "Policy",
     "build_actor",
-    "check_pairs",
-    "evaluate_paths",
+    "build_critic",
+    "critic_level_errors",
     "evaluate_policy",
     "export_policy",
+    "load_critic",
     "load_midpoint_policy",
-    "load_policy",
-    "shipped_policies",
 ]
 
 
@@ -89,99 +81,6 @@ def generate_paths(
                           predictor(actor, metric))
 
 
-@dataclass
-class EvalResult(Result):
-    """Section 5.1 evaluation of paths on a pair set (a `finsler.status.Result`:
-    ``status`` is an `finsler.status.EvalStatus`, ``success`` when every path
-    passed, so ``strict()`` raises unless the success rate is 1)."""
-
-    success_rate: float
-    """Fraction of pairs whose every segment cost C(p_i, p_{i+1}) <= eps."""
-    mean_length: float
-    """Mean over pairs of the path length sum_i C(p_i, p_{i+1})."""
-    mean_max_segment_cost: float
-    """Mean over pairs of max_i C(p_i, p_{i+1})."""
-    eps: float
-    depth: int
-    success: np.ndarray = field(repr=False)
-    """(K,) bool."""
-    length: np.ndarray = field(repr=False)
-    """(K,) float64."""
-    max_segment_cost: np.ndarray = field(repr=False)
-    """(K,) float64."""
-    wall_time: float = field(default=0.0, kw_only=True)
-    """Seconds the evaluation took."""
-
-    @property
-    def status(self) -> EvalStatus:  # type: ignore[override]
-        """``not_finite`` if a path's length is not finite, else ``success`` if every path
-        passed, else ``partial``."""
-        if not np.all(np.isfinite(np.asarray(self.length, dtype=np.float64))):
-            return EvalStatus.NOT_FINITE
-        return EvalStatus.SUCCESS if bool(np.all(self.success)) else EvalStatus.PARTIAL
-
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-ready dict with keys success_rate, mean_length, mean_max_segment_cost,
-        eps, depth, status, converged, wall_time and per_pair (list of success, length,
-        max_segment_cost); non-finite numbers are ``None``."""
-        return json_ready({
-            "success_rate": float(self.success_rate),
-            "mean_length": float(self.mean_length),
-            "mean_max_segment_cost": float(self.mean_max_segment_cost),
-            "eps": float(self.eps),
-            "depth": int(self.depth),
-            "per_pair": [
-                {"success": bool(s), "length": float(length), "max_segment_cost": float(c)}
-                for s, length, c in zip(self.success, self.length, self.max_segment_cost)
-            ],
-            "status": self.status.label,
-            "converged": self.converged,
-            "wall_time": float(self.wall_time),
-        })
-
-
-def evaluate_paths(metric: finsler.Metric, paths: np.ndarray, eps: float) -> EvalResult:
-    """Success (every segment cost <= eps), length and max segment cost of paths
-    ``(K, n + 1, dim)``, all in float64."""
-    check_number(eps, "eps", 0.0, low_open=True)
-    t0 = time.perf_counter()
-    paths = as_real(paths, "paths", f"a real numeric array of shape (K, n+1, {metric.dim})")
-    costs = metric.path_costs(paths)
-    mx = costs.max(axis=1)
-    length = costs.sum(axis=1)
-    ok = mx <= eps
-    depth = (paths.shape[1] - 1).bit_length() - 1
-    return EvalResult(
-        success_rate=float(ok.mean()),
-        mean_length=float(length.mean()),
-        mean_max_segment_cost=float(mx.mean()),
-        eps=float(eps),
-        depth=depth,
-        success=ok,
-        length=length,
-        max_segment_cost=mx,
-        wall_time=time.perf_counter() - t0,
-    )
-
-
-def check_pairs(metric: finsler.Metric, pairs: Any) -> np.ndarray:
-    """``pairs`` as float64 ``(K, 2, dim)``, checked: shape, K >= 1, finite, in the domain."""
-    arr = as_real(pairs, "pairs", f"a real numeric array of shape (K, 2, {metric.dim})")
-    if is_torch(arr):
-        arr = arr.detach().cpu().numpy().astype(np.float64)
-    if arr.ndim != 3 or arr.shape[1] != 2 or arr.shape[2] != metric.dim:
-        raise InputError(
-            f"pairs must have shape (K, 2, {metric.dim}) for {metric.name}, got {arr.shape}"
-        )
-    if arr.shape[0] < 1:
-        raise InputError("pairs is empty")
-    if not np.all(np.isfinite(arr)):
-        raise InputError("pairs contain NaN or inf")
-    metric.domain.check(arr[:, 0], "pair starts")
-    metric.domain.check(arr[:, 1], "pair goals")
-    return arr
-
-
 class Policy(LoadedPolicy):
     """A trained midpoint policy (deterministic means) for one metric."""
 
@@ -211,7 +110,7 @@ class Policy(LoadedPolicy):
 
     def search(self, starts: Any, goals: Any, spec: SearchSpec | None = None,
                depth: int | None = None, eps: float | None = None) -> SearchResult:
-        """Paths by policy-guided route search (`learn.search`: candidate midpoints at
+        """Paths by policy-guided route search (`learn.midpoint.search`: candidate midpoints at
         the top levels chosen by the true cost of the actor's completed paths, polishing by
         the actor's midpoints, windows re-generated by the actor's trees, then segment costs
         equalized along the path; values of C only). Before equalizing never longer (sum C)
@@ -247,32 +146,20 @@ class Policy(LoadedPolicy):
 def evaluate_policy(
     policy: Policy, pairs: Any = None, eps: float | None = None, depth: int | None = None
 ) -> EvalResult:
-    """Functional form of [`Policy.evaluate`][learn.policy.Policy.evaluate]."""
+    """Functional form of [`Policy.evaluate`][learn.midpoint.policy.Policy.evaluate]."""
     return policy.evaluate(pairs, eps=eps, depth=depth)
-
-
-def shipped_policies() -> list[str]:
-    """Environments with a policy shipped inside the package."""
-    root = resources.files("learn") / "policies"
-    if not root.is_dir():
-        return []
-    return sorted(p.name for p in root.iterdir() if (p / POLICY_FILE).is_file())
-
-
-def _shipped_dir(name: str) -> Path:
-    return Path(str(resources.files("learn") / "policies" / name))
 
 
 def load_midpoint_policy(run: str | Path, device: str = "cpu", checkpoint: str = "best",
                          env: str | None = None,
                          metric_params: dict[str, Any] | None = None) -> Policy:
-    """The midpoint learner's loader (`load_policy` picks it from the registry for
+    """The midpoint learner's loader (`learn.load_policy` picks it from the registry for
     ``midpoint`` / ``inter`` / ``two-to-one`` runs and shipped policies): a run directory
     or, given an environment name, the policy shipped with the package."""
     path = Path(run)
     if not path.is_dir():
         if str(run) in shipped_policies():
-            path = _shipped_dir(str(run))
+            path = shipped_dir(str(run))
         else:
             known = ", ".join(shipped_policies()) or "none"
             raise InputError(
@@ -286,41 +173,6 @@ def load_midpoint_policy(run: str | Path, device: str = "cpu", checkpoint: str =
     if device != "cpu":
         actor = actor.to(resolve_device(device))
     return Policy(actor, cfg, source=str(path), checkpoint=loaded)
-
-
-def load_policy(run: str | Path, device: str = "cpu", checkpoint: str = "best",
-                env: str | None = None, metric_params: dict[str, Any] | None = None) -> Any:
-    """Load the policy of any learning method from a run directory (the method's loader,
-    found in `learn.registry` by the run's ``method``), or, given an environment
-    name, the midpoint policy shipped with the package. ``checkpoint``: ``best`` (best
-    success on the validation set during training; falls back to the latest) or
-    ``latest``; the policy's ``checkpoint`` attribute names the file actually loaded.
-    With ``env``, the policy must belong to that environment; with ``metric_params``, to
-    the metric with those parameters (the run's config records them; runs written before
-    the field existed are on the defaults). A user metric's class is re-imported from the
-    config's ``metric_class``, a user method's module from ``method_module``, if they are
-    not registered.
-
-    Raises `InputError` for a missing directory, an unknown name, an ``env`` or
-    parameter mismatch, and `CorruptFileError` for unreadable files.
-    """
-    path = check_path_text(run, "run (a run directory or a shipped policy's name)")
-    for name, value in (("checkpoint", checkpoint), ("device", device)):
-        if not isinstance(value, str):
-            raise InputError(f"{name} must be a str, got {type(value).__name__} "
-                             f"{short(repr(value), 80)}")
-    if env is not None and not isinstance(env, str):
-        raise InputError(f"env must be a metric name (str) or None, got {type(env).__name__} "
-                         f"{short(repr(env), 80)}")
-    if metric_params is not None and not isinstance(metric_params, dict):
-        raise InputError(f"metric_params must be a dict or None, got "
-                         f"{type(metric_params).__name__} {short(repr(metric_params), 80)}")
-    if path.is_dir():
-        method = method_of_run(path, read_config_section(path))
-        return method.load_policy(path, checkpoint=checkpoint, device=device, env=env,
-                                  metric_params=metric_params)
-    return load_midpoint_policy(run, device=device, checkpoint=checkpoint, env=env,
-                                metric_params=metric_params)
 
 
 def load_critic(run: str | Path, checkpoint: str = "best", device: str = "cpu") -> Critic:

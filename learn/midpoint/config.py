@@ -16,7 +16,7 @@ from typing import Any, ClassVar
 
 import finsler
 from finsler.errors import InputError
-from learn.methods import actor_loss_of, derivative_terms, describe
+from learn.midpoint.losses import actor_loss_of, derivative_terms, describe
 from learn.run_config import (
     RunConfig,
     build_metric,
@@ -79,9 +79,9 @@ class TrainConfig(RunConfig):
     ``eval_every``: collections between evaluations), then the learner's own."""
 
     config_methods: ClassVar[tuple[str, ...]] = METHODS
-    # eval_pairs 500 (was 100): at 93 % success the binomial standard deviation of 100
-    # pairs is 2.6 points, so the best of 20 evaluations was chosen mostly by noise and
-    # "last within 3 points of the best" could not be told; with 500 it is 1.1 points.
+    # eval_pairs 500: at 93 % success the binomial standard deviation of the success rate
+    # is 1.1 points on 500 pairs (2.6 on 100, where the best of 20 evaluations is chosen
+    # mostly by noise).
     run_defaults: ClassVar[Mapping[str, Any]] = {"eval_every": 50, "eval_pairs": 500}
 
     actor_loss_power: float = 2.0
@@ -225,10 +225,10 @@ class TrainConfig(RunConfig):
     """Pairs searched per collection when ``route_candidates > 0``."""
     route_weight: float = 1.0
     """Weight of the squared distance of the actor's mean to a better route's midpoint."""
-    # -- expert iteration (learn.expert): the policy learns what the route search finds --
+    # -- expert iteration (learn.midpoint.expert): the policy learns what the route search finds --
     expert_weight: float = 0.0
     """Beyond the paper, model-free (values of C only; 0 = off): weight of the actor's
-    imitation of the route search's paths (``learn.expert.SearchImitation``): every
+    imitation of the route search's paths (``learn.midpoint.expert.SearchImitation``): every
     ``expert_every`` collections ``expert_pairs`` fresh pairs are searched from the
     policy's own paths; the searched paths' tree midpoints are the actor's targets, their
     sub-path costs the critic's (every evaluation of C the search makes is counted)."""
@@ -248,7 +248,7 @@ class TrainConfig(RunConfig):
     # ------------------------------------------------------------------------------------
     def validate(self) -> None:
         """Raise `finsler.InputError` naming the first impossible option of the
-        learner (the run fields are [`RunConfig`][learn.config.RunConfig]'s to check)."""
+        learner (the run fields are [`RunConfig`][learn.RunConfig]'s to check)."""
         check_choice("targets", self.targets, _TARGETS)
         check_choice("depth_schedule", self.depth_schedule, _SCHEDULES)
         check_choice("lr_schedule", self.lr_schedule, _LR_SCHEDULES)
@@ -329,7 +329,7 @@ class TrainConfig(RunConfig):
     @property
     def model_free(self) -> bool:
         """True if training uses values of C only (like the paper); False if a term
-        differentiates C (see `learn.methods`)."""
+        differentiates C (see `learn.midpoint.losses`)."""
         return not derivative_terms(self)
 
 
@@ -348,13 +348,12 @@ def paper_config(env: str, **overrides: Any) -> TrainConfig:
     return base.replace(**overrides) if overrides else base
 
 
-# Beyond the paper (measured, see benchmarks/learn_ablation.py and the closing notes):
-# full depth from the start, big collections and minibatches with few epochs (vectorised
-# trees), a higher learning rate with cosine decay, log1p critic targets, inputs scaled to
-# [-1, 1] and a residual actor mean around the coordinate midpoint; for car-like also the
-# path-energy actor term with one pass per collection (Matsumoto's until issue 25); for
-# Matsumoto and car-like the actor relative to each pair's length, for Matsumoto also the
-# critic relative to it.
+# Beyond the paper (`benchmarks/learn_ablation.py` measures them): full depth from the
+# start, big collections and minibatches with few epochs (vectorised trees), a higher
+# learning rate with cosine decay, log1p critic targets, inputs scaled to [-1, 1] and a
+# residual actor mean around the coordinate midpoint; the per-metric settings on top of
+# these (car-like's path-energy term with one pass per collection, the relative actor and
+# critic) are each metric's `Metric.training.defaults`.
 _OURS_COMMON: dict[str, Any] = dict(
     depth_schedule="full",
     critic_transform="log1p",
@@ -383,19 +382,16 @@ def default_config(env: str, **overrides: Any) -> TrainConfig:
 
 
 # The model-free defaults (values of C only): the path-energy term off, and the number of
-# passes over each collection that Algorithm 1 alone was measured best with (session 1:
-# Matsumoto 3 epochs, first >= 95% at 9.9e6 evaluations; car-like 2). One pass per
-# collection suits the defaults only because the energy term supplies the local signal.
-# The model-free defaults keep the defaults' actor_relative: at 2e7 (Matsumoto, seeds 0 / 1,
-# 500 fresh pairs, last checkpoints) 98.7 +- 0.9% success and ratio mean 1.025 against
-# 95.4 +- 1.0% and 1.122 with the absolute residual actor
-# (benchmarks/results/training/actor-relative-moved.md).
-# (Metric.training.model_free holds the per-metric settings.)
+# passes over each collection that Algorithm 1 alone learns best with (one pass suits the
+# defaults only because the energy term supplies the local signal). They keep the
+# defaults' relative actor, which learns faster and finds shorter paths than the absolute
+# one (benchmarks/results/training/actor-relative-moved.md). `Metric.training.model_free` holds the
+# per-metric settings.
 
 
 def model_free_overrides(env: str) -> dict[str, Any]:
     """Settings that turn the defaults of ``env`` into the model-free defaults: every term
-    differentiating C (``learn.methods``) off, plus the settings Algorithm 1 alone is
+    differentiating C (``learn.midpoint.losses``) off, plus the settings Algorithm 1 alone is
     measured best with."""
     return {"path_energy_weight": 0.0, **training_settings(env).model_free}
 

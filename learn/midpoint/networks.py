@@ -21,32 +21,9 @@ from torch import nn
 
 import finsler
 from finsler.errors import InputError
+from learn.mlp import mlp
 
-__all__ = ["PREDICT_ROWS", "Actor", "Critic", "mlp", "predictor", "resolve_device"]
-
-
-def resolve_device(name: str) -> torch.device:
-    """``cpu`` or ``cuda[:k]``; a clear `InputError` if CUDA is unavailable."""
-    if name == "cpu":
-        return torch.device("cpu")
-    if name == "cuda" or name.startswith("cuda:"):
-        if not torch.cuda.is_available():
-            raise InputError(f"device {name!r} requested but CUDA is not available on this "
-                             "machine (torch.cuda.is_available() is False); use --device cpu")
-        return torch.device(name)
-    raise InputError(f"device must be 'cpu' or 'cuda', got {name!r}")
-
-
-def mlp(n_in: int, n_out: int, hidden: tuple[int, ...], activation: str) -> nn.Sequential:
-    """Plain MLP ``n_in -> hidden... -> n_out``."""
-    act = {"relu": nn.ReLU, "tanh": nn.Tanh}[activation]
-    layers: list[nn.Module] = []
-    width = n_in
-    for h in hidden:
-        layers += [nn.Linear(width, h), act()]
-        width = h
-    layers.append(nn.Linear(width, n_out))
-    return nn.Sequential(*layers)
+__all__ = ["PREDICT_ROWS", "Actor", "Critic", "predictor"]
 
 
 class _Scaler(nn.Module):

@@ -98,8 +98,7 @@ def train_command(
     config.json, used to evaluate, report and resume); --metric-module imports a user's
     module (or FILE.py) whose @finsler.register_metric classes are then trainable.
     """
-    from learn import runs
-    from learn.base import TrainingInterrupted
+    import learn
 
     try:
         params = _check_train_options(env, out, metric_param, metric_module, method_module,
@@ -110,11 +109,11 @@ def train_command(
         else:
             cfg = _new_config(env, method, paper, model_free, seed, timesteps, minutes,
                               device, settings or [], params)
-        result = runs.train_run(cfg, out, resume=resume, progress=not quiet)
+        result = learn.train_run(cfg, out, resume=resume, progress=not quiet)
     except InputError as err:
         fail(str(err))
         return
-    except TrainingInterrupted as stop:
+    except learn.TrainingInterrupted as stop:
         interrupted(f"interrupted ({stop.signal_name}): the run is saved in {stop.run_dir} at "
                     f"{stop.timesteps} evaluations of C (iteration {stop.iterations}); resume "
                     f"with: geodesics train --env {env} --out {stop.run_dir} --resume"
@@ -130,10 +129,9 @@ def _check_train_options(env: str, out: Path, metric_param: list[str] | None,
     """Step 1 of ``train``: the user's modules imported, the options checked; returns the
     parsed --metric-param values."""
     import learn
-    from learn.registry import import_method_modules
 
     import_metric_modules(metric_module)
-    import_method_modules(method_module)
+    learn.import_method_modules(method_module)
     params = parse_metric_params(metric_param)
     check_output_dir(out, "--out")
     if not resume:  # a resumed run's config names (and re-imports) its metric
@@ -151,9 +149,9 @@ def _resumed_config(out: Path, env: str, method: str | None, seed: int | None,
                     settings: list[str], params: dict[str, object] | None) -> object:
     """Step 2 of ``train --resume``: the run's saved settings; explicitly given options must
     agree with them (the config's ``replace`` checks)."""
-    from learn import runs
+    import learn
 
-    cfg = runs.load_run_config(out)
+    cfg = learn.load_run_config(out)
     if cfg.env != env:
         raise InputError(f"cannot resume: run {out} trains {cfg.env!r}, not {env!r}")
     given = {"method": method, "seed": seed, "timesteps": timesteps}
@@ -181,11 +179,10 @@ def _new_config(env: str, method: str | None, paper: bool, model_free: bool,
                 metric_params: dict[str, object] | None = None) -> object:
     """The config of a new run from the command-line options: the method's default variant,
     or the variant of one of its presets (``--paper``, ``--model-free``)."""
-    from learn import runs
-    from learn.registry import get_method
+    import learn
 
     method = method or "midpoint"
-    entry = get_method(method)
+    entry = learn.get_method(method)
     flags = [f for f, on in (("paper", paper), ("model-free", model_free)) if on]
     if len(flags) > 1:
         raise InputError("--paper already is model-free; give one of --paper, --model-free")
@@ -194,12 +191,12 @@ def _new_config(env: str, method: str | None, paper: bool, model_free: bool,
                          f"{method} (its defaults are its own; --set FIELD=VALUE changes "
                          "them)")
     variant = entry.presets[flags[0]] if flags else entry.name
-    cls = type(runs.make_config(env, variant))
+    cls = type(learn.make_config(env, variant))
     over = parse_settings(settings, cls)
     over.setdefault("method", method)
     if metric_params is not None:
         over["metric_params"] = metric_params
-    return runs.make_config(env, variant, seed=0 if seed is None else seed,
+    return learn.make_config(env, variant, seed=0 if seed is None else seed,
                             timesteps=timesteps, minutes=minutes, device=device, **over)
 
 
@@ -250,7 +247,7 @@ def evaluate_command(
     metric_module: MetricModuleOption = None,
     method_module: MethodModuleOption = None,
     search: Annotated[bool, typer.Option(
-        "--search", help="Evaluate the paths of the route search (learn.search: candidate "
+        "--search", help="Evaluate the paths of the route search (learn.midpoint.search: candidate "
         "midpoints at the top levels chosen by the cost of the policy's completed paths, "
         "values of C only) instead of the plain recursive generation.")] = False,
 ) -> None:
@@ -264,12 +261,10 @@ def evaluate_command(
     import numpy as np
 
     import learn
-    from learn.registry import import_method_modules
-    from learn.runs import load_any_policy
 
     try:
         import_metric_modules(metric_module)
-        import_method_modules(method_module)
+        learn.import_method_modules(method_module)
         params = parse_metric_params(metric_param)
         if run is None and env is None:
             raise InputError("give --run DIR or --env NAME")
@@ -277,7 +272,7 @@ def evaluate_command(
             raise InputError(f"--checkpoint must be best or latest, got {checkpoint!r}")
         if run is not None:
             check_input_dir(run, "--run")
-            policy = load_any_policy(run, checkpoint=checkpoint, env=env,
+            policy = learn.load_any_policy(run, checkpoint=checkpoint, env=env,
                                      metric_params=params)
         else:
             finsler.registry.check_name(env, "environment")

@@ -15,7 +15,7 @@ The agent walks from a start ``s`` to a goal ``g`` in steps of local cost ``eps`
 ``n_envs`` copies at once with one vectorised evaluation of ``F`` per quantity (a
 stable-baselines3 ``VecEnv`` with exactly the transitions of ``DummyVecEnv`` over
 `GeodesicEnv`). `move` (eq. 57) and `observation` also serve the
-deterministic rollouts of `learn.seq`.
+deterministic rollouts of `learn.seq.trainer`.
 
 **Counting.** Every evaluation of ``F`` or ``C`` the environment makes is counted
 (`GeodesicEnv.evaluations`), whatever for: per step with a non-zero action exactly 3

@@ -7,7 +7,7 @@ differentiates C (not model-free: the paper's method uses values of C only) and 
 the number of evaluations of C it made, so that the trainer's ``timesteps`` count every
 evaluation whatever it is for.
 
-The paper's baselines live beside this learner, in `learn.seq` and `learn.pg`.
+The paper's baselines live beside this learner, in `learn.seq.trainer` and `learn.pg.trainer`.
 """
 
 from __future__ import annotations
@@ -20,8 +20,8 @@ import torch
 
 import finsler
 from finsler.errors import InputError
-from learn.expert import SearchImitation, search_spec
-from learn.term import ActorTerm, TermOutput, Trainer
+from learn.midpoint.expert import SearchImitation, search_spec
+from learn.midpoint.term import ActorTerm, TermOutput, Trainer
 from learn.tree import build_tree
 
 
@@ -232,7 +232,7 @@ def actor_terms(cfg: TrainConfig) -> list[ActorTerm]:
                                 cfg.path_energy_schedule))
     if cfg.route_candidates > 0:
         terms.append(RouteSearch(cfg.route_candidates, cfg.route_pairs, cfg.route_weight))
-    if cfg.expert_weight > 0:  # expert iteration (learn.expert): values of C only
+    if cfg.expert_weight > 0:  # expert iteration (learn.midpoint.expert): values of C only
         terms.append(SearchImitation(cfg.expert_weight, cfg.expert_pairs, cfg.expert_every,
                                      search_spec(cfg.expert_search), cfg.expert_levels,
                                      cfg.expert_keep, cfg.expert_critic))

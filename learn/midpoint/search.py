@@ -23,20 +23,18 @@ between routes:
   and half a size later), the actor's own depth-``k`` tree between a window's two end
   points replaces the window where that lowers its cost without raising its largest
   segment above ``eps``. The tree was built from fixed anchors; a window whose ends sit
-  elsewhere gets a fresh, often shorter completion (car-like: length ratio on tuning
-  pairs 1.088 -> 1.064 for 1e4 more evaluations of C per path);
+  elsewhere gets a fresh, often shorter completion;
 * then ``equalize`` rounds of `equalize_paths` move the interior points along the
   path so that its segments cost the same: the success criterion bounds the *largest*
   segment cost, and a recursive tree that is off by a little at every level splits the
-  path unevenly (Panda: the largest segment 1.5x the mean on tuning pairs, 1.02x after).
+  path unevenly.
 
 The levels, the polish and the windows compare the true cost of real paths and keep the
 policy's choice as a candidate, so before equalizing the path is never longer (in ``sum
 C``) than the policy's own path, pair by pair, and succeeds (every segment cost <=
 ``eps``) wherever the policy's does. Equalizing never raises a path's largest segment cost
 (so success at any threshold is never lost) nor its discrete energy ``n * sum C**2``, so
-its length stays at most ``sqrt(n * sum C**2)`` of the path it started from (measured:
-mean length slightly lower, at most 3.4% longer on one Panda pair in 200). The search
+its length stays at most ``sqrt(n * sum C**2)`` of the path it started from. The search
 evaluates C (values only, no derivatives: model-free) and the actor; `SearchResult`
 counts the evaluations of C per path.
 """
@@ -68,11 +66,9 @@ CHUNK_FLOATS = 20_000_000
 
 @dataclass(frozen=True)
 class SearchSpec:
-    """Settings of `search_paths`. The defaults were chosen on 300 tuning pairs
-    (``finsler.sample_pairs(matsumoto, 300, 4242)``, never a reporting set) with two
-    policies: against 8 directions and 4 radii they cut the worst length ratio from 1.054
-    to 1.026 (shipped policy) and from 1.115 to 1.031 (a default run) for 1.8x the
-    evaluations of C."""
+    """Settings of `search_paths`. The defaults were chosen on tuning pairs never used
+    for reporting; the figures are in ``docs/guides/route-search.md`` ("How the defaults
+    were chosen") and ``benchmarks/results/policies/route-search-moved.md``."""
 
     levels: int = 3
     """Top levels of the tree at which candidate midpoints are compared (0: none)."""
@@ -86,15 +82,11 @@ class SearchSpec:
     where that shortens the path (0: none)."""
     windows: int = 3
     """Sweeps of window re-generation after the polish (0: none); each sweep goes through
-    window sizes ``2**(D-1)`` down to 2 segments. Chosen on tuning pairs (seed 4242, the
-    shipped policies): car-like length ratio mean 1.0877 / 1.0640 / 1.0632 with 0 / 3 / 6
-    sweeps (20 ms per path more for 3), Matsumoto 1.0016 -> 1.0012, Panda paths 0.7%
-    shorter (one pair in 200 fewer within eps 5)."""
+    window sizes ``2**(D-1)`` down to 2 segments. 3: most of what 6 sweeps gain, at a
+    few ms per path."""
     equalize: int = 3
-    """Rounds of `equalize_paths` after the polish (0: none). Chosen on tuning pairs
-    (seed 4242; shipped policies with the search): Panda's share of paths within eps 5
-    0.56 -> 0.88 / 0.895 / 0.895 after 1 / 3 / 8 rounds (eps 10: 0.92 -> 1.0), car-like
-    within its eps 0.97 -> 1.0, Matsumoto's length ratios unchanged or lower."""
+    """Rounds of `equalize_paths` after the polish (0: none). 3: more rounds gained
+    nothing on the tuning pairs."""
     seed: int = 0
     """Seed of the random directions (n-D only)."""
 
