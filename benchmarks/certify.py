@@ -9,8 +9,8 @@ switchbacks where F is not convex), the triangles, LP rows, the CPU time of the 
 (``time.process_time``: the figure the bars of issue 46 are stated in, which the load of
 other programs on the machine barely changes) and the wall time, then how many pairs meet
 each bar and the median and largest CPU time. The figures also go to a results file
-``benchmarks/results/certify-DATE.md`` (:mod:`results_file`: command, commit, machine and
-its load). A certified gap <= 1e-3 on
+``benchmarks/results/certify/certify-DATE.md`` (:mod:`results_file`: command, commit,
+machine and its load). A certified gap <= 1e-3 on
 the solver's own path (the upper bound is its length) proves that path within 0.1 % of
 the global optimum: the count of such pairs is printed.
 
@@ -134,7 +134,7 @@ def main() -> None:
     ap.add_argument("--only", default=None, help="comma-separated pair numbers")
     ap.add_argument("--json", default=None, help="write the figures to this JSON file")
     ap.add_argument("--no-results-file", action="store_true",
-                    help="do not write benchmarks/results/certify-DATE.md")
+                    help="do not write benchmarks/results/certify/certify-DATE.md")
     args = ap.parse_args()
     m = finsler.get_metric("matsumoto")
     pairs = finsler.sample_pairs(m, args.pairs, args.seed)
@@ -147,7 +147,7 @@ def main() -> None:
     print(head)
     # built now: its header gives the load at the start and the start time of the runs
     out = None if args.no_results_file else ResultsFile(
-        "certify", title="Certified intervals on fresh Matsumoto pairs")
+        "certify", title="Certified intervals on fresh Matsumoto pairs", claim="certify")
     doc: dict = {"seed": args.seed, "pairs": args.pairs, "only": only}
     if not args.skip_default:
         doc["default"] = {"rows": run(pairs, MeshSpec.preset("default"), None, "default",

@@ -1,8 +1,9 @@
-"""Certified intervals in 3-D (issue 46, items 1-2): ``solvers.certify_nd`` on fresh pairs of
+"""Certified intervals in 3-D (issue 46, items 1-2): ``solvers.certificates.nd.certificate`` on
+fresh pairs of
 the closed-form ``poincare-slab`` (every interval must contain the exact distance) and of
 ``carlike`` (the lower bound must stay below the solver's path length, the best length
-known for a fresh pair). Prints a table and writes it to benchmarks/results/ via
-results_file.py, with CPU time (time.process_time) next to wall time.
+known for a fresh pair). Prints a table and writes it to benchmarks/results/certify-nd/
+via results_file.py, with CPU time (time.process_time) next to wall time.
 
     python benchmarks/certify_nd.py --metric poincare-slab --pairs 10 --seed 20261207
     python benchmarks/certify_nd.py --metric carlike --pairs 10 --seed 20261208
@@ -27,7 +28,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from results_file import ResultsFile, markdown_table
 
 import finsler
-from solvers.certify_nd import NDSpec, certify_nd
+from solvers.certificates.nd.certificate import NDSpec, certify_nd
 
 
 def main() -> None:
@@ -52,7 +53,7 @@ def main() -> None:
     args = ap.parse_args()
     if args.verbose:
         logging.basicConfig(format="%(asctime)s %(message)s")
-        logging.getLogger("solvers.certify_nd_p2").setLevel(logging.DEBUG)
+        logging.getLogger("solvers.certificates.nd.p2").setLevel(logging.DEBUG)
     m = finsler.get_metric(args.metric)
     spec = NDSpec.preset(args.preset)
     changes = {k: v for k, v in (("h_path", args.h_path), ("max_rounds", args.max_rounds),
@@ -66,7 +67,7 @@ def main() -> None:
     rows = []
     closed = m.provides("distance")
     out = ResultsFile(f"certify_nd-{args.metric}",
-                      title=f"Certified intervals in 3-D: {args.metric}")
+                      title=f"Certified intervals in 3-D: {args.metric}", claim="certify-nd")
     for i in idx:
         s, g = pairs[i]
         c0, w0 = time.process_time(), time.perf_counter()

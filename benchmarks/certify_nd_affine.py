@@ -2,8 +2,8 @@
 a potential whose gradient is AFFINE in the cell (a quadratic, P2, element) — the
 measurement behind the next step of issue 46's 3-D bar (gap 1e-2).
 
-The proof of :mod:`solvers.certify_nd` needs, on every cell ``Z`` and direction ``w``,
-an upper bound of ``H(z) = p(z) . w - F(z, w)`` over ``z`` in ``Z``. Two ways are
+The proof of :mod:`solvers.certificates.nd.certificate` needs, on every cell ``Z`` and direction
+``w``, an upper bound of ``H(z) = p(z) . w - F(z, w)`` over ``z`` in ``Z``. Two ways are
 compared on cells of width ``h`` (cubes), each against the largest of 4000 sampled values
 of ``H`` (the truth, from below):
 
@@ -12,7 +12,7 @@ of ``H`` (the truth, from below):
   covector and the metric are bounded independently, so the bound loses ``|grad_z F| h``,
   FIRST order in ``h``;
 * **affine**: one affine-arithmetic enclosure of ``H`` itself
-  (:func:`finsler.affine.enclose_affine`), where ``p(z)`` and ``F(z, w)`` share the noise
+  (:func:`finsler.enclosures.affine.enclose_affine`), where ``p(z)`` and ``F(z, w)`` share the noise
   symbols of ``z``, so their first-order variations cancel and the loss is SECOND order.
 
 Cells: centres ``c`` drawn in the domain, ``p(z)`` the gradient of the exact distance from
@@ -40,7 +40,7 @@ import casadi as ca
 from results_file import ResultsFile, markdown_table
 
 import finsler
-from finsler.affine import enclose_affine
+from finsler.enclosures.affine import enclose_affine
 from finsler.lowering import lower
 
 WIDTHS = (0.15, 0.075, 0.0375, 0.01875)
@@ -112,7 +112,8 @@ def main() -> None:
           f"wall {time.perf_counter() - t0:.1f} s")
     if not args.no_results_file:
         out = ResultsFile(f"certify_nd_affine-{args.metric}",
-                          title="3-D cell proof: affine (correlated) against decoupled bounds")
+                          title="3-D cell proof: affine (correlated) against decoupled bounds",
+                          claim="certify-nd")
         out.add(f"Metric `{args.metric}`, {args.cells} cells drawn with seed {args.seed}; "
                 "p(z) the closed-form distance's gradient linearised at the cell's centre "
                 "(what a P2 element's gradient is), w the dual maximiser at the centre; "

@@ -5,8 +5,9 @@ default 20261218, :func:`finsler.sample_pairs`; the split bound was tuned on see
 the full run before it on ``sample_pairs(panda, 4, 11)``; seed 20261211 reported the
 ungrouped split, 20261217 the grouped one before the full run's budget was raised: its
 results were seen, so 20261218 is the report seed), this runs
-:func:`solvers.certify_conformal_split.certify_conformal_split`: the full run of
-:func:`solvers.certify_conformal.certify_conformal` with the work budget ``--max-boxes``
+:func:`solvers.certificates.conformal.split.certify_conformal_split`: the full run of
+:func:`solvers.certificates.conformal.certificate.certify_conformal` with the work budget
+``--max-boxes``
 (box enclosures), then the factor's parts (nested ones grouped; ``--no-group``: each part
 alone), each with ``--part-boxes``, and the whole factor in 4 coordinates with
 ``--merged-boxes``. It prints per pair:
@@ -19,8 +20,8 @@ ceiling (``f_seen |y - x|``, ``f_seen`` the smallest factor at any box centre: t
 bound with the exact minimum is at most this), whether the lower bound beats that ceiling,
 the parts' bounds, the work (enclosures in all), the CPU time of the process
 (``time.process_time``) and the wall time; then the median ratio and how many pairs beat
-the trivial bound. The figures also go to ``benchmarks/results/certify_panda-DATE.md``
-(:mod:`results_file`).
+the trivial bound. The figures also go to
+``benchmarks/results/certify-nd/certify_panda-DATE.md`` (:mod:`results_file`).
 
 Usage::
 
@@ -44,8 +45,8 @@ import numpy as np
 from results_file import ResultsFile, markdown_table
 
 import finsler
-from solvers.certify_conformal import ConformalSpec
-from solvers.certify_conformal_split import certify_conformal_split
+from solvers.certificates.conformal.certificate import ConformalSpec
+from solvers.certificates.conformal.split import certify_conformal_split
 
 
 def main() -> None:
@@ -60,7 +61,8 @@ def main() -> None:
     ap.add_argument("--no-results-file", action="store_true")
     args = ap.parse_args()
     out = ResultsFile("certify_panda", "Sound lower bounds on Panda distances (issue 46 "
-                      "item 3)")  # started now: the header's times and load span the run
+                      "item 3)",
+                      claim="certify-nd")  # started now: the header's times and load span the run
     m = finsler.get_metric("panda-pole")
     spec = ConformalSpec(max_boxes=args.max_boxes)
     part_spec = ConformalSpec(max_boxes=args.part_boxes)

@@ -2,7 +2,7 @@
 metrics of ``tests/broken_metrics.py`` (each wrong in one way, and the valid ones there),
 each in a fresh process (imports and NLP builds included, one thread: OMP_NUM_THREADS=1),
 with its exit status, failed (root cause first), inconclusive properties and the slowest
-property; written to ``benchmarks/results/check_speed-DATE.md``.
+property; written to ``benchmarks/results/check/check_speed-DATE.md``.
 
     .venv/bin/python benchmarks/check_speed.py [--examples 100,200] [--only NAME,...]
                                                [--no-broken] [--two-d]
@@ -82,7 +82,7 @@ def main() -> None:
     if args.two_d:
         jobs = [j for j in jobs if finsler.get_metric(j[0]).dim == 2]
     sizes = [int(e) for e in args.examples.split(",")]
-    out = ResultsFile("check_speed", title="geodesics check: time per metric")
+    out = ResultsFile("check_speed", title="geodesics check: time per metric", claim="check")
     header = ["metric", "examples", "wall s", "CPU s", "exit", "failed (root cause first)",
               "inconclusive", "not run", "slowest property", "stderr lines"]
     print("  ".join(header), flush=True)

@@ -95,7 +95,8 @@ def main() -> None:
     a = ap.parse_args()
     if a.repeats < 1:
         ap.error("--repeats must be >= 1")
-    out = ResultsFile("cli_startup", title="Command-line start-up: CPU and wall time")
+    out = ResultsFile("cli_startup", title="Command-line start-up: CPU and wall time",
+                      claim="cli")
     trees: list[tuple[str, list[str], dict[str, str] | None]] = [("this tree", entry_point(),
                                                                   None)]
     if a.before:

@@ -4,7 +4,7 @@ goals from one start.
 Three measurements, one thread, CPU time (``time.process_time``, children included where a
 subprocess runs):
 
-1. **The field** (`solvers.field.lattice_field` at the default plan's resolution): nodes,
+1. **The field** (`solvers.seeding.field.lattice_field` at the default plan's resolution): nodes,
    edges, moves kept, build time, and the median graph length over the true length on
    ``--pairs`` fresh pairs of a set whose best known energies are cached
    (``ground_truth.py``'s multistart); per pair the time of a route query.
@@ -22,7 +22,7 @@ Usage::
 
     python benchmarks/field_seeding.py [--seed 20261308] [--goals 100] [--cold 3]
 
-Writes ``benchmarks/results/field_seeding-DATE.md``.
+Writes ``benchmarks/results/seed-plans/field_seeding-DATE.md``.
 """
 
 from __future__ import annotations
@@ -48,7 +48,7 @@ from results_file import ResultsFile, markdown_table  # noqa: E402
 import finsler  # noqa: E402
 import solvers  # noqa: E402
 from finsler.spec import MetricSpec  # noqa: E402
-from solvers.field import FieldSpec, lattice_field  # noqa: E402
+from solvers.seeding.field import FieldSpec, lattice_field  # noqa: E402
 
 TIGHT, LOOSE = 1e-4, 1e-2
 
@@ -135,7 +135,8 @@ def main() -> None:
     args = ap.parse_args()
     m = finsler.get_metric("carlike")
     plan = solvers.SeedPlan.default(m)
-    out = ResultsFile("field_seeding", title="The lattice field of the car-like plan")
+    out = ResultsFile("field_seeding", title="The lattice field of the car-like plan",
+                      claim="seed-plans")
     from ground_truth import cache_path
 
     cached = cache_path(m, args.field_pairs_seed, 100, 256, 20)

@@ -41,7 +41,7 @@ Usage::
         [--seed 20261201] [--best-starts 20] [--chunk 5]
         [--finslerax-python PEERS/finslerax/bin/python] [--repeats 3]
 
-Writes ``benchmarks/results/ground_truth-DATE.md`` (``results_file.py``).
+Writes ``benchmarks/results/exact-solves/ground_truth-DATE.md`` (``results_file.py``).
 """
 
 from __future__ import annotations
@@ -65,8 +65,8 @@ from results_file import RESULTS, ResultsFile, markdown_table  # noqa: E402
 import finsler  # noqa: E402
 from finsler.spec import MetricSpec  # noqa: E402
 from solvers import SeedPlan, solve_batch  # noqa: E402
-from solvers.batched import covers  # noqa: E402
-from solvers.seeding import seed_family  # noqa: E402
+from solvers.newton.driver import covers  # noqa: E402
+from solvers.seeding.plans import seed_family  # noqa: E402
 
 CACHE = RESULTS / "ground_truth_cache"
 TIGHT, LOOSE = 1e-4, 1e-2
@@ -429,7 +429,7 @@ def main() -> None:
         print(f"{m.name} pairs {a}..{int(b) - 1}: {rec['cpu']:.2f} s CPU per pair", flush=True)
         return
     out = ResultsFile("ground_truth", title="Ground truth: the default exact solve against "
-                      "a wide multistart on fresh pairs")
+                      "a wide multistart on fresh pairs", claim="exact-solves")
     out.add(f"Fresh pairs `finsler.sample_pairs(metric, K, {args.seed})` at "
             "`2**task.depth` segments; default: `solve_batch(metric, pairs, segments=N, "
             f"workers=1{'' if args.method == 'auto' else f', method={args.method!r}'})`; "

@@ -10,10 +10,11 @@ For each group: the COMMITTED tree (``git archive HEAD``, so the score is for th
 the results file names) is unpacked into ``build/mutation/GROUP/``, its ``[tool.mutmut]``
 (``pyproject.toml``) gets the group's source files and its own FAST focused tests, and
 ``mutmut run`` (``nice``) mutates and tests them there. The results file
-(``benchmarks/results/mutation-DATE.md``) gives per group the mutants, killed, timeouts,
-survivors, score = (killed + timeout) / (mutants - skipped), the CPU time, the commit of
-each source file, and the diff of every survivor; ``mutation_report.md`` gives the
-verdicts. A score from a group's focused tests is a lower bound of the whole suite's.
+(``benchmarks/results/mutation/mutation-DATE.md``) gives per group the mutants, killed,
+timeouts, survivors, score = (killed + timeout) / (mutants - skipped), the CPU time, the
+commit of each source file, and the diff of every survivor; ``mutation_report.md`` in the
+same folder gives the verdicts. A score from a group's focused tests is a lower bound of
+the whole suite's.
 Needs ``pip install -e ".[mutation]"`` (mutmut >= 3.8).
 """
 
@@ -37,17 +38,19 @@ ROOT = Path(__file__).resolve().parents[1]
 #: group -> (files mutated, fast focused tests run against them). mutmut runs, per
 #: mutant, only the selected tests that called the mutated function.
 GROUPS: dict[str, tuple[list[str], list[str]]] = {
-    "block_tridiagonal": (["solvers/block_tridiagonal.py"], ["tests/test_block_tridiagonal.py",
+    "block_tridiagonal": (["solvers/newton/block_tridiagonal.py"],
+                          ["tests/test_block_tridiagonal.py",
                                                              "tests/test_block_tridiagonal_rows.py"]),
-    "certify_mesh": (["solvers/certify_mesh.py"], ["tests/test_mutation_kills_certify_mesh.py"]),
+    "certify_mesh": (["solvers/certificates/plane/mesh.py"],
+                     ["tests/test_mutation_kills_certify_mesh.py"]),
     # certify_lp: its kill tests and the repair's (which run _solve_lp's repair branch)
-    "certify_lp": (["solvers/certify_lp.py"], ["tests/test_mutation_kills_certify_lp.py",
+    "certify_lp": (["solvers/certificates/plane/lp.py"], ["tests/test_mutation_kills_certify_lp.py",
                                                "tests/test_certify_repair.py"]),
-    "newton": (["solvers/newton.py"], ["tests/test_newton.py",
+    "newton": (["solvers/newton/energy.py"], ["tests/test_newton.py",
                                        "tests/test_mutation_kills_newton.py"]),
     # batched: its own kill tests alone (closed forms, hand counts: 17 tests in ~3 s);
     # test_newton.py's batched solves took ~3 s a mutant for 53 %
-    "batched": (["solvers/batched.py"], ["tests/test_mutation_kills_batched.py"]),
+    "batched": (["solvers/newton/driver.py"], ["tests/test_mutation_kills_batched.py"]),
 }
 #: the property suite one module at a time, each against its own fast kill tests
 #: (``testing_engine``, ``testing_metric``, ...): small runs that can be spread; the score
@@ -210,7 +213,7 @@ def main(argv: list[str] | None = None) -> None:
     named = [g for a in (args.groups or DEFAULT) for g in ALIASES.get(a, [a])]
     args.groups = list(dict.fromkeys(named))
     out = ResultsFile("mutation", title="Mutation testing of the solver core and the "
-                      "property suite (mutmut)")
+                      "property suite (mutmut)", claim="mutation")
     rows, sections = [], []
     sums = {"total": 0, "unchecked": 0, "killed": 0, "timeout": 0, "survived": 0,
             "caught": 0, "checked": 0}
@@ -268,7 +271,7 @@ def main(argv: list[str] | None = None) -> None:
             "CPU = user + system seconds of mutmut and its workers (the machine is shared "
             "by other work, so wall time varies; `-`: not measured by a report-only run). "
             "Survived includes `no tests` (no selected test calls the function). Verdicts "
-            "on the survivors: `mutation_report.md`.",
+            "on the survivors: `mutation_report.md` in this folder.",
             markdown_table(["group", "mutants", "not checked", "killed", "timeout",
                             "survived", "score", "CPU s", "wall s"], rows),
             *sections)

@@ -6,7 +6,7 @@ one thread), CPU time (``time.process_time``) next to wall time (the machine may
 CPU is the figure to compare):
 
 1. Same seeds, one solver each: the default plan's seed curves at ``--segments`` (no
-   ladder, no polishing), every row solved by :func:`solvers.interior.interior_energy`
+   ladder, no polishing), every row solved by :func:`solvers.newton.interior.interior_energy`
    (all rows in one batch) and by IPOPT alone (:func:`solvers.transcription.energy_nlp`,
    one row at a time). Per pair: the lowest converged energy of each, how many rows
    the interior point converged, and how many converged rows ended more than 1e-6
@@ -22,7 +22,7 @@ CPU is the figure to compare):
    family the rows, how many converged / stalled / ended at the iteration cap, their
    median iterations and their share of all row iterations (a row's iterations are what
    it costs: every iteration evaluates its segments once and solves its system once).
-   With ``--before REV`` the same rows are first solved by ``solvers/interior.py`` as
+   With ``--before REV`` the same rows are first solved by ``solvers/newton/interior.py`` as
    committed at git revision ``REV`` (e.g. ``9d23a82``, before this session's speed-ups):
    CPU and wall of both, statuses and energies compared; measurement 2 likewise runs the
    whole solve first with that version of the interior point (``--default-plan``: the
@@ -55,8 +55,8 @@ from results_file import ResultsFile, markdown_table  # noqa: E402
 import finsler  # noqa: E402
 import solvers  # noqa: E402
 from solvers.inputs import domain_scale  # noqa: E402
-from solvers.interior import interior_energy  # noqa: E402
-from solvers.seeding import SeedPlan, seed_batch  # noqa: E402
+from solvers.newton.interior import interior_energy  # noqa: E402
+from solvers.seeding.plans import SeedPlan, seed_batch  # noqa: E402
 from solvers.status import NewtonStatus  # noqa: E402
 from solvers.transcription import energy_nlp  # noqa: E402
 
@@ -117,7 +117,7 @@ def _family(name: str) -> str:
 
 
 def _load_before(rev: str) -> object:
-    """``solvers/interior.py`` as committed at git revision ``rev``, loaded as its own
+    """``solvers/newton/interior.py`` as committed at git revision ``rev``, loaded as its own
     module (``interior_before``): the reference for ``--before``."""
     import importlib.util
     import subprocess
@@ -126,7 +126,7 @@ def _load_before(rev: str) -> object:
     from pathlib import Path
 
     root = Path(__file__).resolve().parent.parent
-    src = subprocess.run(["git", "show", f"{rev}:solvers/interior.py"], cwd=root, check=True,
+    src = subprocess.run(["git", "show", f"{rev}:solvers/newton/interior.py"], cwd=root, check=True,
                          capture_output=True, text=True).stdout
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "interior_before.py"
@@ -191,7 +191,7 @@ def work(m: finsler.Metric, pairs: np.ndarray, n: int, before: str = ""
         obest = np.array([np.min(np.where(oconv[k * S:(k + 1) * S],
                                           old.energy[k * S:(k + 1) * S], np.inf))
                           for k in range(K)])
-        summary += (f" Before (`solvers/interior.py` at {before}, the same rows in the same "
+        summary += (f" Before (`solvers/newton/interior.py` at {before}, the same rows in the same "
                     f"run): wall {wb / K:.2f} s, CPU "
                     f"{cb / K:.2f} s per pair, {int(old.iterations.sum())} row iterations; "
                     f"after/before CPU {(c1 - c0) / cb:.2f}. Status the same on "
@@ -210,10 +210,10 @@ def whole(m: finsler.Metric, pairs: np.ndarray, n: int, plan: SeedPlan, ipopt: b
     K = pairs.shape[0]
     # the graph seeder is built once per metric and process (a fixed cost): build it
     # outside the timing, as a long-running process would have it
-    from solvers.seeding import graph_seeder
+    from solvers.seeding.plans import graph_seeder
     graph_seeder(m)
-    if before:  # the same solve with solvers/interior.py as committed at ``before``
-        import solvers.batched as batched_mod
+    if before:  # the same solve with solvers/newton/interior.py as committed at ``before``
+        import solvers.newton.driver as batched_mod
 
         current = batched_mod.interior_energy
         batched_mod.interior_energy = _load_before(before).interior_energy
@@ -250,7 +250,8 @@ def whole(m: finsler.Metric, pairs: np.ndarray, n: int, plan: SeedPlan, ipopt: b
     if before:
         eo = np.array([r.energy for r in old])
         en = np.array([r.energy for r in new])
-        summary += (f". Before (`solvers/interior.py` at {before}, the same pairs in the same "
+        summary += (f". Before (`solvers/newton/interior.py` at {before}, the same pairs in "
+                    f"the same "
                     f"run): wall {(wb1 - wb0) / K:.2f} s, CPU {(cb1 - cb0) / K:.2f} s per pair, "
                     f"after/before CPU {(c1 - c0) / (cb1 - cb0):.2f}; energies after/before - "
                     f"1: max {np.max(en / eo - 1):+.1e}, min {np.min(en / eo - 1):+.1e}; "
@@ -310,7 +311,7 @@ def main() -> None:
     ap.add_argument("--work", action="store_true",
                     help="where the interior point's work goes (measurement 3)")
     ap.add_argument("--before", default="", metavar="REV",
-                    help="with --work and measurement 2: also time solvers/interior.py as "
+                    help="with --work and measurement 2: also time solvers/newton/interior.py as "
                     "committed at REV (git) on the same rows / pairs in the same run")
     ap.add_argument("--truth", type=int, default=0,
                     help="also solve the first N ground-truth pairs against the cache")
@@ -322,7 +323,8 @@ def main() -> None:
     plan = SeedPlan.default(m) if a.default_plan else dataclasses.replace(
         SeedPlan.default(m), coarse=a.coarse, factor=a.factor, refine_top=a.top)
     out = ResultsFile("nonsmooth_newton" + (f"_{a.tag}" if a.tag else ""),
-                      "Car-like: batched interior point against IPOPT")
+                      "Car-like: batched interior point against IPOPT",
+                      claim="nonsmooth-newton")
     out.add(f"Pairs: `finsler.sample_pairs(carlike, {a.pairs}, {a.seed})`, "
             f"{a.segments} segments, one thread.")
     if not a.skip_rows:

@@ -6,8 +6,8 @@ It solves K fresh pairs (``finsler.sample_pairs(carlike, K, seed)``, default see
 20261202: not a seed any plan was tuned on) with ``solvers.solve_batch(carlike, pairs,
 segments=n, workers=1)`` on one thread (numpy, OMP/MKL/OPENBLAS one thread) and prints,
 per pair: status, method, energy, the reported ``residual``
-(:func:`solvers.nonsmooth.kkt_residual`), the energy's projected gradient
-(:func:`solvers.newton.energy_residual`, the measure reported before), and the CPU time
+(:func:`solvers.newton.kkt.kkt_residual`), the energy's projected gradient
+(:func:`solvers.newton.energy.energy_residual`, the measure reported before), and the CPU time
 of the KKT residual of the path (``time.process_time``). Then the batch's wall and CPU
 time per pair. The machine may be shared: CPU time is the figure to compare.
 
@@ -33,8 +33,8 @@ from results_file import ResultsFile, markdown_table  # noqa: E402
 import finsler  # noqa: E402
 import solvers  # noqa: E402
 from solvers.inputs import domain_scale  # noqa: E402
-from solvers.newton import energy_residual  # noqa: E402
-from solvers.nonsmooth import kkt_residual  # noqa: E402
+from solvers.newton.energy import energy_residual  # noqa: E402
+from solvers.newton.kkt import kkt_residual  # noqa: E402
 
 
 def main() -> None:
@@ -80,7 +80,7 @@ def main() -> None:
     print(summary)
     if not a.no_write:
         out = ResultsFile("nonsmooth_residual", "Car-like: the KKT residual reported "
-                          "against the energy's gradient")
+                          "against the energy's gradient", claim="nonsmooth-newton")
         out.add("## Per pair", table, "", "## Summary", summary)
         out.write()
 

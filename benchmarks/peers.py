@@ -144,7 +144,7 @@ def bump_metric() -> Any:
     import casadi as ca
 
     from finsler.domains import Disk
-    from finsler.metric import Metric, Task
+    from finsler.metrics.base import Metric, Task
 
     @dataclass(frozen=True)
     class Bump(Metric):
@@ -435,7 +435,7 @@ def throughput(args: Any, ap: Any) -> None:
     """The throughput section: see the module docstring."""
     import finsler
     import solvers
-    from solvers.seeding import SeedPlan
+    from solvers.seeding.plans import SeedPlan
 
     K, Q = args.throughput_pairs, min(args.quality_pairs, args.throughput_pairs)
     if K < 1 or args.reference_rounds < 0 or args.repeats < 1:

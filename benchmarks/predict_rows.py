@@ -1,4 +1,4 @@
-"""The actor in pieces of ``learn.networks.PREDICT_ROWS`` rows against one call: CPU and
+"""The actor in pieces of ``learn.midpoint.networks.PREDICT_ROWS`` rows against one call: CPU and
 wall time of the shipped policies' predictions, plain generation and the route search,
 both ways in one run, with a check that the paths agree bit for bit.
 
@@ -17,8 +17,8 @@ import torch
 
 import finsler
 import learn
-from learn.networks import PREDICT_ROWS, predictor
-from learn.search import search_paths
+from learn.midpoint.networks import PREDICT_ROWS, predictor
+from learn.midpoint.search import search_paths
 from learn.tree import build_tree
 
 Predict = Callable[[torch.Tensor, torch.Tensor], torch.Tensor]

@@ -39,7 +39,8 @@ def main() -> None:
     ap.add_argument("--no-write", action="store_true", help="print only")
     args = ap.parse_args()
     out = ResultsFile("report_certify", title="Certificates of a report: cost per pair "
-                      "(issue 46, item 5)")  # the header's start: date and load now
+                      "(issue 46, item 5)",
+                      claim="reports")  # the header's start: date and load now
     metrics = args.metric or ["poincare-slab", "carlike", "panda-pole"]
     presets = args.preset or ["coarse"]
     rows, summary = [], []

@@ -6,7 +6,7 @@ runs it (`validation.exact_reference`: a globally seeded batched solve of ``--pa
 with min-max refinement, one process; its share per path) and one pair at a time
 (`solvers.solve_geodesic`, the median over ``--single`` pairs), and the speed-ups. The
 pairs are the first of the environment's default evaluation set. Writes
-``benchmarks/results/report_timing-DATE.md``.
+``benchmarks/results/reports/report_timing-DATE.md``.
 
 Usage::
 
@@ -50,7 +50,8 @@ def main() -> None:
     ap.add_argument("--no-results-file", action="store_true")
     args = ap.parse_args()
     sizes = {e: int(k) for e, k in (item.split("=") for item in args.pairs.split(","))}
-    out = ResultsFile("report_timing", "The report's time per path, every shipped policy")
+    out = ResultsFile("report_timing", "The report's time per path, every shipped policy",
+                      claim="reports")
     rows = []
     for env in args.envs.split(","):
         r = measure(env, sizes.get(env, 20), args.single, args.repeats)

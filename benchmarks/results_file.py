@@ -1,19 +1,25 @@
-"""Write a benchmark's measurements to a file under ``benchmarks/results/``.
+"""Write a benchmark's measurements to a file under ``benchmarks/results/<claim>/``.
 
 Every figure the README or the docs cite lives in such a file, written by the script that
 measured it, never typed by hand. The header says how to get the same figures again: the
 command line, the commit (and whether the tree had uncommitted changes), the machine
 (cores, load averages at the start and at the end, CPU model, Python and key package
-versions) and the date. A rerun writes a new file (the date is in its name unless the
-script names it), so older measurements stay for comparison.
+versions) and the date.
+
+Files are grouped by the claim they back (``benchmarks/results/README.md`` lists the claims,
+the current file of each and the command that measures it again). A run writes a new file
+``<claim>/<name>-DATE.md`` (``-2``, ``-3`` ... when that name is taken in the folder or in
+its ``history/``), so no run overwrites another; the file it replaces as the evidence for a
+claim moves to ``<claim>/history/`` (``git mv``) when the README and the docs are updated to
+cite the new one.
 
 Usage from a benchmark script (run as ``python benchmarks/NAME.py``, so this module is
 importable by its name)::
 
     from results_file import ResultsFile
-    out = ResultsFile("ground_truth", title="Ground truth on fresh pairs")
+    out = ResultsFile("ground_truth", title="Ground truth on fresh pairs", claim="exact-solves")
     out.add("## Matsumoto", table_markdown)
-    path = out.write()          # benchmarks/results/ground_truth-2026-11-28.md
+    path = out.write()          # benchmarks/results/exact-solves/ground_truth-2026-12-07.md
 """
 
 from __future__ import annotations
@@ -78,18 +84,23 @@ def markdown_table(header: list[str], rows: list[list[object]]) -> str:
 class ResultsFile:
     """Collects sections of Markdown and writes them under a reproducibility header.
 
-    ``name`` is the file's stem (the benchmark's name); ``stamp=True`` appends the date
-    (``NAME-YYYY-MM-DD.md``, then ``-2``, ``-3`` ... if that exists) so reruns keep history.
+    ``name`` is the file's stem (the benchmark's name) and ``claim`` the folder of the claim
+    it measures (a folder of ``benchmarks/results/``, listed in its README). ``stamp=True``
+    appends the date (``NAME-YYYY-MM-DD.md``, then ``-2``, ``-3`` ... when that name is taken
+    in the claim's folder or in its ``history/``) so reruns keep history. ``directory`` is
+    the results root (``benchmarks/results/`` unless given).
     """
 
-    def __init__(self, name: str, title: str, *, stamp: bool = True,
+    def __init__(self, name: str, title: str, *, claim: str, stamp: bool = True,
                  directory: str | os.PathLike[str] | None = None) -> None:
-        if not name or "/" in name or name.startswith("."):
-            raise ValueError(f"results name {name!r} is not a plain file stem")
+        for what, value in (("name", name), ("claim", claim)):
+            if not value or "/" in value or "\\" in value or value.startswith("."):
+                raise ValueError(f"results {what} {value!r} is not a plain file or folder name")
         self.name = name
         self.title = title
+        self.claim = claim
         self.stamp = stamp
-        self.directory = Path(directory) if directory is not None else RESULTS
+        self.directory = (Path(directory) if directory is not None else RESULTS) / claim
         self.started = _dt.datetime.now(_dt.timezone.utc)
         self.load_start = _load()
         # the code that runs is the code at the start: a commit made while a long run goes
@@ -121,14 +132,32 @@ class ResultsFile:
             "",
         ])
 
+    def _taken(self, filename: str) -> bool:
+        return (self.directory / filename).exists() or (
+            self.directory / "history" / filename).exists()
+
     def path(self) -> Path:
+        """The first free name (not in the claim's folder, nor in its ``history/``)."""
         if not self.stamp:
             return self.directory / f"{self.name}.md"
         base = f"{self.name}-{self.started:%Y-%m-%d}"
-        p, k = self.directory / f"{base}.md", 2
-        while p.exists():
-            p, k = self.directory / f"{base}-{k}.md", k + 1
-        return p
+        name, k = f"{base}.md", 2
+        while self._taken(name):
+            name, k = f"{base}-{k}.md", k + 1
+        return self.directory / name
+
+    def _claim_path(self) -> Path:
+        """A free name, reserved by creating the file exclusively: two runs of one script
+        started the same day (pairs split between processes) never share a file."""
+        while True:
+            p = self.path()
+            if not self.stamp:
+                return p
+            try:
+                os.close(os.open(p, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644))
+            except FileExistsError:
+                continue
+            return p
 
     def write(self) -> Path:
         """Write the file atomically and return its path (also printed). A second call
@@ -137,7 +166,7 @@ class ResultsFile:
         from finsler.infra.files import atomic_write_text
 
         self.directory.mkdir(parents=True, exist_ok=True)
-        p = self._written or self.path()
+        p = self._written or self._claim_path()
         self._written = p
         atomic_write_text(p, self.header() + "\n" + "\n".join(self.sections))
         print(f"results written to {p}")

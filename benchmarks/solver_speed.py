@@ -56,8 +56,8 @@ import torch
 
 import finsler
 from solvers import SeedPlan, solve_batch, solve_geodesic
-from solvers.baseline import adam_energy_baseline
-from solvers.seeding import graph_seeder
+from solvers.geodesic.baseline import adam_energy_baseline
+from solvers.seeding.plans import graph_seeder
 from solvers.transcription import energy_nlp, minmax_nlp
 
 TASKS = {"matsumoto": 64, "carlike": 256, "panda-pole": 32}
@@ -250,13 +250,13 @@ def run_scale(k: int, sizes: list[int], full_max: int, seed: int = SCALE_SEED) -
 
 def run_linear() -> None:
     """Block Thomas against cyclic reduction
-    (solvers.block_tridiagonal.block_tridiagonal_solve) on random positive definite systems
+    (solvers.newton.block_tridiagonal.block_tridiagonal_solve) on random positive definite systems
     of the shapes the batched solve meets: many short paths (the seeding levels) to a few
     long ones (4096 segments), 2 x 2 blocks (the 2-D metrics) and 7 x 7 (Panda: one pair's
     6 seeds to a batch of 100 pairs); CPU ms per solve, the median of 5, with the local
     modification on (as the solver runs them)."""
-    from solvers.backends import _NUMPY_OPS
-    from solvers.block_tridiagonal import (
+    from solvers.newton.backends import _NUMPY_OPS
+    from solvers.newton.block_tridiagonal import (
         THOMAS_MAX_BLOCKS,
         THOMAS_MAX_BLOCKS_WIDE,
         block_tridiagonal_solve,
@@ -325,7 +325,7 @@ def main() -> None:
     if args.fresh:
         run_fresh(args.fresh, args.fresh_cache, args.fresh_seed)
     if args.scale:
-        # printed, and written to benchmarks/results/solver_scale-DATE.md
+        # printed, and written to benchmarks/results/exact-solves/solver_scale-DATE.md
         import contextlib
         import io
 
@@ -342,7 +342,7 @@ def main() -> None:
             run_scale(args.scale, [int(v) for v in args.sizes.split(",")], args.full_max,
                       args.scale_seed)
         out = ResultsFile("solver_scale", title="Exact solve time against the number of "
-                          "segments (Matsumoto)")
+                          "segments (Matsumoto)", claim="exact-solves")
         out.add("```\n" + buf.getvalue().strip() + "\n```")
         print(out.write())
     if args.linear:

@@ -7,7 +7,7 @@ plan or policy was tuned on) it runs the command line as whole processes, as a u
 would, one after the other:
 
 * default: ``geodesics solve --metric M --pairs P --segments n --no-progress --out D.json``
-  (the global seed plan, batched Newton or IPOPT as ``--method auto`` picks);
+  (the global seed plan, batched Newton or IPOPT as ``--solver auto`` picks);
 * warm: the same with ``--warm-start M`` (the shipped policy): the policy's path of each
   pair is one more start in the same batch, beside the global seeds.
 
@@ -202,7 +202,8 @@ def main() -> None:
               f"{r['wall']['default']:.2f}", f"{r['wall']['warm']:.2f}",
               f"{r['cpu']['warm'] / r['cpu']['default']:.2f}", r["worse"]["1e-09"],
               r["worse"]["1e-06"], r["better"], f"{r['largest_gap']:.2e}"] for r in rows]
-    res = ResultsFile("warm_start", title="--warm-start as one more start of the batched solve")
+    res = ResultsFile("warm_start", title="--warm-start as one more start of the batched solve",
+                      claim="warm-starts")
     res.add(f"Whole `geodesics solve --pairs P --segments n --no-progress --out F` processes "
             f"with and without `--warm-start METRIC` (the shipped policy), median of "
             f"{args.repeats} run(s) each; CPU = user + system of the process (torch and the "

@@ -1,10 +1,12 @@
-"""MkDocs hook: publish ``benchmarks/results/*.md`` under ``results/`` in the site.
+"""MkDocs hook: publish ``benchmarks/results/`` under ``results/`` in the site.
 
-The measured results live beside the scripts that write them, not in ``docs/``; this hook
-adds each file to the build (so the guides' relative links ``results/NAME.md`` are checked
-by ``mkdocs build --strict``) and writes ``results/index.md``: the folder's README followed
-by a list of every file with its title. It also unescapes ``\\|`` inside the code spans of
-table rows (see `on_page_markdown`).
+The measured results live beside the scripts that write them, not in ``docs/``: one folder
+per claim (its current files, and older runs in its ``history/``). This hook adds every
+Markdown file of those folders to the build at the same relative path (so the guides'
+relative links ``results/CLAIM/NAME.md`` are checked by ``mkdocs build --strict``) and
+writes ``results/index.md``: the folder's README (the table of claims) followed by a list
+of every file with its title, claim by claim. It also unescapes ``\\|`` inside the code
+spans of table rows (see `on_page_markdown`).
 """
 
 from __future__ import annotations
@@ -28,13 +30,19 @@ def _title(path: Path) -> str:
 
 def on_files(files, config):
     listing = []
-    for path in sorted(RESULTS.glob("*.md")):
-        if path.name == "README.md":
-            continue
-        files.append(File.generated(config, f"results/{path.name}", abs_src_path=str(path)))
-        listing.append(f"- [{_title(path)}]({path.name})")
+    for folder in sorted(p for p in RESULTS.iterdir() if p.is_dir()):
+        current = sorted(folder.glob("*.md"))
+        history = sorted((folder / "history").glob("*.md"))
+        if not current and not history:
+            continue  # a cache, not a claim
+        listing.append(f"\n### {folder.name}\n")
+        for path in current + history:
+            rel = path.relative_to(RESULTS).as_posix()
+            files.append(File.generated(config, f"results/{rel}", abs_src_path=str(path)))
+            label = " (history)" if path.parent.name == "history" else ""
+            listing.append(f"- [{_title(path)}]({rel}){label}")
     readme = (RESULTS / "README.md").read_text(encoding="utf-8")
-    index = readme.rstrip() + "\n\n## Files\n\n" + "\n".join(listing) + "\n"
+    index = readme.rstrip() + "\n\n## Files\n" + "\n".join(listing) + "\n"
     files.append(File.generated(config, "results/index.md", content=index))
     return files
 

@@ -8,10 +8,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from finsler.infra import moved as _moved
 from finsler.infra.lazy import lazy_exports
-
-_moved.install()  # finsler.pool, finsler.files, ... (moved into finsler.infra) still import
 
 if TYPE_CHECKING:
     from finsler.domains import Box, Disk, Domain, JointBox, Product
@@ -23,20 +20,17 @@ if TYPE_CHECKING:
         atomic_write_text,
         check_output_path,
     )
-    from finsler.metric import LengthBounds, LengthEstimate, Metric, Task, TrainingSettings
-    from finsler.metrics import (
-        MATSUMOTO_CONVEX_RADIUS,
-        CarLike,
+    from finsler.metrics.base import LengthBounds, LengthEstimate, Metric, Task, TrainingSettings
+    from finsler.metrics.closed_form import (
         ClosedFormMetric,
         Euclidean,
-        Matsumoto,
         Minkowski,
-        PandaPole,
         Poincare,
         PoincareSlab,
         Randers,
         Sphere,
     )
+    from finsler.metrics.paper import MATSUMOTO_CONVEX_RADIUS, CarLike, Matsumoto, PandaPole
     from finsler.pairs import (
         DEFAULT_EVAL_SEED,
         VALIDATION_SEED,
@@ -50,36 +44,36 @@ if TYPE_CHECKING:
 
 # Public names -> defining module, imported on first use (PEP 562): `import finsler` and
 # `from finsler.errors import InputError` stay cheap (no CasADi, numpy) for the command line's
-# --help; `from finsler import Metric` works as before.
+# --help.
 _LAZY = {
     "Box": "finsler.domains",
-    "CarLike": "finsler.metrics",
-    "ClosedFormMetric": "finsler.metrics",
+    "CarLike": "finsler.metrics.paper",
+    "ClosedFormMetric": "finsler.metrics.closed_form",
     "DEFAULT_EVAL_SEED": "finsler.pairs",
     "Disk": "finsler.domains",
     "Domain": "finsler.domains",
     "DomainError": "finsler.errors",
-    "Euclidean": "finsler.metrics",
+    "Euclidean": "finsler.metrics.closed_form",
     "HOOKS": "finsler.hooks",
     "InputError": "finsler.errors",
     "JointBox": "finsler.domains",
-    "LengthBounds": "finsler.metric",
-    "LengthEstimate": "finsler.metric",
-    "MATSUMOTO_CONVEX_RADIUS": "finsler.metrics",
-    "Matsumoto": "finsler.metrics",
-    "Metric": "finsler.metric",
+    "LengthBounds": "finsler.metrics.base",
+    "LengthEstimate": "finsler.metrics.base",
+    "MATSUMOTO_CONVEX_RADIUS": "finsler.metrics.paper",
+    "Matsumoto": "finsler.metrics.paper",
+    "Metric": "finsler.metrics.base",
     "MetricHooks": "finsler.hooks",
     "MetricSpec": "finsler.spec",
-    "Minkowski": "finsler.metrics",
+    "Minkowski": "finsler.metrics.closed_form",
     "OutputError": "finsler.infra.files",
-    "PandaPole": "finsler.metrics",
-    "Poincare": "finsler.metrics",
-    "PoincareSlab": "finsler.metrics",
+    "PandaPole": "finsler.metrics.paper",
+    "Poincare": "finsler.metrics.closed_form",
+    "PoincareSlab": "finsler.metrics.closed_form",
     "Product": "finsler.domains",
-    "Randers": "finsler.metrics",
-    "Sphere": "finsler.metrics",
-    "Task": "finsler.metric",
-    "TrainingSettings": "finsler.metric",
+    "Randers": "finsler.metrics.closed_form",
+    "Sphere": "finsler.metrics.closed_form",
+    "Task": "finsler.metrics.base",
+    "TrainingSettings": "finsler.metrics.base",
     "UnknownMetricError": "finsler.errors",
     "VALIDATION_SEED": "finsler.pairs",
     "atomic_write_bytes": "finsler.infra.files",

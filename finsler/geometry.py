@@ -12,7 +12,7 @@ exact; the linear solve with ``g`` is numeric (a 7-D metric needs no symbolic in
 The equation describes shortest curves only where ``g`` is positive definite (``F``
 strongly convex): `Spray.pd_ratio` measures it. `spray` builds it once per
 metric (`finsler.Metric.derived`) and refuses a metric whose ``F`` is not smooth.
-The exp/log maps of `solvers.expmap` integrate it.
+The exp/log maps of `solvers.continuum.expmap` integrate it.
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ import casadi as ca
 import numpy as np
 
 from finsler.errors import InputError
-from finsler.metric import Metric
+from finsler.metrics.base import Metric
 
 __all__ = ["Spray", "spray"]
 

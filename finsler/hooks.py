@@ -150,6 +150,6 @@ class MetricHooks:
         """The factor ``f(x) > 0`` of a conformal metric, ``F(x, v) = f(x) |v|`` with
         ``|v|`` the Euclidean norm, as a CasADi SX expression of ``x`` (``(dim, 1)`` SX ->
         ``(1, 1)`` SX). A metric provides it only if ``F`` has exactly this form: the n-D
-        certificate (``solvers.certify_conformal``) proves its lower bound from enclosures
-        of this factor alone. Not provided by default."""
+        certificate (``solvers.certificates.conformal.certificate``) proves its lower bound from
+        enclosures of this factor alone. Not provided by default."""
         raise self._missing("conformal_factor_sx")

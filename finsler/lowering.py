@@ -282,7 +282,7 @@ class LoweredFunction:
         """Run the program on a caller's backend (the operations ``B.exp``, ``B.sqrt``,
         ... and the arithmetic operators of its values): ``columns[i][j]`` is coordinate
         ``j`` of input ``i``; returns one list of values per output coordinate. Used by
-        `finsler.intervals.enclose`."""
+        `finsler.enclosures.intervals.enclose`."""
         return self._program(backend, columns)
 
 

@@ -11,7 +11,7 @@ from finsler.domains import Domain, describe_value
 from finsler.errors import InputError, short
 from finsler.infra.files import read_npy
 from finsler.infra.limits import check_count, check_memory, check_seed
-from finsler.metric import Metric
+from finsler.metrics.base import Metric
 
 __all__ = [
     "DEFAULT_EVAL_SEED",

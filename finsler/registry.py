@@ -11,18 +11,17 @@ from collections import OrderedDict
 from typing import Any
 
 from finsler.errors import InputError, UnknownMetricError, short
-from finsler.metric import Metric
-from finsler.metrics import (
-    CarLike,
+from finsler.metrics.base import Metric
+from finsler.metrics.checks import check_params
+from finsler.metrics.closed_form import (
     Euclidean,
-    Matsumoto,
     Minkowski,
-    PandaPole,
     Poincare,
     PoincareSlab,
     Randers,
     Sphere,
 )
+from finsler.metrics.paper import CarLike, Matsumoto, PandaPole
 
 __all__ = ["check_name", "get_metric", "list_metrics", "metric_class", "register_metric",
            "shared_instance", "unregister_metric"]
@@ -116,7 +115,6 @@ def get_metric(name: str, /, **params: Any) -> Metric:
             f"metric {name!r} has no parameter {', '.join(map(repr, unknown))}; "
             f"its parameters are: {', '.join(sorted(fields)) or '(none)'}"
         )
-    from finsler.spec import check_params
 
     checked = check_params(name, cls, params)
     try:

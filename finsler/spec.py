@@ -21,25 +21,17 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import math
-import numbers
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-import numpy as np
-
 from finsler import registry
-from finsler.errors import InputError, short
+from finsler.errors import InputError
 from finsler.infra.modules import import_user_module
-from finsler.metric import Metric
+from finsler.metrics.base import Metric
+from finsler.metrics.checks import check_params, param_fields
 
 __all__ = ["MetricSpec", "class_path", "ensure_registered", "metric_spec"]
-
-_PARAM_KINDS: dict[str, tuple[type, ...]] = {
-    "float": (numbers.Real,), "int": (numbers.Integral,), "bool": (bool, np.bool_),
-    "str": (str,)}
-
 
 def class_path(cls: type) -> str | None:
     """``module:qualname`` of a metric class defined outside `finsler` (None for the
@@ -99,47 +91,6 @@ def _json_safe(value: Any) -> Any:
     return value
 
 
-def _check_param(name: str, param: str, kind: str, value: Any) -> Any:
-    """``value`` checked against the field annotation ``kind`` of the metric's class."""
-    ok_types = _PARAM_KINDS.get(kind.replace(" ", ""))
-    if ok_types is not None:
-        ok = isinstance(value, ok_types) and (
-            kind == "bool" or not isinstance(value, (bool, np.bool_)))
-        if ok and kind == "float":
-            ok = math.isfinite(value)
-            value = float(value)
-        elif ok:
-            value = {"int": int, "bool": bool, "str": str}[kind](value)
-        if not ok:
-            raise InputError(f"metric parameter {param} of {short(name, 80)!r} must be {kind}"
-                             f"{' (finite)' if kind == 'float' else ''}, got "
-                             f"{type(value).__name__} {short(repr(value), 80)}")
-        return value
-    try:  # another annotation: anything JSON can hold, checked by the metric itself
-        json.dumps(value, allow_nan=False)
-    except (TypeError, ValueError, RecursionError) as err:
-        raise InputError(f"metric parameter {param} of {short(name, 80)!r} must be a JSON "
-                         f"value, got {type(value).__name__} {short(repr(value), 80)}"
-                         ) from err
-    return value
-
-
-def check_params(name: str, cls: type, params: Mapping[str, Any]) -> dict[str, Any]:
-    """``params`` checked against the field annotations of the metric class ``cls``
-    (registered as ``name``): a ``float`` field takes a finite real number (not a bool),
-    an ``int`` field an integer, a ``bool`` field a bool; other annotations any JSON
-    value. The parameter names are the caller's to check."""
-    fields = _param_fields(cls)
-    return {k: _check_param(name, k, fields[k], v) if k in fields else v
-            for k, v in params.items()}
-
-
-def _param_fields(cls: type) -> dict[str, str]:
-    """The parameters of a metric class (its init fields) and their annotations."""
-    return {f.name: f.type.__name__ if isinstance(f.type, type) else str(f.type)
-            for f in dataclasses.fields(cls) if f.init}
-
-
 @dataclass(frozen=True)
 class MetricSpec:
     """A metric's identity: ``name`` (as registered), the FULL parameter set ``params``
@@ -167,7 +118,7 @@ class MetricSpec:
         if not dataclasses.is_dataclass(metric):
             raise InputError(f"{type(metric).__name__} is not a dataclass: a metric's "
                              "parameters are its dataclass fields")
-        params = {k: _json_safe(getattr(metric, k)) for k in _param_fields(type(metric))}
+        params = {k: _json_safe(getattr(metric, k)) for k in param_fields(type(metric))}
         return cls(metric.name, params, class_path(type(metric)), type(metric))
 
     @classmethod
@@ -193,7 +144,7 @@ class MetricSpec:
             params = {}
         if not isinstance(params, Mapping):
             raise InputError(f"metric_params must be a dict of parameter values, got {params!r}")
-        fields = _param_fields(mcls)
+        fields = param_fields(mcls)
         unknown = sorted(set(params) - set(fields))
         if unknown:
             raise InputError(

@@ -250,9 +250,10 @@ class CertifyStop(str, Outcome):
     NO_REFINEMENT = "no_refinement"
     """No triangle (cell, box) left to refine."""
     LP_ROUNDS = "lp_rounds"
-    """`solvers.certify_nd`: the LP rounds of the last mesh found no verified bound."""
+    """The n-D certificate (`solvers.certificates.nd`): the LP rounds of the last mesh found
+    no verified bound."""
     MAX_CELLS = "max_cells"
-    """`solvers.certify_nd`: the ``max_cells`` budget of its mesh."""
+    """`solvers.certificates.nd.certificate`: the ``max_cells`` budget of its mesh."""
     MAX_BOXES = "max_boxes"
     """The conformal certificate's ``max_boxes`` budget."""
     MAX_LIVE = "max_live"

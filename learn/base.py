@@ -38,7 +38,7 @@ __all__ = [
 
 @dataclass
 class LoadedPolicy:
-    """What every trained policy a method loads holds ([`learn.policy.Policy`][learn.policy.Policy],
+    """What every trained policy a method loads holds ([`learn.Policy`][learn.Policy],
     `learn.pg.PGPolicy`, `learn.seq.SeqPolicy`, a plug-in's): its run config,
     metric, evaluation depth and eps, the run it came from and the checkpoint file."""
 
@@ -61,8 +61,6 @@ class LoadedPolicy:
         """``depth`` checked (a non-negative integer), or the policy's own if None."""
         d = self.depth if depth is None else depth
         return check_count(d, "depth", 0, MAX_DEPTH)
-
-    _depth = check_depth  # the name before issue 49
 
 
 @dataclass

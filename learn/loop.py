@@ -33,7 +33,8 @@ checkpoint (highest validation success, ties by lower mean max segment cost) and
 ``result.json`` (`learn.base.finish_run`). The loop is the only place that knows
 about runs. Register the method with `learn.registry.register_method`.
 
-`load_run` opens a run directory (or a shipped policy's folder) for a policy loader.
+`load_run` opens a run directory (or a shipped policy's folder, `shipped_policies`) for a
+policy loader; `resolve_device` turns a config's ``device`` into a torch device.
 """
 
 from __future__ import annotations
@@ -45,6 +46,7 @@ import sys
 import time
 from abc import ABC, abstractmethod
 from collections.abc import Iterator, Sequence
+from importlib import resources
 from pathlib import Path
 from typing import Any, ClassVar
 
@@ -55,7 +57,6 @@ import finsler
 from finsler.errors import InputError
 from finsler.status import RunStop
 from learn.base import StopOnSignal, TrainResult, finish_run
-from learn.networks import resolve_device
 from learn.registry import BUILTIN_MODULES
 from learn.run_config import RunConfig, check_run_metric, package_versions, run_header
 from learn.storage import (
@@ -83,11 +84,26 @@ __all__ = [
     "load_run",
     "load_weights",
     "read_config_section",
+    "resolve_device",
+    "shipped_dir",
+    "shipped_policies",
 ]
 
 #: The ``format`` entry of every checkpoint (inside the sealed file of learn.storage).
 CHECKPOINT_FORMAT = "learn-checkpoint-v1"
 _LOAD_ERRORS = (KeyError, RuntimeError, TypeError, ValueError, IndexError)
+
+
+def resolve_device(name: str) -> torch.device:
+    """``cpu`` or ``cuda[:k]``; a clear `InputError` if CUDA is unavailable."""
+    if name == "cpu":
+        return torch.device("cpu")
+    if name == "cuda" or name.startswith("cuda:"):
+        if not torch.cuda.is_available():
+            raise InputError(f"device {name!r} requested but CUDA is not available on this "
+                             "machine (torch.cuda.is_available() is False); use --device cpu")
+        return torch.device(name)
+    raise InputError(f"device must be 'cpu' or 'cuda', got {name!r}")
 
 
 def read_config_section(run_dir: str | Path) -> dict[str, Any]:
@@ -101,7 +117,7 @@ def read_config_section(run_dir: str | Path) -> dict[str, Any]:
 
 
 def eval_columns(ev: Any, suffix: str = "") -> dict[str, Any]:
-    """The metrics-row columns of an evaluation (`learn.policy.EvalResult`):
+    """The metrics-row columns of an evaluation (`learn.evaluation.EvalResult`):
     ``success_rate``, ``mean_length`` and ``mean_max_segment_cost`` (+ ``suffix``)."""
     return {f"success_rate{suffix}": ev.success_rate,
             f"mean_length{suffix}": round(ev.mean_length, 8),
@@ -408,7 +424,7 @@ def load_run(run: str | Path, checkpoint: str, config_class: type[RunConfig],
     name loaded)``. ``checkpoint``: ``best`` (``checkpoint_best.pt``, else a shipped
     ``policy.pt``, else the latest) or ``latest``; the run's ``method`` must be one of
     ``methods``; ``env`` / ``metric_params``, if given, must be the run's
-    (`learn.config.check_run_metric`). `InputError` / `CorruptFileError`
+    (`learn.run_config.check_run_metric`). `InputError` / `CorruptFileError`
     name the problem."""
     path = Path(run)
     if not path.is_dir():
@@ -436,3 +452,16 @@ def load_weights(module: Any, state: Any, path: Path) -> None:
     except _LOAD_ERRORS as err:
         raise CorruptFileError(f"checkpoint in {path} does not match its config: {err}") \
             from err
+
+
+def shipped_policies() -> list[str]:
+    """Environments with a policy shipped inside the package."""
+    root = resources.files("learn") / "policies"
+    if not root.is_dir():
+        return []
+    return sorted(p.name for p in root.iterdir() if (p / POLICY_FILE).is_file())
+
+
+def shipped_dir(name: str) -> Path:
+    """The folder of the policy shipped for environment ``name`` (`shipped_policies`)."""
+    return Path(str(resources.files("learn") / "policies" / name))

@@ -5,8 +5,8 @@ A method registers itself once, in the module that defines it, with
 [`learn.loop.RunLoop`][learn.loop.RunLoop] subclass), its policy loader, its default config and, for
 sweeps, its named `Variant` s. Nothing else names it: ``geodesics train --method``,
 ``geodesics sweep --methods``, ``geodesics evaluate --run`` and `learn.load_policy`
-find it here. The toolkit's own methods (`learn.train`: midpoint / inter /
-two-to-one, `learn.pg`, `learn.seq`) are imported on first need; a method in a
+find it here. The toolkit's own methods (`learn.midpoint.trainer`: midpoint / inter /
+two-to-one, `learn.pg.trainer`, `learn.seq.trainer`) are imported on first need; a method in a
 user's file is imported with ``--method-module FILE.py`` (`import_method_modules`)
 and its module is recorded in each run's ``config.json`` (``method_module``, and the file
 in ``method_file``) so that loading the run re-imports it (when it is importable; else the
@@ -56,7 +56,7 @@ __all__ = [
 
 #: The toolkit's own method modules, imported (in this order) when a name is not yet
 #: registered: each registers its methods on import.
-BUILTIN_MODULES = ("learn.train", "learn.seq", "learn.pg")
+BUILTIN_MODULES = ("learn.midpoint.trainer", "learn.seq.trainer", "learn.pg.trainer")
 
 
 @runtime_checkable
@@ -87,7 +87,7 @@ class PathPolicy(Protocol):
     def evaluate(self, pairs: Any = None, eps: float | None = None,
                  depth: int | None = None) -> Any:
         """Section 5.1 evaluation on ``pairs`` ``(K, 2, dim)`` (default:
-        ``finsler.default_pairs``): a `learn.policy.EvalResult`."""
+        ``finsler.default_pairs``): a `learn.evaluation.EvalResult`."""
         ...
 
 

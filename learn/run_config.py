@@ -38,7 +38,7 @@ from typing import Any, ClassVar, TypeVar
 import finsler
 from finsler.errors import InputError
 from finsler.infra.limits import check_memory
-from finsler.metric import TrainingSettings
+from finsler.metrics.base import TrainingSettings
 from finsler.spec import MetricSpec, class_path, ensure_registered
 
 __all__ = [
@@ -254,13 +254,6 @@ class RunConfig:
 
     def complete(self) -> None:
         """Fill in fields derived from others (after `validate`)."""
-
-    # the names before issue 49 (a method's config called them from its __post_init__)
-    def _check_types(self) -> None:
-        self.check_types()
-
-    def _check_env_and_device(self) -> None:
-        self.check_run()
 
     # -- what the config gives ------------------------------------------------------------
     @property

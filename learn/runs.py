@@ -1,7 +1,7 @@
 """One entry point for every learning method: named variants, training, status, loading.
 
-Every method (the midpoint learner of `learn.train`, the paper's baselines
-`learn.seq` and `learn.pg`, and any method registered from a user's file)
+Every method (the midpoint learner of `learn.midpoint.trainer`, the paper's baselines
+`learn.seq.trainer` and `learn.pg.trainer`, and any method registered from a user's file)
 writes run directories of the same layout (``config.json``, ``metrics.csv``,
 ``checkpoint_latest.pt``, ``checkpoint_best.pt`` and, once finished, ``result.json``:
 [`learn.loop.RunLoop`][learn.loop.RunLoop]). This module finds a run's method in `learn.registry`,
@@ -14,7 +14,7 @@ paper's experiment:
   environments they differentiate C (the path-energy term): not model-free;
 * ``midpoint-free``: the model-free defaults: every term that uses the derivative of C
   switched off (values of C only, like the paper's method), with the passes per collection
-  Algorithm 1 alone was measured best with (``learn.config.model_free_overrides``);
+  Algorithm 1 alone was measured best with (``learn.midpoint.config.model_free_overrides``);
 * ``paper``: appendix B.1's settings (`learn.paper_config`);
 * ``inter`` / ``two-to-one``: ``midpoint-free`` with the actor loss of eq. (17) / (18);
 * ``seq``: goal-conditioned PPO (section 5.2, appendix B.2);
@@ -31,10 +31,10 @@ from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
-from finsler.errors import InputError
+from finsler.errors import InputError, short
+from finsler.infra.files import check_path_text
 from finsler.status import RunAction, RunStatus
-from learn.loop import read_config_section
-from learn.policy import load_policy, shipped_policies
+from learn.loop import read_config_section, shipped_dir, shipped_policies
 from learn.registry import find_variant, get_method, method_of_run, variants
 from learn.storage import (
     BEST_FILE,
@@ -48,6 +48,7 @@ from learn.storage import (
 __all__ = [
     "VARIANTS",
     "load_any_policy",
+    "load_policy",
     "load_run_config",
     "make_config",
     "run_lock",
@@ -111,10 +112,49 @@ def load_any_policy(run: str | Path, checkpoint: str = "best", device: str = "cp
     `learn.load_policy`. ``env`` and ``metric_params``, if given, must be the run's
     metric and parameters (the run's own parameters are always used: a policy is loaded
     for the metric it learned)."""
-    from learn.policy import load_policy
-
     return load_policy(run, device=device, checkpoint=checkpoint, env=env,
                        metric_params=metric_params)
+
+
+def load_policy(run: str | Path, device: str = "cpu", checkpoint: str = "best",
+                env: str | None = None, metric_params: dict[str, Any] | None = None) -> Any:
+    """Load the policy of any learning method from a run directory (the method's loader,
+    found in `learn.registry` by the run's ``method``), or, given an environment
+    name, the midpoint policy shipped with the package. ``checkpoint``: ``best`` (best
+    success on the validation set during training; falls back to the latest) or
+    ``latest``; the policy's ``checkpoint`` attribute names the file actually loaded.
+    With ``env``, the policy must belong to that environment; with ``metric_params``, to
+    the metric with those parameters (the run's config records them; runs written before
+    the field existed are on the defaults). A user metric's class is re-imported from the
+    config's ``metric_class``, a user method's module from ``method_module``, if they are
+    not registered.
+
+    Raises `InputError` for a missing directory, an unknown name, an ``env`` or
+    parameter mismatch, and `CorruptFileError` for unreadable files.
+    """
+    path = check_path_text(run, "run (a run directory or a shipped policy's name)")
+    for name, value in (("checkpoint", checkpoint), ("device", device)):
+        if not isinstance(value, str):
+            raise InputError(f"{name} must be a str, got {type(value).__name__} "
+                             f"{short(repr(value), 80)}")
+    if env is not None and not isinstance(env, str):
+        raise InputError(f"env must be a metric name (str) or None, got {type(env).__name__} "
+                         f"{short(repr(env), 80)}")
+    if metric_params is not None and not isinstance(metric_params, dict):
+        raise InputError(f"metric_params must be a dict or None, got "
+                         f"{type(metric_params).__name__} {short(repr(metric_params), 80)}")
+    if path.is_dir():
+        method = method_of_run(path, read_config_section(path))
+        return method.load_policy(path, checkpoint=checkpoint, device=device, env=env,
+                                  metric_params=metric_params)
+    if str(run) in shipped_policies():
+        path = shipped_dir(str(run))
+        method = method_of_run(path, read_config_section(path))
+        return method.load_policy(path, checkpoint=checkpoint, device=device, env=env,
+                                  metric_params=metric_params)
+    known = ", ".join(shipped_policies()) or "none"
+    raise InputError(f"run directory {short(str(run), 80)!r} does not exist and is not the "
+                     f"name of a shipped policy (shipped: {known})")
 
 
 def warm_start_paths(source: str | Path, metric: Any, pairs: Any,

@@ -11,6 +11,10 @@ Public API::
     solve_batch(metric, pairs (K, 2, dim), segments=None, *, minmax=False, workers=None,
                 progress=True, initial_paths=None, global_seeds=True, tol=None)
                 -> list[GeodesicResult]
+    check_batch(metric, pairs, segments=None, **same) -> BatchJob   # solve_batch's checks
+    run_batch(job, *, progress=True, checkpoint_dir=None) -> list[GeodesicResult]
+    certify(metric, start, goal, settings=None, *, path=None) -> Certificate
+    certify_settings(metric, preset="default", **overrides) -> MeshSpec | NDSpec | ConformalSpec
     exp_map(metric, x, v, t=1.0, return_curve=False) -> ExpResult
     log_map(metric, x, y) -> LogResult
 
@@ -20,32 +24,36 @@ what the API, JSON and the command line print.
 
 from __future__ import annotations
 
-import sys
-import types
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 from finsler.infra.lazy import lazy_exports
 
 if TYPE_CHECKING:
-    from solvers.certify import CertifyResult, MeshSpec, certify
-    from solvers.expmap import ExpResult, LogResult, exp_map, log_map
-    from solvers.geodesic import (
-        check_pairs,
-        check_segments,
-        midpoint,
-        refine_minmax,
-        solve_batch,
-        solve_geodesic,
+    from solvers.certificates.conformal.certificate import ConformalSpec
+    from solvers.certificates.dispatch import (
+        CertifySettings,
+        certificate_kind,
+        certify,
+        certify_settings,
     )
+    from solvers.certificates.nd.certificate import NDSpec
+    from solvers.certificates.plane.certificate import MeshSpec
+    from solvers.continuum.expmap import ExpResult, LogResult, exp_map, log_map
+    from solvers.continuum.spectral import distance
+    from solvers.geodesic.batches import BatchJob, check_batch, run_batch, solve_batch
+    from solvers.geodesic.pair_solver import refine_minmax
+    from solvers.geodesic.solve import midpoint, solve_geodesic
+    from solvers.inputs import check_pairs, check_segments
     from solvers.result import (
+        Certificate,
+        CertifyResult,
         DistanceResult,
         GeodesicResult,
         MidpointResult,
         MinMaxResult,
         SolverError,
     )
-    from solvers.seeding import SeedPlan
-    from solvers.spectral import distance
+    from solvers.seeding.plans import SeedPlan
     from solvers.status import (
         CertifyStatus,
         DistanceStatus,
@@ -57,39 +65,52 @@ if TYPE_CHECKING:
 
 # Public names -> defining module, imported on first use (PEP 562), so that `import solvers`
 # (and the `geodesics` command line's --help) does not pay for scipy.integrate, the Newton
-# stack and IPOPT until a solver is called. `from solvers import solve_batch` works as before.
+# stack and IPOPT until a solver is called.
 _LAZY = {
-    "CertifyResult": "solvers.certify",
+    "BatchJob": "solvers.geodesic.batches",
+    "Certificate": "solvers.result",
+    "CertifyResult": "solvers.result",
+    "CertifySettings": "solvers.certificates.dispatch",
+    "ConformalSpec": "solvers.certificates.conformal.certificate",
     "CertifyStatus": "solvers.status",
     "DistanceResult": "solvers.result",
     "DistanceStatus": "solvers.status",
-    "ExpResult": "solvers.expmap",
+    "ExpResult": "solvers.continuum.expmap",
     "ExpStatus": "solvers.status",
     "GeodesicResult": "solvers.result",
-    "LogResult": "solvers.expmap",
+    "LogResult": "solvers.continuum.expmap",
     "LogStatus": "solvers.status",
-    "MeshSpec": "solvers.certify",
+    "MeshSpec": "solvers.certificates.plane.certificate",
     "MidpointResult": "solvers.result",
     "MinMaxResult": "solvers.result",
+    "NDSpec": "solvers.certificates.nd.certificate",
     "Outcome": "solvers.status",
-    "SeedPlan": "solvers.seeding",
+    "SeedPlan": "solvers.seeding.plans",
     "SolverError": "solvers.result",
     "Status": "solvers.status",
-    "certify": "solvers.certify",
-    "check_pairs": "solvers.geodesic",
-    "check_segments": "solvers.geodesic",
-    "distance": "solvers.spectral",
-    "exp_map": "solvers.expmap",
-    "log_map": "solvers.expmap",
-    "midpoint": "solvers.geodesic",
-    "refine_minmax": "solvers.geodesic",
-    "solve_batch": "solvers.geodesic",
-    "solve_geodesic": "solvers.geodesic",
+    "certificate_kind": "solvers.certificates.dispatch",
+    "certify": "solvers.certificates.dispatch",
+    "certify_settings": "solvers.certificates.dispatch",
+    "check_batch": "solvers.geodesic.batches",
+    "check_pairs": "solvers.inputs",
+    "check_segments": "solvers.inputs",
+    "distance": "solvers.continuum.spectral",
+    "exp_map": "solvers.continuum.expmap",
+    "log_map": "solvers.continuum.expmap",
+    "midpoint": "solvers.geodesic.solve",
+    "refine_minmax": "solvers.geodesic.pair_solver",
+    "run_batch": "solvers.geodesic.batches",
+    "solve_batch": "solvers.geodesic.batches",
+    "solve_geodesic": "solvers.geodesic.solve",
 }
 
 __all__ = [
+    "BatchJob",
+    "Certificate",
     "CertifyResult",
+    "CertifySettings",
     "CertifyStatus",
+    "ConformalSpec",
     "DistanceResult",
     "DistanceStatus",
     "ExpResult",
@@ -100,11 +121,15 @@ __all__ = [
     "MeshSpec",
     "MidpointResult",
     "MinMaxResult",
+    "NDSpec",
     "Outcome",
     "SeedPlan",
     "SolverError",
     "Status",
+    "certificate_kind",
     "certify",
+    "certify_settings",
+    "check_batch",
     "check_pairs",
     "check_segments",
     "distance",
@@ -112,6 +137,7 @@ __all__ = [
     "log_map",
     "midpoint",
     "refine_minmax",
+    "run_batch",
     "solve_batch",
     "solve_geodesic",
 ]
@@ -119,17 +145,3 @@ __all__ = [
 
 __getattr__, __dir__ = lazy_exports(__name__, _LAZY, globals(), __all__)
 
-
-class _Package(types.ModuleType):
-    """The package module, keeping ``solvers.certify`` the function as the eager package did:
-    importing a submodule binds it on its package, and ``solvers.certify`` (the module) would
-    then hide the function of the same name."""
-
-    def __setattr__(self, name: str, value: Any) -> None:
-        if (isinstance(value, types.ModuleType) and _LAZY.get(name) == value.__name__
-                and hasattr(value, name)):
-            value = getattr(value, name)
-        super().__setattr__(name, value)
-
-
-sys.modules[__name__].__class__ = _Package

@@ -12,7 +12,7 @@ import numpy as np
 
 from finsler.domains import as_real, describe_value, is_torch
 from finsler.errors import InputError, short
-from finsler.metric import Metric
+from finsler.metrics.base import Metric
 from finsler.registry import get_metric
 
 __all__ = [

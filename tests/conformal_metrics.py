@@ -6,7 +6,7 @@ from __future__ import annotations
 import casadi as ca
 
 from finsler.domains import Box
-from finsler.metric import Metric
+from finsler.metrics.base import Metric
 
 
 class Conformal4D(Metric):

@@ -1,4 +1,4 @@
-"""Affine rules of finsler.affine for kinks and discrete values (abs, max, min, sign,
+"""Affine rules of finsler.enclosures.affine for kinks and discrete values (abs, max, min, sign,
 comparisons, if_else): enclosures hold sampled values of CasADi's own evaluation, keep
 correlations through |.| (tighter than the natural interval extension on a correlated
 expression), and make the car-like metric's F and its gradient affine-ready."""
@@ -9,8 +9,8 @@ import casadi as ca
 import numpy as np
 
 import finsler
-from finsler.affine import enclose_affine
-from finsler.intervals import Interval, enclose
+from finsler.enclosures.affine import enclose_affine
+from finsler.enclosures.intervals import Interval, enclose
 from finsler.lowering import lower, max_through_abs
 
 
@@ -66,8 +66,8 @@ def test_abs_keeps_correlations() -> None:
 def test_carlike_is_affine_ready_and_its_gradient_encloses_samples() -> None:
     """Car-like's F and grad_v F (max through abs) as affine forms over boxes across its
     kink hold sampled values and are finite."""
-    from finsler.affine import affine_forms
-    from solvers.certify_nd_p2 import affine_ready
+    from finsler.enclosures.affine import affine_forms
+    from solvers.certificates.nd.p2 import affine_ready
 
     m = finsler.get_metric("carlike")
     assert affine_ready(m)

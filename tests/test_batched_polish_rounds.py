@@ -10,11 +10,11 @@ import numpy as np
 import pytest
 
 import finsler
-import solvers.batched as batched
+import solvers.newton.driver as batched
 from finsler.errors import InputError
-from finsler.metrics import Euclidean
-from solvers.batched import _best, solve_pairs_batched
-from solvers.seeding import SeedPlan, seed_family
+from finsler.metrics.closed_form import Euclidean
+from solvers.newton.driver import _best, solve_pairs_batched
+from solvers.seeding.plans import SeedPlan, seed_family
 
 PAIRS = np.array([[[0.0, 0.0], [1.0, 0.5]], [[-0.5, 0.2], [0.7, -0.4]]])
 

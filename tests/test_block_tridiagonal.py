@@ -1,4 +1,4 @@
-"""solvers.block_tridiagonal against independent references, FAST (the mutation-testing
+"""solvers.newton.block_tridiagonal against independent references, FAST (the mutation-testing
 selection of the module, see docs/guides/mutation-testing.md): numpy's dense solve of the
 assembled matrix, numpy's eigenvalues for definiteness, and the Gershgorin shift of the
 modified Cholesky computed here by hand, for both elimination orders, block sizes 1, 2, 3,
@@ -11,8 +11,8 @@ import itertools
 import numpy as np
 import pytest
 
-from solvers.backends import backend_for
-from solvers.block_tridiagonal import (
+from solvers.newton.backends import backend_for
+from solvers.newton.block_tridiagonal import (
     TAU_FACTOR,
     THOMAS_MAX_BLOCKS,
     THOMAS_MAX_BLOCKS_WIDE,

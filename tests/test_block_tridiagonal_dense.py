@@ -7,8 +7,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from solvers.backends import _NUMPY_OPS
-from solvers.block_tridiagonal import block_tridiagonal_solve, block_tridiagonal_solve_dense
+from solvers.newton.backends import _NUMPY_OPS
+from solvers.newton.block_tridiagonal import block_tridiagonal_solve, block_tridiagonal_solve_dense
 
 
 def _system(rng, b, m, d, shift):

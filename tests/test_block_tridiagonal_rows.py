@@ -1,4 +1,4 @@
-"""The 2 x 2 block Thomas elimination on both of its paths (solvers.block_tridiagonal:
+"""The 2 x 2 block Thomas elimination on both of its paths (solvers.newton.block_tridiagonal:
 the vectorised ``_thomas2`` and, for at most ``THOMAS_ROWS_MAX`` numpy systems, the one
 system at a time ``_thomas2_rows``), FAST: against numpy's dense solve of the assembled
 matrix, the Gershgorin shift of an indefinite pivot (and Schur complement) computed here
@@ -10,9 +10,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-import solvers.block_tridiagonal as bt
-from solvers.backends import backend_for
-from solvers.block_tridiagonal import THOMAS_ROWS_MAX, block_tridiagonal_solve
+import solvers.newton.block_tridiagonal as bt
+from solvers.newton.backends import backend_for
+from solvers.newton.block_tridiagonal import THOMAS_ROWS_MAX, block_tridiagonal_solve
 
 NP = backend_for(None)
 

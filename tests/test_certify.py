@@ -23,8 +23,10 @@ from validation.cli import app
 
 runner = CliRunner()
 # the module (``solvers.certify`` the attribute is the function of the same name)
-certify_mod = importlib.import_module("solvers.certify")
-bounds_mod = importlib.import_module("solvers.certify_bounds")
+certify_mod = importlib.import_module("solvers.certificates.plane.certificate")
+bounds_mod = importlib.import_module("solvers.certificates.plane.bounds")
+mesh_mod = importlib.import_module("solvers.certificates.plane.mesh")
+bounds_mod = importlib.import_module("solvers.certificates.plane.bounds")
 
 #: the metrics that provide a closed-form distance (asked, not listed)
 CLOSED_FORM = finsler.list_metrics(provides="distance", dim=2)
@@ -204,8 +206,8 @@ def test_same_input_same_result() -> None:
           [0.0, 0.0, 0.0, -1.5, 0.0, 1.8, 0.0]), {}, "start equals goal"),
         (("matsumoto", [1.2, 0.0], [0.0, 0.0]), {}, "outside the domain"),
         (("matsumoto", [0.1, 0.0], [0.1, 0.0]), {}, "start equals goal"),
-        (("matsumoto", [0.1, 0.0], [0.0, 0.0]), {"mesh": "huge"}, "unknown mesh preset"),
-        (("matsumoto", [0.1, 0.0], [0.0, 0.0]), {"mesh": 3}, "MeshSpec"),
+        (("matsumoto", [0.1, 0.0], [0.0, 0.0]), {"settings": "huge"}, "unknown mesh preset"),
+        (("matsumoto", [0.1, 0.0], [0.0, 0.0]), {"settings": 3}, "MeshSpec"),
         (("matsumoto", [0.1, 0.0], [0.0, 0.0]), {"time_limit": -1.0}, "time_limit"),
         (("matsumoto", [0.1, 0.0], [0.0, 0.0]), {"path": [[0.1, 0.0], [0.0, 0.5]]},
          "from start to goal"),
@@ -244,7 +246,7 @@ def test_cli_certify_json() -> None:
     ("args", "message"),
     [
         (["--metric", "panda-pole", "--start", "0,0,0,-1,0,1,0", "--goal", "0,0,0,-1,0,1,0"],
-         "start equals goal"),  # 7-D conformal: solvers.certify_conformal (issue 46)
+         "start equals goal"),  # 7-D conformal: solvers.certificates.conformal
         (["--metric", "matsumoto", "--start", "1.2,0", "--goal", "0,0"], "outside the domain"),
         (["--metric", "matsumoto", "--start", "0.1,0", "--goal", "0,0", "--mesh", "huge"],
          "unknown mesh preset"),
@@ -268,10 +270,10 @@ def test_derived_geometry_lives_in_the_metric() -> None:
     m = type(finsler.get_metric("randers"))()  # its own instance (the registry shares its own)
     lo, v = np.array([[0.1, 0.1], [-0.2, 0.3]]), np.array([[1.0, 0.0], [0.6, 0.8]])
     w = np.array([[np.cos(0.1), np.sin(0.1)], [0.0, 1.0]])
-    certify_mod._bounds_on_boxes(m, lo, lo + 0.02, v, w)
-    progs = certify_mod._second_derivatives(m)
+    bounds_mod._bounds_on_boxes(m, lo, lo + 0.02, v, w)
+    progs = bounds_mod._second_derivatives(m)
     assert m.derived("certify.second_derivatives", lambda: pytest.fail("rebuilt")) is progs
-    f = certify_mod._eval_values(m, lo, v)
+    f = bounds_mod._eval_values(m, lo, v)
     exact = m.F(lo, v)
     assert np.all(f < exact) and np.allclose(f, exact, rtol=1e-14, atol=0)
     assert not hasattr(certify_mod, "_values")
@@ -297,7 +299,7 @@ def test_second_order_bounds_hold_at_every_sampled_point(name: str) -> None:
     dirs = np.stack([np.cos(ang), np.sin(ang)], 1)
     kidx = rng.integers(0, k, n)
     v, w = dirs[kidx], dirs[(kidx + 1) % k]
-    hz, ht = certify_mod._bounds_on_boxes(m, c - h, c + h, v, w)
+    hz, ht = bounds_mod._bounds_on_boxes(m, c - h, c + h, v, w)
     # an infinite enclosure is allowed (certify then splits the box), a wrong one is not
     assert np.mean(np.isfinite(hz) & np.isfinite(ht)) > 0.9
     x, vv = ca.SX.sym("x", 2), ca.SX.sym("v", 2)
@@ -348,11 +350,11 @@ def test_row_bounds_hold_inside_every_triangle_where_the_hessian_term_is_tight()
     On the bowl metric the Hessian term is tight at the centres of equilateral triangles:
     a correction any smaller (e.g. ``0.25 * hz * r2`` instead of ``0.5``) fails here."""
     m = _Bowl()
-    pts = certify_mod._hex_lattice(np.array([-0.6, -0.6]), np.array([0.6, 0.6]), 0.2)
+    pts = mesh_mod._hex_lattice(np.array([-0.6, -0.6]), np.array([0.6, 0.6]), 0.2)
     pts = pts[np.linalg.norm(pts, axis=1) <= 0.75]
     msh = certify_mod._Mesh(pts)
     data = certify_mod._PointData(m, 64)
-    b, corr = certify_mod._row_bounds(msh, data)
+    b, corr = bounds_mod._row_bounds(msh, data)
     z = pts[msh.tri]  # (T, 3, 2)
     side = np.linalg.norm(z[:, 1] - z[:, 0], axis=1)
     eq = np.abs(side - 0.2) < 1e-9  # the lattice's equilateral triangles

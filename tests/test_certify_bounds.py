@@ -1,4 +1,4 @@
-"""The bound code of :mod:`solvers.certify` (in :mod:`solvers.certify_bounds`; issue 22,
+"""The bound code of :mod:`solvers.certify` (in :mod:`solvers.certificates.plane.bounds`; issue 22,
 mutation testing): the corrections, the interval enclosures of the Hessians (one direction
 or a group), the box / triangle test, the lowered values, the per-point / per-triangle
 caches and their tightening on demand, each against an independent reference (CasADi
@@ -18,12 +18,12 @@ from singular_metrics import Cone
 from tick_clock import TickClock
 
 import finsler
+from finsler.enclosures.intervals import Interval
 from finsler.errors import InputError
-from finsler.intervals import Interval
-from solvers.certify_mesh import _Mesh
+from solvers.certificates.plane.mesh import _Mesh
 
 # the module of the bound code (``solvers.certify`` the attribute is a function)
-cm = importlib.import_module("solvers.certify_bounds")
+cm = importlib.import_module("solvers.certificates.plane.bounds")
 EPS = np.finfo(float).eps
 
 

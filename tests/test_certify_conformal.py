@@ -13,17 +13,21 @@ import pytest
 from typer.testing import CliRunner
 
 import finsler
-from finsler.affine import enclose_affine
+from finsler.enclosures.affine import enclose_affine
+from finsler.enclosures.intervals import Interval, enclose
 from finsler.errors import InputError
-from finsler.intervals import Interval, enclose
 from finsler.lowering import lower
 from solvers import certify
-from solvers.certify_conformal import ConformalCertifyResult, ConformalSpec, certify_conformal
+from solvers.certificates.conformal.certificate import (
+    ConformalCertifyResult,
+    ConformalSpec,
+    certify_conformal,
+)
 from solvers.status import CertifyStatus
 from validation.cli import app
 
-cc = importlib.import_module("solvers.certify_conformal")
-affine_mod = importlib.import_module("finsler.affine")
+cc = importlib.import_module("solvers.certificates.conformal.certificate")
+affine_mod = importlib.import_module("finsler.enclosures.affine")
 runner = CliRunner()
 
 #: small budgets: the tests check soundness, not tightness

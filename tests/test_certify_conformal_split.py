@@ -25,11 +25,15 @@ from conformal_metrics import Conformal4D
 from typer.testing import CliRunner
 
 import finsler
-from finsler.metric import Task
+from finsler.metrics.base import Task
 from finsler.registry import unregister_metric
 from solvers import certify
-from solvers.certify_conformal import ConformalCertifyResult, ConformalSpec, certify_conformal
-from solvers.certify_conformal_split import (
+from solvers.certificates.conformal.certificate import (
+    ConformalCertifyResult,
+    ConformalSpec,
+    certify_conformal,
+)
+from solvers.certificates.conformal.split import (
     SplitCertifyResult,
     certify_conformal_best,
     certify_conformal_split,
@@ -37,7 +41,7 @@ from solvers.certify_conformal_split import (
 from solvers.status import CertifyStatus
 from validation.cli import app
 
-split_mod = importlib.import_module("solvers.certify_conformal_split")
+split_mod = importlib.import_module("solvers.certificates.conformal.split")
 runner = CliRunner()
 SPEC = ConformalSpec(max_boxes=12000, r_cells=4)
 
@@ -172,7 +176,7 @@ def test_box_ranges_contain_every_point() -> None:
     c|**2 + 2 sum h_j |(P c)_j| + |h|**2)``) contain (s, r) of random points of the boxes,
     and are no wider than the centre -+ half-diagonal ranges; the exact ranges of thin
     boxes along the chord are much tighter than those."""
-    cc = importlib.import_module("solvers.certify_conformal")
+    cc = importlib.import_module("solvers.certificates.conformal.certificate")
     rng = np.random.default_rng(7)
     for dim in (2, 4, 6):
         x = rng.normal(size=dim)

@@ -1,4 +1,4 @@
-"""solvers.certify_domain: a box is dropped from a certificate only where it misses the
+"""solvers.certificates.domain: a box is dropped from a certificate only where it misses the
 domain (checked against points of the box that the domain contains), boxes that do miss
 it are dropped, and a box domain drops nothing but empty boxes."""
 
@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import finsler
-from solvers.certify_domain import domain_constraints, outside_domain
+from solvers.certificates.domain import domain_constraints, outside_domain
 
 
 @pytest.mark.parametrize("name", ["poincare-slab", "carlike", "poincare"])

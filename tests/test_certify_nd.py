@@ -1,5 +1,5 @@
-"""Certified intervals in any dimension (solvers.certify_nd, issue 46): soundness against
-closed forms, and the verification catches a potential that breaks the dual condition
+"""Certified intervals in any dimension (solvers.certificates.nd.certificate, issue 46): soundness
+against closed forms, and the verification catches a potential that breaks the dual condition
 (a wrong margin or a broken enclosure), so these tests can fail."""
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ import pytest
 import finsler
 from finsler.errors import InputError
 from solvers import certify_nd_parts as parts
-from solvers.certify_nd import NDSpec, certify_nd
+from solvers.certificates.nd.certificate import NDSpec, certify_nd
 
 COARSE = NDSpec(h_path=0.2, corridor=0.2, h_far=0.6, faces=6, max_rounds=1, lp_rounds=6,
                 target_gap=0.5)

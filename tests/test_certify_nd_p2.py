@@ -1,4 +1,4 @@
-"""The P2 element of the 3-D certificate (solvers.certify_nd_p2, issue 46): its gradients
+"""The P2 element of the 3-D certificate (solvers.certificates.nd.p2, issue 46): its gradients
 against finite differences of its own values, the proof's ratio never below one sampled
 from the potential and the metric (with moving direction boxes), affine forms containing
 sampled values, bad options named, and (slow) a closed-form pair certified to 1e-2."""
@@ -12,12 +12,12 @@ import numpy as np
 import pytest
 
 import finsler
-from finsler.affine import affine_forms
+from finsler.enclosures.affine import affine_forms
 from finsler.errors import InputError
 from finsler.lowering import lower
 from solvers import certify_nd_p2 as p2mod
-from solvers.certify_nd import NDSpec, certify_nd
-from solvers.certify_nd_parts import Cells, lowered_f_grad
+from solvers.certificates.nd.certificate import NDSpec, certify_nd
+from solvers.certificates.nd.parts import Cells, lowered_f_grad
 
 
 def _cells(seed: int = 0) -> Cells:

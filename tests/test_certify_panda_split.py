@@ -17,12 +17,12 @@ import pytest
 from conformal_metrics import Conformal4D
 
 import finsler
-from finsler.metric import Metric
-from solvers.certify_conformal import ConformalSpec
-from solvers.certify_conformal_split import certify_conformal_split, factor_parts
+from finsler.metrics.base import Metric
+from solvers.certificates.conformal.certificate import ConformalSpec
+from solvers.certificates.conformal.split import certify_conformal_split, factor_parts
 
-split_mod = importlib.import_module("solvers.certify_conformal_split")
-cc = importlib.import_module("solvers.certify_conformal")
+split_mod = importlib.import_module("solvers.certificates.conformal.split")
+cc = importlib.import_module("solvers.certificates.conformal.certificate")
 QUICK = ConformalSpec(max_boxes=6000, s_cells=8, r_cells=4)
 
 

@@ -1,4 +1,4 @@
-"""The region certify's rows need (solvers.certify_reach, issue 46 item 4): the proven
+"""The region certify's rows need (solvers.certificates.plane.reach, issue 46 item 4): the proven
 speed floor is below every sampled value of F on unit vectors, and a pruned triangle holds
 no point of the ellipse |z - x| + |y - z| <= reach (checked on sampled points)."""
 
@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 import finsler
-from solvers.certify_mesh import _Mesh, _outline
-from solvers.certify_reach import _speed_floor, reachable_triangles, speed_floor
+from solvers.certificates.plane.mesh import _Mesh, _outline
+from solvers.certificates.plane.reach import _speed_floor, reachable_triangles, speed_floor
 
 
 @pytest.mark.parametrize("name", ["matsumoto", "poincare", "randers", "euclidean"])

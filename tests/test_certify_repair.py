@@ -1,4 +1,4 @@
-"""solvers.certify_repair: the local repair of an LP round's potential, checked against
+"""solvers.certificates.plane.repair: the local repair of an LP round's potential, checked against
 every row rebuilt densely here (``FULL`` of the certify_lp kill tests) and the full LP's
 optimum by scipy's HiGHS."""
 
@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 from test_mutation_kills_certify_lp import DIRS, FULL, MESH, NV, K, _highs_solve, _weights
 
-import solvers.certify_lp as lp_mod
-import solvers.certify_repair as rep
-from solvers.certify_lp import _solve_lp
-from solvers.certify_repair import repair
+import solvers.certificates.plane.lp as lp_mod
+import solvers.certificates.plane.repair as rep
+from solvers.certificates.plane.lp import _solve_lp
+from solvers.certificates.plane.repair import repair
 
 
 def _optimum(b: np.ndarray) -> np.ndarray:
@@ -78,10 +78,11 @@ def test_a_round_short_of_the_target_only_by_broken_rows_is_repaired(
     assert plain["ratio"] > 1.01
     monkeypatch.setattr(lp_mod, "REPAIR", True)
     monkeypatch.setattr(lp_mod, "time", TickClock())
-    caplog.set_level(logging.DEBUG, logger="solvers.certify_lp")
+    caplog.set_level(logging.DEBUG, logger="solvers.certificates.plane.lp")
     r = _solve_lp(MESH, b, DIRS, 0, 1, upper=1.001 * value, target=0.05, start=start,
                   max_iter=1)
-    msgs = [rec.getMessage() for rec in caplog.records if rec.name == "solvers.certify_lp"]
+    msgs = [rec.getMessage() for rec in caplog.records
+            if rec.name == "solvers.certificates.plane.lp"]
     got = [re.fullmatch(r"repaired in (\S+) s: max row ratio (\S+) -> bound (\S+)", m)
            for m in msgs]
     got = [g for g in got if g is not None]

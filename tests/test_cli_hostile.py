@@ -179,6 +179,7 @@ INVALID: dict[str, set[str]] = {
     "--depth": {"-1", "x"}, "--seeds": {"-1", "x"}, "--examples": {"-1", "x"},
     "--seed": {"x", "1e23"}, "--certify": {"-1", "x"}, "--mesh": {"nosuch", ""},
     "--method": {"nosuch", ""}, "--methods": {"nosuch", ""}, "--device": {"tpu", ""},
+    "--solver": {"nosuch", ""},
     "--set": {"lr=nan", "nosuch=1", "=", 'hidden=["a"]', "timesteps=1e400", "epochs=-1"},
     "--metric-param": {"x", "=1", "height=nan"}, "--checkpoint": {"nosuch", ""},
     "--pairs": _IN_PATHS_BAD | {"folder"}, "--run": _IN_PATHS_BAD | {"."},

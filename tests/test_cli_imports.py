@@ -16,8 +16,8 @@ import sys
 import pytest
 
 #: Modules none of the light invocations may import.
-HEAVY = ("scipy.integrate", "torch", "hypothesis", "cvxpy", "solvers.geodesic",
-         "solvers.newton", "pinocchio", "learn.train", "validation.testing")
+HEAVY = ("scipy.integrate", "torch", "hypothesis", "cvxpy", "solvers.geodesic.solve",
+         "solvers.newton.energy", "pinocchio", "learn.midpoint.trainer", "validation.testing")
 
 _PROBE = r"""
 import io, json, sys, contextlib

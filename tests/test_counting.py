@@ -17,9 +17,9 @@ import torch
 
 import finsler
 import learn
-from learn.methods import PathEnergy, RouteSearch
-from learn.term import ActorTerm, TermOutput
-from learn.train import Trainer
+from learn.midpoint.losses import PathEnergy, RouteSearch
+from learn.midpoint.term import ActorTerm, TermOutput
+from learn.midpoint.trainer import Trainer
 from learn.tree import build_tree
 
 
@@ -249,7 +249,7 @@ def test_update_skips_and_names_non_finite_gradients(tmp_path: Path, caplog) -> 
     s, g, c, _ = tr.collect()
     with torch.no_grad():
         next(tr.critic.parameters()).fill_(float("nan"))
-    with caplog.at_level(logging.WARNING, logger="learn.train"):
+    with caplog.at_level(logging.WARNING, logger="learn.midpoint.trainer"):
         tr.update(s[:10], g[:10], c[:10])
     assert tr.skipped_steps == 2
     text = caplog.text
@@ -375,7 +375,7 @@ def test_path_energy_power_equal_segments_give_the_squared_length() -> None:
     """Whatever p, a path of equal segment costs L/n has energy L**2 (same minimisers as
     the plain energy); p = 2 is ``n sum C**2`` bit for bit; a zero path has a finite
     gradient."""
-    from learn.methods import _p_energy
+    from learn.midpoint.losses import _p_energy
     c = torch.full((3, 64), 0.05, dtype=torch.float64)
     for p in (1.5, 2.0, 4.0, 16.0, 64.0):
         assert torch.allclose(_p_energy(c, p), torch.full((3,), 3.2**2, dtype=torch.float64))

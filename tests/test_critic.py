@@ -69,7 +69,7 @@ def test_load_critic_returns_the_trained_critic(tmp_path) -> None:
     exact = np.linalg.norm(pairs[:, 1] - pairs[:, 0], axis=1)
     with torch.no_grad():
         trained = critic(s, g).numpy()
-        fresh = learn.policy.build_critic(cfg)(s, g).numpy()
+        fresh = learn.midpoint.policy.build_critic(cfg)(s, g).numpy()
     err_trained = np.mean(np.abs(trained / exact - 1))
     err_fresh = np.mean(np.abs(fresh / exact - 1))
     assert err_trained < 0.1 and err_trained < 0.2 * err_fresh, (err_trained, err_fresh)

@@ -1,9 +1,9 @@
 """Every relative link and ``#heading`` anchor in README.md and docs/ resolves.
 
 README.md is read as GitHub renders it (GitHub's heading slugs); the pages under docs/ as
-MkDocs builds them (Python-Markdown's slugs; ``results/NAME.md`` is published from
-``benchmarks/results/`` by ``docs/hooks.py``). ``mkdocs build --strict`` in CI checks the
-site again, with the API reference; this test needs no MkDocs and runs with the suite.
+MkDocs builds them (Python-Markdown's slugs; ``results/CLAIM/NAME.md`` is published from
+``benchmarks/results/CLAIM/NAME.md`` by ``docs/hooks.py``). ``mkdocs build --strict`` in CI
+checks the site again, with the API reference; this test needs no MkDocs and runs with the suite.
 """
 
 from __future__ import annotations
@@ -67,8 +67,9 @@ def _docs_target(page: Path, target: str) -> Path:
     except ValueError:
         return resolved
     if rel.parts[:1] == ("results",):
-        name = rel.parts[-1]
-        return RESULTS / ("README.md" if name == "index.md" else name)
+        if rel.parts[1:] == ("index.md",):
+            return RESULTS / "README.md"
+        return RESULTS.joinpath(*rel.parts[1:])
     return resolved
 
 
@@ -163,7 +164,7 @@ def test_api_reference_documents_the_public_names() -> None:
 
 
 def test_moved_results_say_where_they_come_from() -> None:
-    moved = sorted(RESULTS.glob("*-moved.md"))
+    moved = sorted(RESULTS.glob("**/*-moved.md"))
     assert moved
     for path in moved:
         head = path.read_text(encoding="utf-8").split("\n\n", 2)[1]

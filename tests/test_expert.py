@@ -11,9 +11,9 @@ import torch
 
 import finsler
 import learn
-from learn.expert import SearchImitation, search_spec, tree_targets
-from learn.policy import generate_paths
-from learn.train import Trainer
+from learn.midpoint.expert import SearchImitation, search_spec, tree_targets
+from learn.midpoint.policy import generate_paths
+from learn.midpoint.trainer import Trainer
 
 
 def _small(**over: object) -> learn.TrainConfig:

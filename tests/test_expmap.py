@@ -1,4 +1,4 @@
-"""exp/log maps (solvers.expmap) against closed forms derived by hand, independent of the
+"""exp/log maps (solvers.continuum.expmap) against closed forms derived by hand, independent of the
 symbolic spray: Poincare (Moebius maps), sphere (great circles), straight lines of the
 constant metrics (Randers, Minkowski, Euclidean); the issue-14 bar on log; bad input."""
 

@@ -391,8 +391,8 @@ def test_a_damaged_metrics_log_loses_no_rows_on_resume(tmp_path, monkeypatch, da
     import signal
 
     import learn
+    from learn.midpoint.trainer import Trainer
     from learn.storage import read_metrics
-    from learn.train import Trainer
 
     cfg = learn.make_config("euclidean", "midpoint", timesteps=30_000, collection_size=1024,
                             minibatch_size=256, eval_every=2, eval_pairs=10, depth=3)

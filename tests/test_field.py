@@ -1,4 +1,4 @@
-"""The lattice field (solvers.field): moves chosen by the metric, graph distances against
+"""The lattice field (solvers.seeding.field): moves chosen by the metric, graph distances against
 closed forms, routes in other basins, one forward search per start."""
 
 from __future__ import annotations
@@ -8,7 +8,7 @@ import pytest
 
 import finsler
 from finsler.errors import InputError
-from solvers.field import FieldSpec, LatticeField, lattice_field
+from solvers.seeding.field import FieldSpec, LatticeField, lattice_field
 
 
 @pytest.mark.parametrize("name", ["euclidean", "randers", "poincare"])

@@ -11,12 +11,12 @@ import numpy as np
 import pytest
 
 import finsler
-import solvers.expmap
+import solvers.continuum.expmap
 from finsler import geometry
 from finsler.errors import InputError
 from solvers import ExpStatus, exp_map
-from solvers.seeding import graph_seeder
-from solvers.spectral import spectral_nlp
+from solvers.continuum.spectral import spectral_nlp
+from solvers.seeding.plans import graph_seeder
 from solvers.transcription import energy_nlp, minmax_nlp
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -80,7 +80,7 @@ def test_matsumoto_spray_solves_the_euler_lagrange_equation() -> None:
 
 
 # numbers of the spray and exp_map before the spray moved to finsler.geometry (commit
-# 7e15455, solvers/expmap.py's own Hessian): the move must not change them
+# 7e15455, solvers/continuum/expmap.py's own Hessian): the move must not change them
 OLD = {
     "matsumoto": ([0.05, -0.05], [0.1, 0.05], [0.015455107892671235, 0.017548317442747968],
                   [0.15687663647556907, 0.008634639011685654]),
@@ -117,7 +117,8 @@ def test_spray_is_refused_for_a_non_smooth_metric() -> None:
 # -- built once per metric -----------------------------------------------------------------
 def test_derived_geometry_is_built_once_per_metric() -> None:
     m = finsler.get_metric("matsumoto")
-    assert solvers.expmap.spray is geometry.spray and solvers.expmap.Spray is geometry.Spray
+    expmap = solvers.continuum.expmap
+    assert expmap.spray is geometry.spray and expmap.Spray is geometry.Spray
     sp = geometry.spray(m)
     assert isinstance(sp, geometry.Spray) and geometry.spray(m) is sp
     assert m.casadi_hessian is m.casadi_hessian and m.casadi_hessian_x is m.casadi_hessian_x
@@ -132,7 +133,7 @@ def test_derived_geometry_is_built_once_per_metric() -> None:
 
 
 def test_panda_kinematics_lowered_once_per_process() -> None:
-    from finsler import panda
+    from finsler.metrics import panda
 
     fk = panda.lowered_frame_positions()
     assert panda.lowered_frame_positions() is fk

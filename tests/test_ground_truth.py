@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 import finsler
-from solvers.graph import GraphSeeder, _unique
+from solvers.seeding.graph import GraphSeeder, _unique
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 import ground_truth

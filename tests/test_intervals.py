@@ -1,5 +1,5 @@
-"""Interval enclosures of lowered CasADi programs (``finsler.intervals``): every value the
-function takes on a box lies in the enclosure (sampled points of the box, elementary
+"""Interval enclosures of lowered CasADi programs (``finsler.enclosures.intervals``): every value
+the function takes on a box lies in the enclosure (sampled points of the box, elementary
 functions with known ranges), undefined operations give the whole line, and the
 Hessians the certification bounds with are enclosed for every 2-D metric."""
 
@@ -14,7 +14,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import finsler
-from finsler.intervals import Interval, enclose
+from finsler.enclosures.intervals import Interval, enclose
 from finsler.lowering import lower
 
 UNARY = {
@@ -161,7 +161,7 @@ def test_box_shapes_checked_on_both_bounds_and_one_box_accepted() -> None:
 
 
 def test_logical_operations_are_certain_only_where_the_truth_is() -> None:
-    from finsler.intervals import _IntervalBackend as B
+    from finsler.enclosures.intervals import _IntervalBackend as B
 
     t, f, u = Interval(np.array([1.0]), np.array([2.0])), Interval(np.zeros(1), np.zeros(1)), \
         Interval(np.array([-1.0]), np.array([1.0]))

@@ -1,4 +1,4 @@
-"""Every operation of the interval backend (finsler.intervals) against numpy at points:
+"""Every operation of the interval backend (finsler.enclosures.intervals) against numpy at points:
 CONTAINMENT (the enclosure holds the function's value at every sampled point of the box,
 endpoints included) and TIGHTNESS (on a degenerate box [x, x] the enclosure is within a
 few ulp of f(x); on a wide box within a little of the hull of the sampled values), so that
@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from scipy.special import erf
 
-from finsler.intervals import _BACKEND, Interval, isqrt
+from finsler.enclosures.intervals import _BACKEND, Interval, isqrt
 
 RNG_SEED = 22
 UNARY = [  # name, reference, domain of the samples
@@ -396,7 +396,7 @@ def test_extremum_test_has_the_documented_slack(scale: float) -> None:
     at |x| = 1e3: 1 - sin = 5e-13)."""
     from decimal import Decimal
 
-    from finsler.intervals import _contains_point
+    from finsler.enclosures.intervals import _contains_point
 
     for phase_s, phase in (("0.5", 0.5 * np.pi), ("1.5", 1.5 * np.pi), ("0", 0.0)):
         for x in scale * np.array([1.0, 1.7, 3.1]):

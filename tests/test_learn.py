@@ -12,9 +12,9 @@ import torch
 
 import finsler
 import learn
-from learn.methods import PathEnergy, RouteSearch
-from learn.policy import build_actor, generate_paths
-from learn.train import Trainer, actor_loss, paper_depth
+from learn.midpoint.losses import PathEnergy, RouteSearch
+from learn.midpoint.policy import build_actor, generate_paths
+from learn.midpoint.trainer import Trainer, actor_loss, paper_depth
 
 
 # ----------------------------------------------------------------------------------------
@@ -274,7 +274,7 @@ def test_multi_head_actor_starts_its_heads_apart() -> None:
     basins: PyTorch's initialisation of the same network, plus 0.25 along +x, -x, +y, -y
     for heads 1-4 (head 0 and the stds and scores untouched); one head is PyTorch's
     initialisation alone."""
-    from learn.networks import mlp
+    from learn.mlp import mlp
 
     m = finsler.get_metric("matsumoto")
     cfg = learn.default_config("matsumoto", actor_heads=5)
@@ -526,7 +526,7 @@ def test_midpoint_loss_power_is_eq6_at_2_and_the_power_mean_otherwise() -> None:
     b**p)**(2/p)``, equal to eq. (6) for an even split, with its minimiser over the split
     of a fixed length at the even split and an uneven split costing about p - 1 times
     more than at p = 2 (against a longer route, which costs the same)."""
-    from learn.methods import ACTOR_LOSSES, actor_loss_of
+    from learn.midpoint.losses import ACTOR_LOSSES, actor_loss_of
 
     assert actor_loss_of("midpoint", 2.0) is ACTOR_LOSSES["midpoint"]
     a = torch.tensor([1.0, 2.0, 0.0, 5.0], dtype=torch.float64)
@@ -951,7 +951,7 @@ def test_path_energy_gradient_is_finite_where_points_coincide() -> None:
     # two consecutive points projected onto the same boundary point: C = 0 there and its
     # derivative through sqrt is 0/0; the energy's costs equal path_costs and the gradient
     # is finite (one such NaN ended a 4e8-evaluation car-like run at 3.7e8)
-    from learn.methods import _path_costs_safe
+    from learn.midpoint.losses import _path_costs_safe
 
     m = finsler.get_metric("carlike")
     pts = torch.tensor([[[0.0, 0.0, 0.0], [0.3, 0.1, 0.2], [0.3, 0.1, 0.2], [0.6, 0.2, 0.1]]],

@@ -119,7 +119,7 @@ def test_shipped_policy_evaluates_as_recorded(env, tmp_path) -> None:
     (the default evaluation set for the policies trained before the validation set
     existed, the validation set of the run's size otherwise: the config says which)."""
     assert env in learn.shipped_policies()
-    doc = json.loads((learn.policy._shipped_dir(env) / "config.json").read_text())
+    doc = json.loads((learn.loop.shipped_dir(env) / "config.json").read_text())
     args = ["evaluate", "--env", env, "--json"]
     if "validation_pairs" in doc["selection"]:
         metric = finsler.get_metric(env)
@@ -130,7 +130,7 @@ def test_shipped_policy_evaluates_as_recorded(env, tmp_path) -> None:
     assert res.exit_code == 0, res.output
     doc = json.loads(res.output)
     recorded = learn.storage.load_checkpoint(
-        learn.policy._shipped_dir(env) / "policy.pt")["eval"]
+        learn.loop.shipped_dir(env) / "policy.pt")["eval"]
     assert doc["success_rate"] == pytest.approx(recorded["success_rate"])
     assert doc["mean_length"] == pytest.approx(recorded["mean_length"], rel=1e-6)
     pol = learn.load_policy(env)
@@ -154,7 +154,7 @@ def test_evaluate_flags_a_checkpoint_chosen_on_the_default_pairs(monkeypatch) ->
     from pathlib import Path
 
     old = Path(__file__).resolve().parents[1] / "benchmarks" / "previous_policies" / "panda-pole"
-    monkeypatch.setattr(learn.policy, "_shipped_dir", lambda name: old)
+    monkeypatch.setattr(learn.runs, "shipped_dir", lambda name: old)
     res = _run("evaluate", "--env", "panda-pole", "--json")
     assert res.exit_code == 0, res.output
     note = json.loads(res.output)["pairs_note"]

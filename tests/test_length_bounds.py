@@ -16,7 +16,7 @@ from singular_metrics import Cone
 
 import finsler
 from finsler.errors import InputError
-from finsler.metric import MAX_LENGTH_HALVINGS
+from finsler.metrics.base import MAX_LENGTH_HALVINGS
 
 
 def _quad_length(m: finsler.Metric, pts: np.ndarray) -> float:
@@ -174,7 +174,7 @@ def test_non_finite_enclosures_of_either_sign_give_zero_and_inf(monkeypatch) -> 
     are the trivially valid ``[0, inf]``, never an exception or a NaN. The enclosures are
     faked by position along the x axis: F in [+inf, +inf] left, a second derivative in
     [-inf, inf] in the middle, F in [-inf, -inf] right."""
-    import finsler.intervals as fi
+    import finsler.enclosures.intervals as fi
 
     def fake(fn, x, v):
         n = x[0].lo.shape[0]
@@ -197,7 +197,7 @@ def test_carlike_segment_across_its_kink_has_a_finite_bound_holding_the_length()
     ``cos(theta) = 0.6``), where the enclosure of f'' is infinite on every box around the
     switch (checked here, so the fallback is what is tested); the bound is finite, narrow
     and contains the adaptive quadrature of the integrand."""
-    from finsler.intervals import Interval, enclose
+    from finsler.enclosures.intervals import Interval, enclose
 
     m = finsler.get_metric("carlike")
     a, b = np.array([0.0, 0.0, 0.6]), np.array([0.5, 0.0, 1.2])

@@ -123,7 +123,7 @@ def test_lowered_torch_runs_in_float32_and_keeps_dtype() -> None:
 def test_lowered_program_is_cached_per_metric(monkeypatch) -> None:
     """Lowering runs once per metric instance, however often the metric is evaluated, and
     again for an instance with other parameters (whose program differs)."""
-    import finsler.metric as fm
+    import finsler.metrics.base as fm
 
     calls = []
     real = fm.lower
@@ -151,7 +151,7 @@ def test_max_through_abs_keeps_values_and_bounds_the_gradient_at_a_kink() -> Non
     ``grad_v F`` on boxes across its kink (``r_min |v_th| = forward speed``) is bounded,
     holds every sampled gradient and shrinks with the box, where the plain program's is
     unbounded."""
-    from finsler.intervals import Interval, enclose
+    from finsler.enclosures.intervals import Interval, enclose
     from finsler.lowering import max_through_abs
 
     x = ca.SX.sym("x", 3)

@@ -379,11 +379,20 @@ def _learn_imports(module: str) -> set[str]:
 
 
 def test_the_run_loop_stands_below_every_method() -> None:
-    """The generic loop and RunConfig import nothing of a method (issue 49): not the
-    midpoint learner's config, terms, expert iteration or route search."""
-    below = {"learn.run_config", "learn.base", "learn.storage", "learn.networks",
-             "learn.registry"}
+    """The generic loop and RunConfig import nothing of a method: not the midpoint
+    learner's config, terms, expert iteration or route search."""
+    below = {"learn.run_config", "learn.base", "learn.storage", "learn.registry"}
     assert _learn_imports("learn.run_config") == set()
     assert _learn_imports("learn.loop") <= below
-    for specific in ("learn.config", "learn.methods", "learn.expert", "learn.search"):
-        assert specific in _learn_imports("learn.train")  # the check can fail
+    for specific in ("learn.midpoint.config", "learn.midpoint.losses", "learn.midpoint.expert",
+                     "learn.midpoint.search"):
+        assert specific in _learn_imports("learn.midpoint.trainer")  # the check can fail
+
+
+@pytest.mark.parametrize("module", ["learn.seq.trainer", "learn.pg.trainer",
+                                    "learn.examples.toy_method", "learn.runs", "learn.sweep"])
+def test_the_baselines_and_the_core_import_nothing_of_the_midpoint_learner(module) -> None:
+    """The baselines, the shipped example and the core stand on the shared core only
+    (`learn.loop`, `learn.evaluation`, `learn.tree`, ...), never on `learn.midpoint`."""
+    assert _learn_imports(module)
+    assert not {m for m in _learn_imports(module) if m.startswith("learn.midpoint")}

@@ -22,9 +22,9 @@ import finsler
 import learn
 from finsler import Disk, Metric, Task
 from finsler.errors import InputError
-from learn.config import TrainConfig, resolve_metric
+from learn.midpoint.config import TrainConfig, resolve_metric
+from learn.midpoint.trainer import Trainer
 from learn.storage import CONFIG_FILE, LATEST_FILE, RESULT_FILE, read_json
-from learn.train import Trainer
 from validation.cli import app
 from validation.cli.common import parse_metric_params
 

@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 import finsler
-from finsler.metric import Metric
+from finsler.metrics.base import Metric
 from validation import testing as vt
 from validation.testing import MetricTests
 

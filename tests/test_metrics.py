@@ -11,7 +11,7 @@ import pytest
 import torch
 
 import finsler
-from finsler import panda
+from finsler.metrics import panda
 
 
 def matsumoto_numpy(p: np.ndarray, v: np.ndarray) -> np.ndarray:

@@ -24,10 +24,11 @@ import pytest
 import finsler
 import solvers
 from finsler.errors import InputError
-from finsler.metrics import Matsumoto, Poincare
+from finsler.metrics.closed_form import Poincare
+from finsler.metrics.paper import Matsumoto
 from solvers import SeedPlan, Status
-from solvers.geodesic import richardson
-from solvers.seeding import perturbed_curves
+from solvers.geodesic.tolerance import richardson
+from solvers.seeding.plans import perturbed_curves
 
 
 # ----------------------------------------------------------------------------------------
@@ -145,9 +146,9 @@ def test_default_plan_follows_capabilities_not_names() -> None:
     assert SeedPlan.default(car) == SeedPlan.default(car, "ipopt")
     import inspect
 
-    import solvers.seeding
+    import solvers.seeding.plans
 
-    assert ".name" not in inspect.getsource(solvers.seeding.SeedPlan.default)
+    assert ".name" not in inspect.getsource(solvers.seeding.plans.SeedPlan.default)
 
 
 # ----------------------------------------------------------------------------------------

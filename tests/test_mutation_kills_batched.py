@@ -1,4 +1,4 @@
-"""Fast kill tests of solvers/batched.py (issue 48 item 6; the `batched` group of
+"""Fast kill tests of solvers/newton/driver.py (issue 48 item 6; the `batched` group of
 benchmarks/mutation.py): the row bookkeeping on crafted batches whose answers are counted
 by hand, and whole batched solves checked against closed-form distances (euclidean,
 poincare), seed counts from the plan's own numbers, and status propagation of rows that
@@ -11,8 +11,9 @@ import time
 import numpy as np
 import pytest
 
-from finsler.metrics import CarLike, Euclidean, Poincare
-from solvers.batched import (
+from finsler.metrics.closed_form import Euclidean, Poincare
+from finsler.metrics.paper import CarLike
+from solvers.newton.driver import (
     AGREE_RTOL,
     BatchOptions,
     BatchSolution,
@@ -27,8 +28,9 @@ from solvers.batched import (
     residuals,
     solve_pairs_batched,
 )
-from solvers.newton import NewtonOptions, NewtonStatus
-from solvers.seeding import SeedPlan
+from solvers.newton.energy import NewtonOptions
+from solvers.seeding.plans import SeedPlan
+from solvers.status import NewtonStatus
 
 C, MI, ST = int(NewtonStatus.CONVERGED), int(NewtonStatus.MAX_ITERATIONS), int(
     NewtonStatus.STALLED)
@@ -355,7 +357,7 @@ class _FakeState:
 
 
 def test_drop_losers_rule_by_hand():
-    from solvers.batched import _Runner
+    from solvers.newton.driver import _Runner
     R = int(NewtonStatus.RUNNING)
     # pair 0 best converged 1.0: running 2.0 (= 2 x best: kept), 2.5 (dropped); pair 1
     # has none converged: its running rows stay; a running row's low energy sets no best
@@ -372,8 +374,8 @@ def test_drop_losers_rule_by_hand():
 
 def test_nonsmooth_rows_go_to_the_interior_point():
     from solvers.inputs import domain_scale
-    from solvers.interior import InteriorOptions, interior_energy
-    from solvers.seeding import seed_batch
+    from solvers.newton.interior import InteriorOptions, interior_energy
+    from solvers.seeding.plans import seed_batch
 
     car, n = CarLike(), 8
     pairs = np.array([[[-0.4, -0.3, 0.0], [0.4, 0.2, 0.3]],

@@ -1,4 +1,5 @@
-"""solvers.certify_lp against independent references, FAST (the mutation-testing selection of
+"""solvers.certificates.plane.lp against independent references, FAST (the mutation-testing
+selection of
 the module, see docs/guides/mutation-testing.md): the rays' exit points by brute force, the
 LP's optimum in closed form (a uniform Euclidean row set: the best potential rises by
 exactly |goal - start|) and by scipy's HiGHS (``linprog``) on the full row set, strong
@@ -15,8 +16,8 @@ import pytest
 from scipy.optimize import OptimizeResult, linprog
 from tick_clock import TickClock
 
-import solvers.certify_lp as lp_mod
-from solvers.certify_lp import (
+import solvers.certificates.plane.lp as lp_mod
+from solvers.certificates.plane.lp import (
     INITIAL_DIRECTIONS,
     LP_SOLVER,
     NEAR_PER_TARGET,
@@ -31,7 +32,7 @@ from solvers.certify_lp import (
     _solve_lp,
     _window,
 )
-from solvers.certify_mesh import _Mesh
+from solvers.certificates.plane.mesh import _Mesh
 
 #: the settle rule of the LP rounds (a tree before it has none: its tests are skipped)
 SETTLE = getattr(lp_mod, "SETTLE", None)
@@ -393,10 +394,11 @@ def test_each_round_logs_its_rows_value_ratio_and_bound(
     import re
 
     monkeypatch.setattr(lp_mod, "time", TickClock())
-    caplog.set_level(logging.DEBUG, logger="solvers.certify_lp")
+    caplog.set_level(logging.DEBUG, logger="solvers.certificates.plane.lp")
     r = _solve_lp(MESH, _weights(), DIRS, 0, 1, upper=100.0, target=1e-6, start=_none(),
                   max_iter=1)
-    msgs = [rec.getMessage() for rec in caplog.records if rec.name == "solvers.certify_lp"]
+    msgs = [rec.getMessage() for rec in caplog.records
+            if rec.name == "solvers.certificates.plane.lp"]
     assert len(msgs) == 1
     got = re.fullmatch(r"LP rows (\d+) \((\d+) exact vertices\) (\S+) s: value (\S+), "
                        r"max row ratio (\S+) -> bound (\S+)", msgs[0])
@@ -599,7 +601,7 @@ def test_the_path_width_is_inclusive() -> None:
     dist = np.abs(MESH.centroids[:, 1] - 0.5)  # all centroids project inside the segment
     inside = (MESH.centroids[:, 0] >= 0.1) & (MESH.centroids[:, 0] <= 0.9)
     t = int(np.flatnonzero(inside)[np.argsort(dist[inside])[3]])
-    from solvers.certify_mesh import _distance_to_path
+    from solvers.certificates.plane.mesh import _distance_to_path
 
     width = float(_distance_to_path(MESH.centroids[t:t + 1], path)[0])
     out = _initial_modes(MESH, K, None, path, width)

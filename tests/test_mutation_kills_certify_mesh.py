@@ -1,5 +1,5 @@
-"""solvers.certify_mesh against independent references, FAST (the mutation-testing selection
-of the module, see docs/guides/mutation-testing.md): exact geometry of the outline, brute
+"""solvers.certificates.plane.mesh against independent references, FAST (the mutation-testing
+selection of the module, see docs/guides/mutation-testing.md): exact geometry of the outline, brute
 force distances and point-in-polygon tests, the lattice's defining formula, P2 gradients
 exact on quadratics, circumradii from the circumcentre, barycentric point location, and a
 zigzag worked out by hand on a metric whose unit ball is not convex."""
@@ -15,7 +15,7 @@ import pytest
 
 from finsler.domains import Box, Disk
 from finsler.errors import InputError
-from solvers.certify_mesh import (
+from solvers.certificates.plane.mesh import (
     _distance_to_path,
     _hex_lattice,
     _initial_points,

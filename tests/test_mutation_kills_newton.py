@@ -1,4 +1,4 @@
-"""solvers.newton and solvers.batched against independent references, FAST (with
+"""solvers.newton.energy and solvers.newton.driver against independent references, FAST (with
 tests/test_newton.py the mutation-testing selection of both modules, see
 docs/guides/mutation-testing.md): the first-order residual of Euclidean paths in closed
 form (the energy sum |x_j - x_{j-1}|**2 has gradient 2 (2 x_j - x_{j-1} - x_{j+1})), its
@@ -16,9 +16,10 @@ import numpy as np
 import pytest
 
 import finsler
-from solvers.batched import _Runner, residuals
 from solvers.inputs import domain_scale
-from solvers.newton import NewtonStatus, energy_residual
+from solvers.newton.driver import _Runner, residuals
+from solvers.newton.energy import energy_residual
+from solvers.status import NewtonStatus
 
 
 def euclid_residual(pts: np.ndarray, scale: float) -> np.ndarray:
@@ -127,8 +128,8 @@ def test_drop_stops_only_running_problems() -> None:
     """Problems dropped before any step keep their starting points and report DROPPED;
     the others converge to the straight line; dropping a converged problem (indices as
     a plain list) leaves it converged."""
-    from solvers.backends import backend_for
-    from solvers.newton import NewtonOptions, NewtonState
+    from solvers.newton.backends import backend_for
+    from solvers.newton.energy import NewtonOptions, NewtonState
 
     m = finsler.get_metric("euclidean")
     paths = _bent_paths()
@@ -149,7 +150,7 @@ def test_drop_stops_only_running_problems() -> None:
 def test_newton_energy_takes_nested_lists_and_reports_the_residual_at_scale_one() -> None:
     """``paths`` as nested lists solve as the array does; the residual of a problem
     stopped after one iteration is the closed form's at the default scale 1."""
-    from solvers.newton import NewtonOptions, newton_energy
+    from solvers.newton.energy import NewtonOptions, newton_energy
 
     m = finsler.get_metric("euclidean")
     paths = _bent_paths()
@@ -167,7 +168,7 @@ def test_newton_energy_passes_scale_on_and_checks_the_number_of_points() -> None
     """The residual at scale 2 is the closed form's at 2; three points (one interior
     point) are the fewest accepted, two are refused."""
     from finsler.errors import InputError
-    from solvers.newton import NewtonOptions, newton_energy
+    from solvers.newton.energy import NewtonOptions, newton_energy
 
     m = finsler.get_metric("euclidean")
     paths = _bent_paths() + 0.01 * np.sin(np.arange(6))[None, :, None]
@@ -185,7 +186,7 @@ def test_newton_energy_shifts_only_the_blocks_that_need_it_by_default() -> None:
     """``local=True`` is the default: on Matsumoto paths whose Hessian is not definite
     along the way, the default run is the local=True run to the last bit, and the
     whole-Hessian shift (local=False) takes another course on the third path."""
-    from solvers.newton import newton_energy
+    from solvers.newton.energy import newton_energy
 
     m = finsler.get_metric("matsumoto")
     line = np.linspace([-0.2, -0.1], [0.2, 0.15], 9)
@@ -200,7 +201,7 @@ def test_newton_energy_shifts_only_the_blocks_that_need_it_by_default() -> None:
 
 
 def _rows(pair, energy, status):
-    from solvers.batched import Rows
+    from solvers.newton.driver import Rows
 
     n = len(pair)
     return Rows(np.array(pair), [f"r{i}" for i in range(n)], np.arange(n * 6.0).reshape(
@@ -209,7 +210,7 @@ def _rows(pair, energy, status):
 
 
 def test_rows_take_keeps_the_results_of_solved_rows_only() -> None:
-    from solvers.batched import Rows
+    from solvers.newton.driver import Rows
 
     rows = _rows([0, 0, 1], [3.0, 1.0, 2.0], [C, C, R])
     t = rows.take([2, 0])
@@ -228,7 +229,7 @@ def test_best_of_picks_per_pair_among_the_marked_rows() -> None:
     row 3 (2.0, converged). Among all: 1 and 3; among rows 0, 2, 3: 0 (a converged row
     goes before a lower unconverged one) and 3; among rows 2: 2 and none; among none:
     none; among rows 0 and 1 only: 1 and none."""
-    from solvers.batched import _best_of
+    from solvers.newton.driver import _best_of
 
     rows = _rows([0, 0, 0, 1], [3.0, 1.0, 0.5, 2.0], [C, C, R, C])
     mark = np.array
@@ -247,7 +248,7 @@ def test_drop_losers_with_one_active_row() -> None:
 
 
 def test_the_opt_in_newton_covers_smooth_metrics_and_nonsmooth_ones_with_the_hook() -> None:
-    from solvers.batched import covers, covers_opt_in
+    from solvers.newton.driver import covers, covers_opt_in
 
     smooth = finsler.get_metric("euclidean")
     assert covers(smooth) and covers_opt_in(smooth)
@@ -275,7 +276,7 @@ def test_a_point_just_inside_the_side_pushed_outwards_counts_as_on_it() -> None:
 def test_value_evaluations_add_up_over_every_line_search() -> None:
     """Every energy-only evaluation (line searches) counts its segments: the total is the
     sum over the calls, counted here from their arguments."""
-    from solvers.newton import NewtonOptions, NewtonState, newton_energy
+    from solvers.newton.energy import NewtonOptions, NewtonState, newton_energy
 
     seen: list[int] = []
     original = NewtonState._energies
@@ -302,7 +303,7 @@ def test_carried_keeps_one_row_per_optimum_within_the_band() -> None:
     and 1 go up (row 2 is row 0's optimum again). Pair 1, nothing converged: its two
     lowest finite rows 5 (1.8) and 4 (2.0), not 6 (inf). Pair 2: one row of infinite
     energy: none."""
-    from solvers.batched import Rows, _carried
+    from solvers.newton.driver import Rows, _carried
 
     base = np.zeros((3, 2))
     pts = np.stack([base, base + 0.3, base + 1e-9, base - 0.3, base, base + 0.1,
@@ -344,7 +345,7 @@ class _DenseNewton:
         return float(np.sum(np.asarray(self.m.F(p[:-1], p[1:] - p[:-1])) ** 2))
 
     def _derivatives(self, p):
-        from solvers.newton import _NUMPY_OPS, _to_field, energy_terms
+        from solvers.newton.energy import _NUMPY_OPS, _to_field, energy_terms
 
         t = energy_terms(self.m, _NUMPY_OPS, _to_field(_NUMPY_OPS, p[None]))
         d, k = p.shape[1], p.shape[0] - 2
@@ -450,8 +451,8 @@ def _follow(m, paths, opt, local, scale, delta=0.0):
     points, shift, status, iteration count, energy and residual of every problem agree.
     ``delta``: the shift every problem starts with. Returns the (moved, step, left the
     domain) history of every problem."""
-    from solvers.backends import backend_for
-    from solvers.newton import NewtonState
+    from solvers.newton.backends import backend_for
+    from solvers.newton.energy import NewtonState
 
     st = NewtonState(m, paths, opt, backend_for(None), scale, local)
     refs = [_DenseNewton(m, p, opt, local, scale) for p in paths]
@@ -493,7 +494,7 @@ def test_line_search_and_shifts_follow_a_dense_reference_with_a_strict_armijo() 
     are refused on the strongly bent paths, shorter steps taken or none (the shift grows
     x8 from delta0, then shrinks /3 after progress); every iteration equals the dense
     reference, and the history shows each kind of step happened."""
-    from solvers.newton import NewtonOptions
+    from solvers.newton.energy import NewtonOptions
 
     m = finsler.get_metric("sphere")
     paths = _bent(m, 5, 0.35, 7)
@@ -508,7 +509,7 @@ def test_whole_hessian_shift_follows_a_dense_reference_on_indefinite_hessians() 
     """Matsumoto paths whose Hessians are not definite, ``local=False``: the smallest
     shift of the ladder 0, delta0, x8 ... (from last / 3 after a factorisation) that
     makes the dense Hessian positive definite, and every iteration as the reference."""
-    from solvers.newton import NewtonOptions
+    from solvers.newton.energy import NewtonOptions
 
     m = finsler.get_metric("matsumoto")
     paths = _bent(m, 4, 0.15, 4)
@@ -527,7 +528,7 @@ def test_refused_steps_raise_the_shift_until_progress_or_stall(local, delta_max)
     x8 until the shifted direction passes (then /3 after progress, local mode), or beyond
     ``delta_max`` = 1, where the problem stops as STALLED; each iteration as the dense
     reference."""
-    from solvers.newton import NewtonOptions
+    from solvers.newton.energy import NewtonOptions
 
     m = finsler.get_metric("sphere")
     opt = NewtonOptions(armijo=0.85, line_steps=2, max_iter=14, gtol=1e-9,
@@ -561,8 +562,8 @@ def test_a_coordinate_within_bound_eps_of_a_side_pushed_out_is_held(c, side, hel
     first two cases: the sign decides, not the size). Pushed outwards (g > 0 at the left
     side, g < 0 at the right) the coordinate is held: its gradient entry leaves the
     residual and one Newton step leaves it where it is; pulled inwards it is free."""
-    from solvers.backends import backend_for
-    from solvers.newton import _NUMPY_OPS, NewtonOptions, NewtonState, _to_field, energy_terms
+    from solvers.newton.backends import _NUMPY_OPS, backend_for
+    from solvers.newton.energy import NewtonOptions, NewtonState, _to_field, energy_terms
 
     m, scale = _Tilt(c), 2.0
     eps = 1e-9 * scale
@@ -596,8 +597,8 @@ def test_evaluations_count_every_segment_evaluated() -> None:
     evaluation. Armijo 0.9 with steps 1, 1/2, 1/4 refuses every step (a quadratic accepts
     only steps <= 0.2): the first iteration evaluates the full steps' derivatives (15) and
     3 x 15 values, the second only the 45 values (no full step after a refused one)."""
-    from solvers.backends import backend_for
-    from solvers.newton import NewtonOptions, NewtonState
+    from solvers.newton.backends import backend_for
+    from solvers.newton.energy import NewtonOptions, NewtonState
 
     m = finsler.get_metric("euclidean")
     st = NewtonState(m, _bent_paths(), NewtonOptions(), backend_for(None), 2.0)
@@ -621,7 +622,7 @@ def test_evaluations_count_every_segment_evaluated() -> None:
 def test_newton_energy_hands_its_device_to_the_backend(monkeypatch) -> None:
     """``device="cpu"`` runs on the torch backend (the numpy and torch runs agree, see
     test_newton.py, so only the backend asked for tells them apart)."""
-    import solvers.newton as newton
+    import solvers.newton.energy as newton
 
     seen: list = []
     real = newton.backend_for
@@ -638,8 +639,8 @@ def test_newton_energy_hands_its_device_to_the_backend(monkeypatch) -> None:
 
 
 def test_dropping_nothing_changes_nothing() -> None:
-    from solvers.backends import backend_for
-    from solvers.newton import NewtonOptions, NewtonState
+    from solvers.newton.backends import backend_for
+    from solvers.newton.energy import NewtonOptions, NewtonState
 
     st = NewtonState(finsler.get_metric("euclidean"), _bent_paths(), NewtonOptions(),
                      backend_for(None), 2.0)
@@ -651,7 +652,7 @@ def test_a_full_step_that_leaves_the_disk_then_a_shorter_one_resets_the_hits() -
     """A sphere path near the rim of its disk (radius 0.8), default options: its full
     Newton step leaves the disk, a shorter one is taken (the boundary
     hits start again from 0), as the dense reference does, iteration by iteration."""
-    from solvers.newton import NewtonOptions
+    from solvers.newton.energy import NewtonOptions
 
     m = finsler.get_metric("sphere")
     paths = _bent(m, 3, 0.2, 15)[:1] * 1.7
@@ -667,7 +668,7 @@ def test_hessians_the_shift_ladder_cannot_fix_stall(delta0, delta_max) -> None:
     shifts tried per iteration (from delta0 = 2e-36 the 40th is 2e-36 * 8**38 = 0.04),
     they stop as STALLED at the first iteration with their shift unchanged; the definite
     ones run on, each as the dense reference."""
-    from solvers.newton import NewtonOptions
+    from solvers.newton.energy import NewtonOptions
 
     m = finsler.get_metric("matsumoto")
     opt = NewtonOptions(armijo=0.3, line_steps=3, max_iter=10, gtol=1e-9, delta0=delta0,
@@ -682,8 +683,8 @@ def test_the_block_solves_get_each_problems_mean_diagonal_as_scale(monkeypatch, 
     of the pivot tests) is, per problem, the mean of |diagonal entries| of its Hessian
     (Matsumoto paths, two of them indefinite: the whole-Hessian ladder solves again for
     those only, with their own scales)."""
-    import solvers.newton as newton
-    from solvers.backends import backend_for
+    import solvers.newton.energy as newton
+    from solvers.newton.backends import backend_for
 
     calls: list[np.ndarray] = []
     real = newton.block_tridiagonal_solve
@@ -712,7 +713,7 @@ def test_a_shift_below_1e_12_of_the_diagonal_is_dropped(local) -> None:
     """Problems starting with a shift of 2.5e-12: after a step it is 2.5e-12 / 3 < 1e-12
     (divided after progress, or before the factorisation in whole-Hessian mode), and a
     shift that small is set to 0, as in the reference."""
-    from solvers.newton import NewtonOptions
+    from solvers.newton.energy import NewtonOptions
 
     m = finsler.get_metric("sphere")
     hist = _follow(m, _bent(m, 3, 0.1, 5), NewtonOptions(max_iter=2, gtol=1e-9), local,
@@ -726,7 +727,7 @@ def test_a_geodesic_pressed_against_the_left_side_stays_in_the_box() -> None:
     trial points at the LOWER bound too: every point stays in the box, several lie on the
     side, and the energy is IPOPT's (the same discrete problem, another method)."""
     import solvers
-    from solvers.newton import newton_energy
+    from solvers.newton.energy import newton_energy
 
     m = _Tilt(3.0)
     s, g = np.array([-0.9, -0.8]), np.array([-0.9, 0.8])
@@ -762,7 +763,8 @@ def test_energy_terms_in_chunks_equal_one_evaluation(device) -> None:
     """Five paths of 4 segments with ``chunk=8``: numpy evaluates 8 // 4 = 2 paths at a
     time (2, 2, 1), torch all five at once; the terms equal those of one evaluation of
     everything (the default chunk) to the last bit on numpy."""
-    from solvers.newton import _to_field, backend_for, energy_terms
+    from solvers.newton.backends import backend_for
+    from solvers.newton.energy import _to_field, energy_terms
 
     ops = backend_for(device)
     rng = np.random.default_rng(5)
@@ -784,8 +786,8 @@ def test_energy_terms_in_chunks_equal_one_evaluation(device) -> None:
 
 
 def test_newton_state_evaluates_in_chunks_of_its_option() -> None:
-    from solvers.backends import backend_for
-    from solvers.newton import NewtonOptions, NewtonState
+    from solvers.newton.backends import backend_for
+    from solvers.newton.energy import NewtonOptions, NewtonState
 
     m, spy = _counting_metric(0.7)
     paths = np.linspace([-0.5, 0.1], [0.4, -0.2], 5)[None] + np.zeros((3, 5, 2))
@@ -796,7 +798,7 @@ def test_newton_state_evaluates_in_chunks_of_its_option() -> None:
 
 def test_newton_options_refuse_wrong_types_with_a_clear_error() -> None:
     from finsler.errors import InputError
-    from solvers.newton import NewtonOptions
+    from solvers.newton.energy import NewtonOptions
 
     for bad in ({"gtol": "1e-10"}, {"armijo": None}):
         with pytest.raises(InputError, match=f"{next(iter(bad))} must be positive and finite"):
@@ -811,8 +813,8 @@ def test_the_newton_state_shifts_locally_by_default_and_shows_chosen_paths() -> 
     """A NewtonState made without ``local`` steps as the local one (Matsumoto paths with
     indefinite Hessians, where the whole-Hessian shift steps elsewhere); ``paths(which)``
     gives the problems asked for, in that order."""
-    from solvers.backends import backend_for
-    from solvers.newton import NewtonOptions, NewtonState
+    from solvers.newton.backends import backend_for
+    from solvers.newton.energy import NewtonOptions, NewtonState
 
     m = finsler.get_metric("matsumoto")
     paths = _bent(m, 4, 0.15, 4)
@@ -843,7 +845,7 @@ class _Kink(finsler.Metric):
 def test_a_start_with_finite_energy_but_nan_derivatives_is_not_finite() -> None:
     """The second path has an interior point at ``x_0 = 0`` (infinite derivatives, finite
     energy): NOT_FINITE at once, no iteration; the first path (no point at x_0 = 0) runs."""
-    from solvers.newton import _NUMPY_OPS, _to_field, energy_terms, newton_energy
+    from solvers.newton.energy import _NUMPY_OPS, _to_field, energy_terms, newton_energy
 
     m = _Kink()
     a = np.array([[-0.6, 0.1], [-0.3, 0.3], [-0.2, 0.5], [-0.1, 0.2]])
@@ -861,7 +863,7 @@ def test_constant_terms_of_chunked_evaluations_fill_their_chunk() -> None:
     returns plain numbers, expanded to each chunk's rows): five paths in chunks of 2, 2,
     1 give the closed-form Hessian blocks (4 I on the diagonal, -2 I coupling) and energy
     sum |p_{j+1} - p_j|**2 for every path."""
-    from solvers.newton import _NUMPY_OPS, _to_field, energy_terms
+    from solvers.newton.energy import _NUMPY_OPS, _to_field, energy_terms
 
     m = finsler.get_metric("euclidean")
     rng = np.random.default_rng(9)
@@ -884,8 +886,8 @@ def test_armijo_on_a_box_measures_the_decrease_along_the_clipped_step() -> None:
     is 0.77 of the model along the clipped displacement (g . (q - p)) but only 0.17 of
     ``slope`` (g . s, the unclipped step): with Armijo 0.5 the projected step is taken
     whole, as the model along the projection arc says."""
-    from solvers.backends import backend_for
-    from solvers.newton import NewtonOptions, NewtonState
+    from solvers.newton.backends import backend_for
+    from solvers.newton.energy import NewtonOptions, NewtonState
 
     m = _Tilt(0.5)
     p = np.array([[-0.98, -0.6], [-0.98, 0.0], [-0.98, 0.6]])

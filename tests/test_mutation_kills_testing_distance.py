@@ -16,7 +16,7 @@ import pytest
 
 from finsler import Box, Metric, Task
 from finsler.errors import InputError
-from finsler.metrics import Euclidean, Randers
+from finsler.metrics.closed_form import Euclidean, Randers
 from finsler.status import DistanceStatus, Status
 from validation.testing import distance as VD
 from validation.testing.engine import FAILED, INCONCLUSIVE, MAPPED, PASSED, SKIPPED
@@ -420,7 +420,7 @@ def test_certificate_branches(monkeypatch):
 
 def test_certificate_maps_a_pair_through_a_non_convex_region(monkeypatch):
     import solvers
-    from finsler.metrics import Matsumoto
+    from finsler.metrics.paper import Matsumoto
 
     called = []
     monkeypatch.setattr(solvers, "certify", lambda *a, **k: called.append(1) or _FakeCert(
@@ -945,7 +945,7 @@ def test_discrete_oracle_sizes_and_mapping():
     assert capped.extra["segments"] == 8 and not capped.extra["tol_reached"]
     loose = VD.DiscreteDistance(1e-2, 4, 64).solve(Randers(), x, y)
     assert loose.extra["segments"] == 16 and loose.extra["tol_reached"]  # 4, 8, 16
-    from finsler.metrics import Matsumoto
+    from finsler.metrics.paper import Matsumoto
     m = Matsumoto()  # convex near its centre only
     inside = VD.DiscreteDistance().solve(m, np.array([0.05, 0.0]), np.array([-0.05, 0.02]))
     assert inside.mapped is False and inside.ok

@@ -16,7 +16,8 @@ import pytest
 from finsler import Box, Disk, Metric, Product, Task
 from finsler.domains import Domain
 from finsler.errors import InputError
-from finsler.metrics import Euclidean, Matsumoto, Randers
+from finsler.metrics.closed_form import Euclidean, Randers
+from finsler.metrics.paper import Matsumoto
 from validation.testing import metric as VM
 from validation.testing.engine import FAILED, MAPPED, PASSED, SKIPPED
 

@@ -17,7 +17,7 @@ import pytest
 
 from finsler import DEFAULT_EVAL_SEED, VALIDATION_SEED, Box, Disk, sample_pairs
 from finsler.errors import InputError
-from finsler.metric import Task
+from finsler.metrics.base import Task
 from validation.testing import policy as P
 from validation.testing.engine import FAILED, INCONCLUSIVE, MAPPED, PASSED, SKIPPED
 

@@ -1,4 +1,4 @@
-"""The batched Newton solver of the discrete energy (solvers.newton, solvers.batched):
+"""The batched Newton solver of the discrete energy (solvers.newton.energy, solvers.newton.driver):
 block-tridiagonal solves against dense linear algebra, the energy's derivatives against
 CasADi's Hessian of the whole energy, closed-form geodesics, the torch device path, the
 IPOPT fallback at an active domain constraint, statuses and bad input."""
@@ -16,17 +16,16 @@ import torch
 import finsler
 import solvers
 from finsler.errors import InputError
-from solvers.newton import (
-    _NUMPY_OPS,
+from solvers.newton.backends import _NUMPY_OPS, backend_for
+from solvers.newton.block_tridiagonal import block_tridiagonal_solve
+from solvers.newton.energy import (
     NewtonOptions,
-    NewtonStatus,
     _to_field,
-    backend_for,
-    block_tridiagonal_solve,
     energy_residual,
     energy_terms,
     newton_energy,
 )
+from solvers.status import NewtonStatus
 
 
 def _dense(a: np.ndarray, o: np.ndarray) -> np.ndarray:
@@ -325,7 +324,7 @@ def _worst_armijo_excess(m: finsler.Metric, armijo: float, c: float) -> float:
     iteration and problem, with ``E`` and its gradient from :func:`energy_terms` at the
     paths before and after each step (the sufficient-decrease condition, along the
     projection arc on box domains as Bertsekas's projected Newton states it)."""
-    from solvers.newton import NewtonState
+    from solvers.newton.energy import NewtonState
 
     pairs = finsler.sample_pairs(m, 8, seed=5)
     opt = NewtonOptions(armijo=0.25)

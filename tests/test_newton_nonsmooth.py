@@ -1,6 +1,6 @@
-"""The batched interior point for a metric whose F is not smooth (solvers.interior): on
+"""The batched interior point for a metric whose F is not smooth (solvers.newton.interior): on
 car-like pairs at small sizes its optima against IPOPT's from the same seeds (a second
-method), the KKT residual of its paths (solvers.nonsmooth, computed from the points
+method), the KKT residual of its paths (solvers.newton.kkt, computed from the points
 alone), iterates inside the domain, honest statuses, and the opt-in routing."""
 
 from __future__ import annotations
@@ -13,12 +13,12 @@ import pytest
 import finsler
 import solvers
 from finsler.errors import InputError
-from solvers import interior
+from solvers.geodesic.pair_solver import resolve_method
 from solvers.inputs import domain_scale
-from solvers.interior import InteriorOptions, covers_interior, interior_energy
-from solvers.nonsmooth import kkt_residual
-from solvers.pairs import resolve_method
-from solvers.seeding import SeedPlan, seed_batch
+from solvers.newton import interior
+from solvers.newton.interior import InteriorOptions, covers_interior, interior_energy
+from solvers.newton.kkt import kkt_residual
+from solvers.seeding.plans import SeedPlan, seed_batch
 from solvers.status import NewtonStatus
 from solvers.transcription import energy_nlp
 
@@ -248,7 +248,7 @@ def test_uneven_rows_are_solved_again_at_equal_cost_spacing(car: finsler.Metric)
     the processor, since OpenBLAS picks its kernels by processor), two of that data's three
     uneven rows stopped at the 300-iteration cap, so the test checked the iteration cap and
     not the plan."""
-    from solvers.batched import solve_pairs_batched
+    from solvers.newton.driver import solve_pairs_batched
 
     pairs = np.asarray(finsler.sample_pairs(car, 4, 20261236))[1:2]
     n = 32
@@ -273,13 +273,13 @@ def test_uneven_rows_are_solved_again_at_equal_cost_spacing(car: finsler.Metric)
 def test_warped_copies_of_the_best_row_reach_a_lower_phase_switch(car: finsler.Metric
                                                                    ) -> None:
     """SeedPlan(warps=6): after the plan's rows, six copies of each pair's best row with
-    their points slid along the curve (solvers.seeding.warped_batch) are solved; the
+    their points slid along the curve (solvers.seeding.plans.warped_batch) are solved; the
     plan's rows are unchanged, the copies are named ``<best>~w<j>``, and on this pair
     (pair 3 of sample_pairs(carlike, 6, 20261240), 32 segments) one ends more than 1 %
     lower: car-like's discrete minima differ by the segment where the path changes phase,
     which sliding the points moves (random perturbations of the same size do not reach
     it: polish=6 at 0.05 stays above)."""
-    from solvers.batched import solve_pairs_batched
+    from solvers.newton.driver import solve_pairs_batched
 
     pairs = np.asarray(finsler.sample_pairs(car, 6, 20261240))[3:4]
     n = 32
@@ -350,7 +350,7 @@ def test_other_first_barriers_end_in_other_basins(car: finsler.Metric) -> None:
     are unchanged); on this pair (pair 3 of sample_pairs(carlike, 6, 20261240), 32
     segments) one of them ends more than 1 % below every row of the plan's own barrier,
     and each is the solve of InteriorOptions(mu0=100) from its seed (a second call)."""
-    from solvers.batched import BatchOptions, solve_pairs_batched
+    from solvers.newton.driver import BatchOptions, solve_pairs_batched
 
     pairs = np.asarray(finsler.sample_pairs(car, 6, 20261240))[3:4]
     n = 32

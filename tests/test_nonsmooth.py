@@ -1,5 +1,5 @@
 """The KKT residual of the reformulated (slack) problem reported for metrics whose F is not
-smooth (solvers.nonsmooth): against IPOPT's own Lagrangian gradient at its solutions,
+smooth (solvers.newton.kkt): against IPOPT's own Lagrangian gradient at its solutions,
 against finite differences of the energy where F is differentiable, large at perturbed
 paths, and the residual the results carry."""
 
@@ -11,9 +11,9 @@ import pytest
 import finsler
 import solvers
 from solvers.inputs import domain_scale
-from solvers.newton import energy_residual
-from solvers.nonsmooth import kkt_residual, optimality_residual, uses_kkt
-from solvers.seeding import SeedPlan, seed_batch
+from solvers.newton.energy import energy_residual
+from solvers.newton.kkt import kkt_residual, optimality_residual, uses_kkt
+from solvers.seeding.plans import SeedPlan, seed_batch
 from solvers.transcription import energy_nlp
 
 N = 16

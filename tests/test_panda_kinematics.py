@@ -1,4 +1,4 @@
-"""Panda forward kinematics in CasADi (finsler.panda) against Pinocchio's own algorithms."""
+"""Panda forward kinematics in CasADi (finsler.metrics.panda) against Pinocchio's own algorithms."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import numpy as np
 import pinocchio
 import pytest
 
-from finsler.panda import (
+from finsler.metrics.panda import (
     FRAME_NAMES,
     JOINT_LIMITS_HIGH,
     JOINT_LIMITS_LOW,

@@ -9,9 +9,9 @@ import pytest
 from typer.testing import CliRunner
 
 import finsler
-from finsler import panda
 from finsler.errors import InputError
-from finsler.quadrature import _GK_T, _GK_WG, _GK_WK
+from finsler.metrics import panda
+from finsler.metrics.quadrature import _GK_T, _GK_WG, _GK_WK
 from validation.cli import app
 
 runner = CliRunner()

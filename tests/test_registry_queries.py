@@ -99,7 +99,7 @@ def test_no_list_of_metric_names_outside_finsler() -> None:
 
 
 def test_the_scan_catches_dicts_keyed_by_metric_names() -> None:
-    # the per-metric dicts learn/config.py and learn/seq.py kept before Metric.training
+    # the per-metric dicts the midpoint and Seq configs kept before Metric.training
     old = """
 _PAPER_LR = {"matsumoto": 3e-5, "carlike": 1e-6, "panda-pole": 1e-6}
 _OURS = {
@@ -107,7 +107,7 @@ _OURS = {
     "carlike": dict(timesteps=400_000_000),
 }
 _MODEL_FREE = {"matsumoto": dict(epochs=3), "carlike": dict(epochs=2)}
-_CYCLES = {"panda-pole": (1077, 1077)}  # learn/pg.py's PG schedule, one key
+_CYCLES = {"panda-pole": (1077, 1077)}  # learn/pg/config.py's PG schedule, one key
 ok = ("matsumoto",)  # one name in a sequence is a lookup, not a list
 """
     found = _name_lists_in(old, set(finsler.list_metrics()), "old")
@@ -125,7 +125,7 @@ class _Trained(_Flat):
 
 
 def test_learn_reads_the_training_settings_the_metric_declares() -> None:
-    from learn.config import default_config, model_free_overrides, paper_config
+    from learn.midpoint.config import default_config, model_free_overrides, paper_config
     from learn.seq import default_seq_config
 
     finsler.register_metric(_Trained)

@@ -16,7 +16,7 @@ import pytest
 from conformal_metrics import Conformal4D
 
 import finsler
-from finsler.metric import Task
+from finsler.metrics.base import Task
 from validation.comparison import StraightLine
 from validation.report import build_report
 from validation.report_certify import cli_lines, md_certified, preset_for

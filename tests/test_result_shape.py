@@ -144,7 +144,7 @@ def test_string_outcomes_are_members_with_their_old_words() -> None:
 
 def test_strict_in_solve_batch(results: dict[str, Any], monkeypatch: pytest.MonkeyPatch
                                ) -> None:
-    import solvers.batch_jobs as bj
+    import solvers.geodesic.batches as bj
 
     m = finsler.get_metric("poincare")
     pairs = np.stack(PAIR)[None]
@@ -169,7 +169,6 @@ def _public_result_classes(packages: tuple[str, ...] = PACKAGES) -> dict[str, ty
     defined in a module of ``packages`` (private modules and names skipped)."""
     import importlib
     import pkgutil
-    import warnings
 
     found: dict[str, type] = {}
     for pkg_name in packages:
@@ -177,9 +176,7 @@ def _public_result_classes(packages: tuple[str, ...] = PACKAGES) -> dict[str, ty
         for info in pkgutil.walk_packages(pkg.__path__, prefix=f"{pkg_name}."):
             if any(part.startswith("_") for part in info.name.split(".")):
                 continue
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore", DeprecationWarning)  # moved-module aliases
-                mod = importlib.import_module(info.name)
+            mod = importlib.import_module(info.name)
             for name, obj in vars(mod).items():
                 if (isinstance(obj, type) and not name.startswith("_")
                         and name.endswith(("Result", "Report"))
@@ -195,7 +192,7 @@ def _not_on_the_base(classes: dict[str, type]) -> list[str]:
 def test_every_public_result_class_derives_from_the_base() -> None:
     classes = _public_result_classes()
     # the walk finds the types of every package (not an empty scan that passes)
-    for name in ("solvers.result.CertifyResult", "learn.policy.EvalResult",
+    for name in ("solvers.result.CertifyResult", "learn.evaluation.EvalResult",
                  "learn.sweep.SweepResult", "validation.testing.engine.CheckReport",
                  "validation.propositions.Lemma1Report"):
         assert name in classes, name
@@ -220,8 +217,8 @@ def test_the_walk_catches_a_result_off_the_base(tmp_path: Any,
 
 def _learn_and_validation_results() -> dict[str, Any]:
     """One result of each learn / validation type, built directly (cheap)."""
-    from learn.policy import EvalResult
-    from learn.search import SearchResult
+    from learn.evaluation import EvalResult
+    from learn.midpoint.search import SearchResult
     from validation.propositions import Prop1Result
     from validation.testing.engine import CheckReport, PropertyResult
 

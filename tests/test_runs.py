@@ -98,7 +98,7 @@ def _signal_at(monkeypatch, iteration: int, sig: int) -> None:
     """Send ``sig`` to this process during the ``iteration``-th update of the trainer."""
     import signal as _signal  # noqa: F401  (documents the kind of ``sig``)
 
-    from learn.train import Trainer
+    from learn.midpoint.trainer import Trainer
 
     real = Trainer.update
     calls = [0]

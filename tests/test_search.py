@@ -20,8 +20,8 @@ import finsler
 import learn
 import solvers
 from finsler.errors import InputError
-from learn.networks import predictor
-from learn.search import SearchSpec, _regenerate_windows, equalize_paths, search_paths
+from learn.midpoint.networks import predictor
+from learn.midpoint.search import SearchSpec, _regenerate_windows, equalize_paths, search_paths
 from validation.cli import app
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -64,7 +64,7 @@ def test_search_finds_the_route_the_policy_misses(matsumoto) -> None:
     policy with the actor relative to each pair's length (issue 25, shipped before the
     model-free one) takes the right route by itself (measured: 2.7% longer); the shipped
     model-free policy does not (13% longer: its ratio tail,
-    benchmarks/results/route-search-moved.md)."""
+    benchmarks/results/policies/route-search-moved.md)."""
     m = matsumoto.metric
     old = learn.load_policy(ROOT / "benchmarks" / "previous_policies" / "matsumoto")
     pair = np.array([[[-0.2539245465809705, 0.9261021595305758],

@@ -16,7 +16,13 @@ import solvers
 from finsler.domains import Box
 from finsler.errors import InputError
 from solvers import SeedPlan
-from solvers.seeding import alternative_gap, family_stats, graph_seeder, seed_batch, seed_family
+from solvers.seeding.plans import (
+    alternative_gap,
+    family_stats,
+    graph_seeder,
+    seed_batch,
+    seed_family,
+)
 from solvers.transcription import energy_nlp
 
 
@@ -131,7 +137,7 @@ def test_warped_copies_trace_the_same_curve_with_their_points_slid_along_it() ->
     ~0), in the same order (arc position increasing), the ends fixed; copy i slides the
     point at parameter t to t + e sin(j pi t) / (j pi) of the curve's parameter, checked
     against the arc position of each point found by projecting it onto the polyline."""
-    from solvers.seeding import warped_batch
+    from solvers.seeding.plans import warped_batch
 
     m = finsler.get_metric("euclidean")
     rng = np.random.default_rng(3)
@@ -242,16 +248,16 @@ def test_aligned_graph_moves_along_the_cheap_directions() -> None:
     alone."""
     m = finsler.get_metric("carlike")
     nodes = m.domain.sample(3000, np.random.default_rng(0))
-    g = solvers.seeding.GraphSeeder.aligned(m, nodes, (0.3,), directions=100, keep=8)
+    g = solvers.seeding.plans.GraphSeeder.aligned(m, nodes, (0.3,), directions=100, keep=8)
     d = g.nodes[g.cols] - g.nodes[g.rows]
     ratio = g.weights / np.linalg.norm(d, axis=1)
     assert g.rows.size > 3 * len(nodes)
-    knn = solvers.seeding.GraphSeeder.roadmap(m, 3000, 8, seed=0)
+    knn = solvers.seeding.plans.GraphSeeder.roadmap(m, 3000, 8, seed=0)
     knn_ratio = knn.weights / np.linalg.norm(knn.nodes[knn.cols] - knn.nodes[knn.rows], axis=1)
     assert np.median(ratio) < 0.4 * np.median(knn_ratio)
     heading = np.stack([np.cos(g.nodes[g.rows, 2]), np.sin(g.nodes[g.rows, 2])], 1)
     forward = np.sum(d[:, :2] * heading, 1)
     assert np.quantile(forward, 0.05) > 0  # forward motion, not backward
     with pytest.raises(InputError, match="3-D"):
-        solvers.seeding.GraphSeeder.aligned(finsler.get_metric("matsumoto"), nodes[:, :2],
+        solvers.seeding.plans.GraphSeeder.aligned(finsler.get_metric("matsumoto"), nodes[:, :2],
                                             (0.2,))

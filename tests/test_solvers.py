@@ -23,7 +23,7 @@ import finsler
 import solvers
 from finsler.errors import DomainError, InputError
 from solvers import DistanceStatus, SeedPlan, Status
-from solvers.baseline import adam_energy_baseline
+from solvers.geodesic.baseline import adam_energy_baseline
 from solvers.transcription import energy_nlp
 
 #: the metrics that provide a closed-form distance (asked, not listed)
@@ -243,7 +243,8 @@ def test_trivial_pair() -> None:
 
 def test_non_convergence_is_a_status_and_strict_raises(monkeypatch) -> None:
     """With a 2-iteration IPOPT budget nothing converges: the result says so, strict raises."""
-    import solvers.pairs as sp  # the module whose solves call energy_nlp / BatchOptions
+    # the module whose solves call energy_nlp / BatchOptions
+    import solvers.geodesic.pair_solver as sp
     from solvers.transcription import EnergyNLP
 
     assert Status.from_ipopt("Maximum_Iterations_Exceeded") is Status.MAX_ITERATIONS
@@ -259,8 +260,8 @@ def test_non_convergence_is_a_status_and_strict_raises(monkeypatch) -> None:
         solvers.solve_geodesic(m, s, g, 16, strict=True, method="ipopt")
     # the Newton path: 2 Newton iterations leave every candidate unfinished, IPOPT (also
     # cut to 2 iterations) finishes none: the result is IPOPT's status, never a success
-    from solvers.batched import BatchOptions
-    from solvers.newton import NewtonOptions
+    from solvers.newton.driver import BatchOptions
+    from solvers.newton.energy import NewtonOptions
 
     monkeypatch.setattr(sp, "BatchOptions", lambda device=None: BatchOptions(
         newton=NewtonOptions(max_iter=2), device=device))
@@ -509,14 +510,20 @@ def test_solve_batch_warm_start_from_exact_paths() -> None:
 def test_solve_batch_initial_paths_reach_the_ray_chunks() -> None:
     """The Ray task body passes each pair's own initial path (checked without Ray: the
     chunk function is plain Python)."""
-    from solvers.batch_jobs import _chunk_worker, _metric_spec
-    from solvers.distributed import _solve_chunk
+    import pickle
+
+    from solvers.geodesic.batches import Chunk
+    from solvers.geodesic.batches import _solve_chunk as chunk_worker
+    from solvers.geodesic.distributed import _solve_chunk
+    from solvers.geodesic.request import SolveRequest
 
     m = finsler.get_metric("matsumoto")
     pairs = finsler.sample_pairs(m, 2, seed=5)
     paths = np.stack([solvers.solve_geodesic(m, s, g, 16).points for s, g in pairs])
-    out = _solve_chunk(_chunk_worker, (_metric_spec(m), [4, 7], pairs, 16, SeedPlan(), False,
-                                       paths, False, None, "newton", None))
+    req = SolveRequest(m, 16, SeedPlan(), "newton", global_seeds=False)
+    chunk = pickle.loads(pickle.dumps(Chunk(req, [4, 7], pairs, paths)))  # as Ray sends it
+    assert chunk.request.metric is m  # rebuilt from its spec: the registry's instance
+    out = _solve_chunk(chunk_worker, chunk)
     assert [k for k, _ in out] == [4, 7]
     for (_, r), p in zip(out, paths):
         assert r.seeds_tried == 1 and r.iterations <= 10
@@ -568,25 +575,27 @@ def test_solve_batch_global_seeds_false_needs_paths() -> None:
 
 
 def test_no_import_cycles_in_solvers() -> None:
-    """Every import between modules of ``solvers`` (top level or inside functions) points
-    one way: the graph has no cycle (geodesic <-> spectral went round through result)."""
+    """Every import between modules of ``solvers`` (top level or inside functions, in any
+    of its folders) points one way: the graph has no cycle (geodesic <-> spectral went
+    round through result)."""
     import ast
     import pathlib
 
     folder = pathlib.Path(solvers.__file__).parent
     edges: dict[str, set[str]] = {}
-    for path in folder.glob("*.py"):
-        if path.stem == "__init__":
+    for path in folder.rglob("*.py"):
+        name = ".".join(("solvers", *path.relative_to(folder).with_suffix("").parts))
+        if name.endswith("__init__"):
             continue
-        out = edges.setdefault(path.stem, set())
+        out = edges.setdefault(name, set())
         for node in ast.walk(ast.parse(path.read_text())):
             names = []
             if isinstance(node, ast.ImportFrom) and node.module:
                 names = [node.module]
             elif isinstance(node, ast.Import):
                 names = [a.name for a in node.names]
-            out.update(n.split(".")[1] for n in names if n.startswith("solvers."))
-    assert "geodesic" in edges["spectral"]  # the check sees the imports
+            out.update(n for n in names if n.startswith("solvers."))
+    assert "solvers.geodesic.solve" in edges["solvers.continuum.spectral"]  # imports seen
 
     def cycle_from(node: str, stack: list[str]) -> list[str] | None:
         if node in stack:

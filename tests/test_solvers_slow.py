@@ -8,7 +8,7 @@ import pytest
 import finsler
 import solvers
 from solvers import Status
-from solvers.baseline import adam_energy_baseline
+from solvers.geodesic.baseline import adam_energy_baseline
 
 pytestmark = pytest.mark.slow
 

@@ -106,9 +106,9 @@ def test_declared_hooks_are_found_by_asking_the_metric() -> None:
 def _metric_probes(path: Path) -> list[str]:
     """``getattr(metric, ...)``/``hasattr(metric, ...)`` and ``isinstance(x, <concrete
     metric class>)`` calls in one file."""
-    concrete = {n for n in dir(finsler.metrics) if isinstance(getattr(finsler.metrics, n), type)
-                and issubclass(getattr(finsler.metrics, n), finsler.Metric)
-                and getattr(finsler.metrics, n) is not finsler.Metric}
+    concrete = {n for n in finsler.__all__ if isinstance(getattr(finsler, n), type)
+                and issubclass(getattr(finsler, n), finsler.Metric)
+                and getattr(finsler, n) is not finsler.Metric}
     found = []
     for node in ast.walk(ast.parse(path.read_text())):
         if not (isinstance(node, ast.Call) and isinstance(node.func, ast.Name)):

@@ -462,7 +462,7 @@ def test_the_learning_curve_names_the_pairs_it_was_evaluated_on(report_dir: Path
     _, _, note = load_report_policy("panda-pole", None, False, tmp_path)
     assert "selected on the validation set" in note and "default evaluation" not in note
     # a shipped policy chosen on the default set (the replaced Panda one) is named so
-    monkeypatch.setattr(learn.policy, "_shipped_dir", lambda name: old / name)
+    monkeypatch.setattr(learn.runs, "shipped_dir", lambda name: old / name)
     _, _, note = load_report_policy("panda-pole", None, False, tmp_path)
     assert "selected on the default evaluation set" in note
 

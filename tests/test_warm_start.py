@@ -75,13 +75,6 @@ def test_cli_warm_start_adds_one_start_beside_the_global_seeds(
     both = solvers.solve_batch(m, easy_pairs[:1], workers=1, progress=False,
                                initial_paths=paths, global_seeds=True)[0]
     assert "initial0" in both.seed_energies and len(both.seed_energies) > 1
-    # the retired options are accepted with a deprecation warning and change nothing
-    old = r.invoke(app, [*base, "--keep-global-seeds", "--recheck-above", "1.1"])
-    assert old.exit_code == 0, old.output
-    assert "--keep-global-seeds is deprecated" in old.stderr
-    assert "--recheck-above is deprecated" in old.stderr
-    assert [row["energy"] for row in json.loads(old.stdout)["results"]] == [
-        row["energy"] for row in doc["results"]]
 
 
 def test_warm_start_is_never_worse_where_the_learned_path_alone_is(tmp_path: Path) -> None:

@@ -27,7 +27,7 @@ if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
     from finsler import Metric
-    from solvers.result import GeodesicResult
+    from solvers import GeodesicResult
 
 __all__ = ["FIGURE_FORMATS", "PATH_FORMATS", "export_paths", "path_bytes", "plot_geodesic"]
 

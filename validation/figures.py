@@ -3,7 +3,7 @@
 Each drawing function returns a `matplotlib.figure.Figure` built with the
 object-oriented API on an Agg canvas: no pyplot, no backend switch, no global state, at
 import or later (figures are garbage-collected, nothing to close). `save_figure`
-writes one atomically (rendered in memory, then ``learn.storage.atomic_write_bytes``).
+writes one atomically (rendered in memory, then ``finsler.infra.files.atomic_write_bytes``).
 
 Report figures (`validation.report`): `learning_curve`, `paths_2d`,
 `carlike_headings`, `panda_motion`, `length_ratios`,
@@ -91,7 +91,7 @@ def figure_bytes(fig: Figure, fmt: str = "png", dpi: int = 120) -> bytes:
 
 def save_figure(fig: Figure, path: Path, dpi: int = 120) -> None:
     """Write ``fig`` to ``path`` atomically (format from the suffix, default png)."""
-    from learn.storage import atomic_write_bytes
+    from finsler.infra.files import atomic_write_bytes
 
     path = Path(path)
     fmt = path.suffix.lstrip(".").lower() or "png"

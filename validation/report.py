@@ -322,7 +322,7 @@ def _md_search(doc: dict[str, Any]) -> list[str]:
         sc = doc["search"]
         lines += [
             "`learned + route search` (`searched` in `report.json`) is the same policy with "
-            "the route search (`learn.search`): at the "
+            "the route search (`learn.midpoint.search`): at the "
             f"top {sc['levels']} levels, {sc['candidates_per_level']} candidate midpoints "
             "per sub-pair (the policy's, the coordinate midpoint and offsets around both) "
             "are each completed by the policy's own halves and the cheapest completed path "
@@ -571,7 +571,7 @@ def _build_report(env: str | None, out: Path, *, run: str | Path | None,
         continuum = not quick
     spec = None
     if search is True and callable(getattr(pol, "search", None)):
-        from learn.search import SearchSpec
+        from learn import SearchSpec
 
         spec = SearchSpec()
     elif search not in (None, False, True):
@@ -613,7 +613,7 @@ def _build_report(env: str | None, out: Path, *, run: str | Path | None,
         doc["summary"]["searched_success"] = doc["success_rate"]["searched"]
         doc["summary"]["searched_ratio"] = ratio_stats(cmp.ratios("searched"))
     doc = jsonable(doc)
-    from learn.storage import atomic_write_text
+    from finsler.infra.files import atomic_write_text
 
     atomic_write_text(out / "report.json", json.dumps(doc, indent=2, allow_nan=False))
     atomic_write_text(out / "report.md", _markdown(doc, figures, metric))

@@ -1,4 +1,4 @@
-"""The certificates of a report (issue 46, item 5): ``lower <= d(s, g) <= upper`` for the
+"""The certificates of a report: ``lower <= d(s, g) <= upper`` for the
 first pairs of a comparison, by `solvers.certify` in any dimension it accepts.
 
 Every row is built from what the certificate carries, never from the metric's name: the
@@ -9,17 +9,14 @@ Every row is built from what the certificate carries, never from the metric's na
 on) and ``lp_status``; the row names their work counts as they are (``work``), their
 ``method`` (the result's own where it has one) and the source of each bound.
 
-Budgets (``benchmarks/report_certify.py``; ``benchmarks/results/report_certify-2026-11-28.md``
-and ``-2.md``: CPU seconds of the certificate alone, two pairs of seed 20261230 per metric, on a
-machine shared with other jobs): in 2-D a report certifies ``QUICK_PAIRS`` pairs with the
-``"coarse"`` preset under ``--quick`` (Matsumoto 5-15 s a pair, gap ~5e-2) and
-``FULL_PAIRS`` with ``"default"`` (4-32 s, gap < 1e-2); beyond 2-D it certifies
-``QUICK_PAIRS_ND`` / ``FULL_PAIRS_ND`` pairs with ``"coarse"``: poincare-slab 10-26 s (gaps
-4.4e-2, 7.0e-2), panda-pole 11-13 s (lower/upper 0.80, 0.67; 1e5 box enclosures), car-like
-114-164 s (gaps 0.28, 0.60), whose default preset costs about 230 s a pair. ``--certify N``
-sets the count. Presets are work budgets (rounds, cells, boxes), never time limits: the same
-report gives the same intervals on any machine (two runs of the benchmark gave the same
-intervals to every digit).
+Budgets: in 2-D a report certifies ``QUICK_PAIRS`` pairs with the ``"coarse"`` preset
+under ``--quick`` and ``FULL_PAIRS`` with ``"default"``; beyond 2-D ``QUICK_PAIRS_ND`` /
+``FULL_PAIRS_ND`` pairs with ``"coarse"`` (the default presets of 3-D and up cost minutes a
+pair). ``--certify N`` sets the count. Presets are work budgets (rounds, cells, boxes),
+never time limits, so the same report gives the same intervals on any machine. The CPU
+seconds and gaps per metric are in ``docs/guides/reports.md`` ("Certified distances in a
+report"), measured by ``benchmarks/report_certify.py`` (its files in
+``benchmarks/results/reports/``).
 """
 
 from __future__ import annotations

@@ -7,7 +7,4 @@ It lives in ``finsler`` because every package (``solvers``, ``learn``, ``validat
 uses it and ``finsler`` is the ground floor of the one-way house; as a subpackage it keeps
 ``finsler/`` itself reading as geometry (metrics, domains, hooks, lowering, intervals,
 kinematics, statuses). It imports nothing of the geometry but `finsler.errors`.
-
-The old paths (``finsler.pool``, ``finsler.files``, ...) still import, with a
-``DeprecationWarning`` (`finsler.infra.moved`).
 """

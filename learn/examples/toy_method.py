@@ -30,8 +30,8 @@ from torch.nn.utils import parameters_to_vector, vector_to_parameters
 import finsler
 from finsler.errors import InputError
 from learn.base import LoadedPolicy
+from learn.evaluation import check_pairs, evaluate_paths
 from learn.loop import RunLoop, best_record, eval_columns, load_run, load_weights
-from learn.policy import check_pairs, evaluate_paths
 from learn.registry import Method, register_method
 from learn.run_config import RunConfig, check_hidden
 from learn.tree import build_tree

@@ -1,7 +1,7 @@
 """The ``geodesics`` command line (typer), a package of its own on top of the library.
 
-One module per command group (``solve``, ``learn``, ``report``, ``plot``, ``sweep``,
-``expmap``, ``certify``, ``check``), the options and input parsing they share in
+One module per command group (``solve``, ``train`` (train and evaluate), ``report``, ``plot``,
+``sweep``, ``expmap``, ``certify``, ``check``), the options and input parsing they share in
 `validation.cli.common`, and the root application with its console-script entry point
 in `validation.cli.entry`. Every command calls public functions of ``finsler``,
 ``solvers``, ``learn`` or ``validation``; nothing is reachable only from here.

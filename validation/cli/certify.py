@@ -1,9 +1,9 @@
-"""``geodesics certify``: a certified interval ``lower <= d(start, goal) <= upper`` on a 2-D
-metric (`solvers.certify`).
+"""``geodesics certify``: a certified interval ``lower <= d(start, goal) <= upper``
+(`solvers.certify`, which picks the certificate by what the metric provides).
 
-JSON keys (``--json``): ``lower``, ``upper``, ``gap`` ((upper - lower) / upper), then
-``length``, ``length_error`` (the quadrature estimate of the path's length; ``upper`` is
-the proven bound of it by interval arithmetic), ``upper_source`` (``path`` |
+JSON keys of the 2-D certificate (``--json``): ``lower``, ``upper``, ``gap``
+((upper - lower) / upper), then ``length``, ``length_error`` (the quadrature estimate of the path's
+length; ``upper`` is the proven bound of it by interval arithmetic), ``upper_source`` (``path`` |
 ``zigzag``), ``path_upper``, ``path_gap`` (the solver's own path), ``triangles``, ``vertices``,
 ``unknowns``, ``directions``, ``lp_rows``, ``lp_rows_total``, ``lp_status``, ``lp_solver``,
 ``convexity`` (``convex`` | ``convexified``), ``convexity_note``, ``solver_status``,
@@ -15,7 +15,7 @@ budget_reached | time_limit | corrections_too_large | lp_failed), ``message``.
 A conformal metric of dimension > 3 (hook ``conformal_factor_sx``, e.g. ``panda-pole``)
 gets a proven lower bound instead, the best of the full run, the factor split into its parts
 and the whole factor in 4 coordinates
-(`solvers.certify_conformal_split.certify_conformal_best`; JSON: ``lower``, ``upper``,
+(`solvers.certificates.conformal.split.certify_conformal_best`; JSON: ``lower``, ``upper``,
 ``ratio``, ``gap``, ``trivial``, ``potential_lower``, ``min_factor``, ``boxes``,
 ``enclosures``, ``cells``, ``momentum``, ``status``, ``bound_by`` (full | split | merged),
 ``split_lower``, ``constant``, ``shares``, ``part_dims``, ``full``, ``parts``, ``merged``
@@ -47,7 +47,7 @@ from validation.cli.common import (
 )
 
 if TYPE_CHECKING:
-    from solvers.certify import CertifyResult
+    from solvers import CertifyResult
 
 __all__ = ["certify_command", "register"]
 
@@ -83,47 +83,16 @@ def certify_command(
     """Certified lower and upper bounds of the distance: a dual (potential) lower bound on a
     refined triangulation (second-order corrections bounded by interval arithmetic) and the
     solver's path length (proven upper bound)."""
-    import dataclasses
-
-    from solvers.certify import MeshSpec, certify
-    from solvers.inputs import domain_scale
-    from solvers.status import CertifyStatus
+    from solvers import CertifyStatus, certify, certify_settings
 
     m = metric_from_options(metric, metric_param, metric_module)
-    if m.dim > 3 and m.provides("conformal_factor_sx"):  # n-D conformal: split factor
-        _certify_conformal(m, start, goal, target_gap, max_boxes, out, as_json)
-        return
-    if m.dim != 2:  # any other dimension, F(x, .) convex: a verified potential
-        _certify_nd(m, start, goal, mesh, h, target_gap, out, as_json)
-        return
-    if mesh == "p2":
-        fail(f"--mesh p2 (a piecewise-quadratic potential) is for metrics of 3 and more "
-             f"dimensions; {m.name} is 2-D: choose coarse, default or fine")
     s = parse_point(start, m.dim, "--start")
     g = parse_point(goal, m.dim, "--goal")
     try:
         m.domain.check(s, "--start")
         m.domain.check(g, "--goal")
-        spec = MeshSpec.preset(mesh)
-        changes = {}
-        if h is not None:
-            scale = domain_scale(m)
-            if not (math.isfinite(h) and 0 < h <= scale):
-                raise InputError(f"--h must be a spacing in (0, {scale:g}] (the domain's "
-                                 f"size), got {h!r}")
-            changes["h_path"] = h
-            changes["h_far"] = max(spec.h_far, h)
-        if directions is not None:
-            if not 8 <= directions <= 65536:
-                raise InputError(f"--directions must be an integer in [8, 65536], got "
-                                 f"{directions}")
-            changes["directions"] = directions
-        if target_gap is not None:
-            if not (math.isfinite(target_gap) and 0 < target_gap < 1):
-                raise InputError(f"--target-gap must be in (0, 1), got {target_gap!r}")
-            changes["target_gap"] = target_gap
-        if changes:
-            spec = dataclasses.replace(spec, **changes)
+        spec = certify_settings(m, mesh, h=h, directions=directions, target_gap=target_gap,
+                                max_boxes=max_boxes, names=_FLAGS)
         if time_limit is not None and not (math.isfinite(time_limit) and time_limit > 0):
             raise InputError(f"--time-limit must be a positive number of seconds, got "
                              f"{time_limit!r}")
@@ -139,121 +108,46 @@ def certify_command(
     if as_json:
         typer.echo(json_text(doc))
     else:
-        _print_result(m.name, s, g, res)
+        typer.echo(f"metric {m.name}: start {tuple(s.tolist())} goal {tuple(g.tolist())}")
+        typer.echo(f"status = {res.status.label}   (stopped by {res.stopped_by})")
+        _PRINT[type(res).__name__](res)
     if res.status in (CertifyStatus.LP_FAILED, CertifyStatus.CORRECTIONS_TOO_LARGE):
         fail(f"certify {res.status.label}: {res.message}", code=1)
 
 
-def _run_and_write(m: Any, start: str, goal: str, out: Path | None, as_json: bool,
-                   run: Any) -> tuple[Any, Any, Any] | None:
-    """Parse and check the pair, ``run(s, g)``, write ``--out`` and print ``--json``: the
-    steps every certificate beyond the plane shares. None after a clean one-line error."""
-    s = parse_point(start, m.dim, "--start")
-    g = parse_point(goal, m.dim, "--goal")
-    try:
-        m.domain.check(s, "--start")
-        m.domain.check(g, "--goal")
-        if out is not None:
-            check_output_path(out, "--out")
-        res = run(s, g)
-        doc = res.to_dict()
-        if out is not None:
-            atomic_write_text(out, json_text(doc), "certify result")
-    except InputError as err:
-        fail(str(err))
-        return None
-    if as_json:
-        typer.echo(json_text(doc))
-    return s, g, res
+#: The command line's names of `solvers.certify_settings`' overrides, for its messages.
+_FLAGS = {"h": "--h", "directions": "--directions", "target_gap": "--target-gap",
+          "max_boxes": "--max-boxes", "preset": "--mesh"}
 
 
-def _certify_conformal(m: Any, start: str, goal: str, target_gap: float | None,
-                       max_boxes: int | None, out: Path | None, as_json: bool) -> None:
-    """``geodesics certify`` on a conformal metric of dimension > 3: a proven lower bound
-    (`solvers.certify_conformal_split.certify_conformal_best`)."""
-    import dataclasses
-
-    from solvers.certify_conformal import ConformalSpec
-    from solvers.certify_conformal_split import certify_conformal_best
-    from solvers.status import CertifyStatus
-
-    def spec() -> Any:
-        changes: dict[str, Any] = {}
-        if target_gap is not None:
-            changes["target_gap"] = target_gap
-        if max_boxes is not None:
-            changes["max_boxes"] = max_boxes
-        return dataclasses.replace(ConformalSpec(), **changes)
-
-    done = _run_and_write(m, start, goal, out, as_json,
-                          lambda s, g: certify_conformal_best(m, s, g, spec()))
-    if done is None:
-        return
-    s, g, res = done
-    if not as_json:
-        typer.echo(f"metric {m.name}: start {tuple(s.tolist())} goal {tuple(g.tolist())}")
-        typer.echo(f"status = {res.status.label}   (stopped by {res.stopped_by})")
-        typer.echo(f"lower  = {res.lower:.10g}   ({res.method})")
-        typer.echo(f"upper  = {res.upper:.10g}   (path length, proven by interval arithmetic)")
-        typer.echo(f"ratio  = {res.ratio:.4f}   lower / upper; trivial bound "
-                   f"{res.trivial:.6g} (min f {res.min_factor:.6g} x |goal - start|)")
-        runs = [f"full run {res.full.lower:.6g}"]
-        if res.parts or res.constant:
-            runs.append(f"split {res.split_lower:.6g} (constant {res.constant:g}"
-                        + "".join(f", part in {d}-D {p.lower:.6g}"
-                                  for d, p in zip(res.part_dims, res.parts, strict=True))
-                        + ")")
-        if res.merged is not None:
-            runs.append(f"whole factor in {res.merged.active_dims}-D {res.merged.lower:.6g}")
-        typer.echo(f"bounds : {'; '.join(runs)}; the largest ({res.bound_by}) counts")
-        typer.echo(f"work   : {res.enclosures} box enclosures, {res.boxes} boxes kept, "
-                   f"{res.cells} cells; {res.times['total']:.2f} s")
-    if res.status is CertifyStatus.LP_FAILED:
-        fail(f"certify {res.status.label}: {res.message}", code=1)
+def _print_conformal(res: Any) -> None:
+    typer.echo(f"lower  = {res.lower:.10g}   ({res.method})")
+    typer.echo(f"upper  = {res.upper:.10g}   (path length, proven by interval arithmetic)")
+    typer.echo(f"ratio  = {res.ratio:.4f}   lower / upper; trivial bound "
+               f"{res.trivial:.6g} (min f {res.min_factor:.6g} x |goal - start|)")
+    runs = [f"full run {res.full.lower:.6g}"]
+    if res.parts or res.constant:
+        runs.append(f"split {res.split_lower:.6g} (constant {res.constant:g}"
+                    + "".join(f", part in {d}-D {p.lower:.6g}"
+                              for d, p in zip(res.part_dims, res.parts, strict=True))
+                    + ")")
+    if res.merged is not None:
+        runs.append(f"whole factor in {res.merged.active_dims}-D {res.merged.lower:.6g}")
+    typer.echo(f"bounds : {'; '.join(runs)}; the largest ({res.bound_by}) counts")
+    typer.echo(f"work   : {res.enclosures} box enclosures, {res.boxes} boxes kept, "
+               f"{res.cells} cells; {res.times['total']:.2f} s")
 
 
-def _certify_nd(m: Any, start: str, goal: str, mesh: str, h: float | None,
-                target_gap: float | None, out: Path | None, as_json: bool) -> None:
-    """``geodesics certify`` in dimension 3 and up: a verified piecewise-linear (or, with
-    ``--mesh p2``, piecewise-quadratic) potential (`solvers.certify_nd.certify_nd`)."""
-    import dataclasses
-
-    from solvers.certify_nd import NDSpec, certify_nd
-    from solvers.status import CertifyStatus
-
-    def spec() -> Any:
-        chosen = NDSpec.preset(mesh)
-        changes: dict[str, Any] = {}
-        if h is not None:
-            changes["h_path"] = h
-            changes["h_far"] = max(chosen.h_far, h)
-        if target_gap is not None:
-            if not (math.isfinite(target_gap) and 0 < target_gap < 1):
-                raise InputError(f"--target-gap must be in (0, 1), got {target_gap!r}")
-            changes["target_gap"] = target_gap
-        return dataclasses.replace(chosen, **changes) if changes else chosen
-
-    done = _run_and_write(m, start, goal, out, as_json,
-                          lambda s, g: certify_nd(m, s, g, spec()))
-    if done is None:
-        return
-    s, g, res = done
-    if not as_json:
-        typer.echo(f"metric {m.name}: start {tuple(s.tolist())} goal {tuple(g.tolist())}")
-        typer.echo(f"status = {res.status.label}   (stopped by {res.stopped_by})")
-        typer.echo(f"lower  = {res.lower:.10g}   (verified P1 potential on {res.cells} cells, "
-                   f"{res.relevant_cells} in the region; proven ratio {res.verified_ratio:.5f})")
-        typer.echo(f"upper  = {res.upper:.10g}   (path length, proven by interval arithmetic)")
-        typer.echo(f"gap    = {res.gap:.3e}   (upper - lower) / upper")
-        typer.echo(f"time   : {res.times['total']:.2f} s (LP {res.times['lp']:.2f}, verify "
-                   f"{res.times['verify']:.2f})")
-    if res.status is CertifyStatus.LP_FAILED:
-        fail(f"certify {res.status.label}: {res.message}", code=1)
+def _print_nd(res: Any) -> None:
+    typer.echo(f"lower  = {res.lower:.10g}   (verified P1 potential on {res.cells} cells, "
+               f"{res.relevant_cells} in the region; proven ratio {res.verified_ratio:.5f})")
+    typer.echo(f"upper  = {res.upper:.10g}   (path length, proven by interval arithmetic)")
+    typer.echo(f"gap    = {res.gap:.3e}   (upper - lower) / upper")
+    typer.echo(f"time   : {res.times['total']:.2f} s (LP {res.times['lp']:.2f}, verify "
+               f"{res.times['verify']:.2f})")
 
 
-def _print_result(name: str, s: Any, g: Any, res: CertifyResult) -> None:
-    typer.echo(f"metric {name}: start {tuple(s.tolist())} goal {tuple(g.tolist())}")
-    typer.echo(f"status = {res.status.label}   (stopped by {res.stopped_by})")
+def _print_plane(res: CertifyResult) -> None:
     typer.echo(f"lower  = {res.lower:.10g}   (dual potential, P2 on {res.triangles} triangles, "
                f"{res.directions} directions)")
     typer.echo(f"upper  = {res.upper:.10g}   (path length, proven by interval arithmetic; "
@@ -267,6 +161,11 @@ def _print_result(name: str, s: Any, g: Any, res: CertifyResult) -> None:
     typer.echo(f"time   : {res.times['total']:.2f} s (solve {res.times['solve']:.2f}, "
                f"bounds {res.times['bounds']:.2f}, LP {res.times['lp']:.2f})")
     typer.echo(f"convexity: {res.convexity}: {res.convexity_note}")
+
+
+#: The printout of each certificate's result, by result type.
+_PRINT = {"CertifyResult": _print_plane, "NDResult": _print_nd,
+          "SplitCertifyResult": _print_conformal}
 
 
 def register(app: typer.Typer) -> None:

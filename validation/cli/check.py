@@ -50,7 +50,7 @@ from validation.cli.common import (
     parse_metric_params,
 )
 
-if TYPE_CHECKING:  # imported in check_command: hypothesis and the suite cost 0.2 s (issue 47)
+if TYPE_CHECKING:  # imported in check_command: hypothesis and the suite cost 0.2 s
     from validation.testing.engine import PropertyResult
 
 __all__ = ["check_command", "register"]
@@ -105,9 +105,9 @@ def check_command(
             if not val > 0 or val == float("inf"):
                 raise InputError(f"{opt} must be positive and finite, got {val}")
         if method_module:
-            from learn.registry import import_method_modules
+            import learn
 
-            import_method_modules(method_module)
+            learn.import_method_modules(method_module)
         policy = None
         if run is not None:
             import learn

@@ -13,7 +13,7 @@ import finsler
 from finsler.errors import InputError, short
 from finsler.infra.modules import import_user_module
 
-if TYPE_CHECKING:  # numpy is imported where used: --help stays light (issue 47)
+if TYPE_CHECKING:  # numpy is imported where used: --help stays light
     import numpy as np
 
 __all__ = [

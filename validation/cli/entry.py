@@ -36,7 +36,7 @@ app = typer.Typer(
     add_completion=False,
     pretty_exceptions_enable=False,
     # click's plain help instead of rich's panels: importing and rendering rich costs 0.1 s
-    # of CPU, a third of the 0.3 s `geodesics CMD --help` may take (issue 47)
+    # of CPU, a third of the 0.3 s `geodesics CMD --help` may take
     rich_markup_mode=None,
 )
 
@@ -47,7 +47,7 @@ def metrics_command(
 ) -> None:
     """List the registered metrics with their domains and task defaults."""
     # Listing does no linear algebra: one OpenBLAS thread spares the 0.08 s of CPU its
-    # thread pool costs at numpy's import (geodesics metrics answers in < 0.3 s; issue 47).
+    # thread pool costs at numpy's import (geodesics metrics answers in < 0.3 s).
     # Without effect if numpy is imported already (the app called in-process).
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
     import finsler
@@ -148,7 +148,7 @@ def cost_command(
 
 def _register_optional_commands() -> None:
     """Commands of the other layers, registered here so the CLI stays one entry point."""
-    for name in ("solve", "learn", "report", "plot", "sweep", "expmap", "certify", "check"):
+    for name in ("solve", "train", "report", "plot", "sweep", "expmap", "certify", "check"):
         importlib.import_module(f"validation.cli.{name}").register(app)
 
 

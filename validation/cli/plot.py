@@ -24,7 +24,7 @@ def plot_curves(sweep_dir: str | Path, out: str | Path,
     ``out`` and write the numbers to ``out`` with suffix ``.csv``. Everything is computed
     before anything is written, and each file is written atomically: bad input (InputError)
     leaves no file. Returns (figure, figure path, CSV path)."""
-    from learn.storage import atomic_write_bytes, atomic_write_text
+    from finsler.infra.files import atomic_write_bytes, atomic_write_text
     from validation import curves as cv
     from validation import figures as fg
 

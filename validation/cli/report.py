@@ -59,7 +59,7 @@ def report_command(
     method_module: MethodModuleOption = None,
     search: Annotated[bool, typer.Option(
         "--search/--no-search",
-        help="Also report the policy with the route search (learn.search: candidate "
+        help="Also report the policy with the route search (learn.midpoint.search: candidate "
              "midpoints at the top levels chosen by the cost of the policy's completed "
              "paths; values of C only).")] = True,
     certify: Annotated[int | None, typer.Option(
@@ -71,9 +71,8 @@ def report_command(
 ) -> None:
     """Benchmark a learned policy against exact geodesics and the straight-line baseline:
     success rates, length ratios, midpoint errors, timing, figures."""
+    import learn
     from finsler.infra.pool import PoolInterrupted
-    from learn.base import TrainingInterrupted
-    from learn.registry import import_method_modules
     from validation.report import build_report, quick_training_note
     from validation.report_certify import cli_lines
 
@@ -84,7 +83,7 @@ def report_command(
         if run is not None:
             check_input_dir(run, "--run")
         import_metric_modules(metric_module)
-        import_method_modules(method_module)
+        learn.import_method_modules(method_module)
         params = parse_metric_params(metric_param)
         note = quick_training_note(env, run, quick, out)
         if note is not None:
@@ -95,7 +94,7 @@ def report_command(
     except InputError as err:
         fail(str(err))
         return
-    except TrainingInterrupted as stop:
+    except learn.TrainingInterrupted as stop:
         interrupted(f"interrupted ({stop.signal_name}) while training the --quick policy: "
                     f"it is kept in {stop.run_dir} at {stop.timesteps} evaluations of C, and "
                     "the same command resumes it; no report written")

@@ -23,15 +23,14 @@ segment cost ``<= eps``: the exact ceiling of the paper's task.
 
 ``--warm-start RUN_OR_ENV``: the policy's path of each pair is one more start of its batched
 solve, beside the global seeds (the same batch, one more row at the final size), so the
-result is never worse than without it; ``warm_start`` in the JSON names the policy. (Until
-issue 47 it replaced the global seeds: no faster with the batched solver, and on 8 of 100
-fresh Matsumoto pairs a worse optimum; ``--keep-global-seeds`` and ``--recheck-above``,
-which patched that, are accepted with a deprecation warning and do nothing.)
+result is never worse than without it; ``warm_start`` in the JSON names the policy.
+
+``--solver auto|newton|ipopt`` picks the exact solver (the word "method" is kept for the
+learning methods of ``--method-module``).
 """
 
 from __future__ import annotations
 
-import dataclasses
 import shutil
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any
@@ -53,8 +52,8 @@ from validation.cli.common import (
     parse_point,
 )
 
-#: Printed (stderr) when --warm-start is used; the figures are those of
-#: benchmarks/results/warm_start-2026-11-28*.md.
+#: Printed (stderr) when --warm-start is used; the figures are those of the warm-start
+#: results in benchmarks/results/warm-starts/ (``python benchmarks/warm_start.py`` writes them).
 WARM_START_DEPRECATED = (
     "warning: --warm-start is deprecated: the default solve (without it) reaches the same "
     "optimum (125 of 126 fresh pairs measured) without loading torch and the policy (1.6-1.9 s "
@@ -102,13 +101,13 @@ def _warm_start(source: str | None, metric: finsler.Metric, pairs: np.ndarray,
                 search: bool = False) -> tuple[np.ndarray | None, dict[str, Any] | None]:
     """Learned initial paths ``(K, 2**D + 1, dim)`` for ``--warm-start`` (None without it)
     and the payload's ``warm_start`` entry. solvers never imports learn: the joining is
-    done here (`learn.runs.warm_start_paths`)."""
+    done here (`learn.warm_start_paths`)."""
     if source is None:
         return None, None
-    from learn.runs import warm_start_paths
+    import learn
 
     try:
-        paths, pol = warm_start_paths(source, metric, pairs, search=search)
+        paths, pol = learn.warm_start_paths(source, metric, pairs, search=search)
     except InputError as err:  # name the option: the run's own message names a file in it
         if "--warm-start" in str(err):
             raise
@@ -140,13 +139,13 @@ def solve_command(
              "path.")] = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print JSON.")] = False,
     workers: Annotated[int | None, typer.Option(
-        help="Worker processes for --pairs (default: 1 for the batched Newton method below "
+        help="Worker processes for --pairs (default: 1 for the batched Newton solver below "
              "1024 pairs, the batch being vectorised; else the CPU count).")] = None,
-    method: Annotated[str, typer.Option(
-        help="auto (the batched Newton method where it covers the metric, IPOPT "
+    solver: Annotated[str, typer.Option(
+        help="auto (the batched Newton solver where it covers the metric, IPOPT "
              "otherwise), newton or ipopt.")] = "auto",
     device: Annotated[str | None, typer.Option(
-        help="torch device of the Newton method, e.g. cuda (default: numpy on the "
+        help="torch device of the Newton solver, e.g. cuda (default: numpy on the "
              "CPU).")] = None,
     progress: Annotated[bool, typer.Option(help="Show a progress bar for --pairs.")] = True,
     ray: Annotated[str | None, typer.Option(
@@ -163,15 +162,9 @@ def solve_command(
              "(never a worse optimum than without it; costs loading the policy): a run "
              "directory of `geodesics train` or an environment with a shipped policy; the "
              "policy must be for --metric.")] = None,
-    keep_global_seeds: Annotated[bool, typer.Option(
-        "--keep-global-seeds", hidden=True,
-        help="Deprecated, no effect: --warm-start always keeps the global seeds.")] = False,
     warm_search: Annotated[bool, typer.Option(
         "--warm-search", help="With --warm-start: seed with the route search's paths "
-        "(learn.search; values of C only) instead of the policy's plain paths.")] = False,
-    recheck_above: Annotated[float | None, typer.Option(
-        "--recheck-above", metavar="RATIO", hidden=True,
-        help="Deprecated, no effect: --warm-start always solves the global seeds.")] = None,
+        "(learn.midpoint.search; values of C only) instead of the policy's plain paths.")] = False,
     tol: Annotated[float | None, typer.Option(
         help="Relative accuracy of the length: double the segments from --segments until "
              "the estimated error (Richardson extrapolation; says when the expected order "
@@ -180,7 +173,7 @@ def solve_command(
     metric_module: MetricModuleOption = None,
     method_module: MethodModuleOption = None,
 ) -> None:
-    """Exact discrete geodesics (globally seeded; the batched Newton method, IPOPT where
+    """Exact discrete geodesics (globally seeded; the batched Newton solver, IPOPT where
     it does not cover the metric or cannot finish a pair) with min-max refinement.
 
     With --pairs and --out, finished pairs are kept in OUT.parts/ until the file is
@@ -188,13 +181,13 @@ def solve_command(
     across --workers and --ray)."""
     m = metric_from_options(metric, metric_param, metric_module)
     _check_options(pairs, start, goal, workers, ray, chunk_size, tol, warm_start,
-                   warm_search, keep_global_seeds, recheck_above)
+                   warm_search)
     _check_files(out, plot, pairs, tol)
     arr = _read_pairs(m, pairs, start, goal)
     parts = None
     try:
         job, warm = _checked_job(m, arr, pairs, segments, workers, ray, chunk_size, tol,
-                                 method, device, warm_start, warm_search, method_module)
+                                 solver, device, warm_start, warm_search, method_module)
         if out is not None:
             out, parts = _checked_out(out, pairs is not None)
         if plot is not None:
@@ -202,7 +195,7 @@ def solve_command(
         results = _solve(job, progress and pairs is not None, parts)
     except InputError as err:
         fail(str(err))
-    payload = solve_payload(m, results, job.n)
+    payload = solve_payload(m, results, job.segments)
     if warm is not None:
         payload["warm_start"] = warm
     text = json_text(payload, indent=None if pairs is not None else 2)
@@ -226,9 +219,8 @@ def solve_command(
 
 def _check_options(pairs: Path | None, start: str | None, goal: str | None,
                    workers: int | None, ray: str | None, chunk_size: int | None,
-                   tol: float | None, warm_start: str | None, warm_search: bool,
-                   keep_global_seeds: bool, recheck_above: float | None) -> None:
-    """Step 1: the options that go together, and the deprecated ones warned about."""
+                   tol: float | None, warm_start: str | None, warm_search: bool) -> None:
+    """Step 1: the options that go together."""
     import numpy as np
 
     if pairs is not None and (start is not None or goal is not None):
@@ -245,12 +237,6 @@ def _check_options(pairs: Path | None, start: str | None, goal: str | None,
         fail(f"--tol must be a relative tolerance in (0, 1), e.g. 1e-7, got {tol:g}")
     if warm_search and warm_start is None:
         fail("--warm-search applies to --warm-start")
-    for given, name in ((keep_global_seeds, "--keep-global-seeds"),
-                        (recheck_above is not None, "--recheck-above")):
-        if given:
-            typer.echo(f"warning: {name} is deprecated and does nothing: --warm-start adds the "
-                       "learned path as one more start beside the global seeds, which are "
-                       "always solved", err=True)
 
 
 def _check_files(out: Path | None, plot: Path | None, pairs: Path | None,
@@ -312,27 +298,26 @@ def _read_pairs(m: finsler.Metric, pairs: Path | None, start: str | None,
 
 def _checked_job(m: finsler.Metric, arr: np.ndarray, pairs: Path | None,
                  segments: int | None, workers: int | None, ray: str | None,
-                 chunk_size: int | None, tol: float | None, method: str, device: str | None,
+                 chunk_size: int | None, tol: float | None, solver: str, device: str | None,
                  warm_start: str | None, warm_search: bool, method_module: list[str] | None
                  ) -> tuple[Any, dict[str, Any] | None]:
     """Step 3: the solver's own check of the input, once (naming the options), before
     --out and before a policy is loaded; the job it returns is solved without checking
     again. With --warm-start the learned paths join the job (and the payload's entry)."""
-    from solvers.batch_jobs import check_batch
-    from solvers.pairs import check_initial_paths
+    from solvers import check_batch
 
     if method_module:
-        from learn.registry import import_method_modules
+        import learn
 
-        import_method_modules(method_module)
+        learn.import_method_modules(method_module)
     job = check_batch(m, arr, segments, minmax=True, workers=workers, ray_address=ray,
-                      chunk_size=chunk_size, tol=tol, method=method, device=device,
+                      chunk_size=chunk_size, tol=tol, method=solver, device=device,
                       names=("--start", "--goal") if pairs is None else
                       ("--pairs starts", "--pairs goals"))
     inits, warm = _warm_start(warm_start, m, arr, warm_search)
     if inits is not None:
         typer.echo(WARM_START_DEPRECATED, err=True)
-        job = dataclasses.replace(job, inits=check_initial_paths(m, job.pairs, job.n, inits))
+        job = job.with_initial_paths(inits)
     return job, warm
 
 
@@ -354,7 +339,7 @@ def _checked_out(out: Path, many: bool) -> tuple[Path, Path | None]:
 def _solve(job: Any, progress: bool, parts: Path | None) -> list[solvers.GeodesicResult]:
     """Step 5: the checked job solved; an interruption stops every worker and says what
     was kept (exit code 130)."""
-    from solvers.batch_jobs import run_batch
+    from solvers import run_batch
 
     try:
         return run_batch(job, progress=progress, checkpoint_dir=parts)
@@ -393,7 +378,7 @@ def _print_pair(r: solvers.GeodesicResult, payload: dict[str, Any], tol: float |
     typer.echo(f"min-max max segment cost  {row['minmax_max_segment_cost']:.6g}"
                f"  (eps {payload['eps']:g}: {'success' if row['success'] else 'fail'})")
     typer.echo(f"seeds agreeing / tried    {r.seeds_agreeing} / {r.seeds_tried}")
-    typer.echo(f"method, residual          {r.method}, {r.residual:.2e}")
+    typer.echo(f"solver, residual          {r.method}, {r.residual:.2e}")
     if r.error_estimate is not None:
         order = ("not seen" if not r.order_seen else f"{r.order:.2f}") + (
             f" (observed {r.order:.2f})" if r.order is not None and not r.order_seen

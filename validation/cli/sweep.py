@@ -119,39 +119,38 @@ def sweep_command(
     Ray task: it is sent its run directory's files, trains in a temporary folder on the
     worker and sends the files back, so the cluster's machines need the project installed
     but no shared filesystem. Exit status 1 if a run failed (the others still finish)."""
-    from learn import sweep as sw
-    from learn.registry import import_method_modules
+    import learn
 
     try:
         if workers is not None and workers < 1:
             raise InputError(f"--workers must be a positive integer, got {workers}")
         check_output_dir(out, "--out")
         import_metric_modules(metric_module)
-        import_method_modules(method_module)
+        learn.import_method_modules(method_module)
         overrides = parse_overrides(settings or [])
         for key, option in (("metric_params", "--metric-param"),
                             ("metric_class", "--metric-module")):
             if key in overrides:
                 raise InputError(f"--set {key}=... is not allowed; use {option}")
         overrides.update(metric_overrides(_split(envs), parse_metric_params(metric_param)))
-        plan = sw.plan_sweep(_split(envs), _split(methods), seeds, timesteps=timesteps,
-                             minutes=minutes, overrides=overrides)
-        result = sw.run_sweep(plan, out, workers=workers, ray_address=ray,
-                              progress=not quiet)
+        plan = learn.plan_sweep(_split(envs), _split(methods), seeds, timesteps=timesteps,
+                                minutes=minutes, overrides=overrides)
+        result = learn.run_sweep(plan, out, workers=workers, ray_address=ray,
+                                 progress=not quiet)
     except InputError as err:
         fail(str(err))
         return
     except PoolInterrupted as stop:
         interrupted(f"interrupted ({stop.signal_name}): every worker saved its run and "
                     f"stopped; finished runs are kept in {out} (status in "
-                    f"{out / sw.SWEEP_FILE}); run the same command to resume")
+                    f"{out / learn.SWEEP_FILE}); run the same command to resume")
     rows = result.rows()
     if as_json:
         typer.echo(json_text(rows))
     else:
         typer.echo(format_table(rows))
         typer.echo(f"{len(rows)} runs in {result.seconds:.1f} s ({result.backend}); "
-                   f"plan and status in {out / sw.SWEEP_FILE}")
+                   f"plan and status in {out / learn.SWEEP_FILE}")
     if result.failed:
         typer.echo(f"{len(result.failed)} run(s) failed:", err=True)
         for o in result.failed:

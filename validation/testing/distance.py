@@ -459,8 +459,8 @@ def check_certificate(suite: DistanceSuite, examples: int = 2, mesh: Any = CERTI
     proven length of the solved curve as upper bound) contains the solved distance within
     its stated error: ``lower <= d + error`` and ``d - error <= upper``, on pairs at least
     1e-3 of the domain's size apart (the certificate's mesh is far coarser; certify fails
-    on near-coincident points, see issue 22). In 2-D the lower bound is the mesh LP's; in
-    3-D a verified potential's (`solvers.certify_nd.certify_nd`, which needs ``F(x,
+    on near-coincident points). In 2-D the lower bound is the mesh LP's; in
+    3-D a verified potential's (`solvers.certificates.nd.certificate.certify_nd`, which needs ``F(x,
     .)`` convex on the whole domain: skipped otherwise); beyond 3-D only a metric providing
     ``conformal_factor_sx`` is certified (a lower bound, the upper one the path's), any
     other is skipped. Beyond the plane at most ``CERTIFY_EXAMPLES_ND`` examples are drawn

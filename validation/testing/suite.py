@@ -203,7 +203,7 @@ def _quietly(fn: Callable[[], Any]) -> Any:
         key = f"{w.category.__name__}: {' '.join(str(w.message).split())[:120]}"
         counts[key] = counts.get(key, 0) + 1
     for line in lines:
-        # CasADi - 2026-11-28 02:19:37 WARNING("...: NaN detected ..., at (row 66, col 0).")
+        # e.g. CasADi - <date> <time> WARNING("...: NaN detected ..., at (row 66, col 0).")
         text = re.sub(r"^CasADi - \S+ \S+ ", "CasADi ", " ".join(line.split()))
         text = re.sub(r"\(row \d+, col \d+\)", "(row ., col .)", text)
         if text:
