@@ -8,8 +8,9 @@ a results file with the score and every surviving mutant (issue 48, item 6).
 
 For each group: the COMMITTED tree (``git archive HEAD``, so the score is for the commit
 the results file names) is unpacked into ``build/mutation/GROUP/``, its ``[tool.mutmut]``
-(``pyproject.toml``) gets the group's source files and its own FAST focused tests, and
-``mutmut run`` (``nice``) mutates and tests them there. The results file
+(``pyproject.toml``) gets the group's source files and its test files with ``-m mutation``
+(the FAST focused tests, marked beside the module's other tests), and ``mutmut run``
+(``nice``) mutates and tests them there. The results file
 (``benchmarks/results/mutation/mutation-DATE.md``) gives per group the mutants, killed,
 timeouts, survivors, score = (killed + timeout) / (mutants - skipped), the CPU time, the
 commit of each source file, and the diff of every survivor; ``mutation_report.md`` in the
@@ -39,33 +40,36 @@ ROOT = Path(__file__).resolve().parents[1]
 #: mutant, only the selected tests that called the mutated function.
 GROUPS: dict[str, tuple[list[str], list[str]]] = {
     "block_tridiagonal": (["solvers/newton/block_tridiagonal.py"],
-                          ["tests/test_block_tridiagonal.py",
-                                                             "tests/test_block_tridiagonal_rows.py"]),
+                          ["tests/solvers/newton/test_block_tridiagonal.py",
+                           "tests/solvers/newton/test_block_tridiagonal_rows.py"]),
     "certify_mesh": (["solvers/certificates/plane/mesh.py"],
-                     ["tests/test_mutation_kills_certify_mesh.py"]),
-    # certify_lp: its kill tests and the repair's (which run _solve_lp's repair branch)
-    "certify_lp": (["solvers/certificates/plane/lp.py"], ["tests/test_mutation_kills_certify_lp.py",
-                                               "tests/test_certify_repair.py"]),
-    "newton": (["solvers/newton/energy.py"], ["tests/test_newton.py",
-                                       "tests/test_mutation_kills_newton.py"]),
-    # batched: its own kill tests alone (closed forms, hand counts: 17 tests in ~3 s);
+                     ["tests/solvers/certificates/plane/test_certify_mesh.py"]),
+    # certify_lp: its tests and the repair's (which run _solve_lp's repair branch)
+    "certify_lp": (["solvers/certificates/plane/lp.py"],
+                   ["tests/solvers/certificates/plane/test_certify_lp.py",
+                    "tests/solvers/certificates/plane/test_certify_repair.py"]),
+    "newton": (["solvers/newton/energy.py"], ["tests/solvers/newton/test_newton.py"]),
+    # batched: the driver's own tests alone (closed forms, hand counts: 17 tests in ~3 s);
     # test_newton.py's batched solves took ~3 s a mutant for 53 %
-    "batched": (["solvers/newton/driver.py"], ["tests/test_mutation_kills_batched.py"]),
+    "batched": (["solvers/newton/driver.py"], ["tests/solvers/newton/test_driver.py"]),
 }
-#: the property suite one module at a time, each against its own fast kill tests
+#: the property suite one module at a time, each against its own fast tests
 #: (``testing_engine``, ``testing_metric``, ...): small runs that can be spread; the score
 #: of validation/testing/ is the sum over these groups
 TESTING_MODULES = ["engine", "metric", "distance", "regions", "policy", "suite", "cases"]
 GROUPS.update({f"testing_{m}": ([f"validation/testing/{m}.py"],
-                                [f"tests/test_mutation_kills_testing_{m}.py"])
+                                [f"tests/validation/testing/test_{m}.py"])
                for m in TESTING_MODULES})
 #: names that stand for several groups: ``testing`` is every module of validation/testing/
 #: (``__init__.py`` holds only imports: mutmut mutates function bodies, so it has no
 #: mutants); the results file then adds a row summing them (the package's score)
 ALIASES = {"testing": [f"testing_{m}" for m in TESTING_MODULES]}
 #: extra pytest arguments of a group's selection: test_newton.py's dense block solves
-#: (two minutes, and tests/test_block_tridiagonal.py's job) call nothing of these modules
+#: (two minutes, and test_block_tridiagonal.py's job) call nothing of these modules
 SELECT = {"newton": ["-k", "not block_tridiagonal_solve_matches_dense"]}
+#: a group runs the tests of its files marked ``mutation`` (``@pytest.mark.mutation`` or a
+#: module's ``pytestmark``): the fast focused ones, beside the other tests of the module
+MARK = ["-m", "mutation and not slow"]
 #: the groups run when none is named
 DEFAULT = ["block_tridiagonal", "certify_mesh", "newton", "batched"]
 
@@ -84,11 +88,11 @@ def _toml_list(items: list[str]) -> str:
 
 
 def used_tests(group: str) -> list[str]:
-    """The group's test files that exist in the committed tree (a focused kill-test file
-    may come later than its module's first run)."""
+    """The group's test files that exist in the committed tree (a test file may come
+    later than its module's first run)."""
     listed = subprocess.run(["git", "ls-files", *GROUPS[group][1]], cwd=ROOT,
                             capture_output=True, text=True, check=True).stdout.split()
-    return [t for t in GROUPS[group][1] if t in listed]
+    return [t for t in dict.fromkeys(GROUPS[group][1]) if t in listed]
 
 
 def prepare(group: str, work: Path) -> Path:
@@ -111,7 +115,8 @@ def prepare(group: str, work: Path) -> Path:
         "[tool.mutmut]",
         f"source_paths = {_toml_list(files)}",
         'also_copy = ["finsler", "solvers", "learn", "validation", "tests", "benchmarks"]',
-        f"pytest_add_cli_args_test_selection = {_toml_list([*tests, *SELECT.get(group, [])])}",
+        "pytest_add_cli_args_test_selection = "
+        f"{_toml_list([*tests, *MARK, *SELECT.get(group, [])])}",
         'pytest_add_cli_args = ["-p", "no:cacheprovider", "-q", "-n", "0", "-x"]', ""])
     (where / "pyproject.toml").write_text(_MUTMUT_SECTION.sub(section, py))
     return where

@@ -1,0 +1,21 @@
+"""The test metrics of
+``tests/solvers/certificates/conformal/test_certify_conformal_split.py``: Valley."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import ClassVar
+import casadi as ca
+from helpers.metrics.conformal import Conformal4D
+from finsler.metrics.base import Task
+
+
+@dataclass(frozen=True)
+class Valley(Conformal4D):
+    """``F = (1 + q1**2 + q2**2 / 2 + (q3 q4)**2 / 5) |v|`` on ``[-1, 1]**4``."""
+
+    name: ClassVar[str] = "test-valley-4d"
+    task: ClassVar[Task] = Task(depth=3, eps=0.2)
+
+    def conformal_factor_sx(self, x: ca.SX) -> ca.SX:
+        return 1.0 + x[0] ** 2 + 0.5 * x[1] ** 2 + 0.2 * (x[2] * x[3]) ** 2
