@@ -14,7 +14,7 @@ import pytest
 import finsler
 from solvers.seeding.graph import GraphSeeder, _unique
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
 import ground_truth
 
 

@@ -10,9 +10,9 @@ from pathlib import Path
 import pytest
 import typer.main
 
-from validation.cli.entry import app
+from validation.cli import app
 
-CLI = Path(__file__).resolve().parents[1] / "validation" / "cli"
+CLI = Path(__file__).resolve().parents[2] / "validation" / "cli"
 SHARED = ("--metric-param", "--metric-module", "--method-module")
 
 

@@ -153,7 +153,7 @@ def test_evaluate_flags_a_checkpoint_chosen_on_the_default_pairs(monkeypatch) ->
     replaced in issue 25, read from its run's config) gets the "optimistic" note."""
     from pathlib import Path
 
-    old = Path(__file__).resolve().parents[1] / "benchmarks" / "previous_policies" / "panda-pole"
+    old = Path(__file__).resolve().parents[2] / "benchmarks" / "previous_policies" / "panda-pole"
     monkeypatch.setattr(learn.runs, "shipped_dir", lambda name: old)
     res = _run("evaluate", "--env", "panda-pole", "--json")
     assert res.exit_code == 0, res.output

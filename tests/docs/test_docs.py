@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 README = ROOT / "README.md"
 DOCS = ROOT / "docs"
 RESULTS = ROOT / "benchmarks" / "results"
@@ -177,7 +177,7 @@ def test_moved_results_say_where_they_come_from() -> None:
 @pytest.mark.parametrize("page", _pages(), ids=lambda p: str(p.relative_to(DOCS)))
 def test_docs_python_blocks_are_python(page: Path) -> None:
     """Every ```python block of the guides compiles (they are fragments: the README's blocks
-    run in tests/test_readme.py)."""
+    run in tests/docs/test_readme.py)."""
     for block in re.findall(r"```python\n(.*?)```", page.read_text(encoding="utf-8"), re.S):
         compile(block, str(page), "exec")
 

@@ -12,14 +12,13 @@ import pytest
 
 import finsler
 import solvers.continuum.expmap
-from finsler import geometry
-from finsler.errors import InputError
+from finsler import InputError, geometry
 from solvers import ExpStatus, exp_map
 from solvers.continuum.spectral import spectral_nlp
-from solvers.seeding.plans import graph_seeder
+from solvers.seeding.graph import graph_seeder
 from solvers.transcription import energy_nlp, minmax_nlp
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def _points(m: finsler.Metric, k: int, seed: int) -> tuple[np.ndarray, np.ndarray]:

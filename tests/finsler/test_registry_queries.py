@@ -4,49 +4,21 @@ instead of keeping lists of their names."""
 from __future__ import annotations
 
 import ast
-from dataclasses import dataclass
 from pathlib import Path
-from typing import ClassVar
 
-import numpy as np
 import pytest
 
 import finsler
-from finsler import Box
-from finsler.errors import InputError
+from finsler import InputError
 
-ROOT = Path(__file__).resolve().parents[1]
+from helpers.metrics.registry_queries import Flat, FlatNoForm, Trained
 
-
-@dataclass(frozen=True)
-class _Flat(finsler.Metric):
-    """A user's 2-D metric with a closed form: Euclidean on a box."""
-
-    name: ClassVar[str] = "test-flat-closed"
-
-    @property
-    def domain(self) -> Box:
-        return Box((-1.0, -1.0), (1.0, 1.0))
-
-    def F_sx(self, x, v):
-        import casadi as ca
-        return ca.sqrt(ca.dot(v, v))
-
-    def distance(self, x, y):
-        return np.linalg.norm(np.asarray(y) - np.asarray(x), axis=-1)
-
-
-@dataclass(frozen=True)
-class _FlatNoForm(_Flat):
-    name: ClassVar[str] = "test-flat-open"
-
-    # no closed form: the hook is not overridden
-    distance = finsler.Metric.distance
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def test_list_metrics_filters_by_what_a_metric_provides() -> None:
-    finsler.register_metric(_Flat)
-    finsler.register_metric(_FlatNoForm)
+    finsler.register_metric(Flat)
+    finsler.register_metric(FlatNoForm)
     try:
         closed = finsler.list_metrics(provides="distance")
         assert "test-flat-closed" in closed and "test-flat-open" not in closed
@@ -114,22 +86,12 @@ ok = ("matsumoto",)  # one name in a sequence is a lookup, not a list
     assert [f.split()[0] for f in found] == ["old:2", "old:3", "old:7", "old:8"], found
 
 
-@dataclass(frozen=True)
-class _Trained(_Flat):
-    """A user's metric declaring its own learning settings (data on the metric)."""
-
-    name: ClassVar[str] = "test-flat-trained"
-    training: ClassVar[finsler.TrainingSettings] = finsler.TrainingSettings(
-        paper_lr=2e-4, paper_timesteps=123_456,
-        defaults=dict(timesteps=777_000, collection_size=2048), model_free=dict(epochs=5))
-
-
 def test_learn_reads_the_training_settings_the_metric_declares() -> None:
     from learn.midpoint.config import default_config, model_free_overrides, paper_config
     from learn.seq import default_seq_config
 
-    finsler.register_metric(_Trained)
-    finsler.register_metric(_Flat)
+    finsler.register_metric(Trained)
+    finsler.register_metric(Flat)
     try:
         env = "test-flat-trained"
         paper = paper_config(env)
@@ -144,7 +106,7 @@ def test_learn_reads_the_training_settings_the_metric_declares() -> None:
         assert (plain.lr, plain.timesteps) == (3e-5, 20_000_000)
         assert default_config("test-flat-closed").timesteps == 20_000_000
         with pytest.raises(TypeError):
-            _Trained.training.defaults["timesteps"] = 1  # type: ignore[index]  # read-only
+            Trained.training.defaults["timesteps"] = 1  # type: ignore[index]  # read-only
     finally:
         finsler.registry.unregister_metric("test-flat-trained")
         finsler.registry.unregister_metric("test-flat-closed")

@@ -5,19 +5,17 @@ from __future__ import annotations
 import ast
 import json
 import pickle
-from dataclasses import dataclass
 from pathlib import Path
-from typing import ClassVar
 
 import numpy as np
 import pytest
 
 import finsler
-from finsler.domains import Box
-from finsler.errors import InputError
-from finsler.spec import MetricSpec, metric_spec
+from finsler import InputError, MetricSpec, metric_spec
 
-ROOT = Path(__file__).resolve().parents[1]
+from helpers.metrics.spec_hooks import Hill, Plain
+
+ROOT = Path(__file__).resolve().parents[2]
 
 
 @pytest.mark.parametrize("name", ["matsumoto", "carlike", "euclidean", "randers", "sphere"])
@@ -51,37 +49,8 @@ def test_spec_refuses_bad_input() -> None:
         MetricSpec.from_dict({"params": {}})
 
 
-@dataclass(frozen=True)
-class _Plain(finsler.Metric):
-    """A user metric with no hooks: Euclidean on the plane."""
-
-    name: ClassVar[str] = "test-plain"
-
-    @property
-    def domain(self) -> Box:
-        return Box((-1.0, -1.0), (1.0, 1.0))
-
-    def F_sx(self, x, v):
-        import casadi as ca
-        return ca.sqrt(ca.dot(v, v))
-
-
-@dataclass(frozen=True)
-class _Hill(_Plain):
-    """The same metric declaring two hooks by overriding them."""
-
-    name: ClassVar[str] = "test-hill"
-
-    def height_map(self, points):
-        return np.asarray(points)[:, 0] ** 2
-
-    @property
-    def convex_radius(self) -> float:
-        return 3.0
-
-
 def test_declared_hooks_are_found_by_asking_the_metric() -> None:
-    plain, hill = _Plain(), _Hill()
+    plain, hill = Plain(), Hill()
     assert plain.hooks() == ()
     assert not plain.provides("height_map")
     assert set(hill.hooks()) == {"height_map", "convex_radius"}

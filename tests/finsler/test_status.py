@@ -11,7 +11,8 @@ import pytest
 
 import finsler.status
 import solvers
-from solvers.status import Outcome, families
+from solvers import Outcome
+from solvers.status import families
 
 
 def _status_enums_in_packages() -> set[type]:

@@ -1,7 +1,8 @@
-"""Metrics written to be wrong in one way each: fixtures of ``tests/test_check.py``.
+"""Metrics written to be wrong in one way each: fixtures of
+``tests/validation/testing/test_check.py``.
 
 Importing this module registers them (as a user's ``--metric-module`` would), so the tests
-import it only in a subprocess (``geodesics check --metric-module tests/broken_metrics.py
+import it only in a subprocess (``geodesics check --metric-module tests/helpers/broken_metrics.py
 --metric NAME``, or a user's pytest file), never into the test session's registry.
 
 Each mistake is one a user can make writing a metric; the property that must name it is in

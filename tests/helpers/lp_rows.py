@@ -4,10 +4,9 @@ LP tests and of the repair tests."""
 from __future__ import annotations
 
 import numpy as np
-from scipy.optimize import OptimizeResult
-from scipy.optimize import linprog
-from solvers.certificates.plane.mesh import _Mesh
+from scipy.optimize import OptimizeResult, linprog
 
+from solvers.certificates.plane.mesh import _Mesh
 
 K = 32
 ANG = 2 * np.pi * np.arange(K) / K

@@ -19,12 +19,12 @@ from typer.testing import CliRunner
 
 import finsler
 import learn
-from learn import registry
-from learn.run_config import RUN_FIELDS, RunConfig
+from learn import RunConfig, registry
+from learn.run_config import RUN_FIELDS
 from learn.storage import read_metrics
 from validation.cli import app
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 #: The shipped example, given by its path (imported as module ``toy_method``, as a copy
 #: of it in a user's folder would be).
 PLUGIN = ROOT / "learn" / "examples" / "toy_method.py"

@@ -20,16 +20,15 @@ from typer.testing import CliRunner
 
 import finsler
 import learn
-from finsler import Disk, Metric, Task
-from finsler.errors import InputError
-from learn.midpoint.config import TrainConfig, resolve_metric
-from learn.midpoint.trainer import Trainer
+from finsler import Disk, InputError, Metric, Task
+from learn import TrainConfig, Trainer
+from learn.run_config import resolve_metric
 from learn.storage import CONFIG_FILE, LATEST_FILE, RESULT_FILE, read_json
 from validation.cli import app
 from validation.cli.common import parse_metric_params
 
 torch.set_num_threads(1)
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 @dataclass(frozen=True)

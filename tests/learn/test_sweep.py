@@ -17,7 +17,7 @@ from typer.testing import CliRunner
 import finsler
 import learn
 import solvers
-from learn.runs import run_one, run_status
+from learn import run_one, run_status
 from learn.storage import load_checkpoint, read_json, read_metrics
 from validation.cli import app
 

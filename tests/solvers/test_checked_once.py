@@ -17,7 +17,7 @@ import finsler
 import finsler.domains
 import solvers
 import solvers.inputs
-from validation.cli.entry import app
+from validation.cli import app
 
 CHECKS = {"as_metric", "check_pairs", "check_segments", "check_point"}
 

@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from finsler.errors import InputError
+from finsler import InputError
 from validation import curves as cv
 from validation import figures as fg
 from validation.cli import app

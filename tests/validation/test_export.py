@@ -12,7 +12,7 @@ from typer.testing import CliRunner
 import finsler
 import solvers
 import validation
-from finsler.errors import InputError
+from finsler import InputError
 from validation.cli import app
 
 PNG = b"\x89PNG\r\n\x1a\n"

@@ -16,7 +16,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import finsler
-from finsler.errors import InputError
+from finsler import InputError
 from validation import propositions as P
 from validation import strategies as vs
 

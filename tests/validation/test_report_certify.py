@@ -6,33 +6,16 @@ CLI's lines carry the rows; ``certify=0`` shows none."""
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass
 from pathlib import Path
-from typing import ClassVar
 
-import casadi as ca
 import numpy as np
 import pytest
-from conformal_metrics import Conformal4D
 
 import finsler
-from finsler.metrics.base import Task
-from validation.comparison import StraightLine
-from validation.report import build_report
+from validation import StraightLine, build_report
 from validation.report_certify import cli_lines, md_certified, preset_for
 
-
-@dataclass(frozen=True)
-class _Valley(Conformal4D):
-    """``F = (1 + q1**2 + q2**2 / 2 + (q3 q4)**2 / 5) |v|`` on ``[-1, 1]**4``: along the q1
-    axis (q2 = q3 = 0) the distance is ``b - a + (b**3 - a**3) / 3`` (``f >= 1 + q1**2``
-    everywhere, with equality on that straight path)."""
-
-    name: ClassVar[str] = "test-report-valley-4d"
-    task: ClassVar[Task] = Task(depth=3, eps=0.2)
-
-    def conformal_factor_sx(self, x: ca.SX) -> ca.SX:
-        return 1.0 + x[0] ** 2 + 0.5 * x[1] ** 2 + 0.2 * (x[2] * x[3]) ** 2
+from helpers.metrics.report_certify import Valley
 
 
 def _report(tmp: Path, metric: finsler.Metric, pairs: np.ndarray, certify: int | None
@@ -71,7 +54,7 @@ def test_3d_report_interval_contains_the_closed_form(slab) -> None:
 
 
 def test_4d_conformal_report_gives_a_lower_bound_above_the_trivial_one(tmp_path) -> None:
-    m = _Valley()
+    m = Valley()
     rng = np.random.default_rng(20261231)
     a, b = np.sort(rng.uniform(-0.9, 0.9, 2))
     c = rng.uniform(-0.9, 0.9)

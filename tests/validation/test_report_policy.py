@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from finsler.errors import InputError
+from finsler import InputError
 from validation.report import load_report_policy
 
 

@@ -20,17 +20,17 @@ from typer.testing import CliRunner
 
 import finsler
 import solvers
-from finsler.errors import InputError
-from validation import strategies as vs
-from validation.cli import app
-from validation.comparison import (
+from finsler import InputError
+from validation import (
     ExactPolicy,
     StraightLine,
+    build_report,
     compare,
     exact_reference,
     midpoint_error,
 )
-from validation.report import build_report
+from validation import strategies as vs
+from validation.cli import app
 from validation.testing import ContinuumDistance, DistanceTests
 
 SETTINGS = settings(
@@ -100,7 +100,8 @@ class TestDiscreteDistances(DistanceTests):
     @pytest.mark.slow
     def test_certificate(self) -> None:
         """Slow (60-140 s: two 7-D Panda certificates; car-like is skipped, not smooth).
-        The default run proves Panda's certificate sound in tests/test_certify_panda_split.py
+        The default run proves Panda's certificate sound in
+        tests/solvers/certificates/conformal/test_certify_panda_split.py
         (lower bound below the solver's path on fresh pairs, parts and grouped)."""
         super().test_certificate()
 
@@ -450,7 +451,7 @@ def test_the_learning_curve_names_the_pairs_it_was_evaluated_on(report_dir: Path
                     progress=False)
     assert curve_set(run) == "validation"
     assert curve_set(Path(learn.load_policy("matsumoto").source)) == "validation"
-    old = Path(__file__).resolve().parents[1] / "benchmarks" / "previous_policies"
+    old = Path(__file__).resolve().parents[2] / "benchmarks" / "previous_policies"
     assert curve_set(old / "matsumoto") == "default"
     assert curve_set(old / "panda-pole") == "default"
     assert curve_set(Path(learn.load_policy("panda-pole").source)) == "validation"
@@ -539,13 +540,13 @@ def test_report_agrees_with_geodesics_solve(report_dir: Path) -> None:
 
 
 # car-like costs ~80 s (its exact solve at 256 segments): slow; the same figure is drawn for
-# a user's pose metric in tests/test_metric_params.py (test_report_picks_figures_...)
+# a user's pose metric in tests/learn/test_metric_params.py (test_report_picks_figures_...)
 @pytest.mark.parametrize("env", [pytest.param("carlike", marks=pytest.mark.slow), "panda-pole"])
 def test_report_figures_for_car_and_arm(tmp_path: Path, env: str) -> None:
     m = finsler.get_metric(env)
     doc = build_report(env, tmp_path, pairs=finsler.default_pairs(m)[:1],
                        policy=StraightLine(m), workers=1, progress=False, continuum=False,
-                       certify=0)  # certificates beyond 2-D: tests/test_report_certify.py
+                       certify=0)  # beyond 2-D: tests/validation/test_report_certify.py
     name = "carlike_headings.png" if env == "carlike" else "panda_motion.png"
     assert name in doc["figures"] and _png_has_content(tmp_path / name)
     assert math.isfinite(doc["success_rate"]["straight"])

@@ -17,6 +17,9 @@ import finsler
 from finsler.enclosures.intervals import Interval, enclose
 from finsler.lowering import lower
 
+#: every test here is in the fast focused selection of mutation runs
+pytestmark = pytest.mark.mutation
+
 UNARY = {
     "exp": ca.exp, "log": ca.log, "sqrt": ca.sqrt, "sin": ca.sin, "cos": ca.cos,
     "tanh": ca.tanh, "atan": ca.atan, "fabs": ca.fabs, "sinh": ca.sinh, "cosh": ca.cosh,

@@ -13,6 +13,9 @@ from scipy.special import erf
 
 from finsler.enclosures.intervals import _BACKEND, Interval, isqrt
 
+#: every test here is in the fast focused selection of mutation runs
+pytestmark = pytest.mark.mutation
+
 RNG_SEED = 22
 UNARY = [  # name, reference, domain of the samples
     ("exp", np.exp, (-20.0, 20.0)), ("log", np.log, (1e-6, 50.0)),

@@ -12,11 +12,15 @@ import math
 import numpy as np
 import pytest
 from scipy.integrate import quad
-from singular_metrics import Cone
 
 import finsler
-from finsler.errors import InputError
+from finsler import InputError
 from finsler.metrics.base import MAX_LENGTH_HALVINGS
+
+from helpers.metrics.singular import Cone
+
+#: every test here is in the fast focused selection of mutation runs
+pytestmark = pytest.mark.mutation
 
 
 def _quad_length(m: finsler.Metric, pts: np.ndarray) -> float:

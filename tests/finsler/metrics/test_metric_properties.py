@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 import finsler
-from finsler.metrics.base import Metric
+from finsler import Metric
 from validation import testing as vt
 from validation.testing import MetricTests
 
@@ -84,7 +84,7 @@ def test_proposition1_cost_over_distance_tends_to_one(name: str) -> None:
     u /= np.linalg.norm(u, axis=1, keepdims=True)
     if name in ("euclidean", "minkowski", "randers"):
         # constant norms: C = d exactly. Their closed-form distance IS F(y - x), so it is
-        # checked against the exact solver instead (tests/test_propositions.py); here
+        # checked against the exact solver instead (tests/validation/test_propositions.py); here
         # C(x, y) must be homogeneous along the ray, C(x, x + h u) = h C(x, x + u)
         ref = m.cost(x, x + 1e-2 * u) / 1e-2
         for h in (1e-1, 1e-3, 1e-4):

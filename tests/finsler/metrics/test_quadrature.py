@@ -9,7 +9,7 @@ import pytest
 from typer.testing import CliRunner
 
 import finsler
-from finsler.errors import InputError
+from finsler import InputError
 from finsler.metrics import panda
 from finsler.metrics.quadrature import _GK_T, _GK_WG, _GK_WK
 from validation.cli import app

@@ -4,7 +4,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from typing import ClassVar
+
 import casadi as ca
+
 import finsler
 
 

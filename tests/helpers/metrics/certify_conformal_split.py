@@ -5,9 +5,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from typing import ClassVar
+
 import casadi as ca
+
+from finsler import Task
+
 from helpers.metrics.conformal import Conformal4D
-from finsler.metrics.base import Task
 
 
 @dataclass(frozen=True)

@@ -4,7 +4,9 @@
 from __future__ import annotations
 
 from typing import ClassVar
+
 import casadi as ca
+
 from helpers.metrics.conformal import Conformal4D
 
 

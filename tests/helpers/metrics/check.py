@@ -4,10 +4,10 @@ FlatConformal4D."""
 from __future__ import annotations
 
 import casadi as ca
+
+from finsler import Box, Metric, Task
+
 from helpers.metrics.conformal import Conformal4D
-from finsler import Box
-from finsler import Metric
-from finsler import Task
 
 
 # ----------------------------------------------------------------------------------------

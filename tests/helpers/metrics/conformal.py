@@ -5,8 +5,7 @@ from __future__ import annotations
 
 import casadi as ca
 
-from finsler.domains import Box
-from finsler.metrics.base import Metric
+from finsler import Box, Metric
 
 
 class Conformal4D(Metric):

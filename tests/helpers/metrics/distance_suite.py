@@ -4,9 +4,8 @@ from __future__ import annotations
 
 import casadi as ca
 import numpy as np
-from finsler import Box
-from finsler import Metric
-from finsler import Task
+
+from finsler import Box, Metric, Task
 
 
 class Flat(Metric):

@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import dataclasses
 from typing import ClassVar
-from finsler.metrics.closed_form import Poincare
-from finsler.metrics.paper import Matsumoto
+
+from finsler import Matsumoto, Poincare
 from solvers import SeedPlan
 
 

@@ -5,7 +5,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from typing import ClassVar
+
 import casadi as ca
+
 import finsler
 
 

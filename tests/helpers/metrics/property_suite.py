@@ -9,14 +9,11 @@ KinkOffCentre, NanBeyond095Off, OffNumpyShaped, DiagonalKink."""
 from __future__ import annotations
 
 import math
+
 import casadi as ca
 import numpy as np
-from finsler import Box
-from finsler import Disk
-from finsler import Metric
-from finsler import Task
-from finsler.metrics.closed_form import Randers
-from finsler.metrics.paper import Matsumoto
+
+from finsler import Box, Disk, Matsumoto, Metric, Randers, Task
 
 
 class Base(Metric):

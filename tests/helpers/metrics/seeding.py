@@ -4,9 +4,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from typing import ClassVar
+
 import numpy as np
+
 import finsler
-from finsler.domains import Box
+from finsler import Box
 
 
 @dataclass(frozen=True)

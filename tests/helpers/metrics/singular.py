@@ -1,6 +1,7 @@
 """Valid metrics with a singular derivative, shared by the fast tests of the bound code
-(``tests/test_certify_bounds.py``, ``tests/test_length_bounds.py``). Not registered: the
-tests build them directly."""
+(``tests/solvers/certificates/plane/test_certify_bounds.py``,
+``tests/finsler/metrics/test_length_bounds.py``). Not registered: the tests build them
+directly."""
 
 from __future__ import annotations
 

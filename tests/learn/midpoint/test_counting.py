@@ -17,10 +17,12 @@ import torch
 
 import finsler
 import learn
+from learn import Trainer, build_tree
 from learn.midpoint.losses import PathEnergy, RouteSearch
 from learn.midpoint.term import ActorTerm, TermOutput
-from learn.midpoint.trainer import Trainer
-from learn.tree import build_tree
+
+#: every test here is in the fast focused selection of mutation runs
+pytestmark = pytest.mark.mutation
 
 
 def _trainer(tmp_path: Path, **over: Any) -> Trainer:

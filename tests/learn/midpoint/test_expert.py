@@ -1,7 +1,7 @@
 """Expert iteration (learn.expert): the search's midpoint-tree targets by hand, the term's
 count of evaluations of C against a spy, targets nearer the true midpoints than the policy
 it improves (Euclidean plane: the midpoint is (a + b) / 2), checkpointed state (a resumed
-run equals an uninterrupted one: tests/test_learn.py), config checks."""
+run equals an uninterrupted one: tests/learn/midpoint/test_learn.py), config checks."""
 
 from __future__ import annotations
 
@@ -11,9 +11,9 @@ import torch
 
 import finsler
 import learn
+from learn import Trainer
 from learn.midpoint.expert import SearchImitation, search_spec, tree_targets
 from learn.midpoint.policy import generate_paths
-from learn.midpoint.trainer import Trainer
 
 
 def _small(**over: object) -> learn.TrainConfig:

@@ -12,9 +12,10 @@ import torch
 
 import finsler
 import learn
+from learn import Trainer
 from learn.midpoint.losses import PathEnergy, RouteSearch
 from learn.midpoint.policy import build_actor, generate_paths
-from learn.midpoint.trainer import Trainer, actor_loss, paper_depth
+from learn.midpoint.trainer import actor_loss, paper_depth
 
 
 # ----------------------------------------------------------------------------------------

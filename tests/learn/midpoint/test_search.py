@@ -19,12 +19,13 @@ from typer.testing import CliRunner
 import finsler
 import learn
 import solvers
-from finsler.errors import InputError
+from finsler import InputError
+from learn import SearchSpec, equalize_paths, search_paths
 from learn.midpoint.networks import predictor
-from learn.midpoint.search import SearchSpec, _regenerate_windows, equalize_paths, search_paths
+from learn.midpoint.search import _regenerate_windows
 from validation.cli import app
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[3]
 
 
 @pytest.fixture(scope="module")

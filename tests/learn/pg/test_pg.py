@@ -12,8 +12,8 @@ import pytest
 import torch
 
 import finsler
-from finsler.errors import InputError
-from learn import pg
+from finsler import InputError
+from learn import pg, train_run
 from learn.pg import (
     DepthPolicy,
     PGConfig,
@@ -30,7 +30,6 @@ from learn.pg import (
     sample_training_paths,
     schedule_total,
 )
-from learn.runs import train_run
 from learn.storage import read_json, read_metrics
 
 torch.set_num_threads(1)

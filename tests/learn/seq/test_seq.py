@@ -14,8 +14,8 @@ import pytest
 import torch
 
 import finsler
-from finsler.errors import InputError
-from learn.runs import train_run
+from finsler import InputError
+from learn import train_run
 from learn.seq import (
     WALL_COLUMNS,
     ZERO_ACTION_REWARD,

@@ -8,8 +8,6 @@ import gc
 import importlib
 import json
 import weakref
-from dataclasses import dataclass
-from typing import ClassVar
 
 import casadi as ca
 import numpy as np
@@ -17,9 +15,11 @@ import pytest
 from typer.testing import CliRunner
 
 import finsler
-from finsler.errors import InputError
+from finsler import InputError
 from solvers import CertifyResult, CertifyStatus, MeshSpec, Status, certify
 from validation.cli import app
+
+from helpers.metrics.certify import Bowl
 
 runner = CliRunner()
 # the module (``solvers.certify`` the attribute is the function of the same name)
@@ -325,23 +325,6 @@ def test_second_order_bounds_hold_at_every_sampled_point(name: str) -> None:
             assert np.median(seen[ok] / bound[ok]) > 0.2
 
 
-@dataclass(frozen=True)
-class _Bowl(finsler.Metric):
-    """F(x, v) = (1 + c |x|**2) |v|: Hess_x F = 2 c |v| I exactly, so the in-triangle
-    correction Hz R**2 / 2 = c R**2 is exactly what the linear interpolant of F over an
-    equilateral triangle overshoots F by at its centre (sum_i lambda_i |z_i - z|**2 = R**2
-    there). Not registered: certify takes the object."""
-
-    c: float = 4.0
-    name: ClassVar[str] = "bowl-test"
-    task: ClassVar[finsler.Task] = finsler.Task(depth=4, eps=0.2)
-    reversible: ClassVar[bool] = True
-    domain = property(lambda self: finsler.Disk(radius=1.0))
-
-    def F_sx(self, x: ca.SX, v: ca.SX) -> ca.SX:
-        return (1 + self.c * ca.dot(x, x)) * ca.sqrt(ca.dot(v, v))
-
-
 def test_row_bounds_hold_inside_every_triangle_where_the_hessian_term_is_tight() -> None:
     """The rows at a triangle's vertices are ``grad phi_T(z_m) . v_k <= b_m,k``; grad phi_T
     is affine, so inside the triangle ``grad phi_T(z) . v_k`` is at most the barycentric
@@ -349,7 +332,7 @@ def test_row_bounds_hold_inside_every_triangle_where_the_hessian_term_is_tight()
     potential may violate the dual condition there and the lower bound is not proven).
     On the bowl metric the Hessian term is tight at the centres of equilateral triangles:
     a correction any smaller (e.g. ``0.25 * hz * r2`` instead of ``0.5``) fails here."""
-    m = _Bowl()
+    m = Bowl()
     pts = mesh_mod._hex_lattice(np.array([-0.6, -0.6]), np.array([0.6, 0.6]), 0.2)
     pts = pts[np.linalg.norm(pts, axis=1) <= 0.75]
     msh = certify_mod._Mesh(pts)

@@ -11,7 +11,7 @@ import pytest
 
 import finsler
 import solvers
-from finsler.errors import DomainError, InputError
+from finsler import DomainError, InputError
 from solvers import ExpStatus, LogStatus, SolverError, exp_map, log_map
 
 
@@ -227,7 +227,7 @@ def _peers_module():
     import importlib.util
     from pathlib import Path
 
-    path = Path(__file__).resolve().parents[1] / "benchmarks" / "peers.py"
+    path = Path(__file__).resolve().parents[3] / "benchmarks" / "peers.py"
     spec = importlib.util.spec_from_file_location("peers_benchmark", path)
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)

@@ -16,19 +16,23 @@ from __future__ import annotations
 import dataclasses
 import json
 import time
-from typing import ClassVar
 
 import numpy as np
 import pytest
 
 import finsler
 import solvers
-from finsler.errors import InputError
-from finsler.metrics.closed_form import Poincare
-from finsler.metrics.paper import Matsumoto
+from finsler import InputError
 from solvers import SeedPlan, Status
 from solvers.geodesic.tolerance import richardson
 from solvers.seeding.plans import perturbed_curves
+
+from helpers.metrics.multires import (
+    HookedPoincare,
+    NotUniquePoincare,
+    RenamedMatsumoto,
+    RenamedPoincare,
+)
 
 
 # ----------------------------------------------------------------------------------------
@@ -97,33 +101,6 @@ def test_plan_validation() -> None:
                 dict(restart_scale=float("nan"))):
         with pytest.raises(InputError):
             SeedPlan(**bad)
-
-
-# ----------------------------------------------------------------------------------------
-# SeedPlan.default by capability, never by name
-# ----------------------------------------------------------------------------------------
-@dataclasses.dataclass(frozen=True)
-class RenamedMatsumoto(Matsumoto):
-    name: ClassVar[str] = "not-matsumoto"
-
-
-@dataclasses.dataclass(frozen=True)
-class RenamedPoincare(Poincare):
-    name: ClassVar[str] = "matsumoto"  # a misleading name must not matter
-
-
-@dataclasses.dataclass(frozen=True)
-class NotUniquePoincare(Poincare):
-    name: ClassVar[str] = "poincare-no-claim"
-    unique_geodesics: ClassVar[bool] = False
-
-
-@dataclasses.dataclass(frozen=True)
-class HookedPoincare(Poincare):
-    name: ClassVar[str] = "hooked"
-
-    def seed_plan(self) -> SeedPlan:
-        return SeedPlan(bulges=(0.2,), random=7, coarse=8)
 
 
 def test_default_plan_follows_capabilities_not_names() -> None:

@@ -21,7 +21,7 @@ from hypothesis import strategies as st
 
 import finsler
 import solvers
-from finsler.errors import DomainError, InputError
+from finsler import DomainError, InputError
 from solvers import DistanceStatus, SeedPlan, Status
 from solvers.geodesic.baseline import adam_energy_baseline
 from solvers.transcription import energy_nlp

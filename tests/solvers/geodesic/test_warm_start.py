@@ -17,8 +17,8 @@ from typer.testing import CliRunner
 import finsler
 import learn
 import solvers
-from finsler.errors import InputError
-from learn.runs import warm_start_paths
+from finsler import InputError
+from learn import warm_start_paths
 from validation.cli import app
 
 torch.set_num_threads(1)

@@ -21,20 +21,12 @@ from solvers.newton.block_tridiagonal import (
     sum_,
 )
 
+from helpers.linalg import dense
+
+#: every test here is in the fast focused selection of mutation runs
+pytestmark = pytest.mark.mutation
+
 NP = backend_for(None)
-
-
-def dense(a: np.ndarray, o: np.ndarray) -> np.ndarray:
-    """The symmetric block-tridiagonal matrix of blocks ``a`` ``(M, d, d)`` and couplings
-    ``o`` ``(M, d, d)`` (``o[j]`` couples unknowns ``j`` and ``j + 1``; ``o[M-1]`` unused)."""
-    m, d, _ = a.shape
-    h = np.zeros((m * d, m * d))
-    for j in range(m):
-        h[j * d:(j + 1) * d, j * d:(j + 1) * d] = a[j]
-        if j < m - 1:
-            h[j * d:(j + 1) * d, (j + 1) * d:(j + 2) * d] = o[j]
-            h[(j + 1) * d:(j + 2) * d, j * d:(j + 1) * d] = o[j].T
-    return h
 
 
 def fields(a: np.ndarray, o: np.ndarray, r: np.ndarray, convert=lambda v: v):

@@ -10,6 +10,8 @@ import pytest
 from solvers.newton.backends import _NUMPY_OPS
 from solvers.newton.block_tridiagonal import block_tridiagonal_solve, block_tridiagonal_solve_dense
 
+from helpers.linalg import dense
+
 
 def _system(rng, b, m, d, shift):
     a = rng.normal(size=(b, m, d, d))
@@ -20,17 +22,6 @@ def _system(rng, b, m, d, shift):
     return diag, off, rhs, scale
 
 
-def _assemble(diag, off):
-    m, d = diag.shape[0], diag.shape[1]
-    h = np.zeros((m * d, m * d))
-    for j in range(m):
-        h[j * d:(j + 1) * d, j * d:(j + 1) * d] = diag[j]
-        if j + 1 < m:
-            h[j * d:(j + 1) * d, (j + 1) * d:(j + 2) * d] = off[j]
-            h[(j + 1) * d:(j + 2) * d, j * d:(j + 1) * d] = off[j].T
-    return h
-
-
 @pytest.mark.parametrize(("m", "d"), [(1, 3), (2, 3), (7, 3), (10, 2), (31, 3), (40, 4)])
 def test_dense_solves_definite_systems(m, d):
     rng = np.random.default_rng(m * 10 + d)
@@ -39,7 +30,7 @@ def test_dense_solves_definite_systems(m, d):
     x, ok = block_tridiagonal_solve_dense(diag, off, rhs, scale)
     assert ok.all()
     for k in range(3):
-        ref = np.linalg.solve(_assemble(diag[k], off[k]), rhs[k].ravel())
+        ref = np.linalg.solve(dense(diag[k], off[k]), rhs[k].ravel())
         np.testing.assert_allclose(x[k].ravel(), ref, rtol=1e-10, atol=1e-12)
 
 

@@ -14,20 +14,12 @@ import solvers.newton.block_tridiagonal as bt
 from solvers.newton.backends import backend_for
 from solvers.newton.block_tridiagonal import THOMAS_ROWS_MAX, block_tridiagonal_solve
 
+from helpers.linalg import dense
+
+#: every test here is in the fast focused selection of mutation runs
+pytestmark = pytest.mark.mutation
+
 NP = backend_for(None)
-
-
-def dense(a: np.ndarray, o: np.ndarray) -> np.ndarray:
-    """The symmetric block-tridiagonal matrix of blocks ``a`` ``(M, 2, 2)`` and couplings
-    ``o`` ``(M, 2, 2)`` (``o[j]`` couples unknowns ``j`` and ``j + 1``)."""
-    m = a.shape[0]
-    h = np.zeros((2 * m, 2 * m))
-    for j in range(m):
-        h[2 * j:2 * j + 2, 2 * j:2 * j + 2] = a[j]
-        if j < m - 1:
-            h[2 * j:2 * j + 2, 2 * j + 2:2 * j + 4] = o[j]
-            h[2 * j + 2:2 * j + 4, 2 * j:2 * j + 2] = o[j].T
-    return h
 
 
 def system(b: int, m: int, seed: int, coupling: float = 0.3):

@@ -1,4 +1,4 @@
-"""Fast kill tests of solvers/newton/driver.py (issue 48 item 6; the `batched` group of
+"""Fast tests of solvers/newton/driver.py (the `batched` group of
 benchmarks/mutation.py): the row bookkeeping on crafted batches whose answers are counted
 by hand, and whole batched solves checked against closed-form distances (euclidean,
 poincare), seed counts from the plan's own numbers, and status propagation of rows that
@@ -11,8 +11,8 @@ import time
 import numpy as np
 import pytest
 
-from finsler.metrics.closed_form import Euclidean, Poincare
-from finsler.metrics.paper import CarLike
+from finsler import CarLike, Euclidean, Poincare
+from solvers import SeedPlan
 from solvers.newton.driver import (
     AGREE_RTOL,
     BatchOptions,
@@ -29,8 +29,10 @@ from solvers.newton.driver import (
     solve_pairs_batched,
 )
 from solvers.newton.energy import NewtonOptions
-from solvers.seeding.plans import SeedPlan
 from solvers.status import NewtonStatus
+
+#: every test here is in the fast focused selection of mutation runs
+pytestmark = pytest.mark.mutation
 
 C, MI, ST = int(NewtonStatus.CONVERGED), int(NewtonStatus.MAX_ITERATIONS), int(
     NewtonStatus.STALLED)

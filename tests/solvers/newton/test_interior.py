@@ -12,13 +12,14 @@ import pytest
 
 import finsler
 import solvers
-from finsler.errors import InputError
+from finsler import InputError
+from solvers import SeedPlan
 from solvers.geodesic.pair_solver import resolve_method
 from solvers.inputs import domain_scale
 from solvers.newton import interior
 from solvers.newton.interior import InteriorOptions, covers_interior, interior_energy
 from solvers.newton.kkt import kkt_residual
-from solvers.seeding.plans import SeedPlan, seed_batch
+from solvers.seeding.plans import seed_batch
 from solvers.status import NewtonStatus
 from solvers.transcription import energy_nlp
 

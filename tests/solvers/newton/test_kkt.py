@@ -10,10 +10,11 @@ import pytest
 
 import finsler
 import solvers
+from solvers import SeedPlan
 from solvers.inputs import domain_scale
 from solvers.newton.energy import energy_residual
 from solvers.newton.kkt import kkt_residual, optimality_residual, uses_kkt
-from solvers.seeding.plans import SeedPlan, seed_batch
+from solvers.seeding.plans import seed_batch
 from solvers.transcription import energy_nlp
 
 N = 16

@@ -11,10 +11,10 @@ import pytest
 
 import finsler
 import solvers.newton.driver as batched
-from finsler.errors import InputError
-from finsler.metrics.closed_form import Euclidean
+from finsler import Euclidean, InputError
+from solvers import SeedPlan
 from solvers.newton.driver import _best, solve_pairs_batched
-from solvers.seeding.plans import SeedPlan, seed_family
+from solvers.seeding.plans import seed_family
 
 PAIRS = np.array([[[0.0, 0.0], [1.0, 0.5]], [[-0.5, 0.2], [0.7, -0.4]]])
 

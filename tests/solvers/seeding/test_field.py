@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import finsler
-from finsler.errors import InputError
+from finsler import InputError
 from solvers.seeding.field import FieldSpec, LatticeField, lattice_field
 
 

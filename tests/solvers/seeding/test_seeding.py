@@ -5,25 +5,19 @@ from __future__ import annotations
 
 import dataclasses
 import json
-from dataclasses import dataclass
-from typing import ClassVar
 
 import numpy as np
 import pytest
 
 import finsler
 import solvers
-from finsler.domains import Box
-from finsler.errors import InputError
+from finsler import InputError
 from solvers import SeedPlan
-from solvers.seeding.plans import (
-    alternative_gap,
-    family_stats,
-    graph_seeder,
-    seed_batch,
-    seed_family,
-)
+from solvers.seeding.graph import graph_seeder
+from solvers.seeding.plans import alternative_gap, family_stats, seed_batch, seed_family
 from solvers.transcription import energy_nlp
+
+from helpers.metrics.seeding import Detour
 
 
 def _hermite_jump(s: np.ndarray, g: np.ndarray, tangent: float, n: int) -> np.ndarray:
@@ -208,37 +202,15 @@ def test_graph_routes_are_distinct_and_the_first_is_the_shortest() -> None:
         SeedPlan(routes=0)
 
 
-@dataclass(frozen=True)
-class _Detour(finsler.Metric):
-    """A user metric (Euclidean in a box) declaring its own seed curves."""
-
-    name: ClassVar[str] = "test-detour"
-    bad: bool = False
-
-    @property
-    def domain(self) -> Box:
-        return Box((-1.0, -1.0), (1.0, 1.0))
-
-    def F_sx(self, x, v):
-        import casadi as ca
-        return ca.sqrt(ca.dot(v, v))
-
-    def seed_curves(self, starts, goals, t):
-        line = starts[:, None] + t[None, :, None] * (goals - starts)[:, None]
-        if self.bad:
-            return {"my detour!": line[:, None]}
-        return {"detour": line[:, None] + 0.2 * np.sin(np.pi * t)[None, None, :, None]}
-
-
 def test_a_user_metric_declares_its_own_seed_curves() -> None:
-    m = _Detour()
+    m = Detour()
     assert m.provides("seed_curves") and "seed_curves" in m.hooks()
     r = solvers.solve_geodesic(m, [-0.5, -0.5], [0.5, 0.5], 16)
     assert "detour[0]" in r.seed_energies or "detour[0]@16" in r.seed_energies \
         or r.seed_families["detour"]["tried"] == 1
     assert r.seed_families["detour"]["tried"] == 1
     with pytest.raises(InputError, match="family 'my detour!'"):
-        solvers.solve_geodesic(_Detour(bad=True), [-0.5, -0.5], [0.5, 0.5], 16)
+        solvers.solve_geodesic(Detour(bad=True), [-0.5, -0.5], [0.5, 0.5], 16)
 
 
 def test_aligned_graph_moves_along_the_cheap_directions() -> None:

@@ -1,4 +1,4 @@
-"""Fast focused tests of validation/testing/cases.py (issue 48 item 6: mutation testing of
+"""Fast focused tests of validation/testing/cases.py (mutation testing of
 the property suite). No search and no solve: every property function the classes call is
 replaced by a recorder that returns a result chosen by the test, so each test method is
 checked to call the right function with the right arguments, and to pass, skip or fail
@@ -12,20 +12,15 @@ import types
 import pytest
 
 import finsler
+from validation.testing import PropertyFailure, PropertyResult
 from validation.testing import cases as C
 from validation.testing import distance as D
 from validation.testing import metric as M
 from validation.testing import policy as P
-from validation.testing.engine import (
-    FAILED,
-    INCONCLUSIVE,
-    MAPPED,
-    NOT_RUN,
-    PASSED,
-    SKIPPED,
-    PropertyFailure,
-    PropertyResult,
-)
+from validation.testing.engine import FAILED, INCONCLUSIVE, MAPPED, NOT_RUN, PASSED, SKIPPED
+
+#: every test here is in the fast focused selection of mutation runs
+pytestmark = pytest.mark.mutation
 
 
 class Recorder:

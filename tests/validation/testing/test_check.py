@@ -1,6 +1,6 @@
 """``validation.testing`` as users meet it: ``geodesics check`` (table, JSON, exit codes,
 same seed same result), its verdicts on metrics written to be wrong in one way each
-(``tests/broken_metrics.py``, run in subprocesses so they never enter this session's
+(``tests/helpers/broken_metrics.py``, run in subprocesses so they never enter this session's
 registry) checked against independent formulas, a user's five-line pytest file, the
 function API, and the policy properties (a shipped policy passes, a detour policy fails).
 """
@@ -15,21 +15,21 @@ import sys
 import textwrap
 from pathlib import Path
 
-import casadi as ca
 import numpy as np
 import pytest
-from conformal_metrics import Conformal4D
 from typer.testing import CliRunner
 
 import finsler
-from finsler import Box, Metric, Task
+from finsler import Metric
 from validation import testing as vt
 from validation.cli import app
 from validation.testing import DiscreteDistance, PolicyTests, Solved
 
-HERE = Path(__file__).resolve().parent
-BROKEN = HERE / "broken_metrics.py"
-ROOT = HERE.parent
+from helpers.metrics.check import Flat, FlatConformal4D, Squared
+
+ROOT = Path(__file__).resolve().parents[3]
+HELPERS = ROOT / "tests" / "helpers"
+BROKEN = HELPERS / "broken_metrics.py"
 
 
 def _expected() -> dict[str, str]:
@@ -287,8 +287,8 @@ def test_a_five_line_user_pytest_file_runs_the_suite(tmp_path: Path) -> None:
 
 def test_a_user_pytest_file_reports_the_counterexample(tmp_path: Path) -> None:
     res = _user_pytest(tmp_path, f"""\
-        import sys; sys.path.insert(0, {str(HERE)!r})
-        from broken_metrics import NotHomogeneous
+        import sys; sys.path.insert(0, {str(HELPERS.parent)!r})
+        from helpers.broken_metrics import NotHomogeneous
         from validation.testing import MetricTests
 
         class TestMine(MetricTests):
@@ -300,21 +300,6 @@ def test_a_user_pytest_file_reports_the_counterexample(tmp_path: Path) -> None:
     assert "FAILED test_mine.py::TestMine::test_homogeneity" in out
     assert "PropertyFailure: FAILED homogeneity" in out
     assert "counterexample (shrunk in" in out and "F(x, 0) = 0.1" in out
-
-
-# ----------------------------------------------------------------------------------------
-# the functions
-# ----------------------------------------------------------------------------------------
-class Squared(Metric):
-    """F = |v|**2 (the square root forgotten): not 1-homogeneous, not subadditive."""
-
-    name = "squared-test"
-    task = Task(depth=3, eps=0.5)
-    reversible = True
-    domain = property(lambda self: Box((-1.0, -1.0), (1.0, 1.0)))
-
-    def F_sx(self, x: ca.SX, v: ca.SX) -> ca.SX:
-        return ca.dot(v, v)
 
 
 def test_a_function_reports_a_shrunk_real_counterexample() -> None:
@@ -492,26 +477,6 @@ def test_check_cli_with_a_shipped_policy() -> None:
     assert "matsumoto" in doc["policy"]
 
 
-# ----------------------------------------------------------------------------------------
-# every distance and policy property able to fail, alone (issue 48)
-# ----------------------------------------------------------------------------------------
-class Flat(Metric):
-    """F = |v| on a box, with no closed-form hook (so closed-form-distance does not apply
-    and every distance property below is judged against the fake oracle alone)."""
-
-    name = "flat-test"
-    task = Task(depth=3, eps=0.5)
-    reversible = True
-
-    def __init__(self, dim: int = 3, half: float = 0.5) -> None:
-        self._box = Box((-half,) * dim, (half,) * dim)
-
-    domain = property(lambda self: self._box)
-
-    def F_sx(self, x: ca.SX, v: ca.SX) -> ca.SX:
-        return ca.sqrt(ca.dot(v, v))
-
-
 class Euclid:
     """Exact Euclidean distances (independent of the solvers), each broken in one way by
     ``bug``: the oracle a property must catch alone."""
@@ -578,18 +543,6 @@ def test_each_distance_property_fails_alone_on_its_broken_oracle(bug: str, prop:
 
         xz, xy, yz = (float(np.linalg.norm(b - a)) for a, b in ((x, z), (x, y), (y, z)))
         assert r.lhs[1] == pytest.approx(f(xz)) and f(xz) > f(xy) + f(yz) + 1e-9
-
-
-class FlatConformal4D(Conformal4D):
-    """``F = 1 |v|`` on ``[-1, 1]**4`` through the conformal hook, with no closed form: the
-    certificate beyond 3-D is the conformal lower bound."""
-
-    name = "flat-conformal-4d-test"
-    task = Task(depth=3, eps=0.5)
-    reversible = True
-
-    def conformal_factor_sx(self, x: ca.SX) -> ca.SX:
-        return ca.SX(1.0)
 
 
 @pytest.mark.parametrize("m", [Flat(dim=2, half=1.0), Flat(dim=3, half=1.0), FlatConformal4D()],

@@ -1,4 +1,4 @@
-"""Fast focused tests of validation/testing/distance.py (issue 48 item 6: mutation testing
+"""Fast focused tests of validation/testing/distance.py (mutation testing
 of the property suite). The distance properties run on oracles built here from the
 closed-form Euclidean distance (exact, no solve), each wrong in one way, so every verdict,
 counterexample and note is known; the two real oracles run on closed-form metrics (the
@@ -14,12 +14,15 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from finsler import Box, Metric, Task
-from finsler.errors import InputError
-from finsler.metrics.closed_form import Euclidean, Randers
+from finsler import Box, Euclidean, InputError, Metric, Randers
 from finsler.status import DistanceStatus, Status
 from validation.testing import distance as VD
 from validation.testing.engine import FAILED, INCONCLUSIVE, MAPPED, PASSED, SKIPPED
+
+from helpers.metrics.distance_suite import Flat, Ring
+
+#: every test here is in the fast focused selection of mutation runs
+pytestmark = pytest.mark.mutation
 
 
 @dataclass
@@ -66,18 +69,6 @@ class Exact:
 
 def _suite(wrong="", metric=None, shrink=1.0, seed=0):
     return VD.DistanceSuite.make(metric or Euclidean(), Exact(wrong), seed=seed, shrink=shrink)
-
-
-class Flat(Metric):
-    """F = |v| without a closed form."""
-
-    name = "flat-test"
-    task = Task(depth=3, eps=0.5)
-    reversible = True
-    domain = property(lambda self: Box((-1.0, -1.0), (1.0, 1.0)))
-
-    def F_sx(self, x, v):
-        return ca.sqrt(ca.dot(v, v))
 
 
 # ----------------------------------------------------------------------------------------
@@ -239,19 +230,6 @@ def test_segment_bound():
     assert long.rhs[1] == pytest.approx(np.linalg.norm(y - x), rel=1e-9)
     assert long.lhs == ("d(x, y)", pytest.approx(1.01 * np.linalg.norm(y - x), rel=1e-12))
     assert long.note.startswith("stated error 1e-12. Distances by")
-
-
-class _Annulus(Box):
-    """The square without the disk |x| < 0.5: a segment through the hole leaves it."""
-
-    def contains(self, x, tol=1e-12):
-        x = np.asarray(x, float)
-        return super().contains(x, tol) & (np.linalg.norm(x, axis=-1) >= 0.5 - tol)
-
-
-class Ring(Flat):
-    name = "ring-test"
-    domain = property(lambda self: _Annulus((-1.0, -1.0), (1.0, 1.0)))
 
 
 def test_segment_leaving_the_domain_is_not_judged():

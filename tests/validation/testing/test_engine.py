@@ -1,4 +1,4 @@
-"""Fast focused tests of validation/testing/engine.py (issue 48 item 6: mutation testing of
+"""Fast focused tests of validation/testing/engine.py (mutation testing of
 the property suite). No metric, no solve: the search runs on integer and float strategies
 whose failing examples are known exactly, and the result classes are compared with texts
 written out by hand."""
@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 from hypothesis import strategies as st
 
-from finsler.errors import InputError
+from finsler import InputError
+from validation.testing import CheckReport, PropertyFailure, PropertyResult, Verdict, search
 from validation.testing import engine as E
 from validation.testing.engine import (
     FAILED,
@@ -21,16 +22,14 @@ from validation.testing.engine import (
     NOT_RUN,
     PASSED,
     SKIPPED,
-    CheckReport,
-    PropertyFailure,
-    PropertyResult,
-    Verdict,
     combine,
     fmt,
     jsonable,
-    search,
     seeded,
 )
+
+#: every test here is in the fast focused selection of mutation runs
+pytestmark = pytest.mark.mutation
 
 
 def _search(check, strategy=None, examples=30, seed=1, **kw):

@@ -1,4 +1,4 @@
-"""Fast focused tests of validation/testing/metric.py (issue 48 item 6: mutation testing of
+"""Fast focused tests of validation/testing/metric.py (mutation testing of
 the property suite). Each property runs on closed-form metrics (no solve, few examples)
 and on metrics built here that are wrong in exactly one way; verdicts, counterexamples and
 notes are checked against independent references (Matsumoto's analytic convex radius,
@@ -13,13 +13,63 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from finsler import Box, Disk, Metric, Product, Task
-from finsler.domains import Domain
-from finsler.errors import InputError
-from finsler.metrics.closed_form import Euclidean, Randers
-from finsler.metrics.paper import Matsumoto
+from finsler import (
+    Box,
+    Disk,
+    Domain,
+    Euclidean,
+    InputError,
+    Matsumoto,
+    Product,
+    Randers,
+)
 from validation.testing import metric as VM
 from validation.testing.engine import FAILED, MAPPED, PASSED, SKIPPED
+
+from helpers.metrics.property_suite import (
+    Base,
+    C1KinkV,
+    ConvexClaimed,
+    DiagonalKink,
+    Drift,
+    EuclidClaimedIrreversible,
+    HalfZero,
+    HiddenConvexity,
+    InfOnAxis,
+    Kinked,
+    KinkedV,
+    KinkOffCentre,
+    LargeScaleOff,
+    NanAndNegativeCones,
+    NanBeyond095Off,
+    NanOutside,
+    NanOutsideOff,
+    NegativeCone,
+    OffAbs,
+    OffHessian,
+    OffHessianAbs,
+    OffNumpy,
+    OffNumpyShaped,
+    Offset,
+    OffTorch,
+    RandersClaimedReversible,
+    Root,
+    RootX,
+    ScaledEuclid,
+    ShortBy,
+    SlightlySquared,
+    SmallScaleOff,
+    Squared,
+    SquaredX,
+    TinyAsymmetric,
+    TinyKinkV,
+    Zero,
+    ZeroCone,
+    ZeroOnAxis,
+)
+
+#: every test here is in the fast focused selection of mutation runs
+pytestmark = pytest.mark.mutation
 
 RC = 1.0 / (2.0 * math.sqrt(3.0))  # Matsumoto's convex radius at height 1 (its docs)
 
@@ -46,88 +96,6 @@ class _Square(Domain):
 
     def describe(self):
         return "a square"
-
-
-class _Base(Metric):
-    task = Task(depth=3, eps=0.5)
-    reversible = True
-    domain = property(lambda self: Box((-1.0, -1.0), (1.0, 1.0)))
-
-    def F_sx(self, x: ca.SX, v: ca.SX) -> ca.SX:
-        return ca.sqrt(ca.dot(v, v))
-
-
-class NanOutside(_Base):
-    """F = |v| on the unit disk, NaN for |x| > 0.9."""
-
-    name = "nan-outside-test"
-    domain = property(lambda self: Disk(radius=1.0))
-
-    def F_sx(self, x, v):
-        return ca.if_else(ca.dot(x, x) > 0.81, float("nan"), ca.sqrt(ca.dot(v, v)))
-
-
-class NegativeCone(_Base):
-    """F = -|v| in a thin cone of directions around (cos 1, sin 1), |v| elsewhere."""
-
-    name = "negative-cone-test"
-    smooth = False
-
-    def F_sx(self, x, v):
-        n = ca.sqrt(ca.dot(v, v))
-        c = (math.cos(1.0) * v[0] + math.sin(1.0) * v[1]) / n
-        return ca.if_else(c > 0.99, -n, n)
-
-
-class Offset(_Base):
-    """F(x, 0) = 1e-3."""
-
-    name = "offset-test"
-
-    def F_sx(self, x, v):
-        return ca.sqrt(ca.dot(v, v)) + 1e-3
-
-
-class Squared(_Base):
-    name = "squared-test"
-
-    def F_sx(self, x, v):
-        return ca.dot(v, v)
-
-
-class Root(_Base):
-    """F = sqrt|v|: subadditive (concave) but the midpoint form fails."""
-
-    name = "root-test"
-
-    def F_sx(self, x, v):
-        return ca.dot(v, v) ** 0.25
-
-
-class ConvexClaimed(Matsumoto):
-    """Matsumoto declared convex everywhere (it is not beyond |x| = RC)."""
-
-    name = "convex-claimed-test"
-    convex_everywhere = True
-
-
-class Kinked(_Base):
-    """F = |v| (1 + 0.3 |x0|) declared smooth."""
-
-    name = "kinked-test"
-
-    def F_sx(self, x, v):
-        return ca.sqrt(ca.dot(v, v)) * (1.0 + 0.3 * ca.fabs(x[0]))
-
-
-class RandersClaimedReversible(Randers):
-    name = "randers-reversible-test"
-    reversible = True
-
-
-class EuclidClaimedIrreversible(_Base):
-    name = "euclid-irreversible-test"
-    reversible = False
 
 
 # ----------------------------------------------------------------------------------------
@@ -248,7 +216,7 @@ class _ZeroBox(Box):
     (_HalvingBox, "projection not idempotent"),
     (_ZeroBox, "a point of the domain is moved by the projection")])
 def test_domain_projection_failures(box, note):
-    class M(_Base):
+    class M(Base):
         name = "projection-test"
         domain = property(lambda self: box((-1.0, -1.0), (1.0, 1.0)))
 
@@ -382,18 +350,8 @@ def test_strong_convexity_failure_says_where():
     np.testing.assert_array_equal(w, ww)
 
 
-class _HiddenConvexity(ConvexClaimed):
-    """The 7-direction test (the search's) sees a convex F; the map's 32 see the real one."""
-
-    name = "hidden-convexity-test"
-
-    def convexity(self, x, n_directions=64, seed=0):
-        lam = super().convexity(x, n_directions=n_directions, seed=seed)
-        return np.abs(lam) + 1e-3 if n_directions == 7 else lam
-
-
 def test_strong_convexity_map_finds_what_the_search_missed():
-    m = _HiddenConvexity()
+    m = HiddenConvexity()
     r = VM.check_strong_convexity(m, examples=5, directions=7)
     cmap = VM.convexity_map(m)
     assert r.status is FAILED
@@ -430,7 +388,7 @@ def test_reversibility():
 
 
 def test_reversibility_thresholds():
-    class Slight(_Base):  # asymmetric by 1e-4 relative: below ASYMMETRY_MIN, above rtol
+    class Slight(Base):  # asymmetric by 1e-4 relative: below ASYMMETRY_MIN, above rtol
         name = "slight-test"
 
         def F_sx(self, x, v):
@@ -445,48 +403,22 @@ def test_reversibility_thresholds():
         type(s).reversible = True
 
 
-class _OffNumpy(Randers):
-    name = "off-numpy-test"
-
-    def F(self, x, v, check=None):
-        out = super().F(x, v, check=check)
-        return out * (1 + 1e-9) if isinstance(out, (np.ndarray, float)) else out
-
-
-class _OffTorch(Randers):
-    name = "off-torch-test"
-
-    def F(self, x, v, check=None):
-        out = super().F(x, v, check=check)
-        return out if isinstance(out, (np.ndarray, float)) else out * (1 + 1e-9)
-
-
-class _OffHessian(Randers):
-    name = "off-hessian-test"
-
-    def lowered_hessian(self, x, v):
-        (h,) = super().lowered_hessian(x, v)
-        h = np.array(h, float)
-        h.reshape(-1)[1] += 1e-6
-        return (h,)
-
-
 def test_lowered_forms():
     ok = VM.check_lowered_forms(Randers(), examples=8)
     assert ok.status is PASSED and ok.tried == ok.passed == 8
-    for cls, label in ((_OffNumpy, "numpy"), (_OffTorch, "torch")):
+    for cls, label in ((OffNumpy, "numpy"), (OffTorch, "torch")):
         r = VM.check_lowered_forms(cls(), examples=8)
         assert r.status is FAILED and r.lhs[0] == f"F lowered to {label}"
         assert r.rhs[0] == "F symbolic (CasADi)" and r.relation == "=="
         x, v = (np.asarray(r.counterexample[k]) for k in "xv")
         assert r.rhs[1] == float(Randers().F(x, v))
         assert r.note == f"difference {r.lhs[1] - r.rhs[1]:.3g} (tolerance 1e-12 max(1, |F|))"
-    assert VM.check_lowered_forms(_OffNumpy(), examples=5, rtol=1e-6).status is PASSED
-    r2 = VM.check_lowered_forms(_OffHessian(), examples=8)
+    assert VM.check_lowered_forms(OffNumpy(), examples=5, rtol=1e-6).status is PASSED
+    r2 = VM.check_lowered_forms(OffHessian(), examples=8)
     assert r2.status is FAILED
     assert r2.lhs[0] in ("fundamental tensor lowered [1,0]", "fundamental tensor lowered [0,1]")
     assert r2.rhs[0] == "symbolic (CasADi)" and abs(r2.lhs[1] - r2.rhs[1]) > 5e-7
-    assert VM.check_lowered_forms(_OffHessian(), examples=5,
+    assert VM.check_lowered_forms(OffHessian(), examples=5,
                                   hessian_rtol=1e-4).status is PASSED
 
 
@@ -527,13 +459,13 @@ def test_smoothness_sweep_finds_a_thin_kink(monkeypatch):
 def test_centre_and_metric_properties():
     np.testing.assert_array_equal(VM._centre_of(Matsumoto()), [0.0, 0.0])
 
-    class Off(_Base):
+    class Off(Base):
         name = "off-test"
         domain = property(lambda self: Disk(radius=1.0, center=(2.0, -1.0)))
 
     np.testing.assert_array_equal(VM._centre_of(Off()), [2.0, -1.0])
 
-    class Shifted(_Base):
+    class Shifted(Base):
         name = "shifted-test"
         domain = property(lambda self: Box((0.0, 2.0), (2.0, 6.0)))
 
@@ -557,7 +489,7 @@ def test_vectors_strategy():
     assert all(v.shape == (3,) and v.dtype == float for v in seen)
     assert all(np.linalg.norm(v) >= 0.5 and np.all(np.abs(v) <= 2.0) for v in seen)
     assert any(np.abs(v).max() > 1.0 for v in seen)
-    class Odd(_Base):
+    class Odd(Base):
         name = "odd-domain-test"
         domain = property(lambda self: _Square())
 
@@ -566,57 +498,6 @@ def test_vectors_strategy():
             "odd-domain-test has a square")):
         VM._points(Odd(), 0.5)
     VM._points(Odd(), 1.0)  # the whole domain needs no scale
-
-
-# ----------------------------------------------------------------------------------------
-# after the first testing_metric run (its survivors)
-# ----------------------------------------------------------------------------------------
-class ZeroCone(NegativeCone):
-    """F = 0 in a thin cone of directions, |v| elsewhere (zero, not negative)."""
-
-    name = "zero-cone-test"
-
-    def F_sx(self, x, v):
-        n = ca.sqrt(ca.dot(v, v))
-        c = (math.cos(1.0) * v[0] + math.sin(1.0) * v[1]) / n
-        return ca.if_else(c > 0.99, 0.0 * n, n)
-
-
-class NanAndNegativeCones(NegativeCone):
-    """F NaN in one thin cone, -|v| in the opposite one: the NaN is the worse."""
-
-    name = "nan-negative-cones-test"
-
-    def F_sx(self, x, v):
-        n = ca.sqrt(ca.dot(v, v))
-        c = (math.cos(1.0) * v[0] + math.sin(1.0) * v[1]) / n
-        return ca.if_else(c > 0.99, float("nan"), ca.if_else(c < -0.99, -n, n))
-
-
-class HalfZero(_Base):
-    """F = |v| for x0 >= 0, 0 for x0 < 0 (finite, not positive)."""
-
-    name = "half-zero-test"
-    smooth = False
-
-    def F_sx(self, x, v):
-        return ca.if_else(x[0] < 0, 0.0, ca.sqrt(ca.dot(v, v)))
-
-
-class Zero(_Base):
-    name = "zero-test"
-
-    def F_sx(self, x, v):
-        return 0.0 * ca.sqrt(ca.dot(v, v))
-
-
-class SlightlySquared(_Base):
-    """F = |v| + 1e-6 |v|^2: homogeneity off by 1e-6 relative (absolute far below 1)."""
-
-    name = "slightly-squared-test"
-
-    def F_sx(self, x, v):
-        return ca.sqrt(ca.dot(v, v)) + 1e-6 * ca.dot(v, v)
 
 
 def test_finite_positive_verdicts_in_full():
@@ -726,7 +607,7 @@ def test_describe_rounds_the_nearest_point():
 
 
 def test_strong_convexity_map_found_note_in_full():
-    m = _HiddenConvexity()
+    m = HiddenConvexity()
     r = VM.check_strong_convexity(m, examples=5, directions=7)
     cmap = VM.convexity_map(m)
     assert r.name == "strong-convexity" and r.relation == ">" and r.rhs == ("0", 0.0)
@@ -761,7 +642,7 @@ def test_strong_convexity_sizes_of_a_region_the_map_misses(monkeypatch):
 
 
 def test_strong_convexity_eigenvalue_zero_fails():
-    class Degenerate(_Base):  # F = |v0|-like along a direction: a zero eigenvalue
+    class Degenerate(Base):  # F = |v0|-like along a direction: a zero eigenvalue
         name = "degenerate-test"
 
         def F_sx(self, x, v):
@@ -795,25 +676,6 @@ def test_metric_properties_pass_their_options(monkeypatch):
                    "check_smoothness": base}
 
 
-class Drift(_Base):
-    """F = |v| + 0.1 x0 v0 declared reversible: asymmetric wherever x0 v0 != 0."""
-
-    name = "drift-test"
-
-    def F_sx(self, x, v):
-        return ca.sqrt(ca.dot(v, v)) + 0.1 * x[0] * v[0]
-
-
-class TinyAsymmetric(_Base):
-    """F = 1e-3 (|v| + 1e-12 v0): relatively asymmetric by ~2e-12 > 1e-13, absolutely by
-    ~1e-15 (so a tolerance rtol / F would pass it)."""
-
-    name = "tiny-asymmetric-test"
-
-    def F_sx(self, x, v):
-        return 1e-3 * (ca.sqrt(ca.dot(v, v)) + 1e-12 * v[0])
-
-
 def test_reversibility_verdicts_in_full():
     r = VM.check_reversibility(Drift(), examples=30)
     assert r.status is FAILED and r.name == "reversibility" and r.relation == "=="
@@ -843,15 +705,6 @@ def test_reversible_search_uses_its_stream(monkeypatch):
     assert a.counterexample == b.counterexample
 
 
-class KinkedV(_Base):
-    """F = |v| + 0.2 |v0| declared smooth: a kink at v0 = 0, where hypothesis looks first."""
-
-    name = "kinked-v-test"
-
-    def F_sx(self, x, v):
-        return ca.sqrt(ca.dot(v, v)) + 0.2 * ca.fabs(v[0])
-
-
 def test_smoothness_search_finds_the_kink_itself():
     k = VM.check_smoothness(KinkedV(), examples=20)
     assert k.status is FAILED and k.name == "smoothness"
@@ -864,17 +717,6 @@ def test_smoothness_search_finds_the_kink_itself():
     assert np.all(np.abs(x) <= 0.9 + 1e-12) and np.linalg.norm(v) >= 0.1
     # a smooth metric passes with a tolerance far below the kink's error
     assert VM.check_smoothness(Randers(), examples=4, rtol=1e-9).status is PASSED
-
-
-class NanOutsideOff(_Base):
-    """F = |v| on the disk of radius 1 about (2, -1), NaN beyond 0.9 from its centre."""
-
-    name = "nan-outside-off-test"
-    domain = property(lambda self: Disk(radius=1.0, center=(2.0, -1.0)))
-
-    def F_sx(self, x, v):
-        d = x - ca.DM([2.0, -1.0])
-        return ca.if_else(ca.dot(d, d) > 0.81, float("nan"), ca.sqrt(ca.dot(v, v)))
 
 
 def test_domain_verdicts_in_full():
@@ -905,7 +747,7 @@ def test_domain_verdicts_in_full():
     (_HalvingBox, "projection not idempotent"),
     (_ZeroBox, "a point of the domain is moved by the projection")])
 def test_domain_projection_sides(box, note):
-    class M(_Base):
+    class M(Base):
         name = "projection-sides-test"
         domain = property(lambda self: box((-1.0, -1.0), (1.0, 1.0)))
 
@@ -947,7 +789,7 @@ def _domain_draws(metric, examples):
 
 def test_domain_draws_around_a_shifted_box():
 
-    class M(_Base):
+    class M(Base):
         name = "shifted-box-test"
         domain = property(lambda self: _ShiftedZeroBox((2.0, 10.0), (4.0, 11.0)))
 
@@ -1029,30 +871,6 @@ def test_strong_convexity_declared_region_and_default_directions():
     assert c.lhs[1] == float(ConvexClaimed().convexity(x[None], n_directions=64)[0]) < 0
 
 
-class _Shaped(_Base):
-    """Depends on x (so a counterexample's x can be told from its v): the factor
-    1 + x0^2 + 2 x1^2 times g(|v|)."""
-
-    def factor(self, x):
-        return 1.0 + x[0] ** 2 + 2.0 * x[1] ** 2
-
-
-class RootX(_Shaped):
-    """(1 + x0^2 + 2 x1^2) sqrt|v|: the midpoint form of subadditivity fails."""
-
-    name = "root-x-test"
-
-    def F_sx(self, x, v):
-        return self.factor(x) * ca.dot(v, v) ** 0.25
-
-
-class SquaredX(_Shaped):
-    name = "squared-x-test"
-
-    def F_sx(self, x, v):
-        return self.factor(x) * ca.dot(v, v)
-
-
 def _fnp(m, x, v):
     return float(m.F(np.asarray(x, float), np.asarray(v, float)))
 
@@ -1070,23 +888,11 @@ def test_counterexamples_recompute_their_sides():
         h.counterexample["lam"]
     assert h.status is FAILED
     assert h.lhs[1] == pytest.approx(_fnp(s, x, lam * v), rel=1e-12)
-    o = VM.check_lowered_forms(_OffNumpy(), examples=8)
+    o = VM.check_lowered_forms(OffNumpy(), examples=8)
     x, v = (np.asarray(o.counterexample[k]) for k in "xv")
-    assert o.lhs[1] == pytest.approx(_fnp(_OffNumpy(), x, v), rel=1e-15)
-    hh = VM.check_lowered_forms(_OffHessian(), examples=8)
+    assert o.lhs[1] == pytest.approx(_fnp(OffNumpy(), x, v), rel=1e-15)
+    hh = VM.check_lowered_forms(OffHessian(), examples=8)
     assert hh.relation == "==" and hh.lhs[0].startswith("fundamental tensor lowered [")
-
-
-class ShortBy(_Base):
-    """|v| - delta: F(x, v + w) - F(x, v) - F(x, w) = delta for parallel v, w."""
-
-    def __init__(self, delta):
-        self.delta = delta
-        self.name = f"short-by-{delta:g}-test"
-        super().__init__()
-
-    def F_sx(self, x, v):
-        return ca.sqrt(ca.dot(v, v)) - self.delta
 
 
 def _fixed_vectors(monkeypatch, v):
@@ -1103,45 +909,11 @@ def test_subadditivity_tolerance_at_its_edges(monkeypatch):
     assert r.status is FAILED and r.lhs[0] == "F(x, v + w)"
 
 
-class SmallScaleOff(_Base):
-    """|v| for |v| >= 0.5, larger below: homogeneous only for scales that stay above 0.5."""
-
-    name = "small-scale-off-test"
-
-    def F_sx(self, x, v):
-        n = ca.sqrt(ca.dot(v, v))
-        return n * (1.0 + 0.5 * ca.fmax(0.0, 0.5 - n))
-
-
-class LargeScaleOff(_Base):
-    """|v| up to |v| = 100.5, larger beyond."""
-
-    name = "large-scale-off-test"
-
-    def F_sx(self, x, v):
-        n = ca.sqrt(ca.dot(v, v))
-        return n * (1.0 + ca.fmax(0.0, n - 100.5))
-
-
 def test_homogeneity_scales_from_001_to_100(monkeypatch):
     _fixed_vectors(monkeypatch, [1.0, 0.0])
     small = VM.check_homogeneity(SmallScaleOff(), examples=30)
     assert small.status is FAILED and small.counterexample["lam"] < 0.5
     assert VM.check_homogeneity(LargeScaleOff(), examples=100).status is PASSED
-
-
-class InfOnAxis(_Base):
-    name = "inf-on-axis-test"
-
-    def F_sx(self, x, v):
-        return ca.if_else(v[0] == 0, float("inf"), ca.sqrt(ca.dot(v, v)))
-
-
-class ZeroOnAxis(_Base):
-    name = "zero-on-axis-test"
-
-    def F_sx(self, x, v):
-        return ca.if_else(v[0] == 0, 0.0, ca.sqrt(ca.dot(v, v)))
 
 
 def test_finite_positive_search_fails_on_inf_and_zero():
@@ -1153,45 +925,14 @@ def test_finite_positive_search_fails_on_inf_and_zero():
     assert z.status is FAILED and z.lhs == ("F(x, v)", 0.0) and "not shrunk" not in z.note
 
 
-class ScaledEuclid(_Base):
-    def __init__(self, k):
-        self.k = k
-        self.name = f"scaled-euclid-{k:g}-test"
-        super().__init__()
-
-    def F_sx(self, x, v):
-        return self.k * ca.sqrt(ca.dot(v, v))
-
-
-class _OffAbs(ScaledEuclid):
-    """numpy F = symbolic F + off (torch untouched)."""
-
-    def __init__(self, k, off, rel=False):
-        self.off, self.rel = off, rel
-        super().__init__(k)
-        self.name += f"-off-{off:g}-{rel}"
-
-    def F(self, x, v, check=None):
-        out = super().F(x, v, check=check)
-        if isinstance(out, (np.ndarray, float)):
-            return out * (1.0 + self.off) if self.rel else out + self.off
-        return out
-
-
-class _OffHessianAbs(ScaledEuclid):
-    def lowered_hessian(self, x, v):
-        (h,) = super().lowered_hessian(x, v)
-        return (np.array(h, float) + 1e-9,)
-
-
 def test_lowered_forms_tolerance_is_rtol_max_1_abs_f():
     # |F| < 1: the tolerance is 1e-12 absolute
-    assert VM.check_lowered_forms(_OffAbs(0.1, 1.5e-12), examples=5).status is FAILED
+    assert VM.check_lowered_forms(OffAbs(0.1, 1.5e-12), examples=5).status is FAILED
     # |F| in [1, 430]: 1e-12 |F|, so a relative error of 0.5e-12 passes
-    assert VM.check_lowered_forms(_OffAbs(100.0, 0.5e-12, rel=True), examples=5
+    assert VM.check_lowered_forms(OffAbs(100.0, 0.5e-12, rel=True), examples=5
                                   ).status is PASSED
     # the tensor's tolerance is 1e-10 relative and absolute: 1e-9 on every entry fails
-    r = VM.check_lowered_forms(_OffHessianAbs(1.0), examples=3)
+    r = VM.check_lowered_forms(OffHessianAbs(1.0), examples=3)
     assert r.status is FAILED and r.lhs[0].startswith("fundamental tensor lowered")
 
 
@@ -1216,26 +957,6 @@ def test_smoothness_counterexample_recomputes():
     assert v[0] == 0.0 and k.rhs[1] == pytest.approx(float(u[2:] @ u[2:]), rel=1e-9)
 
 
-class TinyKinkV(_Base):
-    """|v| + 2e-6 |v0| declared smooth: at v0 = 0 the search's error is ~1e-3 relative,
-    far above its 1e-6 but under the sweep's 1e-3 at its larger step."""
-
-    name = "tiny-kink-v-test"
-
-    def F_sx(self, x, v):
-        return ca.sqrt(ca.dot(v, v)) + 2e-6 * ca.fabs(v[0])
-
-
-class C1KinkV(_Base):
-    """F^2 = |v|^2 + 0.3 max(0, v0)^2: C^1, its second derivative jumps at v0 = 0 (the
-    second difference's error there does not shrink with the step)."""
-
-    name = "c1-kink-v-test"
-
-    def F_sx(self, x, v):
-        return ca.sqrt(ca.dot(v, v) + 0.3 * ca.fmax(0.0, v[0]) ** 2)
-
-
 def test_smoothness_search_tolerances():
     for m in (TinyKinkV(), C1KinkV()):
         r = VM.check_smoothness(m, examples=30)
@@ -1244,16 +965,6 @@ def test_smoothness_search_tolerances():
     # a smooth F with large values: rounding noise of E ~ 1e6 is judged relative to |E|
     big = VM.check_smoothness(ScaledEuclid(1000.0), examples=30)
     assert big.status is PASSED
-
-
-class KinkOffCentre(_Base):
-    """|v| (1 + 0.3 |x0 - 0.3127|) declared smooth: the search rarely draws x0 within its
-    step of the kink; the sweep does."""
-
-    name = "kink-off-centre-test"
-
-    def F_sx(self, x, v):
-        return ca.sqrt(ca.dot(v, v)) * (1.0 + 0.3 * ca.fabs(x[0] - 0.3127))
 
 
 def test_smoothness_sweep_counterexample_recomputes():
@@ -1284,18 +995,6 @@ def test_smoothness_sweep_counterexample_recomputes():
     assert _numbers(r.note) == pytest.approx(errs, rel=6e-3)  # 3 digits
     again = VM.check_smoothness(m, examples=10)
     assert again.counterexample == r.counterexample  # seeded
-
-
-class NanBeyond095Off(_Base):
-    """|v| on the disk of radius 1 about (2, -1), NaN beyond 0.95 of it: the smoothness
-    checks stay within 0.9 of the centre (plus their steps)."""
-
-    name = "nan-beyond-095-off-test"
-    domain = property(lambda self: Disk(radius=1.0, center=(2.0, -1.0)))
-
-    def F_sx(self, x, v):
-        d = x - ca.DM([2.0, -1.0])
-        return ca.if_else(ca.dot(d, d) > 0.9025, float("nan"), ca.sqrt(ca.dot(v, v)))
 
 
 def test_smoothness_stays_in_the_domain_scaled_by_09():
@@ -1339,7 +1038,7 @@ def test_domain_projection_tolerance_is_relative_to_the_box(creep, ok):
     """1e-12 times the box's size (2 here): a creep of 1e-12 passes, 5e-12 fails."""
     box = type("B", (_CreepBox,), {"creep": creep})
 
-    class M(_Base):
+    class M(Base):
         name = f"creep-{creep:g}-test"
         domain = property(lambda self: box((2.0, 10.0), (4.0, 11.0)))
 
@@ -1354,7 +1053,7 @@ def test_domain_projection_containment_tolerance(leak, ok):
     """project(p) may lie 1e-9 outside the domain (rounding), not 1e-3."""
     box = type("B", (_LeakyBox,), {"leak": leak})
 
-    class M(_Base):
+    class M(Base):
         name = f"leak-{leak:g}-test"
         domain = property(lambda self: box((-1.0, -1.0), (1.0, 1.0)))
 
@@ -1366,7 +1065,7 @@ def test_domain_projection_containment_tolerance(leak, ok):
 
 def test_domain_draws_beyond_both_faces():
 
-    class M(_Base):
+    class M(Base):
         name = "shifted-box-both-test"
         domain = property(lambda self: Box((2.0, 10.0), (4.0, 11.0)))
 
@@ -1461,31 +1160,8 @@ def test_labels_and_notes_of_failures(monkeypatch):
     assert s.rhs[0] == "F(x, v) + F(x, w)"
 
 
-class _OffNumpyShaped(_Shaped):
-    """(1 + x0^2 + 2 x1^2) |v|, its numpy form off by 1e-9 relative (torch exact)."""
-
-    name = "off-numpy-shaped-test"
-
-    def F_sx(self, x, v):
-        return self.factor(x) * ca.sqrt(ca.dot(v, v))
-
-    def F(self, x, v, check=None):
-        out = super().F(x, v, check=check)
-        return out * (1 + 1e-9) if isinstance(out, (np.ndarray, float)) else out
-
-
-class DiagonalKink(_Base):
-    """|v| (1 + 0.3 |x0 - x1|) declared smooth: a kink along the diagonal, invisible to a
-    step whose x part moves both coordinates alike."""
-
-    name = "diagonal-kink-test"
-
-    def F_sx(self, x, v):
-        return ca.sqrt(ca.dot(v, v)) * (1.0 + 0.3 * ca.fabs(x[0] - x[1]))
-
-
 def test_more_counterexamples_and_directions(monkeypatch):
-    m = _OffNumpyShaped()
+    m = OffNumpyShaped()
     o = VM.check_lowered_forms(m, examples=8)
     x, v = (np.asarray(o.counterexample[k]) for k in "xv")
     assert o.status is FAILED and o.lhs[1] == pytest.approx(_fnp(m, x, v), rel=1e-15)

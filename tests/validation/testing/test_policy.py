@@ -1,4 +1,4 @@
-"""Fast focused tests of validation/testing/policy.py (issue 48 item 6: mutation testing of
+"""Fast focused tests of validation/testing/policy.py (mutation testing of
 the property suite). No CasADi, no solve: a Euclidean metric in numpy (exact distances are
 |y - x|, exact geodesics straight lines) and a stand-in ``solvers`` module that solves it
 in closed form, with statuses set by the test; policies wrong in one known way (a midpoint
@@ -15,11 +15,12 @@ from dataclasses import dataclass, field
 import numpy as np
 import pytest
 
-from finsler import DEFAULT_EVAL_SEED, VALIDATION_SEED, Box, Disk, sample_pairs
-from finsler.errors import InputError
-from finsler.metrics.base import Task
+from finsler import DEFAULT_EVAL_SEED, VALIDATION_SEED, Box, Disk, InputError, Task, sample_pairs
 from validation.testing import policy as P
 from validation.testing.engine import FAILED, INCONCLUSIVE, MAPPED, PASSED, SKIPPED
+
+#: every test here is in the fast focused selection of mutation runs
+pytestmark = pytest.mark.mutation
 
 
 class Flat:

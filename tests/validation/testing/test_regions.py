@@ -1,4 +1,4 @@
-"""Fast focused tests of validation/testing/regions.py (issue 48 item 6: mutation testing of
+"""Fast focused tests of validation/testing/regions.py (mutation testing of
 the property suite). No CasADi, no solve: small duck-typed metrics (a real ``Disk`` or
 ``Box`` domain and a numpy ``F``) whose invalid regions, scans and fundamental tensors are
 known by hand; every sample set is recomputed independently from the same seeded
@@ -15,6 +15,9 @@ import pytest
 
 from finsler import Box, Disk
 from validation.testing import regions as R
+
+#: every test here is in the fast focused selection of mutation runs
+pytestmark = pytest.mark.mutation
 
 
 class Fake:

@@ -1,4 +1,4 @@
-"""Fast focused tests of validation/testing/suite.py (issue 48 item 6: mutation testing of
+"""Fast focused tests of validation/testing/suite.py (mutation testing of
 the property suite). No search and no solve: every property :func:`check` runs is replaced
 by a recorder whose status the test chooses, so the order of the properties, the
 arguments each gets, which ones are ``not-run`` behind which root cause, the report's
@@ -14,17 +14,13 @@ import warnings
 import pytest
 
 import finsler
-from finsler.errors import InputError
+from finsler import InputError
+from validation.testing import PropertyResult
 from validation.testing import suite as S
-from validation.testing.engine import (
-    FAILED,
-    INCONCLUSIVE,
-    MAPPED,
-    NOT_RUN,
-    PASSED,
-    SKIPPED,
-    PropertyResult,
-)
+from validation.testing.engine import FAILED, INCONCLUSIVE, MAPPED, NOT_RUN, PASSED, SKIPPED
+
+#: every test here is in the fast focused selection of mutation runs
+pytestmark = pytest.mark.mutation
 
 F_PROPS = ["domain", "finite-positive", "homogeneity", "subadditivity", "strong-convexity",
            "reversibility", "lowered-forms", "smoothness"]

@@ -13,17 +13,12 @@ import pytest
 from typer.testing import CliRunner
 
 import finsler
+from finsler import InputError
 from finsler.enclosures.affine import enclose_affine
 from finsler.enclosures.intervals import Interval, enclose
-from finsler.errors import InputError
 from finsler.lowering import lower
-from solvers import certify
-from solvers.certificates.conformal.certificate import (
-    ConformalCertifyResult,
-    ConformalSpec,
-    certify_conformal,
-)
-from solvers.status import CertifyStatus
+from solvers import CertifyStatus, ConformalSpec, certify
+from solvers.certificates.conformal.certificate import ConformalCertifyResult, certify_conformal
 from validation.cli import app
 
 cc = importlib.import_module("solvers.certificates.conformal.certificate")

@@ -15,46 +15,27 @@ from __future__ import annotations
 
 import importlib
 import json
-from dataclasses import dataclass
-from typing import ClassVar
 
-import casadi as ca
 import numpy as np
 import pytest
-from conformal_metrics import Conformal4D
 from typer.testing import CliRunner
 
 import finsler
-from finsler.metrics.base import Task
 from finsler.registry import unregister_metric
-from solvers import certify
-from solvers.certificates.conformal.certificate import (
-    ConformalCertifyResult,
-    ConformalSpec,
-    certify_conformal,
-)
+from solvers import CertifyStatus, ConformalSpec, certify
+from solvers.certificates.conformal.certificate import ConformalCertifyResult, certify_conformal
 from solvers.certificates.conformal.split import (
     SplitCertifyResult,
     certify_conformal_best,
     certify_conformal_split,
 )
-from solvers.status import CertifyStatus
 from validation.cli import app
+
+from helpers.metrics.certify_conformal_split import Valley
 
 split_mod = importlib.import_module("solvers.certificates.conformal.split")
 runner = CliRunner()
 SPEC = ConformalSpec(max_boxes=12000, r_cells=4)
-
-
-@dataclass(frozen=True)
-class _Valley(Conformal4D):
-    """``F = (1 + q1**2 + q2**2 / 2 + (q3 q4)**2 / 5) |v|`` on ``[-1, 1]**4``."""
-
-    name: ClassVar[str] = "test-valley-4d"
-    task: ClassVar[Task] = Task(depth=3, eps=0.2)
-
-    def conformal_factor_sx(self, x: ca.SX) -> ca.SX:
-        return 1.0 + x[0] ** 2 + 0.5 * x[1] ** 2 + 0.2 * (x[2] * x[3]) ** 2
 
 
 def _pairs() -> list[tuple[np.ndarray, np.ndarray, float]]:
@@ -71,7 +52,7 @@ def _pairs() -> list[tuple[np.ndarray, np.ndarray, float]]:
 
 @pytest.fixture(scope="module")
 def valley() -> list[tuple[float, SplitCertifyResult, ConformalCertifyResult]]:
-    m = _Valley()
+    m = Valley()
     out = []
     for x, y, d in _pairs():
         path = np.linspace(x, y, 9)
@@ -98,7 +79,7 @@ def test_parts_in_their_own_coordinates() -> None:
     """Each part is bounded in its own coordinates (q1 alone: 1-D; parts on disjoint
     coordinates are not grouped); the parts without length along the path (q2, q3 q4 at
     0) are left out with no share; the sum stays below the exact distance."""
-    m = _Valley()
+    m = Valley()
     x, y, d = _pairs()[0]
     for group in (True, False):
         r = certify_conformal_split(m, x, y, SPEC, path=np.linspace(x, y, 9), group=group)
@@ -111,7 +92,7 @@ def test_shares_above_the_constant_are_caught(monkeypatch: pytest.MonkeyPatch) -
     """Shares of the constant summing above it (a wrong split): the 'bound' exceeds the
     exact distance, or the part's region empties (an error), so the soundness test above
     can fail."""
-    m = _Valley()
+    m = Valley()
     real = split_mod._shares
     x, y, d = _pairs()[0]
     for factor in (1.5, 2.0):
@@ -139,7 +120,7 @@ def test_result_shape(valley: list) -> None:
 
 def test_budget_shared() -> None:
     """``max_boxes`` is the work of all runs together."""
-    m = _Valley()
+    m = Valley()
     x, y, _ = _pairs()[1]
     r = certify_conformal_best(m, x, y, SPEC, path=np.linspace(x, y, 9))
     budgets = [r.full.spec["max_boxes"], *r.spec["part_max_boxes"]]
@@ -149,14 +130,14 @@ def test_budget_shared() -> None:
 
 @pytest.fixture
 def registered() -> object:
-    finsler.register_metric(_Valley)
-    yield _Valley
-    unregister_metric(_Valley.name)
+    finsler.register_metric(Valley)
+    yield Valley
+    unregister_metric(Valley.name)
 
 
 def test_cli_prints_the_best_bound(registered: object) -> None:
     x, y, d = _pairs()[2]
-    args = ["certify", "--metric", _Valley.name, "--start", ",".join(map(str, x)),
+    args = ["certify", "--metric", Valley.name, "--start", ",".join(map(str, x)),
             "--goal", ",".join(map(str, y)), "--max-boxes", "12000"]
     res = runner.invoke(app, [*args, "--json"])
     assert res.exit_code == 0, res.output

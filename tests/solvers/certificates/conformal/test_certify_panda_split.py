@@ -9,30 +9,21 @@ from __future__ import annotations
 
 import importlib
 import itertools
-from typing import ClassVar
 
 import casadi as ca
 import numpy as np
 import pytest
-from conformal_metrics import Conformal4D
 
 import finsler
-from finsler.metrics.base import Metric
-from solvers.certificates.conformal.certificate import ConformalSpec
+from finsler import Metric
+from solvers import ConformalSpec
 from solvers.certificates.conformal.split import certify_conformal_split, factor_parts
+
+from helpers.metrics.certify_panda_split import ScaledEuclidean
 
 split_mod = importlib.import_module("solvers.certificates.conformal.split")
 cc = importlib.import_module("solvers.certificates.conformal.certificate")
 QUICK = ConformalSpec(max_boxes=6000, s_cells=8, r_cells=4)
-
-
-class _ScaledEuclidean(Conformal4D):
-    """``F = (1.5 + 2) |v|`` on a 4-D box, written as a sum of two constants."""
-
-    name: ClassVar[str] = "test-scaled-euclidean"
-
-    def conformal_factor_sx(self, x: ca.SX) -> ca.SX:
-        return ca.SX(1.5) + ca.SX(2.0) + 0.0 * x[0]
 
 
 def _part_lengths(m: Metric, pts: np.ndarray, group: bool = False
@@ -64,7 +55,7 @@ def test_parts_sum_to_the_factor() -> None:
 
 
 def test_constant_parts_give_the_exact_distance() -> None:
-    m = _ScaledEuclidean()
+    m = ScaledEuclidean()
     x, y = np.array([-0.5, 0.2, 0.1, -0.3]), np.array([0.4, -0.6, 0.3, 0.5])
     d = 3.5 * float(np.linalg.norm(y - x))
     r = certify_conformal_split(m, x, y, QUICK, path=np.stack([x, y]))

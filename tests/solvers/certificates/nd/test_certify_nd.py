@@ -10,9 +10,10 @@ import numpy as np
 import pytest
 
 import finsler
-from finsler.errors import InputError
+from finsler import InputError
+from solvers import NDSpec
 from solvers.certificates.nd import parts
-from solvers.certificates.nd.certificate import NDSpec, certify_nd
+from solvers.certificates.nd.certificate import certify_nd
 
 COARSE = NDSpec(h_path=0.2, corridor=0.2, h_far=0.6, faces=6, max_rounds=1, lp_rounds=6,
                 target_gap=0.5)

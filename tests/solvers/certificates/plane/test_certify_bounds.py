@@ -8,71 +8,26 @@ test is well under a second, so that mutation runs can afford them."""
 from __future__ import annotations
 
 import importlib
-from dataclasses import dataclass
-from typing import ClassVar
 
 import casadi as ca
 import numpy as np
 import pytest
-from singular_metrics import Cone
-from tick_clock import TickClock
 
 import finsler
+from finsler import InputError
 from finsler.enclosures.intervals import Interval
-from finsler.errors import InputError
 from solvers.certificates.plane.mesh import _Mesh
+
+from helpers.metrics.certify_bounds import Ridge, Singular, Tilt
+from helpers.metrics.singular import Cone
+from helpers.tick_clock import TickClock
+
+#: every test here is in the fast focused selection of mutation runs
+pytestmark = pytest.mark.mutation
 
 # the module of the bound code (``solvers.certify`` the attribute is a function)
 cm = importlib.import_module("solvers.certificates.plane.bounds")
 EPS = np.finfo(float).eps
-
-
-@dataclass(frozen=True)
-class _Singular(finsler.Metric):
-    """F not finite at ``x_1 = -2``, by a floating-point error of each kind: ``invalid``
-    (sqrt of a negative number, NaN), ``divide`` (by zero, inf), ``over`` (exp overflow)."""
-
-    kind: str = "invalid"
-    name: ClassVar[str] = "singular-bounds-test"
-    task: ClassVar[finsler.Task] = finsler.Task(depth=4, eps=0.2)
-    reversible: ClassVar[bool] = True
-    domain = property(lambda self: finsler.Disk(radius=1.0))
-
-    def F_sx(self, x: ca.SX, v: ca.SX) -> ca.SX:
-        norm = ca.sqrt(ca.dot(v, v))
-        if self.kind == "invalid":
-            return ca.sqrt(x[0] + 1) * norm
-        if self.kind == "divide":
-            return norm / (x[0] + 2)
-        return ca.exp(-1000 * x[0]) * norm
-
-
-@dataclass(frozen=True)
-class _Ridge(finsler.Metric):
-    """F(x, v) = (1 + 4 x_1**2) |v|: ``Hess_z F`` constant (a tight enclosure), ``Hess_v F``
-    growing with ``x_1`` (a loose one over wide boxes)."""
-
-    name: ClassVar[str] = "ridge-bounds-test"
-    task: ClassVar[finsler.Task] = finsler.Task(depth=4, eps=0.2)
-    reversible: ClassVar[bool] = True
-    domain = property(lambda self: finsler.Disk(radius=1.0))
-
-    def F_sx(self, x: ca.SX, v: ca.SX) -> ca.SX:
-        return (1 + 4 * x[0] ** 2) * ca.sqrt(ca.dot(v, v))
-
-
-@dataclass(frozen=True)
-class _Tilt(finsler.Metric):
-    """F(x, v) = (1 + x_1 + x_2 / 2) |v|: ``Hess_z F = 0`` (Hz and its centre value both 0
-    up to rounding), ``Hess_v F`` varying mildly with x (a tight Ht)."""
-
-    name: ClassVar[str] = "tilt-bounds-test"
-    task: ClassVar[finsler.Task] = finsler.Task(depth=4, eps=0.2)
-    reversible: ClassVar[bool] = True
-    domain = property(lambda self: finsler.Disk(radius=1.0))
-
-    def F_sx(self, x: ca.SX, v: ca.SX) -> ca.SX:
-        return (1 + x[0] + 0.5 * x[1]) * ca.sqrt(ca.dot(v, v))
 
 
 def _hessians(m: finsler.Metric) -> tuple[ca.Function, ca.Function]:
@@ -378,7 +333,7 @@ def test_eval_values_refuse_non_finite_values(kind: str) -> None:
     """The clear error, whatever the caller's numpy error state (the floating-point error
     itself is silenced: under ``np.errstate(all="raise")`` it would otherwise escape as a
     FloatingPointError)."""
-    m = _Singular(kind)
+    m = Singular(kind)
     x = np.array([[0.0, 0.0], [-2.0, 0.0]])
     v = np.array([[1.0, 0.0], [1.0, 0.0]])
     msg = (r"^singular-bounds-test: F is not finite on the mesh \(the polygon covering the "
@@ -562,8 +517,8 @@ def test_point_data_splits_loose_boxes_by_the_documented_rule() -> None:
         assert _chord_q(hv, z, (1 - s) * v + s * w, w - v).max() <= ht[0, j] * (1 + 1e-12)
 
 
-@pytest.mark.parametrize("metric", [finsler.get_metric("poincare"), Cone(), _Ridge(),
-                                    _Tilt()], ids=["poincare", "cone", "ridge", "tilt"])
+@pytest.mark.parametrize("metric", [finsler.get_metric("poincare"), Cone(), Ridge(),
+                                    Tilt()], ids=["poincare", "cone", "ridge", "tilt"])
 def test_split_decisions_follow_the_documented_rule(metric: finsler.Metric) -> None:
     """Elements on both sides of each test of the rule: corrections small or large against
     F (``fmin`` and ``r2`` from tiny to huge), enclosures tight or loose (the cone: Hz loose
@@ -607,7 +562,7 @@ def test_split_decisions_follow_the_documented_rule(metric: finsler.Metric) -> N
     assert list(zip(hz, ht, strict=True)) == want
     whole = cm._bounds_on_boxes(metric, lo, hi, data.dirs[kidx], data.dirs[(kidx + 1) % k])
     split = (hz != whole[0]) | (ht != whole[1])
-    if isinstance(metric, _Tilt):  # both enclosures tight: nothing is split
+    if isinstance(metric, Tilt):  # both enclosures tight: nothing is split
         assert split.sum() == 0
     else:
         assert 0 < split.sum() < len(lo)  # both kinds present

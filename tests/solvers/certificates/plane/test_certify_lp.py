@@ -13,8 +13,6 @@ import math
 
 import numpy as np
 import pytest
-from scipy.optimize import OptimizeResult, linprog
-from tick_clock import TickClock
 
 import solvers.certificates.plane.lp as lp_mod
 from solvers.certificates.plane.lp import (
@@ -22,6 +20,7 @@ from solvers.certificates.plane.lp import (
     LP_SOLVER,
     NEAR_PER_TARGET,
     NEAR_TIGHT,
+    SETTLE,
     SETTLE_ROUNDS,
     TIGHT_DUAL,
     WINDOW_FRACTION,
@@ -34,68 +33,19 @@ from solvers.certificates.plane.lp import (
 )
 from solvers.certificates.plane.mesh import _Mesh
 
-#: the settle rule of the LP rounds (a tree before it has none: its tests are skipped)
-SETTLE = getattr(lp_mod, "SETTLE", None)
-needs_settle = pytest.mark.skipif(SETTLE is None, reason="no settle rule in this tree")
+from helpers.lp_rows import DIRS, FULL, MESH, NV, K, S, highs_solve, weights
+from helpers.tick_clock import TickClock
 
-K = 32
-ANG = 2 * np.pi * np.arange(K) / K
-DIRS = np.stack([np.cos(ANG), np.sin(ANG)], 1)
-S, G = np.array([0.1, 0.5]), np.array([0.9, 0.5])  # goal - start along DIRS[0]
-
-
-def _mesh() -> _Mesh:
-    rng = np.random.default_rng(0)
-    t = np.linspace(0.0, 1.0, 5)
-    x, y = np.meshgrid(t, t)
-    grid = np.stack([x.ravel(), y.ravel()], 1) + rng.uniform(-0.03, 0.03, (25, 2))
-    return _Mesh(np.concatenate([S[None], G[None], grid]))
-
-
-MESH = _mesh()
-NV = 3 * MESH.n_tri
-
-
-def _weights() -> np.ndarray:
-    """Rows that differ from triangle to triangle (F = w(x) |v| piecewise)."""
-    c = MESH.centroids
-    w = 1.0 + c[:, 0] + 0.5 * c[:, 1]
-    return np.broadcast_to(w[:, None, None], (MESH.n_tri, 3, K)).copy()
+#: every test here is in the fast focused selection of mutation runs
+pytestmark = pytest.mark.mutation
 
 
 def _none() -> dict[str, np.ndarray]:
     return {"exact": np.zeros(NV, bool), "active": np.zeros((NV, K), bool)}
 
 
-def _full_rows() -> np.ndarray:
-    """Dense matrix of every row ``grad phi(vertex) . v_k`` (vertex-major, then k), built
-    from the P2 gradients the mesh gives, independently of the module's sparse assembly."""
-    gc = MESH.grad.reshape(NV, 2, 6)
-    dofs = np.repeat(MESH.dofs, 3, axis=0)
-    a = np.zeros((NV * K, MESH.n_dofs))
-    for v in range(NV):
-        co = DIRS @ gc[v]  # (K, 6)
-        for j in range(6):
-            a[v * K:(v + 1) * K, dofs[v, j]] += co[:, j]
-    return a
-
-
-FULL = _full_rows()
-
-
-def _highs_solve(b: np.ndarray) -> OptimizeResult:
-    """The full LP (every row of ``FULL``, the start held at 0) by scipy's HiGHS."""
-    c = np.zeros(MESH.n_dofs)
-    c[1] = -1.0
-    bounds = [(None, None)] * MESH.n_dofs
-    bounds[0] = (0.0, 0.0)
-    res = linprog(c, A_ub=FULL, b_ub=b.reshape(-1), bounds=bounds, method="highs")
-    assert res.status == 0
-    return res
-
-
 def _highs_optimum(b: np.ndarray) -> float:
-    return float(-_highs_solve(b).fun)
+    return float(-highs_solve(b).fun)
 
 
 def _max_ratio(phi: np.ndarray, b: np.ndarray) -> float:
@@ -105,7 +55,7 @@ def _max_ratio(phi: np.ndarray, b: np.ndarray) -> float:
 # ---- constants and the window ----------------------------------------------------------
 def test_constants_and_the_direction_window() -> None:
     assert LP_SOLVER == "CLARABEL" and INITIAL_DIRECTIONS == 8 and WINDOW_FRACTION == 1 / 64
-    assert TIGHT_DUAL == 1e-4 and SETTLE in (None, 0.1)
+    assert TIGHT_DUAL == 1e-4 and SETTLE == 0.1
     assert NEAR_TIGHT == 0.06 and NEAR_PER_TARGET == 6.0 and WORST_WINDOW == 2
     assert SETTLE_ROUNDS == 3 and lp_mod.PROMOTE_WINDOW == 3
     assert lp_mod.LP_OPTIONS == {"tol_gap_abs": 1e-5, "tol_gap_rel": 1e-5, "tol_feas": 1e-5,
@@ -194,7 +144,7 @@ def test_uniform_euclidean_rows_give_exactly_the_straight_distance() -> None:
 
 
 def test_rows_that_vary_reach_the_highs_optimum_of_all_rows() -> None:
-    b = _weights()
+    b = weights()
     best = _highs_optimum(b)
     r = _solve_lp(MESH, b, DIRS, 0, 1, upper=100.0, target=1e-6, start=_none())
     assert best * (1 - 1e-6) <= r["lower"] <= best * (1 + 1e-9)
@@ -212,7 +162,7 @@ def test_rows_tightened_on_demand_reach_the_optimum_of_the_tight_rows() -> None:
     three vertices to their tight value: the LP asks for every row it holds and every row
     its potential nearly fills, and so reaches the HiGHS optimum of the TIGHT rows (the
     loose rows alone give about 10 % less); the bound holds for the rows it ended with."""
-    tight = _weights()
+    tight = weights()
     b = 0.9 * tight
     asked: set[tuple[int, int]] = set()
 
@@ -244,7 +194,7 @@ def test_one_round_tightens_the_rows_its_potential_fills_before_scaling() -> Non
     Those it fills beyond ``1 - near`` (and only rows of the triangles asked) are tightened
     BEFORE the scale, so the bound is the value over the largest ratio against the TIGHT
     rows there (a loose row would scale it down by about 10 %)."""
-    tight = _weights()
+    tight = weights()
     b = 0.9 * tight
     asked: list[tuple[int, int]] = []
 
@@ -279,7 +229,7 @@ def test_one_round_of_few_rows_is_scaled_into_a_valid_bound() -> None:
     other rows): the bound is the LP value over its largest row ratio; the duals satisfy
     strong duality (value = duals . rhs) and dual feasibility (A^T y = e_goal off the start)
     against the rows rebuilt here."""
-    b = _weights()
+    b = weights()
     active = np.zeros((NV, K), bool)
     active[:, [0, 7, 13, 20, 26]] = True
     start = {"exact": np.ones(NV, bool), "active": active}
@@ -320,7 +270,7 @@ def test_rows_of_safe_vertices_point_along_their_facet_normals() -> None:
 
 
 def test_the_rounds_stop_when_the_bound_reaches_the_target() -> None:
-    b = _weights()
+    b = weights()
     best = _highs_optimum(b)
     far = _solve_lp(MESH, b, DIRS, 0, 1, upper=100.0, target=1e-6, start=_none())
     near = _solve_lp(MESH, b, DIRS, 0, 1, upper=best * 1.02, target=0.1, start=_none())
@@ -334,9 +284,8 @@ def test_the_rounds_stop_when_the_bound_reaches_the_target() -> None:
     assert nxt["iterations"] >= 2 and nxt["lower"] >= best * (1 - 0.5 * gap)
 
 
-@needs_settle
 def test_settle_stops_a_mesh_that_cannot_reach_the_target() -> None:
-    b = _weights()
+    b = weights()
     best = _highs_optimum(b)
     # rounds 1 -> 2 gain far less than SETTLE * target * upper: settled after round 2
     r = _solve_lp(MESH, b, DIRS, 0, 1, upper=2 * best, target=0.1, start=_none(),
@@ -370,7 +319,7 @@ def test_settle_stops_a_mesh_that_cannot_reach_the_target() -> None:
 
 def test_lp_seconds_add_up_the_rounds(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(lp_mod, "time", TickClock())
-    r = _solve_lp(MESH, _weights(), DIRS, 0, 1, upper=100.0, target=1e-6, start=_none(),
+    r = _solve_lp(MESH, weights(), DIRS, 0, 1, upper=100.0, target=1e-6, start=_none(),
                   max_iter=3)
     # each round reads the clock before the solve, after it (+1 s), and for the log
     assert r["iterations"] == 3 and r["lp_seconds"] == 3.0
@@ -395,7 +344,7 @@ def test_each_round_logs_its_rows_value_ratio_and_bound(
 
     monkeypatch.setattr(lp_mod, "time", TickClock())
     caplog.set_level(logging.DEBUG, logger="solvers.certificates.plane.lp")
-    r = _solve_lp(MESH, _weights(), DIRS, 0, 1, upper=100.0, target=1e-6, start=_none(),
+    r = _solve_lp(MESH, weights(), DIRS, 0, 1, upper=100.0, target=1e-6, start=_none(),
                   max_iter=1)
     msgs = [rec.getMessage() for rec in caplog.records
             if rec.name == "solvers.certificates.plane.lp"]
@@ -415,19 +364,18 @@ def test_the_target_is_relative_to_the_upper_bound() -> None:
     """Rows scaled by 0.1 (optimum ~0.14) and an upper bound 0.5 with target 0.5: the gap
     0.36 is above 0.5 * 0.5, so the rounds go on (a gap tested against target / upper,
     1.0, would stop at once)."""
-    b = 0.1 * _weights()
+    b = 0.1 * weights()
     best = _highs_optimum(b)
     assert best < 0.2
     r = _solve_lp(MESH, b, DIRS, 0, 1, upper=0.5, target=0.5, start=_none())
     assert r["iterations"] > 1
 
 
-@needs_settle
 def test_a_value_above_the_target_line_never_settles() -> None:
     """Few rows at first (unscaled values above the optimum, falling round by round) and
     (1 - target) upper just below the optimum: every value stays above that line, so the
     rounds never settle; they end on the target once the bound gets there."""
-    b = _weights()
+    b = weights()
     best = _highs_optimum(b)
     active = np.zeros((NV, K), bool)
     active[:, [0, 7, 13, 20, 26]] = True
@@ -443,7 +391,7 @@ def test_promoted_vertices_get_every_direction_when_k_is_16() -> None:
     """K = 16 directions: the coarse set (every K // 16 = 1st) is all of them."""
     a = 2 * np.pi * np.arange(16) / 16
     dirs = np.stack([np.cos(a), np.sin(a)], 1)
-    b = _weights()[:, :, :16]
+    b = weights()[:, :, :16]
     start = {"exact": np.zeros(NV, bool), "active": np.zeros((NV, 16), bool)}
     r = _solve_lp(MESH, b, dirs, 0, 1, upper=100.0, target=1e-6, start=start, max_iter=1)
     assert r["exact"].any()
@@ -458,7 +406,7 @@ def test_one_rounds_refinement_recomputed_from_its_duals_and_rows() -> None:
     such near-tight row of an exact vertex, and WORST_WINDOW neighbours each side of the
     worst row of a vertex that breaks one by more than 0.1 target, are added. Recomputed
     here from the returned potential, duals and rows."""
-    b, target = _weights(), 0.1
+    b, target = weights(), 0.1
     ex0 = np.repeat(np.arange(MESH.n_tri) % 2 == 0, 3)
     act0 = np.zeros((NV, K), bool)
     act0[np.ix_(ex0, [0, 7, 13, 20, 26])] = True

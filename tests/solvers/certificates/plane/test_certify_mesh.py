@@ -13,8 +13,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from finsler.domains import Box, Disk
-from finsler.errors import InputError
+from finsler import Box, Disk, InputError
 from solvers.certificates.plane.mesh import (
     _distance_to_path,
     _hex_lattice,
@@ -25,6 +24,9 @@ from solvers.certificates.plane.mesh import (
     _spacing,
     _zigzag,
 )
+
+#: every test here is in the fast focused selection of mutation runs
+pytestmark = pytest.mark.mutation
 
 
 @dataclass(frozen=True)

@@ -1,21 +1,25 @@
 """solvers.certificates.plane.repair: the local repair of an LP round's potential, checked against
-every row rebuilt densely here (``FULL`` of the certify_lp kill tests) and the full LP's
+every row rebuilt densely (``FULL`` of ``helpers.lp_rows``) and the full LP's
 optimum by scipy's HiGHS."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
-from test_mutation_kills_certify_lp import DIRS, FULL, MESH, NV, K, _highs_solve, _weights
 
 import solvers.certificates.plane.lp as lp_mod
 import solvers.certificates.plane.repair as rep
 from solvers.certificates.plane.lp import _solve_lp
 from solvers.certificates.plane.repair import repair
 
+from helpers.lp_rows import DIRS, FULL, MESH, NV, K, highs_solve, weights
+
+#: every test here is in the fast focused selection of mutation runs
+pytestmark = pytest.mark.mutation
+
 
 def _optimum(b: np.ndarray) -> np.ndarray:
-    return _highs_solve(b).x
+    return highs_solve(b).x
 
 
 def _ratio(phi: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -33,7 +37,7 @@ def _broken(b: np.ndarray) -> tuple[np.ndarray, int]:
 
 
 def test_a_pushed_unknown_is_mended_locally_and_every_row_holds() -> None:
-    b = _weights()
+    b = weights()
     phi, _ = _broken(b)
     ratio = _ratio(phi, b)
     out = repair(MESH, b.reshape(NV, K), DIRS, phi, ratio, (0, 1))
@@ -48,7 +52,7 @@ def test_a_pushed_unknown_is_mended_locally_and_every_row_holds() -> None:
 
 def test_nothing_broken_or_too_much_broken_gives_none(monkeypatch: pytest.MonkeyPatch
                                                       ) -> None:
-    b = _weights()
+    b = weights()
     good = 0.9 * _optimum(b)
     assert repair(MESH, b.reshape(NV, K), DIRS, good, _ratio(good, b), (0, 1)) is None
     phi, _ = _broken(b)
@@ -65,9 +69,9 @@ def test_a_round_short_of_the_target_only_by_broken_rows_is_repaired(
     import logging
     import re
 
-    from tick_clock import TickClock
+    from helpers.tick_clock import TickClock
 
-    b = _weights()
+    b = weights()
     active = np.zeros((NV, K), bool)
     active[:, [0, 7, 13, 20, 26]] = True
     start = {"exact": np.ones(NV, bool), "active": active}
