@@ -219,6 +219,7 @@ def test_a_run_whose_module_cannot_be_imported_names_the_file(runs, tmp_path) ->
 def test_the_guide_commands_run(runs, tmp_path) -> None:
     """The guide's commands (docs/guides/methods.md), with budgets 1/12 of its: the
     shipped example by its module name, as an installed package has it."""
+    _forget_example()  # as in a new shell: whatever an earlier test imported or registered
     block = re.search(r"```bash\n(.*?)```", GUIDE.read_text(), flags=re.S).group(1)
     lines = block.strip().splitlines()
     assert lines[0] == "M=learn.examples.toy_method"
