@@ -1,5 +1,5 @@
 """Time of ``geodesics check`` (default settings) on the registered metrics and on the
-metrics of ``tests/broken_metrics.py`` (each wrong in one way, and the valid ones there),
+metrics of ``tests/helpers/broken_metrics.py`` (each wrong in one way, and the valid ones there),
 each in a fresh process (imports and NLP builds included, one thread: OMP_NUM_THREADS=1),
 with its exit status, failed (root cause first), inconclusive properties and the slowest
 property; written to ``benchmarks/results/check/check_speed-DATE.md``.
@@ -65,7 +65,7 @@ def main() -> None:
     ap.add_argument("--examples", default="100",
                     help="comma-separated --examples values (default 100)")
     ap.add_argument("--only", default="", help="comma-separated metric names")
-    ap.add_argument("--no-broken", action="store_true", help="skip tests/broken_metrics.py")
+    ap.add_argument("--no-broken", action="store_true", help="skip tests/helpers/broken_metrics.py")
     ap.add_argument("--two-d", action="store_true", help="only 2-D metrics")
     args = ap.parse_args()
     sys.path.insert(0, str(ROOT / "tests"))
@@ -99,7 +99,7 @@ def main() -> None:
             print("  ".join(str(c) for c in row), flush=True)
         out.add(f"## --examples {examples}", "", markdown_table(header, rows), "")
     out.add("Each row is one `python -m validation.cli check --metric NAME --json "
-            "--examples N` process (with `--metric-module tests/broken_metrics.py` for the "
+            "--examples N` process (with `--metric-module tests/helpers/broken_metrics.py` for the "
             "broken-* and valid-* metrics), OMP_NUM_THREADS=1; CPU s is the process's user + "
             "system time. `stderr lines`: lines the JSON run printed on stderr (warnings "
             "are caught and summarised in the JSON, so 0 is expected).")

@@ -12,7 +12,7 @@ header gives the load averages, since other processes slow a run down.
 
 With ``--imports`` it also lists, per command, the heavy modules the run imported
 (scipy.integrate, torch, hypothesis, cvxpy, casadi, numpy, pydantic, rich), from a probe
-that invokes the typer app in a fresh interpreter (``tests/test_cli_imports.py`` asserts
+that invokes the typer app in a fresh interpreter (``tests/cli/test_cli_imports.py`` asserts
 the first four stay out).
 
 ``--before DIR`` also times the same commands from another checkout of the project

@@ -4,7 +4,7 @@ The kinematic model comes from Pinocchio, which parses the Panda URDF shipped by
 ``example-robot-data`` package (the URDF is never copied into this repository). The PyPI
 Pinocchio wheels have no CasADi bindings, so the forward kinematics is rebuilt here in CasADi
 from Pinocchio's model data: joint placements, joint axes, parent indices and frame placements.
-``tests/test_panda_kinematics.py`` checks it against ``pinocchio.forwardKinematics`` +
+``tests/finsler/metrics/test_panda_kinematics.py`` checks it against ``pinocchio.forwardKinematics`` +
 ``pinocchio.updateFramePlacements``.
 
 Only the 7 arm joints are configuration coordinates: the finger joints of the URDF are locked at
