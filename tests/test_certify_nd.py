@@ -11,7 +11,7 @@ import pytest
 
 import finsler
 from finsler.errors import InputError
-from solvers import certify_nd_parts as parts
+from solvers.certificates.nd import parts
 from solvers.certificates.nd.certificate import NDSpec, certify_nd
 
 COARSE = NDSpec(h_path=0.2, corridor=0.2, h_far=0.6, faces=6, max_rounds=1, lp_rounds=6,

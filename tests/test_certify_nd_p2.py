@@ -15,7 +15,7 @@ import finsler
 from finsler.enclosures.affine import affine_forms
 from finsler.errors import InputError
 from finsler.lowering import lower
-from solvers import certify_nd_p2 as p2mod
+from solvers.certificates.nd import p2 as p2mod
 from solvers.certificates.nd.certificate import NDSpec, certify_nd
 from solvers.certificates.nd.parts import Cells, lowered_f_grad
 
