@@ -8,6 +8,8 @@ Public API::
     midpoint(metric, start, goal, segments=None, **kw) -> MidpointResult
     refine_minmax(metric, result) -> MinMaxResult
     distance(metric, start, goal, rtol=None, *, strict=False) -> DistanceResult
+    distance_field(metric, source, resolution=None, *, stencil=1, ...) -> DistanceField
+    distance_matrix(metric, points (K, dim), *, exact=False, ...) -> DistanceMatrix
     solve_batch(metric, pairs (K, 2, dim), segments=None, *, minmax=False, workers=None,
                 progress=True, initial_paths=None, global_seeds=True, tol=None)
                 -> list[GeodesicResult]
@@ -28,6 +30,7 @@ from finsler.infra.lazy import lazy_exports
 
 if TYPE_CHECKING:
     from solvers.certify import CertifyResult, MeshSpec, certify
+    from solvers.distance import DistanceField, distance_field, distance_matrix
     from solvers.expmap import ExpResult, LogResult, exp_map, log_map
     from solvers.geodesic import (
         check_pairs,
@@ -61,6 +64,7 @@ if TYPE_CHECKING:
 _LAZY = {
     "CertifyResult": "solvers.certify",
     "CertifyStatus": "solvers.status",
+    "DistanceField": "solvers.distance",
     "DistanceResult": "solvers.result",
     "DistanceStatus": "solvers.status",
     "ExpResult": "solvers.expmap",
@@ -79,6 +83,8 @@ _LAZY = {
     "check_pairs": "solvers.geodesic",
     "check_segments": "solvers.geodesic",
     "distance": "solvers.spectral",
+    "distance_field": "solvers.distance",
+    "distance_matrix": "solvers.distance",
     "exp_map": "solvers.expmap",
     "log_map": "solvers.expmap",
     "midpoint": "solvers.geodesic",
@@ -90,6 +96,7 @@ _LAZY = {
 __all__ = [
     "CertifyResult",
     "CertifyStatus",
+    "DistanceField",
     "DistanceResult",
     "DistanceStatus",
     "ExpResult",
@@ -108,6 +115,8 @@ __all__ = [
     "check_pairs",
     "check_segments",
     "distance",
+    "distance_field",
+    "distance_matrix",
     "exp_map",
     "log_map",
     "midpoint",
