@@ -60,11 +60,12 @@ MAX_NODES = 20_000_000
 
 @dataclass(frozen=True)
 class Grid:
-    """A regular grid of spacing ``h`` in every coordinate: node ``i`` (a multi-index) is at
-    ``low + h i``; ``inside`` ``shape`` bool marks the nodes inside the domain."""
+    """A regular grid of spacing ``h`` ``(dim,)`` (per coordinate): node ``i`` (a
+    multi-index) is at ``low + h i``; ``inside`` ``shape`` bool marks the nodes inside the
+    domain."""
 
     low: np.ndarray
-    h: float
+    h: np.ndarray
     shape: tuple[int, ...]
     inside: np.ndarray
 
@@ -78,7 +79,7 @@ class Grid:
 
     def axes(self) -> list[np.ndarray]:
         """Node coordinates along each axis."""
-        return [self.low[i] + self.h * np.arange(n) for i, n in enumerate(self.shape)]
+        return [self.low[i] + self.h[i] * np.arange(n) for i, n in enumerate(self.shape)]
 
     def points(self) -> np.ndarray:
         """Every node ``(prod(shape), dim)`` in C order."""
@@ -86,10 +87,11 @@ class Grid:
         return np.stack([m.ravel() for m in mesh], -1)
 
 
-def make_grid(domain: Any, resolution: int, box: tuple[np.ndarray, np.ndarray] | None = None
-              ) -> Grid:
-    """The grid with ``resolution`` cells along the longest side of ``box`` (default: the
-    domain's bounding box), the same spacing in every coordinate, centred in the box."""
+def make_grid(domain: Any, resolution: int | tuple[int, ...],
+              box: tuple[np.ndarray, np.ndarray] | None = None) -> Grid:
+    """The grid over ``box`` (default: the domain's bounding box): ``resolution`` an
+    integer, that many cells along the longest side and the same spacing in every
+    coordinate (centred in the box); or one number of cells per coordinate."""
     low, high = (domain.bounds() if box is None else box)
     low = np.asarray(low, float)
     high = np.asarray(high, float)
@@ -99,8 +101,12 @@ def make_grid(domain: Any, resolution: int, box: tuple[np.ndarray, np.ndarray] |
     side = high - low
     if np.any(side <= 0):
         raise InputError(f"the grid box must have positive sides, got {side.tolist()}")
-    h = float(side.max()) / resolution
-    n = np.floor(side / h + 1e-9).astype(int) + 1
+    if isinstance(resolution, tuple):
+        n = np.array(resolution, int) + 1
+        h = side / np.array(resolution, float)
+    else:
+        h = np.full(side.shape, float(side.max()) / resolution)
+        n = np.floor(side / h + 1e-9).astype(int) + 1
     total = int(np.prod(n.astype(float)))
     if total > MAX_NODES:
         raise InputError(f"resolution {resolution} makes a grid of {total} nodes "
@@ -195,7 +201,7 @@ def _eval_F(metric: Metric, x: np.ndarray, v: np.ndarray) -> np.ndarray:
 
 def step_costs(metric: Metric, grid: Grid, stencil: Stencil, dep: np.ndarray,
                domain: Any = None) -> tuple[np.ndarray, np.ndarray]:
-    """Cost table ``(classes, F, P)`` of the steps ``h F(y - h w / 2, w)`` and the class of
+    """Cost table ``(classes, F, P)`` of the steps ``F(y - h w / 2, h w)`` and the class of
     every node (``shape`` int): one class per value of the coordinates ``F`` depends on
     (``dep``), one per node where it depends on all."""
     w = stencil.directions()
@@ -216,7 +222,7 @@ def step_costs(metric: Metric, grid: Grid, stencil: Stencil, dep: np.ndarray,
         if dep_axes:
             sub_idx = np.stack(np.unravel_index(np.arange(n_cls), sub), -1)
             for k, ax in enumerate(dep_axes):
-                reps[:, ax] = grid.low[ax] + grid.h * sub_idx[:, k]
+                reps[:, ax] = grid.low[ax] + grid.h[ax] * sub_idx[:, k]
     n_cls = reps.shape[0]
     check_memory((n_cls, nf * npt, dim), "distance field step costs",
                  "lower the resolution or the stencil's order")
@@ -224,8 +230,8 @@ def step_costs(metric: Metric, grid: Grid, stencil: Stencil, dep: np.ndarray,
     flat_w, back = np.unique(np.round(w.reshape(-1, dim), 12), axis=0, return_inverse=True)
     nu = flat_w.shape[0]
     x = np.repeat(reps, nu, axis=0)
-    v = np.tile(flat_w, (n_cls, 1))
-    mid = x - 0.5 * grid.h * v
+    v = np.tile(flat_w * grid.h, (n_cls, 1))   # the step in coordinates
+    mid = x - 0.5 * v
     with np.errstate(all="ignore"):
         f = _eval_F(metric, mid, v)
         ok = np.isfinite(f) & (f > 0)
@@ -236,7 +242,7 @@ def step_costs(metric: Metric, grid: Grid, stencil: Stencil, dep: np.ndarray,
         if not ok.all():
             f[~ok] = _eval_F(metric, x[~ok], v[~ok])
     f = f.reshape(n_cls, nu)[:, back.reshape(-1)]
-    cost = grid.h * f.reshape(n_cls, nf, npt)
+    cost = f.reshape(n_cls, nf, npt)
     bad = ~(np.isfinite(f) & (f > 0))
     if bad.any():
         c, k = np.argwhere(bad)[0]

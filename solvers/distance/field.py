@@ -125,7 +125,7 @@ class DistanceField(Result):
     values: np.ndarray = field(repr=False)
     error: np.ndarray | None = field(repr=False)
     grid: Grid = field(repr=False)
-    resolution: int
+    resolution: Any
     stencil: Stencil = field(repr=False)
     iterations: int
     status: DistanceStatus
@@ -164,7 +164,7 @@ class DistanceField(Result):
         if self.error is None:
             return {"median": float("nan"), "p99": float("nan"), "max": float("nan")}
         pts = self.grid.points()
-        far = np.max(np.abs(pts - self.source), axis=1) > INIT_RADIUS * self.grid.h
+        far = np.max(np.abs(pts - self.source) / self.grid.h, axis=1) > INIT_RADIUS
         v = self.values.ravel()
         e = self.error.ravel()
         ok = far & np.isfinite(v) & np.isfinite(e) & (v > 0)
@@ -177,7 +177,7 @@ class DistanceField(Result):
     def geodesic(self, goal: Any, exact: bool = False, segments: int | None = None,
                  max_steps: int | None = None) -> FieldGeodesic:
         """The path from the source to ``goal`` ``(dim,)`` by backtracking: from the goal,
-        repeatedly the stencil step ``w`` that minimises ``field(y - h w) + h F(y, w)``,
+        repeatedly the stencil step ``w`` that minimises ``field(y - h w) + F(y, h w)``,
         until within a few cells of the source. ``exact=True``: the path seeds one exact
         solve (`solvers.solve_geodesic` with ``initial=`` the path and no other seeds)
         of ``segments`` segments (default the metric's task), attached as ``exact``."""
@@ -192,17 +192,16 @@ class DistanceField(Result):
                  else 4 * int(sum(self.grid.shape)) * int(self.stencil.radius.max()) + 50)
         path = [g]
         p = g
-        near = INIT_RADIUS * h
         status = DistanceStatus.CONVERGED
         for _ in range(limit):
-            if np.max(np.abs(p - self.source)) <= near:
+            if np.max(np.abs(p - self.source) / h) <= INIT_RADIUS:
                 break
             q = p[None] - h * w
             with np.errstate(all="ignore"):
                 inside = m.domain.contains(q, tol=1e-12)
                 val = interpolate(self.grid, self.values, q)
-                (f,) = m.lowered_F(p[None] - 0.5 * h * w, w)
-            total = np.where(inside, val + h * np.asarray(f, float).reshape(-1), np.inf)
+                (f,) = m.lowered_F(p[None] - 0.5 * h * w, h * w)
+            total = np.where(inside, val + np.asarray(f, float).reshape(-1), np.inf)
             k = int(np.argmin(total))
             if not np.isfinite(total[k]):
                 status = DistanceStatus.SOLVER_FAILED
@@ -253,6 +252,16 @@ class DistanceField(Result):
         return json_ready(out)
 
 
+def _check_resolution(resolution: Any, dim: int) -> int | tuple[int, ...]:
+    if isinstance(resolution, (list, tuple, np.ndarray)):
+        r = tuple(resolution)
+        if len(r) != dim:
+            raise InputError(f"resolution must be an integer or {dim} integers (cells per "
+                             f"coordinate), got {len(r)} entries")
+        return tuple(check_count(k, "resolution", 4, MAX_RESOLUTION) for k in r)
+    return check_count(resolution, "resolution", 4, MAX_RESOLUTION)
+
+
 def _check_radius(stencil: Any, dim: int) -> tuple[int, ...]:
     if isinstance(stencil, (int, np.integer)) and not isinstance(stencil, bool):
         stencil = (int(stencil),) * dim
@@ -274,7 +283,8 @@ def distance_field(metric: Metric | str, source: Any, resolution: int | None = N
     (metrics of dimension 2 or 3).
 
     ``resolution``: cells along the longest side of the domain's bounding box (or of
-    ``box``), the same spacing in every coordinate (default `DEFAULT_RESOLUTION`).
+    ``box``), the same spacing in every coordinate (default `DEFAULT_RESOLUTION`); or one
+    number of cells per coordinate (e.g. finer in position than in heading).
     ``stencil``: half widths (cells, an integer or one per coordinate) of the box of
     offsets whose boundary the update minimises over: wider for strongly anisotropic
     metrics (thin unit balls), at a cost growing like its surface. ``order``: samples per
@@ -293,8 +303,8 @@ def distance_field(metric: Metric | str, source: Any, resolution: int | None = N
     m = _metric(metric)
     s = _point(m, source, "source")
     dim = m.dim
-    res = DEFAULT_RESOLUTION[dim] if resolution is None else check_count(
-        resolution, "resolution", 4, MAX_RESOLUTION)
+    res = _check_resolution(DEFAULT_RESOLUTION[dim] if resolution is None else resolution,
+                            dim)
     radius = _check_radius(stencil, dim)
     order_ = DEFAULT_ORDER[dim] if order is None else check_count(order, "order", 1, 16)
     if not isinstance(error_estimate, (bool, np.bool_)):
@@ -331,7 +341,8 @@ def distance_field(metric: Metric | str, source: Any, resolution: int | None = N
     ok = sweep.converged
     err = None
     if error_estimate:
-        coarse_grid, coarse = solve(max(res // 2, 2))
+        half = tuple(max(k // 2, 2) for k in res) if isinstance(res, tuple) else max(res // 2, 2)
+        coarse_grid, coarse = solve(half)
         ok = ok and coarse.converged
         coarse_at_fine = interpolate(coarse_grid, coarse.values, grid.points())
         with np.errstate(invalid="ignore"):
