@@ -20,7 +20,7 @@ def test_field_writes_grid_and_figure(tmp_path):
     doc = json.loads((tmp_path / "field.json").read_text())
     assert values.shape == tuple(doc["grid"]["shape"])
     assert (tmp_path / "field.png").stat().st_size > 1000
-    assert "goal [0.5, 0.3]: distance 1.48" in r.output
+    assert "goal [0.5, 0.3]: distance 1.47" in r.output
 
 
 def test_bad_source_is_one_error_line(tmp_path):

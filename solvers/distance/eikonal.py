@@ -325,9 +325,33 @@ def _factor_table(metric: Metric, grid: Grid, stencil: Stencil, source: np.ndarr
     return widx, corr
 
 
+def _prune_faces(cost: np.ndarray, stencil: Stencil, h: np.ndarray, prune: float | None
+                 ) -> np.ndarray | None:
+    """Per cost row, the faces ``(rows, M)`` whose cheapest sample costs at most ``prune``
+    times the row's cheapest per unit of (Euclidean) step length; None without
+    pruning. Strongly anisotropic metrics (car-like: sideways and backwards ten times
+    dearer than forwards) never take their dear directions over a grid step, and leaving
+    them out divides the work; a direction pruned where it would be the best makes the
+    field an upper bound there instead. Rows with fewer faces repeat their best ones."""
+    if prune is None:
+        return None
+    step = np.linalg.norm(stencil.directions() * h, axis=-1)          # (F, P)
+    ratio = (cost / step[None]).min(axis=2)                            # (rows, F)
+    keep = ratio <= prune * ratio.min(axis=1, keepdims=True)
+    order = np.argsort(np.where(keep, ratio, np.inf), axis=1, kind="stable")
+    m = int(keep.sum(axis=1).max())
+    rows = order[:, :m]
+    count = keep.sum(axis=1)
+    # pad short rows with their cheapest face
+    pad = np.arange(m)[None, :] >= count[:, None]
+    rows = np.where(pad, rows[:, :1], rows)
+    return rows
+
+
 def solve_eikonal(metric: Metric, grid: Grid, stencil: Stencil, source: np.ndarray,
                   cost: np.ndarray, cls: np.ndarray, init_radius: int = 3,
-                  factor_radius: int = 0, max_iterations: int | None = None) -> Sweep:
+                  factor_radius: int = 0, prune: float | None = None,
+                  band: float | None = None, max_iterations: int | None = None) -> Sweep:
     """The fixed point of the semi-Lagrangian update (see the module's docstring) from
     ``source`` ``(dim,)``, with the step costs of `step_costs`."""
     dim = grid.dim
@@ -381,18 +405,51 @@ def solve_eikonal(metric: Metric, grid: Grid, stencil: Stencil, source: np.ndarr
         pcls = pcls.copy()
         pcls[rows] = cost_t.shape[0] + widx[rows]
         cost_t = table
+    face_rows = _prune_faces(cost_t, stencil, grid.h, prune)
     limit = max_iterations if max_iterations is not None else 20 * int(sum(grid.shape)) + 100
     it = 0
     updates = 0
     chunk = max(1, int(4_000_000 // (nf * npt)))
-    while active.size and it < limit:
+    # Band ordering: of the pending nodes, those whose activating neighbour's value is
+    # within ``width`` of the least are updated first (an untidy priority queue): nodes
+    # far behind the front wait instead of being updated again and again.
+    width = np.inf
+    if band is not None:
+        width = band * float(np.median(cost_t[: cost.shape[0]].min(axis=(1, 2))))
+    key = np.full(d.size, np.inf)
+    pending = np.zeros(d.size, bool)
+    key[active] = 0.0
+    pending[active] = True
+    if np.isfinite(width):
+        limit *= 50
+    while it < limit:
+        if np.isfinite(width):
+            cand = np.flatnonzero(pending)
+            if cand.size == 0:
+                active = cand
+                break
+            kc = key[cand]
+            active = cand[kc <= kc.min() + width]
+        else:
+            active = np.flatnonzero(pending)
+            if active.size == 0:
+                break
+        pending[active] = False
+        key[active] = np.inf
         it += 1
         new = np.empty(active.size)
         for a in range(0, active.size, chunk):
             nodes = active[a:a + chunk]
             vd = d[nodes[:, None] - off[None, :]]          # (A, K)
-            vf = vd[:, faces]                             # (A, F, dim)
-            vals = cost_t[pcls[nodes]]
+            rows = pcls[nodes]
+            if face_rows is None:
+                vf = vd[:, faces]                         # (A, F, dim)
+                vals = cost_t[rows]                       # (A, F, P)
+            else:
+                fidx = face_rows[rows]                    # (A, M)
+                vf = np.take_along_axis(vd, faces[fidx].reshape(len(nodes), -1),
+                                        1).reshape(len(nodes), -1, dim)
+                vals = cost_t[rows[:, None], fidx]
             for j in range(dim):
                 vals = vals + vf[:, :, j, None] * bary[None, None, :, j]
             best = vals.min(axis=2)
@@ -417,10 +474,14 @@ def solve_eikonal(metric: Metric, grid: Grid, stencil: Stencil, source: np.ndarr
         d[changed] = new[better]
         updates += int(active.size)
         if changed.size == 0:
-            active = changed
-            break
-        cand = np.unique((changed[:, None] + off[None, :]).ravel())
-        active = cand[inside[cand]]
+            continue
+        dep = (changed[:, None] + off[None, :]).ravel()
+        src = np.repeat(d[changed], off.size)
+        ok = inside[dep]
+        dep, src = dep[ok], src[ok]
+        np.minimum.at(key, dep, src)
+        pending[dep] = True
+    active = np.flatnonzero(pending)
     values = d.reshape(pshape)[core].copy()
     values[~grid.inside] = np.inf
     values[values >= UNREACHED] = np.inf
