@@ -76,12 +76,13 @@ def field_command(
     goal: Annotated[list[str] | None, typer.Option(
         help='A goal point (repeatable): its distance, error estimate and geodesic are '
              'printed and drawn.')] = None,
-    resolution: Annotated[int | None, typer.Option(
-        help="Cells along the longest side of the domain's bounding box (default: 100 in "
-             "2-D, 40 in 3-D).")] = None,
-    stencil: Annotated[str, typer.Option(
-        help='Half widths of the stencil box in cells: "1", or one per coordinate, e.g. '
-             '"3,3,2" (wider for strongly anisotropic metrics).')] = "1",
+    resolution: Annotated[str | None, typer.Option(
+        help='Cells along the longest side of the domain\'s bounding box (default: 100 in '
+             '2-D, 40 in 3-D), or one number per coordinate, e.g. "40,40,24".')] = None,
+    stencil: Annotated[str | None, typer.Option(
+        help='Half widths of the stencil box in cells: "2", or one per coordinate, e.g. '
+             '"3,3,2" (wider for strongly anisotropic metrics; default 2 in 2-D, 1 in '
+             '3-D).')] = None,
     exact: Annotated[bool, typer.Option(
         help="Polish each goal's backtracked geodesic with the exact solver.")] = False,
     metric_param: MetricParamOption = None,
@@ -94,13 +95,23 @@ def field_command(
              f"dimension {m.dim}")
     s = parse_point(source, m.dim, "--source")
     goals = [parse_point(g, m.dim, "--goal") for g in (goal or [])]
-    try:
-        radius = tuple(int(t) for t in stencil.split(","))
-    except ValueError:
-        fail(f'--stencil must be integers separated by commas, e.g. "1" or "3,3,2", got '
-             f"{stencil!r}")
-    if len(radius) == 1:
-        radius = radius * m.dim
+    res: Any = None
+    if resolution is not None:
+        try:
+            cells = tuple(int(t) for t in resolution.split(","))
+        except ValueError:
+            fail(f'--resolution must be an integer or integers separated by commas, e.g. '
+                 f'"100" or "40,40,24", got {resolution!r}')
+        res = cells[0] if len(cells) == 1 else cells
+    radius = None
+    if stencil is not None:
+        try:
+            radius = tuple(int(t) for t in stencil.split(","))
+        except ValueError:
+            fail(f'--stencil must be integers separated by commas, e.g. "2" or "3,3,2", got '
+                 f"{stencil!r}")
+        if len(radius) == 1:
+            radius = radius * m.dim
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as err:
@@ -111,7 +122,7 @@ def field_command(
 
     try:
         try:
-            f = solvers.distance_field(m, s, resolution, stencil=radius)
+            f = solvers.distance_field(m, s, res, stencil=radius)
             rows, paths = [], []
             for g in goals:
                 geo = f.geodesic(g, exact=exact)
