@@ -135,9 +135,16 @@ class _Package(types.ModuleType):
     then hide the function of the same name."""
 
     def __setattr__(self, name: str, value: Any) -> None:
-        if (isinstance(value, types.ModuleType) and _LAZY.get(name) == value.__name__
-                and hasattr(value, name)):
-            value = getattr(value, name)
+        if isinstance(value, types.ModuleType) and name in _LAZY:
+            if _LAZY[name] == value.__name__ and hasattr(value, name):
+                value = getattr(value, name)
+            elif _LAZY[name] != value.__name__:
+                # a subpackage named like a public function of another module (the
+                # package ``solvers.distance`` of distance fields beside the function
+                # ``solvers.distance``): the function stays the attribute
+                import importlib
+
+                value = getattr(importlib.import_module(_LAZY[name]), name)
         super().__setattr__(name, value)
 
 

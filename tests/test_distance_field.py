@@ -142,3 +142,10 @@ def test_bad_options(kw, match):
 def test_dimension_refused():
     with pytest.raises(InputError, match="dimension 2 or 3"):
         distance_field(get_metric("euclidean", n=4), np.zeros(4))
+
+
+def test_the_package_does_not_hide_the_distance_function():
+    import solvers
+    import solvers.distance.field  # noqa: F401
+
+    assert callable(solvers.distance) and solvers.distance.__module__ == "solvers.spectral"
