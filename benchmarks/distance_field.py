@@ -175,11 +175,13 @@ def carlike(out: ResultsFile, k: int, seed: int, resolution: tuple[int, ...],
             "segment costs at an energy minimiser).")
 
 
-def matrix(out: ResultsFile, k: int, sample: int, seed: int) -> None:
+def matrix(out: ResultsFile, k: int, sample: int, seed: int, resolution: int | None,
+           factor_radius: int | None) -> None:
     m = get_metric("matsumoto")
     pts = sources(m, k, seed, shrink=0.9)
     c0 = time.process_time()
-    mat = solvers.distance_matrix(m, pts, progress=False)
+    mat = solvers.distance_matrix(m, pts, resolution=resolution, progress=False,
+                                  factor_radius=factor_radius)
     cpu = time.process_time() - c0
     rng = np.random.default_rng(seed + 1)
     rows, rels = [], []
@@ -193,8 +195,9 @@ def matrix(out: ResultsFile, k: int, sample: int, seed: int) -> None:
                      f"{mat.error[i, j]:.1e}"])
     rels = np.array(rels)
     print("matrix", cpu, np.median(rels), rels.max(), flush=True)
-    out.add(f"## distance_matrix, {k} Matsumoto points (seeded, radius <= 0.9), default "
-            "fields\n",
+    out.add(f"## distance_matrix, {k} Matsumoto points (seed {seed}, radius <= 0.9), fields "
+            f"at resolution {resolution or 'default'}, factor radius "
+            f"{factor_radius or 'default'}\n",
             f"CPU {cpu:.1f} s for the {k} fields (with their error estimates), status "
             f"{mat.status.label}; on {sample} sampled entries against the exact solver "
             f"(`solve_geodesic(tol=1e-6)` length estimate): relative difference median "
@@ -212,6 +215,9 @@ def main() -> None:
     p.add_argument("--car-stencil", default="2,2,1")
     p.add_argument("--matrix-points", type=int, default=50)
     p.add_argument("--matrix-sample", type=int, default=30)
+    p.add_argument("--matrix-seed", type=int, default=5)
+    p.add_argument("--matrix-resolution", type=int, default=None)
+    p.add_argument("--matrix-factor-radius", type=int, default=None)
     p.add_argument("--skip", nargs="*", default=[],
                    choices=["closed2d", "slab", "fmm", "carlike", "matrix"])
     args = p.parse_args()
@@ -233,7 +239,8 @@ def main() -> None:
                 tuple(int(t) for t in args.car_stencil.split(",")))
         out.write()
     if "matrix" not in args.skip:
-        matrix(out, args.matrix_points, args.matrix_sample, 5)
+        matrix(out, args.matrix_points, args.matrix_sample, args.matrix_seed,
+               args.matrix_resolution, args.matrix_factor_radius)
         out.write()
 
 

@@ -42,7 +42,7 @@ def test_without_the_factored_correction_the_source_error_dominates():
 
 
 def test_poincare_slab_3d():
-    f = distance_field("poincare-slab", [0.1, -0.2, 0.1], 24, error_estimate=False)
+    f = distance_field("poincare-slab", [0.1, -0.2, 0.1], 20, error_estimate=False)
     rel = _errors(f, 0.1)
     assert np.median(rel) < 1.5e-2
     assert np.percentile(rel, 99) < 6e-2

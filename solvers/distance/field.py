@@ -28,14 +28,17 @@ from solvers.distance.eikonal import (
 __all__ = ["DistanceField", "FieldGeodesic", "distance_field", "DEFAULT_RESOLUTION"]
 
 #: Cells along the longest side of the bounding box by dimension. In 2-D, 100 cells put
-#: the median relative error near 2e-4 and the 99th percentile near 1e-3 on the Poincare
+#: the median relative error near 1.4e-4 and the 99th percentile near 5e-4 on the Poincare
 #: disk (benchmarks/results/distance_field-2026-12-07.md); in 3-D, 40 cells keep one
-#: field to seconds of CPU.
+#: field to about ten seconds of CPU.
 DEFAULT_RESOLUTION = {2: 100, 3: 40}
 #: Stencil half widths by dimension: in 2-D the 16-direction box (half width 2) put the
 #: Poincare median error at 9.6e-5 against 2.5e-4 with 8 directions, and Matsumoto's
-#: field 0.34 % from the exact length against 1.4 % (100 cells).
-DEFAULT_STENCIL = {2: 2, 3: 1}
+#: field 0.34 % from the exact length against 1.4 % (100 cells); in 3-D half width 2 put
+#: the poincare-slab 99th percentile at 1.7e-2 to 2.3e-2 against 4.4e-2 to 5.5e-2 with 1
+#: (three sources, 40 cells; about 10 s of CPU against 3.5 s), its worst nodes near the
+#: disk's rim, where the metric changes fastest.
+DEFAULT_STENCIL = {2: 2, 3: 2}
 #: Barycentric samples per face edge, by dimension (2-D: with the parabolic refinement).
 DEFAULT_ORDER = {2: 8, 3: 4}
 #: Nodes near the source that start from the straight segment's length (cells).
