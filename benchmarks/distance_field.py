@@ -66,7 +66,7 @@ def closed_forms(out: ResultsFile, names: list[str], dim: int, factor: float) ->
         base = DEFAULT_RESOLUTION[dim]
         errs = {}
         cpu = {}
-        for res in (base, int(round(factor * base))):
+        for res in (base, round(factor * base)):
             e, c = [], []
             for s in sources(m, 3, 11):
                 c0 = time.process_time()

@@ -146,6 +146,6 @@ def test_dimension_refused():
 
 def test_the_package_does_not_hide_the_distance_function():
     import solvers
-    import solvers.distance.field  # noqa: F401
+    import solvers.distance.field
 
     assert callable(solvers.distance) and solvers.distance.__module__ == "solvers.spectral"

@@ -166,11 +166,12 @@ def box_stencil(radius: tuple[int, ...], order: int) -> Stencil:
         for sign in (-1, 1):
             for i in range(-r[a], r[a]):
                 for j in range(-r[b], r[b]):
-                    def vid(u: int, v: int) -> int:
+                    corner = {}
+                    for u, v in ((i, j), (i + 1, j), (i, j + 1), (i + 1, j + 1)):
                         p = [0, 0, 0]
                         p[axis], p[a], p[b] = sign * r[axis], u, v
-                        return index[tuple(p)]
-                    c00, c10, c01, c11 = vid(i, j), vid(i + 1, j), vid(i, j + 1), vid(i + 1, j + 1)
+                        corner[u - i, v - j] = index[tuple(p)]
+                    c00, c10, c01, c11 = corner[0, 0], corner[1, 0], corner[0, 1], corner[1, 1]
                     # split along the diagonal that points away from the facet's centre,
                     # so the triangulation is symmetric under the box's reflections
                     if (i + 0.5) * (j + 0.5) >= 0:

@@ -14,7 +14,6 @@ from finsler.errors import InputError
 from finsler.infra.limits import check_count, check_number
 from finsler.metric import Metric
 from finsler.status import DistanceStatus, Result, json_ready
-
 from solvers.distance.eikonal import (
     Grid,
     Stencil,
@@ -25,7 +24,7 @@ from solvers.distance.eikonal import (
     step_costs,
 )
 
-__all__ = ["DistanceField", "FieldGeodesic", "distance_field", "DEFAULT_RESOLUTION"]
+__all__ = ["DEFAULT_RESOLUTION", "DistanceField", "FieldGeodesic", "distance_field"]
 
 #: Cells along the longest side of the bounding box by dimension. In 2-D, 100 cells put
 #: the median relative error near 1.4e-4 and the 99th percentile near 5e-4 on the Poincare

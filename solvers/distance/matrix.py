@@ -12,7 +12,6 @@ import numpy as np
 from finsler.domains import as_real
 from finsler.errors import InputError
 from finsler.status import DistanceStatus, Result
-
 from solvers.distance.field import DistanceField, _metric, distance_field
 
 __all__ = ["DistanceMatrix", "distance_matrix"]
