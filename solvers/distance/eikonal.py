@@ -421,8 +421,8 @@ def solve_eikonal(metric: Metric, grid: Grid, stencil: Stencil, source: np.ndarr
     cost_t = cost.reshape(cost.shape[0], nf, npt)
     refine = dim == 2 and stencil.order >= 2
     # the 3-D quadratic refinement where F is smooth: at the kinks of a non-smooth F
-    # (car-like's max) its undershoot made the iteration creep (6726 iterations instead of
-    # about 1000, the value 2 % lower)
+    # (car-like's max) its undershoot below the samples makes the iteration creep by tiny
+    # decreases
     hexes = (_hex_neighbours(stencil) if dim == 3 and stencil.order >= 3 and metric.smooth
              else None)
 

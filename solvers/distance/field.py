@@ -26,17 +26,13 @@ from solvers.distance.eikonal import (
 
 __all__ = ["DEFAULT_RESOLUTION", "DistanceField", "FieldGeodesic", "distance_field"]
 
-#: Cells along the longest side of the bounding box by dimension. In 2-D, 100 cells put
-#: the median relative error near 1.4e-4 and the 99th percentile near 5e-4 on the Poincare
-#: disk (benchmarks/results/distance_field-2026-12-07.md); in 3-D, 40 cells keep one
-#: field to about ten seconds of CPU.
+#: Cells along the longest side of the bounding box by dimension: the errors they give on
+#: the closed forms, and the CPU time, are in benchmarks/results/distance_field-*.md.
 DEFAULT_RESOLUTION = {2: 100, 3: 40}
-#: Stencil half widths by dimension: in 2-D the 16-direction box (half width 2) put the
-#: Poincare median error at 9.6e-5 against 2.5e-4 with 8 directions, and Matsumoto's
-#: field 0.34 % from the exact length against 1.4 % (100 cells); in 3-D half width 2 put
-#: the poincare-slab 99th percentile at 1.7e-2 to 2.3e-2 against 4.4e-2 to 5.5e-2 with 1
-#: (three sources, 40 cells; about 10 s of CPU against 3.5 s), its worst nodes near the
-#: disk's rim, where the metric changes fastest.
+#: Stencil half widths by dimension: half width 2 (16 directions in 2-D, 98 vertices in
+#: 3-D) against 1 lowered the errors several times on Poincare, Matsumoto and
+#: poincare-slab (where the worst nodes lie near the disk's rim) for two to three times
+#: the time (measured in benchmarks/results/distance_field-*.md).
 DEFAULT_STENCIL = {2: 2, 3: 2}
 #: Barycentric samples per face edge, by dimension (2-D: with the parabolic refinement).
 DEFAULT_ORDER = {2: 8, 3: 4}
@@ -45,9 +41,9 @@ INIT_RADIUS = 3
 #: Cells around the source where the factored correction is applied, by dimension (in 2-D
 #: the whole grid at the default resolution).
 FACTOR_RADIUS = {2: 400, 3: 12}
-#: Width of the update band in cheapest step costs (`eikonal.solve_eikonal`): with 3,
-#: car-like at 41 x 41 x 25 took 7.1 s of CPU instead of 16.5 s (236,915 node updates
-#: instead of 640,259, the same values); the Poincare disk 0.42 s instead of 0.47 s.
+#: Width of the update band in cheapest step costs (`eikonal.solve_eikonal`): a few step
+#: costs keep the front's nodes from being updated again and again (about a third of the
+#: node updates on car-like, the same values) without one band per node.
 DEFAULT_BAND = 3.0
 #: Largest resolution accepted (a grid also has `eikonal.MAX_NODES` as a limit).
 MAX_RESOLUTION = 4096
@@ -296,15 +292,18 @@ def distance_field(metric: Metric | str, source: Any, resolution: int | None = N
     ``resolution``: cells along the longest side of the domain's bounding box (or of
     ``box``), the same spacing in every coordinate (default `DEFAULT_RESOLUTION`); or one
     number of cells per coordinate (e.g. finer in position than in heading).
-    ``stencil``: half widths (cells, an integer or one per coordinate) of the box of
-    offsets whose boundary the update minimises over: wider for strongly anisotropic
-    metrics (thin unit balls), at a cost growing like its surface. ``order``: samples per
-    face edge. ``box``: ``(low, high)`` of the grid instead of the bounding box (nodes
-    outside the domain are left out). ``error_estimate``: also solve at half the
+    ``stencil``: half widths (cells, an integer or one per coordinate; default
+    `DEFAULT_STENCIL`) of the box of offsets whose boundary the update minimises over:
+    wider for strongly anisotropic metrics (thin unit balls), at a cost growing like its
+    surface. ``order``: samples per face edge (default `DEFAULT_ORDER`). ``factor_radius``:
+    cells around the source where the factored correction applies (default
+    `FACTOR_RADIUS`; 0: none). ``box``: ``(low, high)`` of the grid instead of the
+    bounding box (nodes outside the domain are left out). ``error_estimate``: also solve at half the
     resolution and keep the difference as the error estimate. ``prune``: leave out, per
     point, the faces whose directions cost more than ``prune`` times the cheapest per unit
-    of step length (e.g. 3 for car-like: several times faster; exact when the pruned
-    directions are never the best over a grid step, an upper bound otherwise).
+    of step length: faster, exact when the pruned directions are never the best over a
+    grid step, an upper bound otherwise (off by default: on car-like the interpolation
+    uses dear faces, and pruning raised the values).
     ``band``: nodes are updated in bands of this many cheapest step costs above the least
     pending value (None: every pending node at once); the fixed point is the same.
 
