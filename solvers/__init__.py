@@ -8,7 +8,7 @@ Public API::
     midpoint(metric, start, goal, segments=None, **kw) -> MidpointResult
     refine_minmax(metric, result) -> MinMaxResult
     distance(metric, start, goal, rtol=None, *, strict=False) -> DistanceResult
-    distance_field(metric, source, resolution=None, *, stencil=1, ...) -> DistanceField
+    distance_field(metric, source, resolution=None, *, stencil=None, ...) -> DistanceField
     distance_matrix(metric, points (K, dim), *, exact=False, ...) -> DistanceMatrix
     solve_batch(metric, pairs (K, 2, dim), segments=None, *, minmax=False, workers=None,
                 progress=True, initial_paths=None, global_seeds=True, tol=None)
