@@ -53,6 +53,11 @@ __all__ = ["Grid", "Stencil", "Sweep", "box_stencil", "depends_on", "make_grid",
 BIG = 1e30
 UNREACHED = 1e29
 
+#: In band order, every this many iterations updates every pending node (a Jacobi sweep):
+#: values that keep falling by small amounts near the least pending key would otherwise
+#: hold the band back indefinitely (seen on car-like at fine grids).
+SWEEP_EVERY = 32
+
 #: Largest grid (nodes of the padded grid) a field is computed on: the iteration holds a
 #: few arrays of this size and, where ``F`` depends on every coordinate, a cost table of
 #: this size times the number of sample directions.
@@ -475,9 +480,9 @@ def solve_eikonal(metric: Metric, grid: Grid, stencil: Stencil, source: np.ndarr
     key[active] = 0.0
     pending[active] = True
     if np.isfinite(width):
-        limit *= 50
+        limit *= SWEEP_EVERY
     while it < limit:
-        if np.isfinite(width):
+        if np.isfinite(width) and it % SWEEP_EVERY:
             cand = np.flatnonzero(pending)
             if cand.size == 0:
                 active = cand
