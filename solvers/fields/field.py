@@ -27,12 +27,12 @@ from solvers.fields.eikonal import (
 __all__ = ["DEFAULT_RESOLUTION", "DistanceField", "FieldGeodesic", "distance_field"]
 
 #: Cells along the longest side of the bounding box by dimension: the errors they give on
-#: the closed forms, and the CPU time, are in benchmarks/results/distance_field-*.md.
+#: the closed forms, and the CPU time, are in benchmarks/results/distance-fields/distance_field-*.md.
 DEFAULT_RESOLUTION = {2: 100, 3: 40}
 #: Stencil half widths by dimension: half width 2 (16 directions in 2-D, 98 vertices in
 #: 3-D) against 1 lowered the errors several times on Poincare, Matsumoto and
 #: poincare-slab (where the worst nodes lie near the disk's rim) for two to three times
-#: the time (measured in benchmarks/results/distance_field-*.md).
+#: the time (measured in benchmarks/results/distance-fields/distance_field-*.md).
 DEFAULT_STENCIL = {2: 2, 3: 2}
 #: Barycentric samples per face edge, by dimension (2-D: with the parabolic refinement).
 DEFAULT_ORDER = {2: 8, 3: 4}
