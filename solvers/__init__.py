@@ -8,6 +8,8 @@ Public API::
     midpoint(metric, start, goal, segments=None, **kw) -> MidpointResult
     refine_minmax(metric, result) -> MinMaxResult
     distance(metric, start, goal, rtol=None, *, strict=False) -> DistanceResult
+    distance_field(metric, source, resolution=None, *, stencil=None, ...) -> DistanceField
+    distance_matrix(metric, points (K, dim), *, exact=False, ...) -> DistanceMatrix
     solve_batch(metric, pairs (K, 2, dim), segments=None, *, minmax=False, workers=None,
                 progress=True, initial_paths=None, global_seeds=True, tol=None)
                 -> list[GeodesicResult]
@@ -40,6 +42,7 @@ if TYPE_CHECKING:
     from solvers.certificates.plane.certificate import MeshSpec
     from solvers.continuum.expmap import ExpResult, LogResult, exp_map, log_map
     from solvers.continuum.spectral import distance
+    from solvers.fields import DistanceField, distance_field, distance_matrix
     from solvers.geodesic.batches import BatchJob, check_batch, run_batch, solve_batch
     from solvers.geodesic.pair_solver import refine_minmax
     from solvers.geodesic.solve import midpoint, solve_geodesic
@@ -73,6 +76,7 @@ _LAZY = {
     "CertifySettings": "solvers.certificates.dispatch",
     "ConformalSpec": "solvers.certificates.conformal.certificate",
     "CertifyStatus": "solvers.status",
+    "DistanceField": "solvers.fields",
     "DistanceResult": "solvers.result",
     "DistanceStatus": "solvers.status",
     "ExpResult": "solvers.continuum.expmap",
@@ -95,6 +99,8 @@ _LAZY = {
     "check_pairs": "solvers.inputs",
     "check_segments": "solvers.inputs",
     "distance": "solvers.continuum.spectral",
+    "distance_field": "solvers.fields",
+    "distance_matrix": "solvers.fields",
     "exp_map": "solvers.continuum.expmap",
     "log_map": "solvers.continuum.expmap",
     "midpoint": "solvers.geodesic.solve",
@@ -111,6 +117,7 @@ __all__ = [
     "CertifySettings",
     "CertifyStatus",
     "ConformalSpec",
+    "DistanceField",
     "DistanceResult",
     "DistanceStatus",
     "ExpResult",
@@ -133,6 +140,8 @@ __all__ = [
     "check_pairs",
     "check_segments",
     "distance",
+    "distance_field",
+    "distance_matrix",
     "exp_map",
     "log_map",
     "midpoint",

@@ -148,7 +148,8 @@ def cost_command(
 
 def _register_optional_commands() -> None:
     """Commands of the other layers, registered here so the CLI stays one entry point."""
-    for name in ("solve", "train", "report", "plot", "sweep", "expmap", "certify", "check"):
+    for name in ("solve", "train", "report", "plot", "sweep", "expmap", "certify", "check",
+                 "field"):
         importlib.import_module(f"validation.cli.{name}").register(app)
 
 
