@@ -6,8 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from finsler.errors import InputError
-from finsler.registry import get_metric
+from finsler import InputError, get_metric
 from solvers import DistanceField, distance_field, distance_matrix
 
 
@@ -148,4 +147,5 @@ def test_the_package_does_not_hide_the_distance_function():
     import solvers
     import solvers.fields.field
 
-    assert callable(solvers.distance) and solvers.distance.__module__ == "solvers.continuum.spectral"
+    assert callable(solvers.distance)
+    assert solvers.distance.__module__ == "solvers.continuum.spectral"

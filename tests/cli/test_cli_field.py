@@ -8,7 +8,7 @@ import json
 import numpy as np
 from typer.testing import CliRunner
 
-from validation.cli.entry import app
+from validation.cli import app
 
 
 def test_field_writes_grid_and_figure(tmp_path):
