@@ -2,9 +2,10 @@
 
 The folders mirror the packages (``tests/solvers/newton/test_newton.py`` tests
 ``solvers/newton/``); shared helpers and the test metrics are in the package
-``tests/helpers/`` (``from helpers.metrics.conformal import Conformal4D``), importable
-because this folder is on ``sys.path``. Test file names are unique across folders (pytest
-imports them by name).
+``tests/helpers/`` (``from tests.helpers.metrics.conformal import Conformal4D``). Every
+folder of ``tests/`` is a package, so pytest imports the tests as ``tests.<folder>...`` with
+the repository's root on ``sys.path``, and ``tests/`` itself never is: there, its folders
+named like the packages (``tests/finsler/``, ...) would shadow them.
 
 Markers: ``slow`` (deselected by default; ``-m slow``) and ``mutation`` (the fast focused
 tests a mutation run selects: ``benchmarks/mutation.py`` runs a group's test files with
@@ -12,10 +13,3 @@ tests a mutation run selects: ``benchmarks/mutation.py`` runs a group's test fil
 """
 
 from __future__ import annotations
-
-import sys
-from pathlib import Path
-
-_TESTS = str(Path(__file__).resolve().parent)
-if _TESTS not in sys.path:  # for ``import helpers`` in every import mode
-    sys.path.insert(0, _TESTS)

@@ -11,7 +11,7 @@ import pytest
 import finsler
 from finsler import InputError
 
-from helpers.metrics.registry_queries import Flat, FlatNoForm, Trained
+from tests.helpers.metrics.registry_queries import Flat, FlatNoForm, Trained
 
 ROOT = Path(__file__).resolve().parents[2]
 

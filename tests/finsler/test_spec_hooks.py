@@ -13,7 +13,7 @@ import pytest
 import finsler
 from finsler import InputError, MetricSpec, metric_spec
 
-from helpers.metrics.spec_hooks import Hill, Plain
+from tests.helpers.metrics.spec_hooks import Hill, Plain
 
 ROOT = Path(__file__).resolve().parents[2]
 

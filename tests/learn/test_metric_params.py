@@ -199,7 +199,7 @@ def test_run_reloads_in_a_fresh_process_by_importing_the_class(tmp_path: Path) -
             f"p = learn.load_policy({str(tmp_path / 'r')!r})\n"
             "x = np.array([[0.3, 0.1]]); y = np.array([[-0.2, 0.4]])\n"
             "print(type(p.metric).__module__, p.metric.a, float(p.metric.cost(x, y)[0]))\n")
-    env = {**os.environ, "PYTHONPATH": str(Path(__file__).parent)}
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).parents[2])}
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          env=env, timeout=120, cwd=tmp_path)
     assert out.returncode == 0, out.stderr

@@ -15,7 +15,7 @@ import finsler
 from validation import StraightLine, build_report
 from validation.report_certify import cli_lines, md_certified, preset_for
 
-from helpers.metrics.report_certify import Valley
+from tests.helpers.metrics.report_certify import Valley
 
 
 def _report(tmp: Path, metric: finsler.Metric, pairs: np.ndarray, certify: int | None

@@ -17,7 +17,7 @@ import finsler
 from finsler import InputError
 from finsler.metrics.base import MAX_LENGTH_HALVINGS
 
-from helpers.metrics.singular import Cone
+from tests.helpers.metrics.singular import Cone
 
 #: every test here is in the fast focused selection of mutation runs
 pytestmark = pytest.mark.mutation

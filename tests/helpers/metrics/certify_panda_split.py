@@ -7,7 +7,7 @@ from typing import ClassVar
 
 import casadi as ca
 
-from helpers.metrics.conformal import Conformal4D
+from tests.helpers.metrics.conformal import Conformal4D
 
 
 class ScaledEuclidean(Conformal4D):

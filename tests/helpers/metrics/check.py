@@ -7,7 +7,7 @@ import casadi as ca
 
 from finsler import Box, Metric, Task
 
-from helpers.metrics.conformal import Conformal4D
+from tests.helpers.metrics.conformal import Conformal4D
 
 
 # ----------------------------------------------------------------------------------------

@@ -9,7 +9,7 @@ import casadi as ca
 
 from finsler import Task
 
-from helpers.metrics.conformal import Conformal4D
+from tests.helpers.metrics.conformal import Conformal4D
 
 
 @dataclass(frozen=True)

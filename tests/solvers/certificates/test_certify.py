@@ -19,7 +19,7 @@ from finsler import InputError
 from solvers import CertifyResult, CertifyStatus, MeshSpec, Status, certify
 from validation.cli import app
 
-from helpers.metrics.certify import Bowl
+from tests.helpers.metrics.certify import Bowl
 
 runner = CliRunner()
 # the module (``solvers.certify`` the attribute is the function of the same name)

@@ -27,7 +27,7 @@ from solvers import SeedPlan, Status
 from solvers.geodesic.tolerance import richardson
 from solvers.seeding.plans import perturbed_curves
 
-from helpers.metrics.multires import (
+from tests.helpers.metrics.multires import (
     HookedPoincare,
     NotUniquePoincare,
     RenamedMatsumoto,

@@ -21,7 +21,7 @@ from solvers.newton.block_tridiagonal import (
     sum_,
 )
 
-from helpers.linalg import dense
+from tests.helpers.linalg import dense
 
 #: every test here is in the fast focused selection of mutation runs
 pytestmark = pytest.mark.mutation

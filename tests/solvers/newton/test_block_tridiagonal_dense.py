@@ -10,7 +10,7 @@ import pytest
 from solvers.newton.backends import _NUMPY_OPS
 from solvers.newton.block_tridiagonal import block_tridiagonal_solve, block_tridiagonal_solve_dense
 
-from helpers.linalg import dense
+from tests.helpers.linalg import dense
 
 
 def _system(rng, b, m, d, shift):

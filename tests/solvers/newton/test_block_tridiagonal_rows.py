@@ -14,7 +14,7 @@ import solvers.newton.block_tridiagonal as bt
 from solvers.newton.backends import backend_for
 from solvers.newton.block_tridiagonal import THOMAS_ROWS_MAX, block_tridiagonal_solve
 
-from helpers.linalg import dense
+from tests.helpers.linalg import dense
 
 #: every test here is in the fast focused selection of mutation runs
 pytestmark = pytest.mark.mutation

@@ -28,8 +28,8 @@ from solvers.newton.energy import (
 )
 from solvers.status import NewtonStatus
 
-from helpers.linalg import dense
-from helpers.metrics.newton import Bump, Cheaper, Kink, Tilt, WallAbove
+from tests.helpers.linalg import dense
+from tests.helpers.metrics.newton import Bump, Cheaper, Kink, Tilt, WallAbove
 
 #: every test here is in the fast focused selection of mutation runs
 pytestmark = pytest.mark.mutation

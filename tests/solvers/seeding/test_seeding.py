@@ -17,7 +17,7 @@ from solvers.seeding.graph import graph_seeder
 from solvers.seeding.plans import alternative_gap, family_stats, seed_batch, seed_family
 from solvers.transcription import energy_nlp
 
-from helpers.metrics.seeding import Detour
+from tests.helpers.metrics.seeding import Detour
 
 
 def _hermite_jump(s: np.ndarray, g: np.ndarray, tangent: float, n: int) -> np.ndarray:

@@ -25,7 +25,7 @@ from validation import testing as vt
 from validation.cli import app
 from validation.testing import DiscreteDistance, PolicyTests, Solved
 
-from helpers.metrics.check import Flat, FlatConformal4D, Squared
+from tests.helpers.metrics.check import Flat, FlatConformal4D, Squared
 
 ROOT = Path(__file__).resolve().parents[3]
 HELPERS = ROOT / "tests" / "helpers"
@@ -287,8 +287,8 @@ def test_a_five_line_user_pytest_file_runs_the_suite(tmp_path: Path) -> None:
 
 def test_a_user_pytest_file_reports_the_counterexample(tmp_path: Path) -> None:
     res = _user_pytest(tmp_path, f"""\
-        import sys; sys.path.insert(0, {str(HELPERS.parent)!r})
-        from helpers.broken_metrics import NotHomogeneous
+        import sys; sys.path.insert(0, {str(HELPERS.parents[1])!r})
+        from tests.helpers.broken_metrics import NotHomogeneous
         from validation.testing import MetricTests
 
         class TestMine(MetricTests):

@@ -19,7 +19,7 @@ from finsler.status import DistanceStatus, Status
 from validation.testing import distance as VD
 from validation.testing.engine import FAILED, INCONCLUSIVE, MAPPED, PASSED, SKIPPED
 
-from helpers.metrics.distance_suite import Flat, Ring
+from tests.helpers.metrics.distance_suite import Flat, Ring
 
 #: every test here is in the fast focused selection of mutation runs
 pytestmark = pytest.mark.mutation

@@ -26,7 +26,7 @@ from finsler import (
 from validation.testing import metric as VM
 from validation.testing.engine import FAILED, MAPPED, PASSED, SKIPPED
 
-from helpers.metrics.property_suite import (
+from tests.helpers.metrics.property_suite import (
     Base,
     C1KinkV,
     ConvexClaimed,

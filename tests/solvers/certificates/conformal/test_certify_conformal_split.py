@@ -31,7 +31,7 @@ from solvers.certificates.conformal.split import (
 )
 from validation.cli import app
 
-from helpers.metrics.certify_conformal_split import Valley
+from tests.helpers.metrics.certify_conformal_split import Valley
 
 split_mod = importlib.import_module("solvers.certificates.conformal.split")
 runner = CliRunner()

@@ -19,7 +19,7 @@ from finsler import Metric
 from solvers import ConformalSpec
 from solvers.certificates.conformal.split import certify_conformal_split, factor_parts
 
-from helpers.metrics.certify_panda_split import ScaledEuclidean
+from tests.helpers.metrics.certify_panda_split import ScaledEuclidean
 
 split_mod = importlib.import_module("solvers.certificates.conformal.split")
 cc = importlib.import_module("solvers.certificates.conformal.certificate")

@@ -18,9 +18,9 @@ from finsler import InputError
 from finsler.enclosures.intervals import Interval
 from solvers.certificates.plane.mesh import _Mesh
 
-from helpers.metrics.certify_bounds import Ridge, Singular, Tilt
-from helpers.metrics.singular import Cone
-from helpers.tick_clock import TickClock
+from tests.helpers.metrics.certify_bounds import Ridge, Singular, Tilt
+from tests.helpers.metrics.singular import Cone
+from tests.helpers.tick_clock import TickClock
 
 #: every test here is in the fast focused selection of mutation runs
 pytestmark = pytest.mark.mutation

@@ -33,8 +33,8 @@ from solvers.certificates.plane.lp import (
 )
 from solvers.certificates.plane.mesh import _Mesh
 
-from helpers.lp_rows import DIRS, FULL, MESH, NV, K, S, highs_solve, weights
-from helpers.tick_clock import TickClock
+from tests.helpers.lp_rows import DIRS, FULL, MESH, NV, K, S, highs_solve, weights
+from tests.helpers.tick_clock import TickClock
 
 #: every test here is in the fast focused selection of mutation runs
 pytestmark = pytest.mark.mutation

@@ -12,7 +12,7 @@ import solvers.certificates.plane.repair as rep
 from solvers.certificates.plane.lp import _solve_lp
 from solvers.certificates.plane.repair import repair
 
-from helpers.lp_rows import DIRS, FULL, MESH, NV, K, highs_solve, weights
+from tests.helpers.lp_rows import DIRS, FULL, MESH, NV, K, highs_solve, weights
 
 #: every test here is in the fast focused selection of mutation runs
 pytestmark = pytest.mark.mutation
@@ -69,7 +69,7 @@ def test_a_round_short_of_the_target_only_by_broken_rows_is_repaired(
     import logging
     import re
 
-    from helpers.tick_clock import TickClock
+    from tests.helpers.tick_clock import TickClock
 
     b = weights()
     active = np.zeros((NV, K), bool)
