@@ -369,7 +369,7 @@ def test_check_api_does_not_run_what_needs_a_broken_property() -> None:
 def test_a_detour_policy_fails_the_policy_properties() -> None:
     """Midpoints pushed sideways by half the pair's length (test_validation's negative
     control): d(x, m) = d(x, y) / sqrt(2), a midpoint error of 0.207."""
-    from test_validation import DetourPolicy
+    from tests.validation.test_validation import DetourPolicy
 
     m = finsler.get_metric("euclidean")
     pol = DetourPolicy(m)
