@@ -281,6 +281,28 @@ def _check_radius(stencil: Any, dim: int) -> tuple[int, ...]:
     return tuple(check_count(k, "stencil radius", 1, 16) for k in r)
 
 
+#: grids whose step costs a metric keeps (a field's own and its error estimate's)
+_COSTS_KEPT = 2
+
+
+def _step_costs(m: Metric, grid: Grid, st: Any, dep: np.ndarray) -> tuple[np.ndarray,
+                                                                           np.ndarray]:
+    """`step_costs` of the grid, kept on the metric for its last `_COSTS_KEPT` grids: the
+    table depends on the grid and the stencil, not on the source, so the fields of one
+    metric and resolution (a distance matrix's K sources, repeated calls) build it once."""
+    store: dict = m.derived("solvers.fields.step_costs", dict)
+    key = (grid.shape, grid.low.tobytes(), grid.h.tobytes(), st.offsets.tobytes(),
+           st.faces.tobytes(), st.bary.tobytes(), dep.tobytes())
+    if key not in store:
+        while len(store) >= _COSTS_KEPT:
+            store.pop(next(iter(store)))
+        tables = step_costs(m, grid, st, dep, m.domain)
+        for t in tables:
+            t.setflags(write=False)  # shared by every field of this grid
+        store[key] = tables
+    return store[key]
+
+
 def distance_field(metric: Metric | str, source: Any, resolution: int | None = None, *,
                    stencil: Any = None, order: int | None = None,
                    box: tuple[Any, Any] | None = None, error_estimate: bool = True,
@@ -350,7 +372,7 @@ def distance_field(metric: Metric | str, source: Any, resolution: int | None = N
         if np.any(np.array(grid.shape) < 2 * np.array(radius) + 1):
             raise InputError(f"resolution {r} gives a grid of shape {grid.shape}, too small "
                              f"for the stencil of half widths {radius}: raise the resolution")
-        cost, cls = step_costs(m, grid, st, dep, m.domain)
+        cost, cls = _step_costs(m, grid, st, dep)
         sweep = solve_eikonal(m, grid, st, s, cost, cls, factor_radius=fr, prune=pr,
                               band=band)
         return grid, sweep
